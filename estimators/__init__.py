@@ -1,0 +1,6 @@
+"""Lidar-only motion estimators, their metrics and the pipeline that scores them."""
+
+from estimators.base import LIDAR_KEYS, Estimator, SensorSetup
+from estimators.registry import make, names
+
+__all__ = ["LIDAR_KEYS", "Estimator", "SensorSetup", "make", "names"]

@@ -1,0 +1,31 @@
+"""Estimators by name: ``make(name, **params)`` and ``names()``.
+
+Entries are ``"module:Class"`` strings imported on first use, so listing names stays cheap
+and a module's heavy dependencies load only when one of its estimators is made.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from estimators.base import Estimator
+
+#: name -> ("module:Class", default keyword parameters)
+_ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
+}
+
+
+def names() -> list[str]:
+    """All registered estimator names, sorted."""
+    return sorted(_ENTRIES)
+
+
+def make(name: str, **params: Any) -> Estimator:
+    """A fresh estimator registered as ``name``, with ``params`` over its defaults."""
+    if name not in _ENTRIES:
+        raise KeyError(f"unknown estimator {name!r}: expected one of {', '.join(names())}")
+    target, defaults = _ENTRIES[name]
+    module_name, class_name = target.split(":")
+    cls = getattr(importlib.import_module(module_name), class_name)
+    return cls(**{**defaults, **params})

@@ -1,0 +1,50 @@
+"""SE(2) poses as plain arrays ``(x [m], y [m], heading [rad])``.
+
+Every function accepts a single pose of shape ``(3,)`` or a batch ``(N, 3)`` and
+broadcasts; headings are wrapped to ``[-pi, pi)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Pose = NDArray[np.float64]
+
+
+def wrap_angle(angle: ArrayLike) -> NDArray[np.float64]:
+    """Wrap angles [rad] to ``[-pi, pi)``."""
+    return (np.asarray(angle, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> Pose:
+    """``a ⊕ b``: pose ``b`` (given in the frame of ``a``) expressed in the frame ``a`` lives in."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def inverse(a: ArrayLike) -> Pose:
+    """``a⁻¹``: the pose of the parent frame seen from frame ``a``."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def relative(a: ArrayLike, b: ArrayLike) -> Pose:
+    """``a⁻¹ ⊕ b``: pose ``b`` expressed in the frame of pose ``a`` (both in the same parent)."""
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
+    """Map points ``(N, 2)`` given in the frame ``pose`` into that pose's parent frame."""
+    pose = np.asarray(pose, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rotation = np.array([[c, -s], [s, c]])
+    return points @ rotation.T + pose[:2]
