@@ -20,7 +20,7 @@ LIDAR_KEYS: tuple[str, ...] = ("lidar_1", "lidar_2")
 
 
 def default_beam_angles(n_beams: int) -> NDArray[np.float64]:
-    """Beam ``i`` points at ``2 pi i / n`` [rad], counter-clockwise from the sensor's forward axis."""
+    """Beam ``i`` points at ``2 pi i / n`` [rad], CCW from the sensor's forward axis."""
     return 2.0 * np.pi * np.arange(n_beams) / n_beams
 
 
@@ -48,7 +48,7 @@ class SensorSetup:
             raise ValueError(f"mounts: expected shape (1, 3) or (2, 3), got {mounts.shape}")
         angles = np.asarray(self.beam_angles, dtype=np.float64)
         if angles.ndim != 1 or len(angles) < 3:
-            raise ValueError(f"beam_angles: expected a 1-D array of >= 3 angles, got {angles.shape}")
+            raise ValueError(f"beam_angles: expected a 1-D array of >= 3, got {angles.shape}")
         if not np.isfinite(self.max_range) or self.max_range <= 0:
             raise ValueError(f"max_range: expected a positive finite number, got {self.max_range}")
         object.__setattr__(self, "mounts", mounts)
@@ -154,7 +154,7 @@ class Estimator(ABC):
         """The latest pose estimate (3,)."""
         return self._poses[-1].copy() if self._poses else self._initial_pose.copy()
 
-    def _reset_state(self) -> None:
+    def _reset_state(self) -> None:  # noqa: B027 - optional hook, empty by design
         """Clear per-trajectory state (override when there is some)."""
 
     @abstractmethod
