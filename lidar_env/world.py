@@ -1,0 +1,308 @@
+"""Static 2-D worlds: circles, zero-thickness walls and filled polygons, in metres.
+
+A :class:`World` keeps only numpy arrays, so it pickles cheaply and can be shared with worker
+processes; :meth:`World.build_space` makes a fresh ``pymunk.Space`` from it on demand.
+
+Polygons are filled with the **even-odd rule**: a point is inside the obstacle region when it
+lies inside an odd number of polygons. A polygon nested in another is therefore a hole, which is
+how :meth:`World.from_image` represents the free interior of a walled room. Give disjoint
+polygons when you mean a union.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pymunk
+from numpy.typing import ArrayLike, NDArray
+
+#: ``collision_type`` of every static obstacle shape added by :meth:`World.build_space`.
+OBSTACLE_COLLISION_TYPE: int = 1
+
+#: Points per chunk in the vectorised point queries: bounds memory to ~chunk x primitives.
+_POINT_CHUNK = 4096
+
+
+def _as_rows(values: ArrayLike, width: int, what: str) -> NDArray[np.float64]:
+    """``values`` as a finite float64 ``(N, width)`` array (empty input gives ``(0, width)``)."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.size == 0:
+        return np.zeros((0, width))
+    if array.ndim == 1 and array.shape[0] == width:
+        array = array[None, :]
+    if array.ndim != 2 or array.shape[1] != width:
+        raise ValueError(f"{what}: expected shape (N, {width}), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{what}: expected finite values, got NaN or inf")
+    return array
+
+
+def _as_polygon(vertices: ArrayLike, index: int) -> NDArray[np.float64]:
+    """One polygon as ``(k, 2)`` float64 with k >= 3 distinct vertices, closing vertex dropped."""
+    polygon = np.asarray(vertices, dtype=np.float64)
+    if polygon.ndim != 2 or polygon.shape[1] != 2:
+        raise ValueError(f"polygons[{index}]: expected shape (k, 2), got {polygon.shape}")
+    if not np.all(np.isfinite(polygon)):
+        raise ValueError(f"polygons[{index}]: expected finite vertices, got NaN or inf")
+    if len(polygon) > 1 and np.array_equal(polygon[0], polygon[-1]):
+        polygon = polygon[:-1]
+    if len(polygon) < 3:
+        raise ValueError(f"polygons[{index}]: expected >= 3 distinct vertices, got {len(polygon)}")
+    if abs(_signed_area(polygon)) <= 0.0:
+        raise ValueError(f"polygons[{index}]: expected a non-zero area, got collinear vertices")
+    return polygon
+
+
+def _signed_area(polygon: NDArray[np.float64]) -> float:
+    """Shoelace area [m^2] of a ``(k, 2)`` polygon, positive when counter-clockwise."""
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _polygon_edges(polygon: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(k, 4)`` edges ``x1, y1, x2, y2`` of a closed polygon."""
+    return np.hstack([polygon, np.roll(polygon, -1, axis=0)])
+
+
+def segment_distances(points: NDArray[np.float64], segments: NDArray[np.float64]) -> NDArray:
+    """``(N, M)`` Euclidean distance [m] from each point ``(N, 2)`` to each segment ``(M, 4)``."""
+    start = segments[None, :, 0:2]
+    edge = segments[None, :, 2:4] - start
+    offset = points[:, None, :] - start
+    length2 = np.maximum(np.sum(edge * edge, axis=-1), np.finfo(float).tiny)
+    u = np.clip(np.sum(offset * edge, axis=-1) / length2, 0.0, 1.0)
+    return np.linalg.norm(offset - u[..., None] * edge, axis=-1)
+
+
+def even_odd_inside(points: NDArray[np.float64], edges: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``(N,)`` True where a point has an odd number of ``edges`` (``(M, 4)``) to its right.
+
+    The crossing-number test of a horizontal ray towards +x: with the edges of closed polygons it
+    is the even-odd fill rule.
+    """
+    px, py = points[:, None, 0], points[:, None, 1]
+    x1, y1, x2, y2 = (edges[None, :, i] for i in range(4))
+    spans = (y1 > py) != (y2 > py)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_cross = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+    crossings = spans & (px < x_cross)
+    return (np.count_nonzero(crossings, axis=1) % 2) == 1
+
+
+class World:
+    """Static obstacles [m] seen by the Lidars and collided with by the car.
+
+    Args:
+        circles: ``(N, 3)`` rows ``cx, cy, r`` with ``r > 0``.
+        segments: ``(M, 4)`` rows ``x1, y1, x2, y2``: zero-thickness walls of non-zero length.
+        polygons: sequence of ``(k, 2)`` vertex arrays (closed implicitly, any orientation),
+            filled with the even-odd rule (see the module docstring).
+        name: label for plots and logs.
+        bounds: ``(xmin, ymin, xmax, ymax)`` of the map; default: the bounding box of the geometry.
+
+    Attributes:
+        circles: ``(N, 3)`` float64.
+        walls: ``(M, 4)`` float64, the segments given.
+        segments: ``(M + E, 4)`` float64: the walls followed by all ``E`` polygon edges, i.e.
+            every line the Lidar can see.
+        polygons: list of ``(k, 2)`` float64 vertex arrays.
+        bounds: ``(xmin, ymin, xmax, ymax)`` tuple of floats.
+    """
+
+    def __init__(
+        self,
+        circles: ArrayLike = (),
+        segments: ArrayLike = (),
+        polygons: Sequence[ArrayLike] = (),
+        name: str = "custom",
+        bounds: Sequence[float] | None = None,
+    ) -> None:
+        self.name = str(name)
+        self.circles = _as_rows(circles, 3, "circles")
+        if np.any(self.circles[:, 2] <= 0):
+            bad = int(np.argmax(self.circles[:, 2] <= 0))
+            raise ValueError(
+                f"circles[{bad}]: expected a positive radius, got {self.circles[bad, 2]}"
+            )
+        self.walls = _as_rows(segments, 4, "segments")
+        lengths = np.hypot(*(self.walls[:, 2:4] - self.walls[:, 0:2]).T)
+        if np.any(lengths <= 0):
+            bad = int(np.argmax(lengths <= 0))
+            raise ValueError(
+                f"segments[{bad}]: expected two distinct end points, got {self.walls[bad]}"
+            )
+        if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
+            raise ValueError(
+                f"polygons: expected a sequence of (k, 2) arrays, got one array {polygons.shape}; "
+                "wrap a single polygon in a list"
+            )
+        self.polygons = [_as_polygon(p, i) for i, p in enumerate(polygons)]
+        edges = [_polygon_edges(p) for p in self.polygons]
+        self.polygon_edges = np.vstack(edges) if edges else np.zeros((0, 4))
+        self.segments = np.ascontiguousarray(np.vstack([self.walls, self.polygon_edges]))
+        self.bounds = self._check_bounds(bounds)
+
+    def _check_bounds(self, bounds: Sequence[float] | None) -> tuple[float, float, float, float]:
+        if bounds is None:
+            corners = [self.circles[:, :2] - self.circles[:, 2:3]]
+            corners.append(self.circles[:, :2] + self.circles[:, 2:3])
+            corners.append(self.segments[:, 0:2])
+            corners.append(self.segments[:, 2:4])
+            points = np.vstack(corners)
+            if len(points) == 0:
+                raise ValueError(
+                    "bounds: expected (xmin, ymin, xmax, ymax) for a world without obstacles"
+                )
+            lo, hi = points.min(axis=0), points.max(axis=0)
+            return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        box = np.asarray(bounds, dtype=np.float64)
+        ordered = box.shape == (4,) and box[0] < box[2] and box[1] < box[3]
+        if not (ordered and np.all(np.isfinite(box))):
+            raise ValueError(
+                f"bounds: expected finite (xmin, ymin, xmax, ymax) with xmin < xmax and "
+                f"ymin < ymax, got {bounds}"
+            )
+        return (float(box[0]), float(box[1]), float(box[2]), float(box[3]))
+
+    def __repr__(self) -> str:
+        return (
+            f"World(name={self.name!r}, circles={len(self.circles)}, walls={len(self.walls)}, "
+            f"polygons={len(self.polygons)}, bounds={self.bounds})"
+        )
+
+    @property
+    def n_primitives(self) -> int:
+        """Circles plus segments (walls and polygon edges): what the Lidar kernel tests."""
+        return len(self.circles) + len(self.segments)
+
+    # ------------------------------------------------------------------ pymunk
+    def build_space(self) -> pymunk.Space:
+        """A fresh ``pymunk.Space`` holding every obstacle as a static shape.
+
+        Circles become ``pymunk.Circle``, walls and polygon edges ``pymunk.Segment`` of radius 0
+        (so ray queries see exactly the lines the Lidar kernel sees), and each polygon that is
+        not part of a nesting (no hole, not inside another polygon) is also added as convex
+        ``pymunk.Poly`` pieces so that it is solid. All shapes get
+        ``collision_type = OBSTACLE_COLLISION_TYPE``.
+        """
+        space = pymunk.Space()
+        body = space.static_body
+        shapes: list[pymunk.Shape] = []
+        for cx, cy, r in self.circles:
+            shapes.append(pymunk.Circle(body, float(r), offset=(float(cx), float(cy))))
+        for x1, y1, x2, y2 in self.segments:
+            shapes.append(pymunk.Segment(body, (float(x1), float(y1)), (float(x2), float(y2)), 0.0))
+        for polygon in self._solid_polygons():
+            for piece in _convex_pieces(polygon):
+                shapes.append(pymunk.Poly(body, [tuple(v) for v in piece], radius=0.0))
+        for shape in shapes:
+            shape.collision_type = OBSTACLE_COLLISION_TYPE
+        space.add(*shapes)
+        return space
+
+    def _solid_polygons(self) -> list[NDArray[np.float64]]:
+        """Polygons that neither contain nor lie inside another polygon (safe to fill alone)."""
+        if len(self.polygons) < 2:
+            return list(self.polygons)
+        firsts = np.array([p[0] for p in self.polygons])
+        nested = np.zeros(len(self.polygons), dtype=bool)
+        for i, polygon in enumerate(self.polygons):
+            inside = even_odd_inside(firsts, _polygon_edges(polygon))
+            inside[i] = False
+            if np.any(inside):
+                nested[i] = True
+                nested[inside] = True
+        return [p for p, n in zip(self.polygons, nested, strict=True) if not n]
+
+    # ------------------------------------------------------------------ queries
+    def contains(self, points: ArrayLike) -> NDArray[np.bool_]:
+        """``(N,)`` True where a point ``(N, 2)`` [m] is strictly inside a circle or polygon.
+
+        Walls have zero thickness and contain nothing.
+        """
+        pts = _as_rows(points, 2, "points")
+        out = np.zeros(len(pts), dtype=bool)
+        for chunk in range(0, len(pts), _POINT_CHUNK):
+            p = pts[chunk : chunk + _POINT_CHUNK]
+            if len(self.circles):
+                d = np.hypot(p[:, None, 0] - self.circles[:, 0], p[:, None, 1] - self.circles[:, 1])
+                out[chunk : chunk + len(p)] |= np.any(d < self.circles[:, 2], axis=1)
+            if len(self.polygon_edges):
+                out[chunk : chunk + len(p)] |= even_odd_inside(p, self.polygon_edges)
+        return out
+
+    def clearance(self, points: ArrayLike) -> NDArray[np.float64]:
+        """``(N,)`` signed distance [m] from each point ``(N, 2)`` to the nearest obstacle surface.
+
+        Positive in free space; negative inside a circle or polygon (minus the distance to the
+        surface it is under). With no obstacles at all, ``inf``.
+        """
+        pts = _as_rows(points, 2, "points")
+        out = np.full(len(pts), np.inf)
+        for chunk in range(0, len(pts), _POINT_CHUNK):
+            p = pts[chunk : chunk + _POINT_CHUNK]
+            best = np.full(len(p), np.inf)
+            if len(self.circles):
+                d = np.hypot(p[:, None, 0] - self.circles[:, 0], p[:, None, 1] - self.circles[:, 1])
+                best = np.minimum(best, np.min(d - self.circles[:, 2], axis=1))
+            if len(self.walls):
+                best = np.minimum(best, np.min(segment_distances(p, self.walls), axis=1))
+            if len(self.polygon_edges):
+                d = np.min(segment_distances(p, self.polygon_edges), axis=1)
+                inside = even_odd_inside(p, self.polygon_edges)
+                best = np.minimum(best, np.where(inside, -d, d))
+            out[chunk : chunk + len(p)] = best
+        return out
+
+
+def _convex_pieces(polygon: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """Convex pieces covering a simple polygon: itself if convex, else an ear-clip triangulation."""
+    if _is_convex(polygon):
+        return [polygon]
+    return _ear_clip(polygon)
+
+
+def _is_convex(polygon: NDArray[np.float64]) -> bool:
+    edge = np.roll(polygon, -1, axis=0) - polygon
+    turn = edge[:, 0] * np.roll(edge[:, 1], -1) - edge[:, 1] * np.roll(edge[:, 0], -1)
+    return bool(np.all(turn >= 0) or np.all(turn <= 0))
+
+
+def _ear_clip(polygon: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """Triangles of a simple polygon by ear clipping (O(k^2)); collinear slivers are dropped."""
+    vertices = polygon if _signed_area(polygon) > 0 else polygon[::-1]
+    remaining = list(range(len(vertices)))
+    triangles: list[NDArray[np.float64]] = []
+    guard = 0
+    while len(remaining) > 3 and guard < len(remaining):
+        k = len(remaining)
+        for position in range(k):
+            i, j, m = remaining[position - 1], remaining[position], remaining[(position + 1) % k]
+            a, b, c = vertices[i], vertices[j], vertices[m]
+            cross = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+            if cross < 0:
+                continue
+            others = vertices[[v for v in remaining if v not in (i, j, m)]]
+            if cross > 0 and np.any(_in_triangle(others, a, b, c)):
+                continue
+            if cross > 0:
+                triangles.append(np.array([a, b, c]))
+            del remaining[position]
+            guard = 0
+            break
+        else:
+            guard = len(remaining)  # no ear found: not a simple polygon; keep what we have
+    if len(remaining) == 3:
+        tri = vertices[remaining]
+        if abs(_signed_area(tri)) > 0:
+            triangles.append(tri)
+    return triangles
+
+
+def _in_triangle(points: NDArray, a: NDArray, b: NDArray, c: NDArray) -> NDArray[np.bool_]:
+    """``(N,)`` True where points lie inside or on the CCW triangle ``a, b, c``."""
+    def side(p: NDArray, q: NDArray) -> NDArray:
+        return (q[0] - p[0]) * (points[:, 1] - p[1]) - (q[1] - p[1]) * (points[:, 0] - p[0])
+
+    return (side(a, b) >= 0) & (side(b, c) >= 0) & (side(c, a) >= 0)
