@@ -1,0 +1,333 @@
+"""Trace seeds (the paper's "strict, right-turn, zigzag" paths) and the traces built from them.
+
+A *seed* is a shape: a list of pieces of constant curvature, given a total length [m] and a
+bend scale (how large its turns are). A :class:`Trace` is that shape laid down from a start pose
+(x [m], y [m], heading [rad], world frame) and densely resampled. :func:`make_trace` fits it to
+a world: it shrinks the trace (first its bends, then its length) until every waypoint keeps
+``clearance`` metres from every obstacle, and says so readably when nothing fits.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: (arc length [m], curvature [1/m], positive = turning left / CCW) of one piece of a seed.
+Piece = tuple[float, float]
+
+#: Waypoint spacing [m]: 5 cm is well under the car's size, so checking clearance at the
+#: waypoints checks the whole path.
+WAYPOINT_SPACING = 0.05
+
+#: Scales tried, in order, when a trace does not fit its world: bends shrink before the length.
+LENGTH_SCALES: tuple[float, ...] = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3)
+BEND_SCALES: tuple[float, ...] = (1.0, 0.75, 0.5)
+
+#: Shortest trace [m] :func:`make_trace` accepts before giving up.
+MIN_TRACE_LENGTH = 2.0
+
+
+class TraceFitError(ValueError):
+    """No shrunken version of a trace keeps the required clearance in its world."""
+
+
+def _straight(length: float, bend: float) -> list[Piece]:
+    """The paper's "strict" seed: one straight line."""
+    return [(length, 0.0)]
+
+
+RIGHT_TURN_RADIUS = 2.5  # [m] at bend scale 1: gentle for a 0.8 m car, tight for a Lidar view
+
+
+def _right_turn(length: float, bend: float) -> list[Piece]:
+    """Straight, a 90 degree right (clockwise) arc, straight; the two straights are equal."""
+    radius = RIGHT_TURN_RADIUS * bend
+    arc = 0.5 * math.pi * radius
+    straight = max(length - arc, 0.0) / 2.0
+    return [(straight, 0.0), (min(arc, length), -1.0 / radius), (straight, 0.0)]
+
+
+ZIGZAG_AMPLITUDE = 1.0  # [m] lateral swing at bend scale 1 (fits a 4 m wide corridor)
+ZIGZAG_ANGLE = math.radians(40.0)  # [rad] leg direction off the main axis
+ZIGZAG_RADIUS = 1.5  # [m] corner radius at bend scale 1
+ZIGZAG_LEAD = 1.0  # [m] straight lead-in and lead-out
+
+
+def _zigzag(length: float, bend: float) -> list[Piece]:
+    """Lead-in, legs alternating +-40 degrees off the axis joined by round corners, lead-out.
+
+    The first and last legs are half legs so the path ends on its start axis; the number of
+    full legs is the largest that fits ``length`` and the lead-out takes the remainder.
+    """
+    radius = ZIGZAG_RADIUS * bend
+    leg = 2.0 * ZIGZAG_AMPLITUDE * bend / math.sin(ZIGZAG_ANGLE)
+    corner = 2.0 * ZIGZAG_ANGLE * radius  # arc length of a 2*angle corner
+    half_turn = ZIGZAG_ANGLE * radius
+    # the half turns shift the path sideways; shorter first/last half legs undo that shift
+    half_leg = leg / 2 - radius * (1 - math.cos(ZIGZAG_ANGLE)) / math.sin(ZIGZAG_ANGLE)
+    fixed = 2 * ZIGZAG_LEAD + 2 * half_turn + 2 * half_leg
+    if length < fixed + corner + leg:
+        return _straight(length, bend)
+    n_full = int((length - fixed - corner) // (corner + leg))
+    pieces: list[Piece] = [(ZIGZAG_LEAD, 0.0), (half_turn, 1.0 / radius), (half_leg, 0.0)]
+    sign = -1.0
+    for _ in range(n_full):
+        pieces += [(corner, sign / radius), (leg, 0.0)]
+        sign = -sign
+    pieces += [(corner, sign / radius), (half_leg, 0.0), (half_turn, -sign / radius)]
+    used = sum(p[0] for p in pieces)
+    pieces.append((length - used, 0.0))
+    return pieces
+
+
+@dataclass(frozen=True)
+class TraceSeed:
+    """A named trace shape.
+
+    Attributes:
+        name: the seed's name.
+        pieces: ``(length [m], bend scale) -> [(arc length [m], curvature [1/m]), ...]``.
+        closed: the trace ends where it starts (a circuit); progress then wraps around.
+    """
+
+    name: str
+    pieces: Callable[[float, float], list[Piece]]
+    closed: bool = False
+
+
+TRACE_SEEDS: dict[str, TraceSeed] = {
+    seed.name: seed
+    for seed in (
+        TraceSeed("straight", _straight),
+        TraceSeed("right_turn", _right_turn),
+        TraceSeed("zigzag", _zigzag),
+    )
+}
+TRACE_NAMES: tuple[str, ...] = tuple(TRACE_SEEDS)
+
+
+def check_trace_name(name: Any) -> str:
+    """Return ``name`` if it is a trace seed, else raise a ``ValueError`` listing the seeds."""
+    if not isinstance(name, str) or name not in TRACE_SEEDS:
+        raise ValueError(f"unknown trace {name!r}: expected one of {', '.join(TRACE_NAMES)}")
+    return name
+
+
+def integrate_pieces(
+    start_pose: ArrayLike, pieces: list[Piece], spacing: float = WAYPOINT_SPACING
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Lay ``pieces`` down from ``start_pose`` exactly (arcs in closed form).
+
+    Returns ``(points (M, 2) [m], headings (M,) [rad])`` spaced at most ``spacing`` apart along
+    the arc, first row = the start.
+    """
+    x, y, heading = (float(v) for v in np.asarray(start_pose, dtype=np.float64))
+    points = [np.array([[x, y]])]
+    headings = [np.array([heading])]
+    for length, curvature in pieces:
+        if length <= 0:
+            continue
+        s = np.linspace(0.0, length, max(1, math.ceil(length / spacing)) + 1)[1:]
+        if abs(curvature) < 1e-12:
+            px = x + s * math.cos(heading)
+            py = y + s * math.sin(heading)
+            ph = np.full_like(s, heading)
+        else:
+            ph = heading + curvature * s
+            px = x + (np.sin(ph) - math.sin(heading)) / curvature
+            py = y - (np.cos(ph) - math.cos(heading)) / curvature
+        points.append(np.stack([px, py], axis=1))
+        headings.append(ph)
+        x, y, heading = float(px[-1]), float(py[-1]), float(ph[-1])
+    return np.concatenate(points), np.concatenate(headings)
+
+
+class TraceProjection(NamedTuple):
+    """Where a point lies relative to a trace."""
+
+    progress: float  # [-] arc_position / length, in [0, 1]
+    cross_track_error: float  # [m] signed distance to the trace, positive = left of it
+    arc_position: float  # [m] arc length of the closest trace point from the start
+
+
+@numba.njit(cache=True)
+def _project(
+    points: np.ndarray, arc: np.ndarray, px: float, py: float, first: int, last: int
+) -> tuple[float, float]:
+    """Closest point to (px, py) on segments ``first..last-1``: (arc position, signed distance)."""
+    best_d2 = np.inf
+    best_s = 0.0
+    best_side = 0.0
+    for i in range(first, last):
+        ax, ay = points[i, 0], points[i, 1]
+        dx, dy = points[i + 1, 0] - ax, points[i + 1, 1] - ay
+        seg2 = dx * dx + dy * dy
+        u = 0.0
+        if seg2 > 0.0:
+            u = min(max(((px - ax) * dx + (py - ay) * dy) / seg2, 0.0), 1.0)
+        ex, ey = px - (ax + u * dx), py - (ay + u * dy)
+        d2 = ex * ex + ey * ey
+        if d2 < best_d2:
+            best_d2 = d2
+            best_s = arc[i] + u * (arc[i + 1] - arc[i])
+            best_side = dx * ey - dy * ex
+    distance = math.sqrt(best_d2)
+    return best_s, distance if best_side >= 0.0 else -distance
+
+
+class Trace:
+    """A trace laid down in the world: dense waypoints with arc length and heading.
+
+    Attributes:
+        seed: name of the seed it was built from.
+        waypoints: ``(M, 2)`` [m] world-frame points, at most ``WAYPOINT_SPACING`` apart.
+        headings: ``(M,)`` [rad] path direction at each waypoint.
+        arc: ``(M,)`` [m] arc length from the start to each waypoint.
+        closed: a circuit (its end meets its start).
+    """
+
+    def __init__(
+        self,
+        seed: str,
+        waypoints: NDArray[np.float64],
+        headings: NDArray[np.float64],
+        closed: bool = False,
+    ) -> None:
+        waypoints = np.ascontiguousarray(waypoints, dtype=np.float64)
+        if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) < 2:
+            raise ValueError(f"waypoints: expected shape (M >= 2, 2), got {waypoints.shape}")
+        self.seed = seed
+        self.waypoints = waypoints
+        self.headings = np.asarray(headings, dtype=np.float64)
+        steps = np.hypot(*np.diff(waypoints, axis=0).T)
+        self.arc = np.concatenate([[0.0], np.cumsum(steps)])
+        self.closed = closed
+        for array in (self.waypoints, self.headings, self.arc):
+            array.flags.writeable = False
+
+    def __repr__(self) -> str:
+        x, y, h = self.start_pose
+        return (
+            f"Trace({self.seed!r}, start=({x:.2f}, {y:.2f}, {h:.2f}), length={self.length:.2f} m)"
+        )
+
+    @property
+    def length(self) -> float:
+        """[m] total arc length."""
+        return float(self.arc[-1])
+
+    @property
+    def start_pose(self) -> NDArray[np.float64]:
+        """(x [m], y [m], heading [rad]) of the first waypoint."""
+        return np.array([*self.waypoints[0], self.headings[0]])
+
+    @property
+    def end_pose(self) -> NDArray[np.float64]:
+        """(x [m], y [m], heading [rad]) of the last waypoint."""
+        return np.array([*self.waypoints[-1], self.headings[-1]])
+
+    def project(
+        self, point: ArrayLike, near: float | None = None, window: float = 2.0
+    ) -> TraceProjection:
+        """Project ``point`` (x, y) [m] onto the trace.
+
+        With ``near`` (an arc position [m], e.g. the previous projection), only the trace within
+        ``window`` metres of it is searched: progress then cannot jump across to a neighbouring
+        leg of a zigzag that passes close by.
+        """
+        x, y = (float(v) for v in np.asarray(point, dtype=np.float64)[:2])
+        first, last = 0, len(self.arc) - 1
+        if near is not None:
+            first = max(int(np.searchsorted(self.arc, near - window)) - 1, 0)
+            last = min(int(np.searchsorted(self.arc, near + window)) + 1, last)
+        s, cte = _project(self.waypoints, self.arc, x, y, first, last)
+        return TraceProjection(s / self.length, cte, s)
+
+    def point_at(self, arc_position: float) -> NDArray[np.float64]:
+        """(x, y) [m] at ``arc_position`` [m] (clamped to the trace, or wrapped when closed)."""
+        s = arc_position % self.length if self.closed else min(max(arc_position, 0.0), self.length)
+        return np.array(
+            [np.interp(s, self.arc, self.waypoints[:, 0]), np.interp(s, self.arc, self.waypoints[:, 1])]
+        )
+
+    def lookahead(
+        self, point: ArrayLike, distance: float, near: float | None = None
+    ) -> NDArray[np.float64]:
+        """The trace point ``distance`` [m] of arc ahead of ``point``'s projection."""
+        return self.point_at(self.project(point, near).arc_position + distance)
+
+
+def build_trace(
+    seed: str, start_pose: ArrayLike, length: float, bend_scale: float = 1.0
+) -> Trace:
+    """Lay seed ``seed`` of ``length`` [m] down from ``start_pose``, without fitting."""
+    spec = TRACE_SEEDS[check_trace_name(seed)]
+    pose = np.asarray(start_pose, dtype=np.float64)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"start_pose: expected 3 finite numbers (x, y, heading), got {pose}")
+    if not math.isfinite(length) or length <= 0:
+        raise ValueError(f"length: expected a positive trace length [m], got {length!r}")
+    points, headings = integrate_pieces(pose, spec.pieces(length, bend_scale))
+    return Trace(seed, points, headings, spec.closed)
+
+
+def make_trace(
+    seed: str,
+    start_pose: ArrayLike,
+    length: float,
+    world: Any = None,
+    clearance: float = 0.77,
+) -> Trace:
+    """Build seed ``seed`` from ``start_pose`` and fit it to ``world``.
+
+    Args:
+        seed: one of :data:`TRACE_NAMES`.
+        start_pose: (x [m], y [m], heading [rad]) in the world frame.
+        length: wanted arc length [m].
+        world: anything with ``clearance(points (N, 2)) -> (N,)`` [m] and ``bounds``
+            (xmin, ymin, xmax, ymax) [m]; ``None`` skips fitting.
+        clearance: [m] free distance every waypoint must keep (car half-diagonal + margin).
+
+    Returns the first trace, trying bend scales :data:`BEND_SCALES` within length scales
+    :data:`LENGTH_SCALES`, whose waypoints all stay inside the bounds with ``clearance``.
+
+    Raises:
+        TraceFitError: when none does (the message names the tightest spot found).
+    """
+    if world is None:
+        return build_trace(seed, start_pose, length)
+    worst: tuple[float, NDArray[np.float64]] | None = None
+    for length_scale in LENGTH_SCALES:
+        if length * length_scale < MIN_TRACE_LENGTH:
+            break
+        for bend_scale in BEND_SCALES:
+            trace = build_trace(seed, start_pose, length * length_scale, bend_scale)
+            margin = free_margin(world, trace.waypoints) - clearance
+            if np.all(margin >= 0):
+                return trace
+            i = int(np.argmin(margin))
+            if worst is None:
+                worst = (float(margin[i] + clearance), trace.waypoints[i])
+    free, where = worst if worst is not None else (0.0, np.asarray(start_pose)[:2])
+    raise TraceFitError(
+        f"trace {seed!r} from {tuple(np.round(np.asarray(start_pose, dtype=float), 3))} does not "
+        f"fit in world {getattr(world, 'name', '?')!r}: expected every waypoint {clearance:.2f} m "
+        f"clear of obstacles and bounds, but at full size the point ({where[0]:.2f}, "
+        f"{where[1]:.2f}) is {free:.2f} m clear, and no shrunken version down to "
+        f"{max(MIN_TRACE_LENGTH, length * LENGTH_SCALES[-1]):.1f} m fits"
+    )
+
+
+def free_margin(world: Any, points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """[m] distance from each point to the nearest obstacle or edge of ``world.bounds``."""
+    xmin, ymin, xmax, ymax = world.bounds
+    to_edge = np.minimum.reduce(
+        [points[:, 0] - xmin, xmax - points[:, 0], points[:, 1] - ymin, ymax - points[:, 1]]
+    )
+    return np.minimum(np.asarray(world.clearance(points), dtype=np.float64), to_edge)
