@@ -1,0 +1,115 @@
+"""Two-Lidar fusion: the four-node graph (paper Fig. 4) and windowed pose graphs by weighted
+least squares. Oracle: edges generated from known car poses and mounts."""
+
+import numpy as np
+import pytest
+
+from estimators.fusion import (
+    SensorEdge,
+    fuse_car_motion,
+    motion_from_sensor_match,
+    optimize_poses,
+    predict_edges,
+)
+from lidar_env.se2 import compose, relative
+
+MOUNTS = np.array([[0.25, 0.05, 0.1], [-0.25, -0.1, -0.4]])
+
+
+def four_edges(motion: np.ndarray, rng: np.random.Generator | None = None) -> list[SensorEdge]:
+    """The four matches 1→3, 2→4, 1→4, 2→3 a car moving by ``motion`` produces."""
+    edges = []
+    for i, j in ((0, 0), (1, 1), (0, 1), (1, 0)):
+        z = relative(MOUNTS[i], compose(motion, MOUNTS[j]))
+        if rng is not None:
+            z = z + rng.normal(0.0, [0.005, 0.005, 0.002])
+        edges.append(SensorEdge(0, i, 1, j, z, 1.0))
+    return edges
+
+
+@pytest.mark.parametrize("motion", [[0.15, 0.0, 0.0], [0.1, -0.05, 0.3], [-0.2, 0.1, -1.2]])
+def test_exact_edges_give_the_true_car_motion(motion) -> None:
+    motion = np.array(motion)
+    estimate = fuse_car_motion(MOUNTS, four_edges(motion))
+    np.testing.assert_allclose(estimate, motion, atol=1e-6)
+
+
+def test_cross_edge_alone_constrains_all_three_dof() -> None:
+    motion = np.array([0.12, 0.03, 0.2])
+    edge = four_edges(motion)[2]  # lidar 1 at t-1 -> lidar 2 at t
+    np.testing.assert_allclose(
+        predict_edges(np.stack([np.zeros(3), motion]), MOUNTS, [edge])[0], edge.pose, atol=1e-12
+    )
+    np.testing.assert_allclose(fuse_car_motion(MOUNTS, [edge]), motion, atol=1e-6)
+
+
+def test_confidence_weights_the_edges_like_a_weighted_mean() -> None:
+    # Identity mounts and pure translation: the weighted least-squares answer is the weighted mean.
+    mounts = np.zeros((2, 3))
+    edges = [
+        SensorEdge(0, 0, 1, 0, np.array([0.10, 0.0, 0.0]), 0.9),
+        SensorEdge(0, 1, 1, 1, np.array([0.13, 0.0, 0.0]), 0.3),
+    ]
+    estimate = fuse_car_motion(mounts, edges, robust_scale=1e6)
+    np.testing.assert_allclose(estimate, [(0.9 * 0.10 + 0.3 * 0.13) / 1.2, 0.0, 0.0], atol=1e-6)
+
+
+def test_one_wrong_match_does_not_drag_the_others() -> None:
+    motion = np.array([0.15, 0.02, 0.05])
+    edges = four_edges(motion)
+    bad = edges[3]
+    edges[3] = SensorEdge(
+        0, bad.source_sensor, 1, bad.target_sensor, bad.pose + [0.4, -0.3, 0.2], 1
+    )
+    estimate = fuse_car_motion(MOUNTS, edges)
+    assert np.hypot(*(estimate[:2] - motion[:2])) < 0.01
+    plain = fuse_car_motion(MOUNTS, edges, robust_scale=1e6)
+    assert np.hypot(*(plain[:2] - motion[:2])) > 0.05  # the robust loss is what saves it
+
+
+def test_window_with_extra_edges_beats_chaining_consecutive_matches() -> None:
+    rng = np.random.default_rng(7)
+    truth = [np.zeros(3)]
+    for _ in range(5):
+        truth.append(compose(truth[-1], [0.15, 0.0, 0.05]))
+    truth = np.array(truth)
+    chained_errors, window_errors = [], []
+    for _ in range(20):
+        edges = []
+        for a in range(len(truth)):
+            for b in range(a + 1, min(a + 4, len(truth))):
+                for i in range(2):
+                    for j in range(2):
+                        z = relative(compose(truth[a], MOUNTS[i]), compose(truth[b], MOUNTS[j]))
+                        noise = rng.normal(0.0, [0.01, 0.01, 0.005])
+                        edges.append(SensorEdge(a, i, b, j, z + noise, 1.0))
+        chained = [np.zeros(3)]
+        for edge in edges:
+            if (
+                edge.target_node == edge.source_node + 1
+                and edge.source_sensor == edge.target_sensor == 0
+            ):
+                chained.append(compose(chained[-1], motion_from_sensor_match(MOUNTS[0], edge.pose)))
+        chained = np.array(chained)
+        solved = optimize_poses(chained, MOUNTS, edges)
+        chained_errors.append(np.hypot(*(chained[-1, :2] - truth[-1, :2])))
+        window_errors.append(np.hypot(*(solved[-1, :2] - truth[-1, :2])))
+    assert np.mean(window_errors) < 0.5 * np.mean(chained_errors)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"n_fixed": 2}, "n_fixed"),
+        ({"edges": [SensorEdge(0, 0, 2, 0, np.zeros(3), 1.0)]}, "nodes outside"),
+        ({"edges": [SensorEdge(0, 0, 1, 2, np.zeros(3), 1.0)]}, "sensors outside"),
+        ({"edges": [SensorEdge(0, 0, 1, 0, np.zeros(3), 0.0)]}, "confidences"),
+        ({"edges": []}, "at least one edge"),
+        ({"sigma_heading": -1.0}, "positive"),
+    ],
+)
+def test_bad_graphs_raise_readable_errors(kwargs, message) -> None:
+    arguments = {"car_poses": np.zeros((2, 3)), "mounts": MOUNTS, "edges": four_edges(np.zeros(3))}
+    arguments.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        optimize_poses(**arguments)
