@@ -1,0 +1,232 @@
+"""The scenario runner: record missing sensor datasets, replay them through every estimator.
+
+Work is split by scenario: one task records the scenario's sensor dataset if the database lacks
+it (or receives the stored one) and replays it through every estimator that has no trace there
+yet. Tasks go to any *executor*: an object with ``submit(fn, *args) -> future`` whose futures
+have ``done()`` and ``result()``. That covers
+
+* ``None``: run in this process, one task after another;
+* ``concurrent.futures.ProcessPoolExecutor(n)``: a local process pool;
+* ``dask.distributed.Client(...)`` (or ``client.get_executor()``): a Dask cluster;
+* Ray, through a two-line adapter over ``ray.util`` / object refs::
+
+      class RayExecutor:
+          def submit(self, fn, *args):
+              return ray.remote(fn).remote(*args).future()  # a concurrent.futures.Future
+
+Design choice: **workers return results and only this (parent) process writes the database.**
+SQLite allows one writer at a time, cluster workers often share no filesystem with the
+database, and a stateless worker can be killed or retried freely. Each finished scenario is
+committed as it arrives, one transaction per dataset and per trace, so killing the run (or a
+worker) loses only the scenarios still in flight; a re-run skips everything already stored.
+At most ``max_in_flight`` tasks are submitted at once, which bounds the memory held by
+datasets travelling to and from workers.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import time
+import traceback
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from estimators.database import (
+    ExperimentDatabase,
+    Scenario,
+    SensorDataset,
+    TraceDataset,
+    package_version,
+)
+from estimators.recording import record, replay, score
+from estimators.registry import _ENTRIES, names
+
+
+class FutureLike(Protocol):
+    def done(self) -> bool: ...
+
+    def result(self, timeout: float | None = None) -> Any: ...
+
+
+class ExecutorLike(Protocol):
+    def submit(self, fn: Callable[..., Any], /, *args: Any) -> FutureLike: ...
+
+
+class RunInterrupted(RuntimeError):
+    """The executor failed (e.g. a worker process died); committed scenarios are kept."""
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """A registered estimator and the parameters it runs with (over the registry defaults)."""
+
+    name: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.name not in _ENTRIES:
+            raise ValueError(
+                f"unknown estimator {self.name!r}: expected one of {', '.join(names())}"
+            )
+
+    @property
+    def resolved_params(self) -> dict[str, Any]:
+        """Every parameter: registry defaults overridden by ``params`` (what gets recorded)."""
+        return {**_ENTRIES[self.name][1], **dict(self.params)}
+
+
+@dataclass(frozen=True)
+class ScenarioTask:
+    """What a worker gets: the scenario, its stored dataset (``None``: record it) and the
+    estimators still to run on it."""
+
+    scenario: Scenario
+    estimators: tuple[EstimatorSpec, ...]
+    dataset: SensorDataset | None = None
+
+
+@dataclass
+class ScenarioOutcome:
+    """What a worker returns; ``failures`` maps a stage (``record`` or an estimator name) to
+    the error it raised, so one broken estimator does not stop the run."""
+
+    scenario: Scenario
+    dataset: SensorDataset | None
+    recorded: bool
+    traces: list[tuple[TraceDataset, dict[str, float]]] = field(default_factory=list)
+    failures: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class RunSummary:
+    """Counts of one :func:`run_scenarios` call."""
+
+    scenarios: int = 0
+    skipped: int = 0
+    recorded: int = 0
+    traces: int = 0
+    failures: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
+    """Record (if needed) and replay one scenario; runs in a worker, touches no database."""
+    dataset, recorded = task.dataset, False
+    outcome = ScenarioOutcome(task.scenario, None, False)
+    if dataset is None:
+        try:
+            dataset, recorded = record(task.scenario), True
+        except Exception:  # reported per stage; the rest of the run goes on
+            outcome.failures["record"] = traceback.format_exc(limit=3)
+            return outcome
+    outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
+    for spec in task.estimators:
+        try:
+            trace = replay(dataset, spec.name, spec.params, resolved_params=spec.resolved_params)
+            outcome.traces.append((trace, score(trace, dataset.poses)))
+        except Exception:  # a broken estimator must not sink the others
+            outcome.failures[spec.name] = traceback.format_exc(limit=3)
+    return outcome
+
+
+def _pending_task(db: ExperimentDatabase, scenario: Scenario,
+                  estimators: Sequence[EstimatorSpec]) -> ScenarioTask | None:
+    """The task still to do for ``scenario``, or ``None`` when everything is stored."""
+    version = package_version()
+    missing = tuple(spec for spec in estimators
+                    if not db.has_trace(scenario, spec.name, spec.resolved_params, version))
+    has_dataset = db.has_sensor_dataset(scenario)
+    if has_dataset and not missing:
+        return None
+    dataset = db.load_sensor_dataset(scenario) if has_dataset and missing else None
+    return ScenarioTask(scenario, missing, dataset)
+
+
+def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummary) -> None:
+    if outcome.dataset is not None and db.save_sensor_dataset(outcome.scenario, outcome.dataset):
+        summary.recorded += 1
+    for trace, metrics in outcome.traces:
+        if db.save_trace(outcome.scenario, trace, metrics) is not None:
+            summary.traces += 1
+    for stage, error in outcome.failures.items():
+        summary.failures[f"{outcome.scenario.label}: {stage}"] = error
+
+
+def _first_done(pending: set[Any]) -> set[Any]:
+    """Block until at least one future is done; return the done ones."""
+    if all(isinstance(future, cf.Future) for future in pending):
+        done, _ = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
+        return set(done)
+    while True:  # Dask / Ray futures: poll, they all have done()
+        done = {future for future in pending if future.done()}
+        if done:
+            return done
+        time.sleep(0.01)
+
+
+def run_scenarios(
+    db: ExperimentDatabase,
+    scenarios: Iterable[Scenario],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """Make sure every scenario has a sensor dataset and a scored trace per estimator.
+
+    Scenarios already complete in ``db`` are skipped; the rest go to ``executor`` (``None``:
+    this process) and are committed one by one as they finish. ``on_done`` is called after
+    each scenario is settled (e.g. to advance a progress bar). Raises :class:`RunInterrupted`
+    when the executor breaks (a killed worker); everything committed before stays.
+    """
+    if max_in_flight < 1:
+        raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
+    start = time.perf_counter()
+    summary = RunSummary()
+    todo: list[ScenarioTask] = []
+    for scenario in scenarios:
+        summary.scenarios += 1
+        task = _pending_task(db, scenario, estimators)
+        if task is None:
+            summary.skipped += 1
+            if on_done is not None:
+                on_done(scenario)
+        else:
+            todo.append(task)
+    if executor is None:
+        for task in todo:
+            _commit(db, run_scenario_task(task), summary)
+            if on_done is not None:
+                on_done(task.scenario)
+    else:
+        _run_on(executor, todo, db, summary, max_in_flight, on_done)
+    summary.seconds = time.perf_counter() - start
+    return summary
+
+
+def _run_on(executor: ExecutorLike, todo: list[ScenarioTask], db: ExperimentDatabase,
+            summary: RunSummary, max_in_flight: int,
+            on_done: Callable[[Scenario], None] | None) -> None:
+    queue = list(reversed(todo))
+    pending: set[Any] = set()
+    while queue or pending:
+        while queue and len(pending) < max_in_flight:
+            pending.add(executor.submit(run_scenario_task, queue.pop()))
+        for future in _first_done(pending):
+            pending.discard(future)
+            try:
+                outcome = future.result()
+            except Exception as error:  # the task catches its own errors: this is the executor
+                for other in pending:
+                    other.cancel()
+                raise RunInterrupted(
+                    f"the executor failed ({type(error).__name__}: {error}); "
+                    f"{summary.recorded} sensor datasets and {summary.traces} traces of this run "
+                    f"are committed, {len(pending) + len(queue) + 1} scenarios are not: "
+                    "re-run to resume"
+                ) from error
+            _commit(db, outcome, summary)
+            if on_done is not None:
+                on_done(outcome.scenario)
