@@ -1,0 +1,176 @@
+"""Scan geometry shared by the scan matchers: scans to points, normals, correlative search.
+
+Frames: a scan's points are first in the sensor frame (x forward, y left), then mapped into
+the car frame through the sensor's mount; the estimators map them into the world frame with
+the car pose. Distances are in metres, angles in radians.
+
+Two Lidars are merged by mapping both scans into the car frame through their known mounts;
+the result is one point set, as if from a single sensor at the car's origin.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from estimators.base import SensorSetup
+from lidar_env.se2 import transform_points, wrap_angle
+
+#: Readings at or below this [m] are treated as "no return" (CARMEN logs write 0 for none).
+DEFAULT_MIN_RANGE: float = 0.05
+
+
+def scan_to_points(
+    ranges: ArrayLike,
+    angles: ArrayLike,
+    max_range: float,
+    mount: ArrayLike = (0.0, 0.0, 0.0),
+    min_range: float = DEFAULT_MIN_RANGE,
+) -> NDArray[np.float64]:
+    """Points ``(M, 2)`` [m] of the beams that hit something, in the frame the sensor is
+    ``mount``-ed in (the sensor frame itself for the default identity mount).
+
+    Beams with ``range >= max_range`` or ``range <= min_range`` carry no return and are dropped.
+    """
+    ranges = np.asarray(ranges, dtype=np.float64)
+    angles = np.asarray(angles, dtype=np.float64)
+    if ranges.shape != angles.shape or ranges.ndim != 1:
+        raise ValueError(
+            f"ranges and angles: expected equal 1-D shapes, got {ranges.shape}, {angles.shape}"
+        )
+    hit = (ranges < max_range) & (ranges > min_range)
+    r, a = ranges[hit], angles[hit]
+    points = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    return transform_points(mount, points)
+
+
+def scans_to_car_points(
+    scans: Mapping[str, NDArray[np.float64]],
+    setup: SensorSetup,
+    min_range: float = DEFAULT_MIN_RANGE,
+) -> NDArray[np.float64]:
+    """All Lidars' hits ``(M, 2)`` [m] merged in the car frame through the known mounts."""
+    return np.concatenate(
+        [
+            scan_to_points(scans[key], setup.beam_angles, setup.max_range, mount, min_range)
+            for key, mount in zip(setup.keys, setup.mounts, strict=True)
+        ]
+    )
+
+
+def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[np.float64]:
+    """Keep the first point of every ``voxel_size`` [m] square cell (order preserved)."""
+    if voxel_size <= 0:
+        raise ValueError(f"voxel_size: expected a positive size [m], got {voxel_size}")
+    cells = np.floor(points / voxel_size).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def estimate_normals(
+    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
+    (principal axis of their covariance), and which points have a reliable one: at least 3
+    neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob)."""
+    k = min(k, len(points))
+    distances, index = tree.query(points, k=k, distance_upper_bound=max_radius)
+    distances = distances.reshape(len(points), k)
+    index = index.reshape(len(points), k)
+    found = np.isfinite(distances)
+    safe = np.where(found, index, np.arange(len(points))[:, None])
+    neighbours = points[safe]
+    weights = found.astype(np.float64)
+    count = weights.sum(axis=1)
+    mean = (neighbours * weights[..., None]).sum(axis=1) / count[:, None]
+    centred = (neighbours - mean[:, None, :]) * weights[..., None]
+    sxx = (centred[..., 0] ** 2).sum(axis=1)
+    syy = (centred[..., 1] ** 2).sum(axis=1)
+    sxy = (centred[..., 0] * centred[..., 1]).sum(axis=1)
+    # The normal is the eigenvector of the smaller eigenvalue of [[sxx, sxy], [sxy, syy]].
+    direction = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    normals = np.column_stack([-np.sin(direction), np.cos(direction)])
+    spread = np.sqrt((sxx - syy) ** 2 + 4.0 * sxy**2)
+    small = 0.5 * (sxx + syy - spread)
+    large = 0.5 * (sxx + syy + spread)
+    valid = (count >= 3) & (small < 0.1 * large)
+    return normals, valid
+
+
+class LikelihoodField:
+    """A grid [m] holding, per cell, ``exp(-d^2 / 2 sigma^2)`` of the distance ``d`` to the
+    nearest reference point: the smooth score of Olson's correlative scan matching.
+
+    E. Olson, "Real-time correlative scan matching", ICRA 2009.
+    """
+
+    def __init__(
+        self, points: NDArray[np.float64], resolution: float = 0.05, sigma: float = 0.1,
+        margin: float = 1.0,
+    ) -> None:
+        if len(points) == 0:
+            raise ValueError("points: expected at least one reference point, got none")
+        if resolution <= 0 or sigma <= 0:
+            raise ValueError(
+                f"resolution and sigma: expected positive [m], got {resolution}, {sigma}"
+            )
+        self.resolution = resolution
+        self.origin = points.min(axis=0) - margin
+        shape = np.ceil((points.max(axis=0) + margin - self.origin) / resolution).astype(int) + 1
+        occupied = np.ones(tuple(shape), dtype=bool)
+        cells = np.floor((points - self.origin) / resolution).astype(int)
+        occupied[cells[:, 0], cells[:, 1]] = False
+        distance = ndimage.distance_transform_edt(occupied) * resolution
+        self.grid = np.exp(-0.5 * (distance / sigma) ** 2)
+
+    def score(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Score of each point ``(..., 2)`` [m]; 0 outside the grid."""
+        cells = np.floor((points - self.origin) / self.resolution).astype(np.int64)
+        inside = (
+            (cells[..., 0] >= 0) & (cells[..., 0] < self.grid.shape[0])
+            & (cells[..., 1] >= 0) & (cells[..., 1] < self.grid.shape[1])
+        )
+        scores = np.zeros(points.shape[:-1])
+        scores[inside] = self.grid[cells[inside][:, 0], cells[inside][:, 1]]
+        return scores
+
+
+def correlative_search(
+    field: LikelihoodField,
+    points: NDArray[np.float64],
+    center: ArrayLike,
+    linear_window: float = 0.5,
+    angular_window: float = np.radians(20.0),
+    angular_step: float = np.radians(1.0),
+) -> tuple[NDArray[np.float64], float]:
+    """Exhaustive search for the pose of ``points`` (M, 2, car frame) in ``field`` (world).
+
+    Tries every heading within ``center[2] ± angular_window`` [rad] at ``angular_step`` and
+    every translation within ``center[:2] ± linear_window`` [m] at the field's resolution.
+    Returns the best pose (3,) and its mean score in [0, 1].
+    """
+    center = np.asarray(center, dtype=np.float64)
+    step = field.resolution
+    n_lin = int(np.ceil(linear_window / step))
+    offsets = step * np.arange(-n_lin, n_lin + 1)
+    n_ang = int(np.ceil(angular_window / angular_step))
+    headings = center[2] + angular_step * np.arange(-n_ang, n_ang + 1)
+    best_pose, best_score = center.copy(), -1.0
+    grid_x, grid_y = np.meshgrid(offsets, offsets, indexing="ij")
+    shifts = np.column_stack([grid_x.ravel(), grid_y.ravel()])
+    for heading in headings:
+        c, s = np.cos(heading), np.sin(heading)
+        rotated = points @ np.array([[c, s], [-s, c]]) + center[:2]
+        # (n_shifts, M, 2): every translation of the rotated scan at once.
+        scores = field.score(rotated[None, :, :] + shifts[:, None, :]).mean(axis=1)
+        k = int(np.argmax(scores))
+        if scores[k] > best_score:
+            best_score = float(scores[k])
+            best_pose = np.array(
+                [center[0] + shifts[k, 0], center[1] + shifts[k, 1], float(wrap_angle(heading))]
+            )
+    return best_pose, best_score
