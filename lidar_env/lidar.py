@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numba import njit
@@ -172,13 +172,18 @@ def _scan_one(
         if d == 0.0:
             ranges[:] = 0.0
             return
-        a1 = math.atan2(seg[1] - oy, seg[0] - ox)
-        a2 = math.atan2(seg[3] - oy, seg[2] - ox)
-        sweep = (a2 - a1) % _TWO_PI  # CCW angle from end 1 to end 2, in [0, 2 pi)
-        if sweep <= math.pi:
-            lo, width = (a1 - heading) % _TWO_PI, sweep
+        v1x, v1y, v2x, v2y = seg[0] - ox, seg[1] - oy, seg[2] - ox, seg[3] - oy
+        a1 = math.atan2(v1y, v1x)
+        a2 = math.atan2(v2y, v2x)
+        # The sign of the cross product, not the rounded bearings, says which end is clockwise
+        # of the other; this stays right for a sensor next to a long wall (sweep near pi).
+        if v1x * v2y - v1y * v2x >= 0.0:
+            lo, width = a1, (a2 - a1) % _TWO_PI
         else:
-            lo, width = (a2 - heading) % _TWO_PI, _TWO_PI - sweep
+            lo, width = a2, (a1 - a2) % _TWO_PI
+        if width > math.pi:  # rounding: the true sweep is ~pi (or ~0 when nearly collinear)
+            width = math.pi if width < 1.5 * math.pi else 0.0
+        lo = (lo - heading) % _TWO_PI
         pieces = _interval_pieces(lo, width)
         for p in range(3):
             first, last = _sorted_range(pieces[2 * p], pieces[2 * p + 1], sorted_angles, step)
@@ -197,13 +202,11 @@ def _cast_rays_kernel(
     segments: NDArray[np.float64],
     first_polygon_edge: int,
     sensor_poses: NDArray[np.float64],
-    beam_angles: NDArray[np.float64],
+    beams: tuple,
     max_range: float,
 ) -> NDArray[np.float64]:
-    sorted_angles, order, step = _beam_order(beam_angles)
-    cos_beam = np.cos(beam_angles)
-    sin_beam = np.sin(beam_angles)
-    out = np.empty((sensor_poses.shape[0], beam_angles.shape[0]))
+    sorted_angles, order, step, cos_beam, sin_beam = beams
+    out = np.empty((sensor_poses.shape[0], cos_beam.shape[0]))
     for k in range(sensor_poses.shape[0]):
         _scan_one(
             out[k],
@@ -221,6 +224,17 @@ def _cast_rays_kernel(
             max_range,
         )
     return out
+
+
+@lru_cache(maxsize=16)
+def _beam_geometry(angle_bytes: bytes) -> tuple:
+    """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
+
+    Cached by the angles' bytes: a Lidar's beams are set up once, not on every scan.
+    """
+    angles = np.frombuffer(angle_bytes, dtype=np.float64)
+    sorted_angles, order, step = _beam_order(angles)
+    return sorted_angles, order, step, np.cos(angles), np.sin(angles)
 
 
 Geometry = World | tuple[ArrayLike, ArrayLike]
@@ -275,9 +289,8 @@ def cast_rays(
         )
     if not (np.isfinite(max_range) and max_range > 0):
         raise ValueError(f"max_range: expected a positive finite number [m], got {max_range}")
-    return _cast_rays_kernel(
-        circles, segments, first_polygon_edge, poses, angles, float(max_range)
-    )
+    beams = _beam_geometry(angles.tobytes())
+    return _cast_rays_kernel(circles, segments, first_polygon_edge, poses, beams, float(max_range))
 
 
 @dataclass(frozen=True)

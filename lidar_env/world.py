@@ -11,7 +11,9 @@ polygons when you mean a union.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pymunk
@@ -176,6 +178,75 @@ class World:
         """Circles plus segments (walls and polygon edges): what the Lidar kernel tests."""
         return len(self.circles) + len(self.segments)
 
+    # ------------------------------------------------------------------ images
+    @classmethod
+    def from_image(
+        cls,
+        image: ArrayLike | str | os.PathLike,
+        resolution: float,
+        origin: Sequence[float] = (0.0, 0.0),
+        name: str | None = None,
+        tolerance: float = 0.5,
+    ) -> World:
+        """A world of polygons traced around the occupied pixels of an occupancy image.
+
+        Args:
+            image: 2-D array, or path to an image file read as greyscale (PNG, PGM, ...);
+                0 = free, > 0 = obstacle (the paper's world-map convention). Up to ~2000 x 2000.
+            resolution: pixel size [m].
+            origin: world ``(x, y)`` [m] of the bottom-left corner of the image. Row 0 is the
+                top (max y): pixel ``(r, c)`` covers ``x in origin_x + [c, c+1) * res`` and
+                ``y in origin_y + [H-1-r, H-r) * res``.
+            name: world name; default the file stem, or ``"image"``.
+            tolerance: Douglas-Peucker simplification [pixels] of the traced staircase
+                outlines, in ``[0, 0.5]``; 0.5 keeps every outline within half a pixel.
+
+        The outlines come from ``pymunk.autogeometry.march_hard`` on pixel centres, so they run
+        along pixel edges before simplification; outlines of free regions enclosed by obstacles
+        become holes by the even-odd rule. The world's bounds are the image extent.
+        """
+        if name is None:
+            name = Path(image).stem if isinstance(image, (str, os.PathLike)) else "image"
+        pixels = _read_occupancy(image)
+        if not (np.isfinite(resolution) and resolution > 0):
+            raise ValueError(f"resolution: expected a positive pixel size [m], got {resolution}")
+        ox, oy = _as_rows(origin, 2, "origin")[0]
+        if not 0.0 <= tolerance <= 0.5:
+            raise ValueError(f"tolerance: expected a value in [0, 0.5] pixels, got {tolerance}")
+        height, width = pixels.shape
+        loops = _trace_outlines(pixels, tolerance)
+        polygons = [np.asarray(loop) * resolution + (ox, oy) for loop in loops]
+        bounds = (ox, oy, ox + width * resolution, oy + height * resolution)
+        return cls(polygons=polygons, name=name, bounds=bounds)
+
+    def to_image(
+        self, resolution: float, bounds: Sequence[float] | None = None
+    ) -> NDArray[np.uint8]:
+        """Rasterise the obstacles: ``(H, W)`` uint8, 255 = obstacle, 0 = free.
+
+        Same pixel convention as :meth:`from_image` with ``origin = (xmin, ymin)`` of
+        ``bounds`` (default :attr:`bounds`); ``H, W = ceil(extent / resolution)``. A pixel is
+        occupied when its centre is inside a circle or polygon (even-odd) or it holds a circle
+        centre, or a wall passes through it (walls are drawn at least one pixel wide).
+        """
+        if not (np.isfinite(resolution) and resolution > 0):
+            raise ValueError(f"resolution: expected a positive pixel size [m], got {resolution}")
+        xmin, ymin, xmax, ymax = self._check_bounds(self.bounds if bounds is None else bounds)
+        width = max(1, int(np.ceil((xmax - xmin) / resolution - 1e-9)))
+        height = max(1, int(np.ceil((ymax - ymin) / resolution - 1e-9)))
+        if width * height > 50_000_000:
+            raise ValueError(
+                f"to_image: expected at most 5e7 pixels, got {height} x {width}; "
+                "use a coarser resolution or smaller bounds"
+            )
+        grid = _PixelGrid(xmin, ymin, resolution, height, width)
+        occupied = grid.even_odd_fill(self.polygon_edges)
+        for cx, cy, r in self.circles:
+            grid.mark_disc(occupied, cx, cy, r)
+        for wall in self.walls:
+            grid.mark_segment(occupied, wall)
+        return np.where(occupied, np.uint8(255), np.uint8(0))
+
     # ------------------------------------------------------------------ pymunk
     def build_space(self) -> pymunk.Space:
         """A fresh ``pymunk.Space`` holding every obstacle as a static shape.
@@ -306,3 +377,141 @@ def _in_triangle(points: NDArray, a: NDArray, b: NDArray, c: NDArray) -> NDArray
         return (q[0] - p[0]) * (points[:, 1] - p[1]) - (q[1] - p[1]) * (points[:, 0] - p[0])
 
     return (side(a, b) >= 0) & (side(b, c) >= 0) & (side(c, a) >= 0)
+
+
+def _read_occupancy(image: ArrayLike | str | os.PathLike) -> NDArray[np.bool_]:
+    """``(H, W)`` bool occupancy (True = obstacle) of an image array or file, validated."""
+    if isinstance(image, (str, os.PathLike)):
+        try:
+            from PIL import Image, UnidentifiedImageError
+        except ImportError as error:  # pragma: no cover - pillow ships with matplotlib
+            raise ImportError("World.from_image(path) needs pillow: pip install pillow") from error
+        try:
+            with Image.open(image) as handle:
+                array = np.asarray(handle.convert("L"))
+        except (UnidentifiedImageError, OSError, SyntaxError) as error:
+            if isinstance(error, FileNotFoundError):
+                raise
+            raise ValueError(
+                f"image: expected a readable image file, got {image!s}: {error}"
+            ) from error
+    else:
+        array = np.asarray(image)
+    if array.ndim != 2:
+        raise ValueError(f"image: expected a 2-D occupancy array, got shape {array.shape}")
+    if array.size == 0:
+        raise ValueError(f"image: expected a non-empty image, got shape {array.shape}")
+    if array.dtype == bool:
+        occupied = array.copy()
+    else:
+        if not np.issubdtype(array.dtype, np.number):
+            raise ValueError(f"image: expected numeric pixel values, got dtype {array.dtype}")
+        values = array.astype(np.float64)
+        if not np.all(np.isfinite(values)) or np.any(values < 0):
+            raise ValueError("image: expected finite pixel values >= 0 (0 = free, > 0 = obstacle)")
+        occupied = values > 0
+    if occupied.all():
+        raise ValueError(f"image: expected some free (0) pixels, got all {array.size} occupied")
+    return occupied
+
+
+def _trace_outlines(occupied: NDArray[np.bool_], tolerance: float) -> list[NDArray[np.float64]]:
+    """Closed outlines ``(k, 2)`` [pixels, origin at the bottom-left corner] of the occupied
+    pixels, traced by pymunk's marching squares and simplified by Douglas-Peucker."""
+    from pymunk import autogeometry
+
+    height, width = occupied.shape
+    # One free pixel of padding closes outlines that touch the image border.
+    padded = np.pad(occupied, 1).astype(float).tolist()
+
+    def sample(point: tuple[float, float]) -> float:
+        # Samples sit on pixel centres (c + 0.5, H - 1 - r + 0.5) in padded index space.
+        return padded[int(height + 1.0 - point[1])][int(point[0] + 1.0)]
+
+    box = pymunk.BB(-0.5, -0.5, width + 0.5, height + 0.5)
+    polylines = autogeometry.march_hard(box, width + 2, height + 2, 0.5, sample)
+    loops = []
+    for line in polylines:
+        simplified = autogeometry.simplify_curves(line, tolerance) if tolerance > 0 else line
+        loop = np.array([(v.x, v.y) for v in simplified])
+        if len(loop) > 1 and np.array_equal(loop[0], loop[-1]):
+            loop = loop[:-1]
+        if len(loop) >= 3 and abs(_signed_area(loop)) > 0:
+            loops.append(loop)
+    return loops
+
+
+class _PixelGrid:
+    """Pixel-centre geometry of a raster whose row 0 is the top (max y)."""
+
+    def __init__(self, xmin: float, ymin: float, resolution: float, height: int, width: int):
+        self.xmin, self.ymin, self.res = xmin, ymin, resolution
+        self.height, self.width = height, width
+
+    def rows_of(self, y: NDArray) -> NDArray:
+        """Row index whose pixel holds world ``y`` (may be out of range)."""
+        return self.height - 1 - np.floor((y - self.ymin) / self.res).astype(np.int64)
+
+    def cols_of(self, x: NDArray) -> NDArray:
+        return np.floor((x - self.xmin) / self.res).astype(np.int64)
+
+    def centre_y(self, rows: NDArray) -> NDArray:
+        return self.ymin + (self.height - 1 - rows + 0.5) * self.res
+
+    def even_odd_fill(self, edges: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """``(H, W)`` even-odd fill of closed polygon ``edges`` at pixel centres (scanlines)."""
+        crossings = np.zeros((self.height, self.width + 1), dtype=np.int64)
+        if len(edges):
+            x1, y1, x2, y2 = edges.T
+            # Rows whose centre y lies in [min(y1,y2), max(y1,y2)): rows_of maps y down to rows.
+            top = np.clip(self.rows_of(np.maximum(y1, y2)), 0, self.height - 1)
+            bottom = np.clip(self.rows_of(np.minimum(y1, y2)), 0, self.height - 1)
+            counts = np.maximum(bottom - top + 1, 0)
+            edge_of = np.repeat(np.arange(len(edges)), counts)
+            rows = np.repeat(top, counts) + (np.arange(counts.sum()) - np.repeat(
+                np.cumsum(counts) - counts, counts))
+            yc = self.centre_y(rows)
+            ya, yb = y1[edge_of], y2[edge_of]
+            spans = (ya > yc) != (yb > yc)
+            edge_of, rows, yc = edge_of[spans], rows[spans], yc[spans]
+            xa, xb, ya, yb = x1[edge_of], x2[edge_of], y1[edge_of], y2[edge_of]
+            x_cross = xa + (yc - ya) * (xb - xa) / (yb - ya)
+            # Columns c with centre x < x_cross are those c < k.
+            k = np.clip(np.ceil((x_cross - self.xmin) / self.res - 0.5), 0, self.width)
+            np.add.at(crossings, (rows, k.astype(np.int64)), 1)
+        # Crossings right of centre c: total minus those with k <= c.
+        right = crossings.sum(axis=1, keepdims=True) - np.cumsum(crossings, axis=1)[:, :-1]
+        return (right % 2) == 1
+
+    def _block(self, x_lo: float, y_lo: float, x_hi: float, y_hi: float) -> tuple:
+        """Clipped row and column index ranges covering a world box, or None if outside."""
+        r0 = max(int(self.rows_of(np.array(y_hi))), 0)
+        r1 = min(int(self.rows_of(np.array(y_lo))), self.height - 1)
+        c0 = max(int(self.cols_of(np.array(x_lo))), 0)
+        c1 = min(int(self.cols_of(np.array(x_hi))), self.width - 1)
+        return (r0, r1, c0, c1) if r0 <= r1 and c0 <= c1 else None
+
+    def mark_disc(self, occupied: NDArray[np.bool_], cx: float, cy: float, r: float) -> None:
+        """Occupy pixels whose centre is inside the circle, and the pixel of its centre."""
+        block = self._block(cx - r, cy - r, cx + r, cy + r)
+        if block is None:
+            return
+        r0, r1, c0, c1 = block
+        rows = np.arange(r0, r1 + 1)[:, None]
+        cols = np.arange(c0, c1 + 1)[None, :]
+        x = self.xmin + (cols + 0.5) * self.res
+        y = self.centre_y(rows)
+        occupied[r0 : r1 + 1, c0 : c1 + 1] |= np.hypot(x - cx, y - cy) < r
+        row, col = int(self.rows_of(np.array(cy))), int(self.cols_of(np.array(cx)))
+        if 0 <= row < self.height and 0 <= col < self.width:
+            occupied[row, col] = True
+
+    def mark_segment(self, occupied: NDArray[np.bool_], segment: NDArray[np.float64]) -> None:
+        """Occupy every pixel the segment passes through (sampled at quarter-pixel steps)."""
+        length = float(np.hypot(segment[2] - segment[0], segment[3] - segment[1]))
+        u = np.linspace(0.0, 1.0, int(np.ceil(4.0 * length / self.res)) + 2)
+        x = segment[0] + u * (segment[2] - segment[0])
+        y = segment[1] + u * (segment[3] - segment[1])
+        rows, cols = self.rows_of(y), self.cols_of(x)
+        keep = (rows >= 0) & (rows < self.height) & (cols >= 0) & (cols < self.width)
+        occupied[rows[keep], cols[keep]] = True
