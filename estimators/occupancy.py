@@ -1,9 +1,10 @@
 """Log-odds occupancy grid built from planar Lidar scans at (estimated) sensor poses.
 
-The grid uses the image convention of :meth:`lidar_env.world.World.to_image`: cell
-``(row, col)`` covers ``x`` in ``[xmin + col * res, xmin + (col + 1) * res)`` and ``y`` in
-``(ymax - (row + 1) * res, ymax - row * res]``, so row 0 is the top (largest ``y``) and a map can
-be compared cell by cell with ``world.to_image(res)`` of the same bounds.
+The grid uses the image convention of :meth:`lidar_env.world.World.to_image`: ``H, W =
+ceil(extent / res)`` anchored at ``(xmin, ymin)``, cell ``(row, col)`` covers ``x`` in
+``xmin + [col, col + 1) * res`` and ``y`` in ``ymin + [H - 1 - row, H - row) * res`` (up to
+which side owns a boundary), so row 0 is the top (largest ``y``) and a map can be compared cell
+by cell with ``world.to_image(res)`` of the same bounds.
 
 Every beam is traced exactly through the cells it crosses (Amanatides & Woo, "A fast voxel
 traversal algorithm", Eurographics 1987): the cells before the return get a "miss", the cell of
@@ -143,7 +144,7 @@ class OccupancyGrid:
     Attributes:
         bounds: ``(xmin, ymin, xmax, ymax)`` [m] of the mapped world rectangle; the grid has
             ``ceil(width / resolution)`` columns and ``ceil(height / resolution)`` rows anchored
-            at ``(xmin, ymax)`` (row 0 = top).
+            at ``(xmin, ymin)`` (row 0 = top; the top row may reach past ``ymax``).
         resolution: [m] side of a square cell.
         p_hit, p_miss: inverse sensor model, probability of occupancy of the cell holding a
             return and of a cell a beam passed through.
@@ -205,17 +206,18 @@ class OccupancyGrid:
         """World points ``(N, 2)`` [m] -> continuous ``(col, row)`` [cells]; ``floor`` gives the
         cell index."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        xmin, _, _, ymax = self.bounds
+        xmin, ymin, _, _ = self.bounds
         return np.column_stack(
-            [(points[:, 0] - xmin) / self.resolution, (ymax - points[:, 1]) / self.resolution]
+            [(points[:, 0] - xmin) / self.resolution,
+             self.shape[0] - (points[:, 1] - ymin) / self.resolution]
         )
 
     def cell_centres(self) -> NDArray[np.float64]:
         """``(rows, cols, 2)`` world ``(x, y)`` [m] of every cell centre."""
         rows, cols = self.shape
-        xmin, _, _, ymax = self.bounds
+        xmin, ymin, _, _ = self.bounds
         x = xmin + (np.arange(cols) + 0.5) * self.resolution
-        y = ymax - (np.arange(rows) + 0.5) * self.resolution
+        y = ymin + (rows - np.arange(rows) - 0.5) * self.resolution
         return np.stack(np.meshgrid(x, y), axis=-1)
 
     def integrate(

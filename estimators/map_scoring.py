@@ -1,0 +1,348 @@
+"""Scores of a built map against the true world, and pictures of maps side by side.
+
+Occupied cells (:func:`score_occupancy`), at a tolerance of ``t`` cells (Chebyshev distance,
+i.e. a ``(2t+1) x (2t+1)`` square dilation with :func:`scipy.ndimage.binary_dilation`):
+
+* precision = share of the map's occupied cells within ``t`` cells of a true occupied cell;
+* recall = share of the evaluated true occupied cells within ``t`` cells of a map cell;
+* IoU = ``1 / (1/precision + 1/recall - 1)``, which is exactly ``|A ∩ B| / |A ∪ B|`` when
+  ``t = 0`` and extends it to a tolerance without counting a cell pair twice.
+
+The evaluated true cells are the *visible* ones (:func:`visible_cells`): the true occupied cells
+that a beam from some sensor position of the run could have hit, i.e. that hold the first hit of
+a ray cast in any direction, within ``max_range``, from a position where a Lidar was. Rays are
+cast exactly against the world geometry (:func:`lidar_env.lidar.cast_rays`) so densely that two
+neighbouring rays at ``max_range`` are at most half a cell apart. A hit that falls in a free cell
+because the image rasterised the surface to the other side marks the true cells next to it.
+
+Cylinders (:func:`score_cylinders`): detected circles are matched one-to-one to the true
+``world.circles`` (Hungarian assignment on centre distance, pairs farther than
+``match_distance`` discarded); recall counts only *observable* true cylinders
+(:func:`observable_cylinders`: at least ``min_points`` returns on it in one true scan), and the
+position error is the centre distance of the matched pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.optimize import linear_sum_assignment
+
+from estimators.base import SensorSetup
+from estimators.obstacles import DetectorParams, ObstacleTracker, detect_obstacles
+from estimators.occupancy import Bounds, OccupancyGrid, from_estimator_run, sensor_poses
+
+
+@dataclass(frozen=True)
+class MapScores:
+    """Occupied-cell scores at ``tolerance_cells``; counts are cells."""
+
+    precision: float
+    recall: float
+    iou: float
+    tolerance_cells: int
+    n_map: int  # occupied cells in the map
+    n_truth: int  # evaluated true occupied cells
+
+
+@dataclass(frozen=True)
+class CylinderScores:
+    """Detected cylinders against the observable true ones; errors in metres."""
+
+    recall: float
+    precision: float
+    mean_error: float  # [m] mean centre distance of matched pairs (nan if none)
+    max_error: float  # [m] largest centre distance of matched pairs (nan if none)
+    n_true: int  # observable true cylinders
+    n_detected: int
+    n_matched: int
+
+
+def truth_mask(image: ArrayLike) -> NDArray[np.bool_]:
+    """Occupied cells of a ground-truth image (e.g. ``world.to_image(res)``): any value > 0,
+    the paper's convention (0 = nothing, above 0 = obstacle)."""
+    image = np.asarray(image)
+    if image.ndim != 2:
+        raise ValueError(f"truth image: expected a 2-D (rows, cols) array, got {image.shape}")
+    return image > 0
+
+
+def _dilate(mask: NDArray[np.bool_], cells: int) -> NDArray[np.bool_]:
+    if cells == 0:
+        return mask
+    return ndimage.binary_dilation(mask, structure=np.ones((2 * cells + 1, 2 * cells + 1), bool))
+
+
+def score_occupancy(
+    occupied: ArrayLike,
+    truth: ArrayLike,
+    tolerance_cells: int = 1,
+    evaluated: ArrayLike | None = None,
+) -> MapScores:
+    """Precision, recall and IoU of the ``occupied`` map cells (rows, cols) against the true
+    image ``truth`` (same shape, > 0 = obstacle) at ``tolerance_cells`` (module doc).
+
+    ``evaluated`` (rows, cols) bool restricts the true cells that recall must find, e.g. to
+    :func:`visible_cells`; by default all true occupied cells count."""
+    occupied = np.asarray(occupied, dtype=bool)
+    true = truth_mask(truth)
+    if occupied.shape != true.shape:
+        raise ValueError(f"occupied map {occupied.shape} and truth image {true.shape}: expected "
+                         "the same shape (build the map over world.bounds at the image resolution)")
+    if isinstance(tolerance_cells, bool) or not isinstance(tolerance_cells, (int, np.integer)) \
+            or tolerance_cells < 0:
+        raise ValueError(f"tolerance_cells: expected an integer >= 0, got {tolerance_cells!r}")
+    if evaluated is not None:
+        evaluated = np.asarray(evaluated, dtype=bool)
+        if evaluated.shape != true.shape:
+            raise ValueError(f"evaluated: expected shape {true.shape}, got {evaluated.shape}")
+        true_evaluated = true & evaluated
+    else:
+        true_evaluated = true
+    n_map, n_truth = int(occupied.sum()), int(true_evaluated.sum())
+    matched_map = int((occupied & _dilate(true, tolerance_cells)).sum())
+    matched_truth = int((true_evaluated & _dilate(occupied, tolerance_cells)).sum())
+    precision = matched_map / n_map if n_map else math.nan
+    recall = matched_truth / n_truth if n_truth else math.nan
+    if precision > 0 and recall > 0:
+        iou = 1.0 / (1.0 / precision + 1.0 / recall - 1.0)
+    else:
+        iou = 0.0 if (precision == 0 or recall == 0) else math.nan
+    return MapScores(precision, recall, iou, int(tolerance_cells), n_map, n_truth)
+
+
+def dense_ray_angles(max_range: float, resolution: float) -> NDArray[np.float64]:
+    """Ray directions [rad] over the full circle, so dense that neighbouring rays are at most
+    half a cell (``resolution / 2`` [m]) apart at ``max_range`` [m]."""
+    n = math.ceil(2.0 * math.pi * max_range / (0.5 * resolution))
+    return 2.0 * np.pi * np.arange(n) / n
+
+
+def visible_cells(
+    world: Any,
+    sensor_positions: ArrayLike,
+    grid: OccupancyGrid,
+    max_range: float,
+) -> NDArray[np.bool_]:
+    """``(rows, cols)`` true occupied cells of ``world.to_image(grid.resolution)`` that a beam
+    from one of ``sensor_positions`` (N, 2) [m] could have hit (module doc), on ``grid``'s
+    cells (its bounds must be ``world.bounds``)."""
+    from lidar_env.lidar import cast_rays
+
+    true = truth_mask(world.to_image(grid.resolution))
+    if true.shape != grid.shape:
+        raise ValueError(f"grid {grid.shape} and world image {true.shape}: expected the same "
+                         f"shape; build the grid over world.bounds {world.bounds}")
+    positions = np.asarray(sensor_positions, dtype=np.float64).reshape(-1, 2)
+    angles = dense_ray_angles(max_range, grid.resolution)
+    poses = np.column_stack([positions, np.zeros(len(positions))])
+    hit_cells = np.zeros(grid.shape, dtype=bool)
+    rows, cols = grid.shape
+    for pose in poses:  # one sensor position at a time bounds memory to one dense scan
+        ranges = cast_rays(world, pose, angles, max_range)[0]
+        hit = (ranges < max_range) & (ranges > 0)
+        ends = pose[:2] + ranges[hit, None] * np.column_stack([np.cos(angles[hit]),
+                                                              np.sin(angles[hit])])
+        cells = np.floor(grid.to_grid_coordinates(ends)).astype(np.int64)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (
+            cells[:, 1] < rows)
+        hit_cells[cells[inside, 1], cells[inside, 0]] = True
+    return true & (hit_cells | _dilate(hit_cells & ~true, 1))
+
+
+def observable_cylinders(
+    world: Any,
+    true_sensor_poses: ArrayLike,
+    beam_angles: ArrayLike,
+    max_range: float,
+    min_points: int,
+) -> NDArray[np.bool_]:
+    """``(len(world.circles),)`` True for each cylinder that got at least ``min_points``
+    returns in one noiseless scan from one of ``true_sensor_poses`` (N, 3)."""
+    from lidar_env.lidar import cast_rays
+
+    circles = np.asarray(world.circles, dtype=np.float64).reshape(-1, 3)
+    poses = np.asarray(true_sensor_poses, dtype=np.float64).reshape(-1, 3)
+    angles = np.asarray(beam_angles, dtype=np.float64)
+    ranges = cast_rays(world, poses, angles, max_range)
+    directions = poses[:, 2:3] + angles
+    ends = np.stack([poses[:, 0:1] + ranges * np.cos(directions),
+                     poses[:, 1:2] + ranges * np.sin(directions)], axis=-1)
+    observable = np.zeros(len(circles), dtype=bool)
+    for i, (cx, cy, r) in enumerate(circles):
+        on_surface = (ranges < max_range) & (np.abs(np.hypot(ends[..., 0] - cx,
+                                                              ends[..., 1] - cy) - r) < 1e-6)
+        observable[i] = np.max(on_surface.sum(axis=1), initial=0) >= min_points
+    return observable
+
+
+def score_cylinders(
+    detected: ArrayLike,
+    true_circles: ArrayLike,
+    match_distance: float = 0.25,
+    observable: ArrayLike | None = None,
+) -> CylinderScores:
+    """Detected circles ``(M, 3)`` (cx, cy, r [m]) against ``true_circles`` ``(N, 3)``.
+
+    ``match_distance`` [m] (default 0.25: half the smallest gap a car could pass through, far
+    above a usable centre error, far below the spacing of distinct cylinders) caps a match.
+    ``observable`` (N,) bool limits the true cylinders recall counts; a detection matched to an
+    unobservable cylinder is still a correct detection for precision."""
+    found = np.asarray(detected, dtype=np.float64).reshape(-1, 3)
+    true = np.asarray(true_circles, dtype=np.float64).reshape(-1, 3)
+    if not (math.isfinite(match_distance) and match_distance > 0):
+        raise ValueError(
+            f"match_distance: expected a positive distance [m], got {match_distance!r}"
+        )
+    counted = np.ones(len(true), bool) if observable is None else np.asarray(observable, bool)
+    if counted.shape != (len(true),):
+        raise ValueError(f"observable: expected shape ({len(true)},), got {counted.shape}")
+    distances = np.hypot(found[:, None, 0] - true[None, :, 0], found[:, None, 1] - true[None, :, 1])
+    rows, cols = linear_sum_assignment(np.where(distances <= match_distance, distances, 1e9))
+    keep = distances[rows, cols] <= match_distance
+    rows, cols = rows[keep], cols[keep]
+    matched_counted = counted[cols]
+    errors = distances[rows, cols][matched_counted]
+    n_true = int(counted.sum())
+    return CylinderScores(
+        recall=float(matched_counted.sum() / n_true) if n_true else math.nan,
+        precision=float(len(rows) / len(found)) if len(found) else math.nan,
+        mean_error=float(errors.mean()) if len(errors) else math.nan,
+        max_error=float(errors.max()) if len(errors) else math.nan,
+        n_true=n_true,
+        n_detected=len(found),
+        n_matched=int(matched_counted.sum()),
+    )
+
+
+@dataclass(frozen=True)
+class RunMapEvaluation:
+    """What :func:`evaluate_run_map` measured, and the map and tracker it built."""
+
+    map_scores: MapScores
+    cylinder_scores: CylinderScores | None  # None for worlds without cylinders
+    grid: OccupancyGrid
+    tracker: ObstacleTracker
+
+
+def track_obstacles(
+    trajectory: ArrayLike,
+    observations: Sequence[Mapping[str, ArrayLike]],
+    setup: SensorSetup,
+    params: DetectorParams | None = None,
+    gate: float = 0.5,
+) -> ObstacleTracker:
+    """Detect the obstacles of every scan at the (estimated) sensor poses of ``trajectory``
+    (N, 3) and track them across steps (one tracker step per observation)."""
+    tracker = ObstacleTracker(gate=gate)
+    poses = sensor_poses(trajectory, setup)
+    for observation, step_poses in zip(observations, poses, strict=True):
+        scans = setup.check_observation(observation)
+        detections = []
+        for key, pose in zip(setup.keys, step_poses, strict=True):
+            detections += detect_obstacles(scans[key], setup.beam_angles, pose, setup.max_range,
+                                           params)
+        tracker.update(detections)
+    return tracker
+
+
+def evaluate_run_map(
+    world: Any,
+    true_trajectory: ArrayLike,
+    estimated_trajectory: ArrayLike,
+    observations: Sequence[Mapping[str, ArrayLike]],
+    setup: SensorSetup,
+    resolution: float = 0.05,
+    tolerance_cells: int = 1,
+    params: DetectorParams | None = None,
+) -> RunMapEvaluation:
+    """Map and track obstacles from ``observations`` at ``estimated_trajectory`` (N, 3), and
+    score both against ``world`` seen from ``true_trajectory`` (N, 3): occupied cells at
+    ``tolerance_cells`` over the visible cells, and cylinders (confirmed round tracks, at least 3
+    hits) against the observable ``world.circles``."""
+    true_trajectory = np.asarray(true_trajectory, dtype=np.float64)
+    estimated_trajectory = np.asarray(estimated_trajectory, dtype=np.float64)
+    if true_trajectory.shape != estimated_trajectory.shape:
+        raise ValueError(f"true_trajectory {true_trajectory.shape} and estimated_trajectory "
+                         f"{estimated_trajectory.shape}: expected the same shape (N, 3)")
+    grid = from_estimator_run(estimated_trajectory, observations, setup, resolution,
+                              bounds=world.bounds)
+    true_poses = sensor_poses(true_trajectory, setup).reshape(-1, 3)
+    visible = visible_cells(world, true_poses[:, :2], grid, setup.max_range)
+    map_scores = score_occupancy(grid.occupied(), world.to_image(resolution), tolerance_cells,
+                                 visible)
+    params = DetectorParams() if params is None else params
+    tracker = track_obstacles(estimated_trajectory, observations, setup, params)
+    cylinder_scores = None
+    if len(world.circles):
+        if setup.world_aligned:
+            true_poses[:, 2] = 0.0
+        observable = observable_cylinders(world, true_poses, setup.beam_angles, setup.max_range,
+                                          params.min_circle_points)
+        cylinder_scores = score_cylinders(tracker.cylinders(), world.circles,
+                                          observable=observable)
+    return RunMapEvaluation(map_scores, cylinder_scores, grid, tracker)
+
+
+def _as_probability_image(panel: OccupancyGrid | ArrayLike) -> NDArray[np.float64]:
+    if isinstance(panel, OccupancyGrid):
+        return panel.probabilities()
+    image = np.asarray(panel)
+    if image.ndim != 2:
+        raise ValueError(f"map panel: expected an OccupancyGrid or a 2-D image, got {image.shape}")
+    return image / 255.0 if image.dtype == np.uint8 else image.astype(np.float64)
+
+
+def save_map_figure(
+    path: str | Path,
+    panels: Mapping[str, OccupancyGrid | ArrayLike],
+    bounds: Bounds,
+    trajectories: Mapping[str, ArrayLike] | None = None,
+    title: str | None = None,
+) -> Path:
+    """Draw maps side by side and save them as a PNG at ``path``; return the path.
+
+    ``panels`` maps a title to an :class:`OccupancyGrid` or an image in the grid layout (row 0
+    = largest y): uint8 with 255 = obstacle (``world.to_image``) or probabilities in [0, 1].
+    All are drawn over ``bounds`` (xmin, ymin, xmax, ymax) [m], dark = occupied, white = free,
+    grey = unknown; ``trajectories`` (name -> (N, 3) or (N, 2) [m]) are drawn on every panel.
+    Needs matplotlib (the ``plots`` extra)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as error:
+        raise ImportError("save_map_figure needs matplotlib: pip install 'duallidar[plots]'") \
+            from error
+    if not panels:
+        raise ValueError("panels: expected at least one map to draw, got none")
+    xmin, ymin, xmax, ymax = bounds
+    aspect = (ymax - ymin) / (xmax - xmin)
+    figure, axes = plt.subplots(1, len(panels), figsize=(5.0 * len(panels), 5.0 * aspect + 0.8),
+                                squeeze=False)
+    for axis, (name, panel) in zip(axes[0], panels.items(), strict=True):
+        axis.imshow(_as_probability_image(panel), cmap="gray_r", vmin=0.0, vmax=1.0,
+                    extent=(xmin, xmax, ymin, ymax), origin="upper", interpolation="nearest")
+        for label, trajectory in (trajectories or {}).items():
+            points = np.asarray(trajectory, dtype=np.float64)
+            axis.plot(points[:, 0], points[:, 1], linewidth=1.0, label=label)
+        if trajectories:
+            axis.legend(loc="upper right", fontsize="small")
+        axis.set_title(name)
+        axis.set_xlabel("x [m]")
+        axis.set_ylabel("y [m]")
+    if title:
+        figure.suptitle(title)
+    figure.tight_layout()
+    path = Path(path)
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+    return path
