@@ -13,6 +13,10 @@ from estimators.base import Estimator
 
 #: name -> ("module:Class", default keyword parameters)
 _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
+    "zero": ("estimators.paper:ZeroMotion", {}),
+    "pc": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 0}),
+    "pc_offset": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 1}),
+    "pc_pg": ("estimators.paper:PoseGraphCorrelationOdometry", {}),
 }
 
 
