@@ -30,7 +30,8 @@ CORNER_SATURATION = 2.0 * np.tan(np.deg2rad(75.0))
 MIN_PIXEL_VALUE = 64
 
 
-def _check_size(size: int) -> None:
+def check_image_size(size: int) -> None:
+    """Raise unless ``size`` [px] is a positive even integer."""
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= 0 or size % 2:
         raise ValueError(f"size: expected a positive even integer [px], got {size!r}")
 
@@ -48,7 +49,7 @@ def check_image_geometry(size: int, resolution: float | None, max_range: float) 
     ``resolution=None`` picks the finest one whose image still holds every return:
     ``2 max_range / size`` (0.05 m/px for 400 px and 10 m).
     """
-    _check_size(size)
+    check_image_size(size)
     if not np.isfinite(max_range) or max_range <= 0:
         raise ValueError(f"max_range: expected a positive finite number [m], got {max_range!r}")
     if resolution is None:
@@ -125,7 +126,7 @@ def points_to_image(
     values = np.asarray(values)
     if values.shape != (len(points),):
         raise ValueError(f"values: expected shape ({len(points)},), got {values.shape}")
-    _check_size(size)
+    check_image_size(size)
     resolution = _check_resolution(resolution)
     half = size // 2
     cols = np.floor(points[:, 0] / resolution).astype(np.int64) + half
@@ -163,7 +164,6 @@ def scan_to_image(
     max_range: float,
     size: int = DEFAULT_SIZE,
     resolution: float | None = None,
-    points_pose: ArrayLike | None = None,
 ) -> NDArray[np.uint8]:
     """One scan as a ``(size, size)`` uint8 image (eqs. 4 and 5); zero where nothing returned.
 
@@ -174,20 +174,15 @@ def scan_to_image(
         max_range: [m].
         size: image side [px], a positive even integer (default 400, the paper's).
         resolution: [m/px]; default ``2 max_range / size``; must hold ``max_range``.
-        points_pose: optional (x [m], y [m], heading [rad]) of the scan's frame in the image's
-            frame, to draw a scan from another sensor (e.g. the offset Lidar) into this one.
+    To draw a scan rotated by ``phi`` (e.g. into another sensor's axes), add ``phi`` to
+    ``beam_angles``; to draw arbitrary points, use :func:`points_to_image`.
     """
     resolution = check_image_geometry(size, resolution, max_range)
     angles = np.asarray(beam_angles, dtype=np.float64)
     filtered = scan_filter(ranges, angles, max_range)
     beam_step = 2.0 * np.pi / len(angles)
     values = pixel_values(filtered, max_range, beam_step)
-    points = filtered[:, :2]
-    if points_pose is not None:
-        pose = np.asarray(points_pose, dtype=np.float64)
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        points = points @ np.array([[c, s], [-s, c]]) + pose[:2]
-    return points_to_image(points, values, size, resolution)
+    return points_to_image(filtered[:, :2], values, size, resolution)
 
 
 def pixel_shift_to_metres(shift: ArrayLike, resolution: float) -> NDArray[np.float64]:
