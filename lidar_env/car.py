@@ -20,7 +20,7 @@ import math
 import numba
 import numpy as np
 import pymunk
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 #: ``collision_type`` of the car's pymunk shape.
 CAR_COLLISION_TYPE: int = 2
@@ -167,6 +167,10 @@ class Car:
             self.pose, speed, yaw_rate, duration, substeps,
             self.half_length, self.half_width, self.circles, self.segments,
         )
+
+    def __getstate__(self) -> dict:
+        # the pymunk body belongs to a space that is rebuilt on demand, so it is not pickled
+        return {**self.__dict__, "pose": self.pose.copy(), "body": None}
 
     def add_to_space(self, space: pymunk.Space) -> pymunk.Body:
         """Add the car as a kinematic box body to ``space`` (once); return the body."""

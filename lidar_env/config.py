@@ -85,7 +85,9 @@ class EnvConfig:
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if not isinstance(self.dropout_prob, (int, float)) or not 0 <= self.dropout_prob < 1:
-            raise ValueError(f"dropout_prob: expected a number in [0, 1), got {self.dropout_prob!r}")
+            raise ValueError(
+                f"dropout_prob: expected a number in [0, 1), got {self.dropout_prob!r}"
+            )
         if self.scan_frame not in SCAN_FRAMES:
             raise ValueError(
                 f"scan_frame: expected one of {', '.join(SCAN_FRAMES)}, got {self.scan_frame!r}"
@@ -111,7 +113,7 @@ class EnvConfig:
         return cls().replace(**dict(mapping or {}))
 
     def replace(self, **changes: Any) -> EnvConfig:
-        """A copy with ``changes`` applied; unknown keys raise ``ValueError`` naming the valid ones."""
+        """A copy with ``changes`` applied; an unknown key raises ``ValueError`` naming all keys."""
         unknown = sorted(set(changes) - set(self.keys()))
         if unknown:
             raise ValueError(

@@ -157,10 +157,18 @@ class TraceProjection(NamedTuple):
 
 
 @numba.njit(cache=True)
-def _project(
-    points: np.ndarray, arc: np.ndarray, px: float, py: float, first: int, last: int
+def project_onto_polyline(
+    points: np.ndarray, arc: np.ndarray, px: float, py: float, near: float, window: float
 ) -> tuple[float, float]:
-    """Closest point to (px, py) on segments ``first..last-1``: (arc position, signed distance)."""
+    """Closest point to (px, py) on the polyline ``points`` (M, 2) with arc lengths ``arc``.
+
+    Only segments within ``window`` [m] of arc position ``near`` are searched (``window = inf``
+    searches all). Returns (arc position [m], signed distance [m], positive = left).
+    """
+    first, last = 0, points.shape[0] - 1
+    if window < np.inf:
+        first = max(np.searchsorted(arc, near - window) - 1, 0)
+        last = min(np.searchsorted(arc, near + window) + 1, last)
     best_d2 = np.inf
     best_s = 0.0
     best_side = 0.0
@@ -242,19 +250,16 @@ class Trace:
         leg of a zigzag that passes close by.
         """
         x, y = (float(v) for v in np.asarray(point, dtype=np.float64)[:2])
-        first, last = 0, len(self.arc) - 1
-        if near is not None:
-            first = max(int(np.searchsorted(self.arc, near - window)) - 1, 0)
-            last = min(int(np.searchsorted(self.arc, near + window)) + 1, last)
-        s, cte = _project(self.waypoints, self.arc, x, y, first, last)
+        if near is None:
+            near, window = 0.0, np.inf
+        s, cte = project_onto_polyline(self.waypoints, self.arc, x, y, float(near), window)
         return TraceProjection(s / self.length, cte, s)
 
     def point_at(self, arc_position: float) -> NDArray[np.float64]:
         """(x, y) [m] at ``arc_position`` [m] (clamped to the trace, or wrapped when closed)."""
         s = arc_position % self.length if self.closed else min(max(arc_position, 0.0), self.length)
-        return np.array(
-            [np.interp(s, self.arc, self.waypoints[:, 0]), np.interp(s, self.arc, self.waypoints[:, 1])]
-        )
+        x = np.interp(s, self.arc, self.waypoints[:, 0])
+        return np.array([x, np.interp(s, self.arc, self.waypoints[:, 1])])
 
     def lookahead(
         self, point: ArrayLike, distance: float, near: float | None = None

@@ -1,0 +1,386 @@
+"""``DualLidar-v0``: a car with two planar Lidars driving along a trace through a 2-D world."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from lidar_env.car import Car, mount_poses
+from lidar_env.config import EnvConfig
+from lidar_env.lidar import Lidar
+from lidar_env.traces import Trace, check_trace_name, project_onto_polyline
+from lidar_env.world import World
+from lidar_env.worlds import (
+    PAPER_TRACES,
+    Scene,
+    built_in_layout,
+    check_world_name,
+    make_scene,
+)
+
+#: Keys accepted in ``reset(options=...)``.
+RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
+
+#: [m] half-width of the arc window searched when tracking progress along the trace: far more
+#: than the car moves per step (0.15 m at default settings), far less than the spacing between
+#: zigzag legs, so progress never jumps to a neighbouring leg.
+PROGRESS_WINDOW = 2.0
+
+
+class StartPoseError(ValueError):
+    """The requested start pose puts the car inside or onto an obstacle."""
+
+
+class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
+    """A car with two planar Lidars drives along a trace through a 2-D world.
+
+    ## Description
+
+    The setting of Cheng et al.'s dual-Lidar pose estimation paper (sections III.A-B, IV): a
+    box-shaped car (0.8 m x 0.5 m) moves as a unicycle through a world of static obstacles
+    (cylinders, walls, polygons; a pymunk ``Space``). Two Lidars sit on the car at a fixed
+    offset ("the main and the offset sensor"; by default 0.25 m ahead of and 0.25 m behind the
+    car's centre on its axis). Each control step both take one exact 360-beam scan. The task
+    is to follow a *trace* (a waypoint path from a start pose: ``straight``, ``right_turn`` or
+    ``zigzag``) to its end; the ground-truth poses in ``info`` are what Lidar-only motion
+    estimators are scored against.
+
+    ## Action Space
+
+    ``Box(-1, 1, (2,), float32)``; finite values outside [-1, 1] are clipped.
+
+    | Index | Action            | Min                  | Max                 | Unit  |
+    |-------|-------------------|----------------------|---------------------|-------|
+    | 0     | linear velocity   | -max_speed (reverse) | +max_speed (1.5)    | m/s   |
+    | 1     | yaw rate, CCW > 0 | -max_yaw_rate        | +max_yaw_rate (1.5) | rad/s |
+
+    Both are held constant for ``control_dt`` (0.1 s): the car runs along a circular arc.
+
+    ## Observation Space
+
+    ``Dict`` of two ``Box(0, max_range, (n_beams,), float32)`` scans (defaults 10 m, 360):
+
+    | Key       | Sensor                 | Beam 0 points along        | Angle of beam i     | Unit |
+    |-----------|------------------------|----------------------------|---------------------|------|
+    | "lidar_1" | main, mount row 0      | sensor's forward axis (*)  | 2 pi i / n, CCW     | m    |
+    | "lidar_2" | offset, mount row 1    | sensor's forward axis (*)  | 2 pi i / n, CCW     | m    |
+
+    Each value is the range [m] from that sensor's centre to the first obstacle along the beam,
+    in [0, max_range]. A beam that hits nothing within ``max_range`` (or drops out, probability
+    ``dropout_prob``) reads exactly ``max_range``. Hits carry Gaussian noise of std
+    ``range_noise_std`` (0.01 m), clipped to [0, max_range). (*) With ``scan_frame="world"``
+    beam i instead points at world angle 2 pi i / n (the paper's simplification, as if the
+    heading were known); the ranges are then cast exactly along those world directions, not
+    interpolated from a sensor-frame scan.
+
+    ## Rewards
+
+    Per step: metres of arc gained along the trace, minus ``cross_track_penalty`` (0.1 /s)
+    x |cross-track error [m]| x ``control_dt``, minus ``collision_penalty`` (10) on the step
+    the car touches an obstacle.
+
+    ## Starting State
+
+    The car stands at the trace's start pose: each world has a default start per trace seed;
+    ``reset(options={"start": (x, y, heading)})`` overrides it (the trace is then fitted to
+    the world from there). A start where the car's box touches or lies inside an obstacle
+    raises :class:`StartPoseError`.
+
+    ## Episode End
+
+    Termination: 1. the car is within ``goal_tolerance`` (0.3 m) of arc from the trace's end;
+    2. the car's box touches an obstacle (it is stopped at the last free physics substep).
+    Truncation: 3. the episode time reaches ``max_episode_time`` (120 s).
+
+    ## Info
+
+    | Key                 | Meaning                                                 | Unit      |
+    |---------------------|---------------------------------------------------------|-----------|
+    | "pose"              | true car pose (x, y, heading), float64 (3,), world     | m, m, rad |
+    | "lidar_poses"       | true world poses of lidar_1 and lidar_2, float64 (2,3)  | m, m, rad |
+    | "time"              | time since reset                                        | s         |
+    | "progress"          | arc position / trace length, in [0, 1]                  | -         |
+    | "arc_position"      | arc length of the car's projection onto the trace       | m         |
+    | "cross_track_error" | signed distance from the trace, positive = left of it   | m         |
+    | "collision"         | the car touched an obstacle this step                   | -         |
+
+    Progress is tracked locally (within 2 m of arc of the previous step's), so it cannot jump
+    to a neighbouring leg of a zigzag.
+
+    ## Arguments
+
+    | Argument    | Default          | Meaning                                                  |
+    |-------------|------------------|----------------------------------------------------------|
+    | world       | "open_cylinders" | "open_cylinders", "hallway", "closed_to_open", "random"  |
+    | trace       | None             | "straight", "right_turn", "zigzag"; None: the world's    |
+    |             |                  | paper trace (right_turn, zigzag, zigzag, zigzag)         |
+    | config      | None             | an :class:`EnvConfig` or a dict of its fields            |
+    | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
+
+    ``reset(seed=..., options={"world": ..., "trace": ..., "start": (x, y, heading)})``
+    changes the world, trace or start pose for that episode only. A ``random`` world is drawn
+    from the env's ``np_random`` at every reset, as are range noise and dropouts.
+    ``env.unwrapped.space`` is the pymunk ``Space`` (obstacles and the car's kinematic body),
+    ``.world`` the :class:`~lidar_env.world.World`, ``.trace`` the active
+    :class:`~lidar_env.traces.Trace`, ``.config`` the :class:`EnvConfig`.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        world: str = "open_cylinders",
+        trace: str | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        self.world_name = check_world_name(world)
+        self.trace_name = None if trace is None else check_trace_name(trace)
+        if isinstance(config, EnvConfig):
+            self.config = config
+        elif config is None or isinstance(config, Mapping):
+            self.config = EnvConfig.from_dict(config)
+        else:
+            raise TypeError(f"config: expected an EnvConfig or a dict, got {type(config).__name__}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode: expected one of {', '.join(self.metadata['render_modes'])} or "
+                f"None, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        cfg = self.config
+        scan_box = spaces.Box(0.0, cfg.max_range, (cfg.n_beams,), np.float32)
+        self.observation_space = spaces.Dict({"lidar_1": scan_box, "lidar_2": scan_box})
+        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.lidar = Lidar(cfg.n_beams, cfg.max_range, cfg.range_noise_std, cfg.dropout_prob)
+        self._mounts = cfg.mounts_array
+        self._sensor_poses = np.zeros((2, 3))
+        self._world_aligned = cfg.scan_frame == "world"
+        self._scenes: dict[tuple[str, str, tuple[float, ...] | None], Scene] = {}
+        self.world: World | None = None
+        self.trace: Trace | None = None
+        self.car: Car | None = None
+        self._space: Any = None
+        self._space_world: World | None = None
+        self._renderer: Any = None
+        self._trajectories: dict[str, NDArray[np.float64]] = {}
+        self._last_scans: NDArray[np.float32] | None = None
+        self._time = 0.0
+        self._arc = 0.0
+
+    # ------------------------------------------------------------------ episode
+    def reset(
+        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(
+                f"unknown reset option(s) {', '.join(map(repr, unknown))}: expected some of "
+                f"{', '.join(RESET_OPTIONS)}"
+            )
+        world_name = check_world_name(options.get("world", self.world_name))
+        trace_name = options.get("trace", self.trace_name)
+        if trace_name is None:
+            trace_name = PAPER_TRACES[world_name]
+        trace_name = check_trace_name(trace_name)
+        start = options.get("start")
+        if start is not None:
+            start = self._check_start(start, world_name)
+        scene = self._scene(world_name, trace_name, start)
+        if self.world is not scene.world:
+            self.car = Car(self.config.car_length, self.config.car_width,
+                           scene.world.circles, scene.world.segments)
+        self.world, self.trace = scene.world, scene.trace
+        assert self.car is not None
+        self.car.place(self.trace.start_pose)
+        self._time = 0.0
+        self._arc = 0.0
+        self._trajectories = {}
+        observation = self._observe()
+        info = self._info(*self._progress(), collision=False)
+        if self.render_mode == "human":
+            self.render()
+        return observation, info
+
+    def _check_start(self, start: Any, world_name: str) -> tuple[float, float, float]:
+        pose = np.asarray(start, dtype=np.float64)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(
+                f"options['start']: expected 3 finite numbers (x [m], y [m], heading [rad]), "
+                f"got {start!r}"
+            )
+        if world_name != "random":
+            world = built_in_layout(world_name).world
+            car = Car(self.config.car_length, self.config.car_width, world.circles, world.segments)
+            if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
+                raise StartPoseError(
+                    f"start pose {tuple(pose.round(3))} puts the {self.config.car_length} m x "
+                    f"{self.config.car_width} m car into an obstacle of world {world_name!r}: "
+                    f"expected a pose where the car's box is clear"
+                )
+        return (float(pose[0]), float(pose[1]), float(pose[2]))
+
+    def _scene(
+        self, world_name: str, trace_name: str, start: tuple[float, float, float] | None
+    ) -> Scene:
+        """The world and fitted trace; built-in ones are cached (random worlds never are)."""
+        clearance = self.config.trace_clearance
+        if world_name == "random":
+            return make_scene(world_name, trace_name, self.np_random, clearance, start)
+        key = (world_name, trace_name, start)
+        if key not in self._scenes:
+            self._scenes[key] = make_scene(world_name, trace_name, None, clearance, start)
+        return self._scenes[key]
+
+    def step(
+        self, action: ArrayLike
+    ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
+        if self.car is None or self.trace is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action)
+        if a.shape != (2,):
+            raise ValueError(
+                f"action: expected shape (2,) (speed, yaw rate) in [-1, 1], got shape {a.shape}"
+            )
+        throttle, steer = float(a[0]), float(a[1])
+        if not (math.isfinite(throttle) and math.isfinite(steer)):
+            raise ValueError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+        cfg = self.config
+        speed = min(max(throttle, -1.0), 1.0) * cfg.max_speed
+        yaw_rate = min(max(steer, -1.0), 1.0) * cfg.max_yaw_rate
+        collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
+        self._time += cfg.control_dt
+        previous_arc = self._arc
+        arc, cross_track = self._progress()
+        reward = arc - previous_arc - cfg.cross_track_penalty * abs(cross_track) * cfg.control_dt
+        if collision:
+            reward -= cfg.collision_penalty
+        terminated = collision or arc >= self.trace.length - cfg.goal_tolerance
+        truncated = not terminated and self._time >= cfg.max_episode_time - 1e-9
+        observation = self._observe()
+        info = self._info(arc, cross_track, collision)
+        if self.render_mode == "human":
+            self.render()
+        return observation, reward, terminated, truncated, info
+
+    def _progress(self) -> tuple[float, float]:
+        """Arc position [m] and cross-track error [m] of the car, tracked near the last one."""
+        assert self.car is not None and self.trace is not None
+        pose = self.car.pose
+        arc, cross_track = project_onto_polyline(
+            self.trace.waypoints, self.trace.arc, pose[0], pose[1], self._arc, PROGRESS_WINDOW
+        )
+        self._arc = arc
+        return arc, cross_track
+
+    def _observe(self) -> dict[str, NDArray[np.float32]]:
+        assert self.car is not None
+        mount_poses(self.car.pose, self._mounts, self._sensor_poses)
+        cast_from = self._sensor_poses
+        if self._world_aligned:
+            cast_from = self._sensor_poses.copy()
+            cast_from[:, 2] = 0.0  # beam i along world angle 2 pi i / n
+        scans = self.lidar.scan(self.world, cast_from, self.np_random)
+        self._last_scans = scans
+        return {"lidar_1": scans[0], "lidar_2": scans[1]}
+
+    def _info(self, arc: float, cross_track: float, collision: bool) -> dict[str, Any]:
+        assert self.car is not None and self.trace is not None
+        return {
+            "pose": self.car.pose.copy(),
+            "lidar_poses": self._sensor_poses.copy(),
+            "time": self._time,
+            "progress": arc / self.trace.length,
+            "arc_position": arc,
+            "cross_track_error": cross_track,
+            "collision": collision,
+        }
+
+    # ------------------------------------------------------------------ pymunk
+    @property
+    def space(self) -> Any:
+        """The pymunk ``Space``: the world's static obstacles plus the car's kinematic box.
+
+        Built on first access for each world; the car's body is moved to the current pose on
+        every access (the simulation itself does not need pymunk; see :mod:`lidar_env.car`).
+        """
+        if self.world is None or self.car is None:
+            raise RuntimeError("call reset() before reading space")
+        if self._space is None or self._space_world is not self.world:
+            self._space = self.world.build_space()
+            self._space_world = self.world
+            self.car.add_to_space(self._space)
+        self.car.sync_body()
+        return self._space
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the pymunk space and the pygame window are rebuilt on demand after unpickling
+        state = self.__dict__.copy()
+        state["_space"] = None
+        state["_space_world"] = None
+        state["_renderer"] = None
+        return state
+
+    # ------------------------------------------------------------------ rendering
+    def set_render_trajectories(self, trajectories: Mapping[str, ArrayLike]) -> None:
+        """Trajectories to draw, ``{name: (N, 2) or (N, 3) world-frame poses [m]}``.
+
+        Cleared at every reset.
+        """
+        checked = {}
+        for name, poses in trajectories.items():
+            array = np.asarray(poses, dtype=np.float64)
+            if array.ndim != 2 or array.shape[1] not in (2, 3):
+                raise ValueError(
+                    f"trajectory {name!r}: expected shape (N, 2) or (N, 3), got {array.shape}"
+                )
+            checked[str(name)] = array[:, :2].copy()
+        self._trajectories = checked
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
+                "to gym.make"
+            )
+            return None
+        if self.car is None or self._last_scans is None:
+            raise RuntimeError("call reset() before render()")
+        from lidar_env.rendering import Renderer, show_in_window
+
+        if self._renderer is None or self._renderer.world is not self.world:
+            window = self._renderer.window if self._renderer is not None else None
+            self._renderer = Renderer(self.world)
+            self._renderer.window = window
+        frame = self._renderer.draw(
+            car_pose=self.car.pose,
+            car_size=(self.config.car_length, self.config.car_width),
+            sensor_poses=self._sensor_poses,
+            scans=self._last_scans,
+            beam_angles=self.lidar.beam_angles,
+            max_range=self.config.max_range,
+            world_aligned=self._world_aligned,
+            trace=self.trace.waypoints if self.trace is not None else None,
+            trajectories=self._trajectories,
+        )
+        if self.render_mode == "rgb_array":
+            return frame
+        show_in_window(self._renderer, frame, self.metadata["render_fps"])
+        return None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,210 @@
+"""Top-down pictures of a ``DualLidar-v0`` episode, drawn with numpy alone.
+
+``rgb_array`` frames need no window and no pygame; the ``human`` window imports pygame only
+when first shown. Pixel convention (as :meth:`lidar_env.world.World.to_image`): row 0 is the
+top of the world (max y), column 0 its left edge (min x).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium.error import DependencyNotInstalled
+from numpy.typing import ArrayLike, NDArray
+
+from lidar_env.world import World
+
+#: Longest image side [pixels] by default: sharp enough to see 0.1 m on a 40 m world.
+DEFAULT_MAX_SIZE = 640
+
+FREE = np.array([250, 250, 250], dtype=np.uint8)
+OBSTACLE = np.array([40, 40, 40], dtype=np.uint8)
+TRACE_COLOUR = np.array([120, 160, 255], dtype=np.uint8)
+CAR_COLOUR = np.array([220, 30, 30], dtype=np.uint8)
+LIDAR_COLOURS = (np.array([255, 140, 0], dtype=np.uint8), np.array([0, 170, 80], dtype=np.uint8))
+#: Colours cycled through for the trajectories handed in (blue, purple, brown, teal, olive).
+TRAJECTORY_COLOURS = tuple(
+    np.array(c, dtype=np.uint8)
+    for c in ((30, 60, 200), (150, 40, 170), (140, 90, 40), (0, 140, 140), (120, 120, 0))
+)
+
+
+class Renderer:
+    """Draws a world, a trace, the car, both Lidars' hits and trajectories into RGB frames.
+
+    Args:
+        world: the world; its obstacle raster is computed once.
+        max_size: longest image side [pixels]; sets the scale ``resolution`` [m/pixel].
+    """
+
+    def __init__(self, world: World, max_size: int = DEFAULT_MAX_SIZE) -> None:
+        if max_size < 16:
+            raise ValueError(f"max_size: expected at least 16 pixels, got {max_size}")
+        self.world = world
+        xmin, ymin, xmax, ymax = world.bounds
+        self.resolution = max(xmax - xmin, ymax - ymin) / max_size
+        occupied = world.to_image(self.resolution) > 0
+        self.background = np.where(occupied[..., None], OBSTACLE, FREE)
+        self.window: Any = None
+        self._clock: Any = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of every frame [pixels]."""
+        return self.background.shape[:2]
+
+    def to_pixels(self, points: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """(rows, cols) of world points (N, 2) [m]; may fall outside the image."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        xmin, _, _, ymax = self.world.bounds
+        cols = np.floor((p[:, 0] - xmin) / self.resolution).astype(np.int64)
+        rows = np.floor((ymax - p[:, 1]) / self.resolution).astype(np.int64)
+        return rows, cols
+
+    def _paint(
+        self, frame: NDArray[np.uint8], points: ArrayLike, colour: NDArray, size: int
+    ) -> None:
+        """Paint ``size`` x ``size`` pixel dots at world ``points`` (clipped to the frame)."""
+        rows, cols = self.to_pixels(points)
+        height, width = self.shape
+        for dr in range(size):
+            for dc in range(size):
+                r, c = rows + dr - size // 2, cols + dc - size // 2
+                keep = (r >= 0) & (r < height) & (c >= 0) & (c < width)
+                frame[r[keep], c[keep]] = colour
+
+    def _polyline(self, frame: NDArray[np.uint8], points: ArrayLike, colour: NDArray,
+                  size: int) -> None:
+        """Paint the polyline through ``points`` (N, 2) [m], sampled every half pixel."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(p) < 2:
+            self._paint(frame, p, colour, size)
+            return
+        steps = np.hypot(*np.diff(p, axis=0).T)
+        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        samples = np.linspace(0.0, arc[-1], max(2, int(arc[-1] / (0.5 * self.resolution)) + 1))
+        dense = np.stack([np.interp(samples, arc, p[:, 0]), np.interp(samples, arc, p[:, 1])], 1)
+        self._paint(frame, dense, colour, size)
+
+    def _car(self, frame: NDArray[np.uint8], pose: NDArray[np.float64],
+             size: tuple[float, float]) -> None:
+        """Fill the car's box and mark its nose."""
+        x, y, heading = pose
+        half_length, half_width = 0.5 * size[0], 0.5 * size[1]
+        reach = math.hypot(half_length, half_width)
+        (r0, r1), (c0, c1) = self.to_pixels([[x - reach, y + reach], [x + reach, y - reach]])
+        height, width = self.shape
+        rows = np.arange(max(r0, 0), min(r1 + 1, height))
+        cols = np.arange(max(c0, 0), min(c1 + 1, width))
+        if len(rows) == 0 or len(cols) == 0:
+            return
+        xmin, _, _, ymax = self.world.bounds
+        px = xmin + (cols[None, :] + 0.5) * self.resolution - x
+        py = ymax - (rows[:, None] + 0.5) * self.resolution - y
+        c, s = math.cos(heading), math.sin(heading)
+        along, across = c * px + s * py, -s * px + c * py
+        inside = (np.abs(along) <= half_length) & (np.abs(across) <= half_width)
+        hit_rows, hit_cols = np.nonzero(inside)
+        frame[rows[hit_rows], cols[hit_cols]] = CAR_COLOUR
+        nose = [[x + c * half_length, y + s * half_length]]
+        self._paint(frame, nose, np.array([255, 255, 255], dtype=np.uint8), 3)
+
+    def draw(
+        self,
+        car_pose: ArrayLike,
+        car_size: tuple[float, float],
+        sensor_poses: ArrayLike,
+        scans: ArrayLike,
+        beam_angles: ArrayLike,
+        max_range: float | None = None,
+        world_aligned: bool = False,
+        trace: ArrayLike | None = None,
+        trajectories: Mapping[str, ArrayLike] | None = None,
+    ) -> NDArray[np.uint8]:
+        """One ``(H, W, 3)`` uint8 frame.
+
+        Args:
+            car_pose: (x [m], y [m], heading [rad]).
+            car_size: (length, width) [m].
+            sensor_poses: ``(K, 3)`` world poses of the Lidars.
+            scans: ``(K, n)`` ranges [m]; readings ``>= max_range`` (default: the largest
+                reading) are not drawn.
+            beam_angles: ``(n,)`` [rad] from each sensor's forward axis (from world +x if
+                ``world_aligned``).
+            trace: ``(M, 2)`` waypoints [m] to draw under everything else.
+            trajectories: ``{name: (N, 2 or 3) poses [m]}``, each in its own colour.
+        """
+        frame = self.background.copy()
+        if trace is not None:
+            self._polyline(frame, trace, TRACE_COLOUR, 2)
+        for i, path in enumerate((trajectories or {}).values()):
+            colour = TRAJECTORY_COLOURS[i % len(TRAJECTORY_COLOURS)]
+            self._polyline(frame, np.asarray(path, dtype=np.float64)[:, :2], colour, 2)
+        poses = np.asarray(sensor_poses, dtype=np.float64).reshape(-1, 3)
+        ranges = np.asarray(scans, dtype=np.float64).reshape(len(poses), -1)
+        limit = float(np.max(ranges)) if max_range is None else max_range
+        angles = np.asarray(beam_angles, dtype=np.float64)
+        for k, pose in enumerate(poses):
+            heading = 0.0 if world_aligned else pose[2]
+            hit = ranges[k] < limit
+            direction = angles[hit] + heading
+            points = pose[:2] + ranges[k][hit, None] * np.stack(
+                [np.cos(direction), np.sin(direction)], axis=1
+            )
+            self._paint(frame, points, LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 2)
+        self._car(frame, np.asarray(car_pose, dtype=np.float64), car_size)
+        for k, pose in enumerate(poses):
+            self._paint(frame, pose[None, :2], LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 3)
+        return frame
+
+    def close(self) -> None:
+        """Close the window, if one was opened."""
+        if self.window is not None:
+            import pygame
+
+            pygame.display.quit()
+            pygame.quit()
+            self.window = None
+
+
+def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> None:
+    """Show ``frame`` in a pygame window (opened on first use), at most ``fps`` frames per s."""
+    try:
+        import pygame
+    except ImportError as error:
+        raise DependencyNotInstalled(
+            'pygame is not installed: run `pip install "duallidar[human]"` for render_mode="human"'
+        ) from error
+    height, width = frame.shape[:2]
+    if renderer.window is None:
+        pygame.init()
+        pygame.display.init()
+        renderer.window = pygame.display.set_mode((width, height))
+        renderer._clock = pygame.time.Clock()
+    surface = pygame.surfarray.make_surface(np.transpose(frame, (1, 0, 2)))
+    renderer.window.blit(surface, (0, 0))
+    pygame.event.pump()
+    pygame.display.flip()
+    renderer._clock.tick(fps)
+
+
+def frames_to_png(frames: Sequence[NDArray[np.uint8]], path: Any, columns: int = 3) -> None:
+    """Tile equally sized RGB ``frames`` into a grid and save it as a PNG (needs matplotlib)."""
+    try:
+        import matplotlib.image
+    except ImportError as error:
+        raise DependencyNotInstalled(
+            'matplotlib is not installed: run `pip install "duallidar[plots]"` to write PNGs'
+        ) from error
+    height = max(f.shape[0] for f in frames)
+    width = max(f.shape[1] for f in frames)
+    rows = math.ceil(len(frames) / columns)
+    sheet = np.full((rows * height, min(columns, len(frames)) * width, 3), 255, dtype=np.uint8)
+    for i, frame in enumerate(frames):
+        r, c = divmod(i, columns)
+        top, left = r * height, c * width
+        sheet[top : top + frame.shape[0], left : left + frame.shape[1]] = frame
+    matplotlib.image.imsave(path, sheet)
