@@ -1,0 +1,139 @@
+"""Map scores on hand-built maps with known precision and recall; visibility; cylinders."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.base import SensorSetup, default_beam_angles
+from estimators.map_scoring import (
+    evaluate_run_map,
+    observable_cylinders,
+    save_map_figure,
+    score_cylinders,
+    score_occupancy,
+    visible_cells,
+)
+from estimators.occupancy import OccupancyGrid, occupancy_to_rgb
+from lidar_env.lidar import cast_rays
+from lidar_env.world import World
+
+
+def hand_built_pair() -> tuple[np.ndarray, np.ndarray]:
+    """A 10 x 10 truth with a 6-cell wall in row 2, and a map that has 4 of those cells, the
+    cell just below a fifth (1 off), and 2 cells far from everything."""
+    truth = np.zeros((10, 10), np.uint8)
+    truth[2, 2:8] = 255
+    occupied = np.zeros((10, 10), bool)
+    occupied[2, 2:6] = True  # exact
+    occupied[3, 6] = True  # one cell off the wall cell (2, 6)
+    occupied[7, 1] = occupied[8, 8] = True  # far off
+    return occupied, truth
+
+
+def test_scores_without_tolerance_are_plain_cell_counts():
+    occupied, truth = hand_built_pair()
+    scores = score_occupancy(occupied, truth, tolerance_cells=0)
+    assert scores.precision == pytest.approx(4 / 7)
+    assert scores.recall == pytest.approx(4 / 6)
+    assert scores.iou == pytest.approx(4 / 9)  # |A and B| / |A or B| = 4 / (7 + 6 - 4)
+    assert (scores.n_map, scores.n_truth) == (7, 6)
+
+
+def test_one_cell_tolerance_forgives_the_offset_cell_only():
+    occupied, truth = hand_built_pair()
+    scores = score_occupancy(occupied, truth, tolerance_cells=1)
+    assert scores.precision == pytest.approx(5 / 7)
+    # truth cells within one cell of a map cell: columns 2..7 (col 7 touches (3, 6))
+    assert scores.recall == pytest.approx(6 / 6)
+    assert scores.iou == pytest.approx(1 / (7 / 5 + 1 - 1))
+
+
+def test_recall_counts_only_the_evaluated_cells():
+    occupied, truth = hand_built_pair()
+    evaluated = np.zeros_like(occupied)
+    evaluated[:, :4] = True  # only truth cells (2, 2) and (2, 3) are evaluated
+    scores = score_occupancy(occupied, truth, tolerance_cells=0, evaluated=evaluated)
+    assert scores.recall == 1.0 and scores.n_truth == 2
+    assert scores.precision == pytest.approx(4 / 7)  # precision still sees every map cell
+
+
+def test_empty_map_scores_nan_precision_and_zero_iou():
+    _, truth = hand_built_pair()
+    scores = score_occupancy(np.zeros((10, 10), bool), truth)
+    assert np.isnan(scores.precision) and scores.recall == 0.0 and scores.iou == 0.0
+
+
+def test_visible_cells_are_the_near_faces_seen_from_the_sensor():
+    # a 2 m x 2 m box seen from the left: only its left face (x = 4) is visible
+    box = np.array([[4.0, -1.0], [6.0, -1.0], [6.0, 1.0], [4.0, 1.0]])
+    world = World(polygons=[box], bounds=(0.0, -3.0, 8.0, 3.0))
+    grid = OccupancyGrid(world.bounds, 0.1)
+    visible = visible_cells(world, [[1.0, 0.0]], grid, max_range=10.0)
+    centres = grid.cell_centres()[visible]
+    assert visible.sum() >= 20 and np.all(centres[:, 0] < 4.2)
+    assert np.ptp(centres[:, 1]) > 1.8  # the whole face, top to bottom
+    # out of range: nothing visible
+    assert not visible_cells(world, [[1.0, 0.0]], grid, max_range=2.5).any()
+
+
+def test_cylinder_scores_match_one_to_one_and_count_only_observable_ones():
+    true = np.array([[0.0, 0.0, 0.3], [5.0, 0.0, 0.3], [0.0, 5.0, 0.3]])
+    detected = np.array([[0.03, 0.04, 0.3], [5.0, 0.1, 0.3], [0.05, 0.0, 0.3], [9.0, 9.0, 0.3]])
+    scores = score_cylinders(detected, true, observable=[True, True, False])
+    assert scores.recall == 1.0 and scores.n_matched == 2
+    assert scores.precision == pytest.approx(2 / 4)  # duplicate and far one unmatched
+    assert scores.mean_error == pytest.approx((0.05 + 0.1) / 2)
+    assert scores.max_error == pytest.approx(0.1)
+    assert score_cylinders(detected[:1], true).recall == pytest.approx(1 / 3)
+    with pytest.raises(ValueError, match=r"observable: expected shape \(3,\)"):
+        score_cylinders(detected, true, observable=[True])
+
+
+def test_observable_cylinders_need_enough_returns():
+    world = World(circles=[[2.0, 0.0, 0.3], [9.5, 0.0, 0.1], [-4.0, 0.0, 0.2]],
+                  segments=[[-3.0, -1.0, -3.0, 1.0]])  # the wall hides the third one
+    observable = observable_cylinders(world, [[0.0, 0.0, 0.0]], default_beam_angles(360), 10.0,
+                                      min_points=5)
+    assert list(observable) == [True, False, False]
+
+
+def test_true_pose_run_maps_the_world_and_finds_its_cylinders(tmp_path):
+    world = World(circles=[[3.0, 2.0, 0.3], [5.0, -2.0, 0.4], [8.0, 1.5, 0.25]],
+                  segments=[[-1.0, -4.0, 11.0, -4.0], [11.0, -4.0, 11.0, 4.0]],
+                  bounds=(-2.0, -5.0, 12.0, 5.0))
+    setup = SensorSetup(np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]]),
+                        default_beam_angles(360), 10.0)
+    rng = np.random.default_rng(3)
+    trajectory = np.column_stack([np.linspace(0.0, 8.0, 60), np.full(60, -0.5), np.zeros(60)])
+    observations = []
+    for car in trajectory:
+        sensors = car + setup.mounts
+        ranges = cast_rays(world, sensors, setup.beam_angles, setup.max_range)
+        ranges = np.where(ranges < 10.0, ranges + rng.normal(0, 0.01, ranges.shape), ranges)
+        observations.append(dict(zip(setup.keys, ranges, strict=True)))
+    result = evaluate_run_map(world, trajectory, trajectory, observations, setup)
+    assert result.map_scores.iou >= 0.9
+    assert result.cylinder_scores.recall == 1.0
+    assert result.cylinder_scores.max_error <= 0.05
+    # a map from a trajectory shifted by 0.3 m scores clearly worse
+    shifted = trajectory + [0.3, 0.0, 0.0]
+    worse = evaluate_run_map(world, trajectory, shifted, observations, setup)
+    assert worse.map_scores.iou < result.map_scores.iou - 0.3
+    figure = save_map_figure(tmp_path / "maps.png",
+                             {"true": world.to_image(0.05), "true poses": result.grid},
+                             world.bounds, trajectories={"truth": trajectory})
+    assert figure.stat().st_size > 1000
+    assert occupancy_to_rgb(result.grid).shape == (*result.grid.shape, 3)
+    with pytest.raises(ValueError, match="expected the same shape"):
+        evaluate_run_map(world, trajectory, trajectory[:5], observations, setup)
+
+
+def test_mismatched_shapes_and_bad_tolerance_are_readable_errors():
+    occupied, truth = hand_built_pair()
+    with pytest.raises(ValueError, match="expected the same shape"):
+        score_occupancy(occupied[:5], truth)
+    with pytest.raises(ValueError, match="tolerance_cells: expected an integer >= 0"):
+        score_occupancy(occupied, truth, tolerance_cells=-1)
+    with pytest.raises(ValueError, match="at least one map"):
+        save_map_figure("unused.png", {}, (0.0, 0.0, 1.0, 1.0))

@@ -1,0 +1,117 @@
+"""Obstacle detection on scenes with known cylinders, and tracking with stable ids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.base import default_beam_angles
+from estimators.obstacles import (
+    DetectorParams,
+    ObstacleTracker,
+    detect_obstacles,
+    fit_circle,
+    split_scan,
+)
+from lidar_env.lidar import cast_rays
+from lidar_env.world import World
+
+ANGLES = default_beam_angles(360)
+MAX_RANGE = 10.0
+CIRCLES = np.array([[3.0, 0.5, 0.25], [-1.0, 4.0, 0.4], [-3.5, -2.0, 0.3], [1.5, -3.0, 0.2]])
+
+
+def noisy_scan(world: World, pose: np.ndarray, rng: np.random.Generator, sigma: float = 0.01):
+    """The exact scan from ``lidar_env.lidar.cast_rays`` plus Gaussian noise on the returns."""
+    ranges = cast_rays(world, pose, ANGLES, MAX_RANGE)[0]
+    return np.where(ranges < MAX_RANGE, ranges + rng.normal(0.0, sigma, ranges.shape), ranges)
+
+
+def test_fit_circle_recovers_an_exact_arc_and_refuses_collinear_points():
+    arc = np.linspace(-1.0, 0.3, 7)
+    fit = fit_circle(np.column_stack([5.0 + 0.3 * np.cos(arc), -2.0 + 0.3 * np.sin(arc)]))
+    assert (fit.cx, fit.cy, fit.radius) == pytest.approx((5.0, -2.0, 0.3), abs=1e-9)
+    assert fit.rms == pytest.approx(0.0, abs=1e-9)
+    assert fit_circle([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]) is None
+    with pytest.raises(ValueError, match=r"expected shape \(N >= 3, 2\)"):
+        fit_circle([[0.0, 0.0], [1.0, 1.0]])
+
+
+def test_every_cylinder_is_found_once_with_its_centre_and_radius():
+    world = World(circles=CIRCLES)
+    pose = np.array([0.2, -0.1, 0.7])
+    obstacles = detect_obstacles(noisy_scan(world, pose, np.random.default_rng(0)), ANGLES, pose,
+                                 MAX_RANGE)
+    assert len(obstacles) == len(CIRCLES)
+    found = np.array([[*o.circle.centre, o.circle.radius] for o in obstacles])
+    for cx, cy, r in CIRCLES:
+        error = np.hypot(found[:, 0] - cx, found[:, 1] - cy)
+        best = int(np.argmin(error))
+        assert error[best] < 0.05
+        assert found[best, 2] == pytest.approx(r, abs=0.05)
+
+
+def test_walls_are_extended_not_round_and_a_corner_is_one_cluster():
+    world = World(segments=[[4.0, -3.0, 4.0, 3.0], [4.0, 3.0, -2.0, 3.0]])
+    pose = np.array([0.0, 0.0, 0.0])
+    obstacles = detect_obstacles(cast_rays(world, pose, ANGLES, MAX_RANGE)[0], ANGLES, pose,
+                                 MAX_RANGE)
+    assert len(obstacles) == 1
+    (corner,) = obstacles
+    assert corner.circle is None
+    assert corner.extent[0] > 6.0  # spans the diagonal of the L at least
+    assert np.all(corner.points[:, 0] <= 4.0 + 1e-9) and np.all(corner.points[:, 1] <= 3 + 1e-9)
+
+
+def test_clusters_split_at_range_jumps_and_join_across_zero_radians():
+    ranges = np.full(360, MAX_RANGE)
+    ranges[[357, 358, 359, 0, 1, 2]] = 2.0  # an arc of radius 2 m seen across 0 rad
+    ranges[100:103] = 3.0
+    ranges[103:106] = 3.5  # a 0.5 m jump in range: another object behind the first
+    ranges[200:203] = [4.0, 4.0, 4.3]  # a surface seen at ~13 deg, above the 10 deg limit: one
+    clusters = split_scan(ranges, ANGLES, MAX_RANGE, DetectorParams())
+    assert sorted(map(list, clusters)) == [
+        [100, 101, 102], [103, 104, 105], [200, 201, 202], [357, 358, 359, 0, 1, 2]
+    ]
+    with pytest.raises(ValueError, match="like beam_angles"):
+        split_scan(ranges[:5], ANGLES, MAX_RANGE, DetectorParams())
+
+
+def test_track_ids_stay_stable_while_the_car_drives_by_with_both_lidars():
+    world = World(circles=CIRCLES, segments=[[-6.0, -6.0, 6.0, -6.0]])
+    rng = np.random.default_rng(1)
+    tracker = ObstacleTracker()
+    mounts = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
+    ids_per_step = []
+    for k in range(40):
+        car = np.array([-2.0 + 0.1 * k, 0.5 + 0.02 * k, 0.05 * k])
+        c, s = np.cos(car[2]), np.sin(car[2])
+        detections = []
+        for mount in mounts:
+            sensor = np.array([car[0] + c * mount[0], car[1] + s * mount[0], car[2]])
+            detections += detect_obstacles(noisy_scan(world, sensor, rng), ANGLES, sensor,
+                                           MAX_RANGE)
+        ids = tracker.update(detections)
+        # the id of each true cylinder this step: the id of the detection nearest to it
+        positions = np.array([d.position for d in detections])
+        ids_per_step.append([ids[int(np.argmin(np.hypot(*(positions - c[:2]).T)))]
+                             for c in CIRCLES])
+    ids_per_step = np.array(ids_per_step)
+    assert np.all(ids_per_step == ids_per_step[0])  # one id per cylinder for all 40 steps
+    assert len(set(ids_per_step[0])) == len(CIRCLES)
+    cylinders = tracker.cylinders()
+    assert len(cylinders) == len(CIRCLES)
+    for cx, cy, r in CIRCLES:
+        error = np.min(np.hypot(cylinders[:, 0] - cx, cylinders[:, 1] - cy))
+        assert error < 0.02  # the joint fit over 80 scans beats a single scan's 5 cm
+
+
+def test_bad_parameters_are_readable_errors():
+    with pytest.raises(ValueError, match="grazing_angle"):
+        DetectorParams(grazing_angle=2.0)
+    with pytest.raises(ValueError, match="min_circle_points >= 4"):
+        DetectorParams(min_circle_points=3)
+    with pytest.raises(ValueError, match="gate: expected a positive distance"):
+        ObstacleTracker(gate=0.0)
+    with pytest.raises(ValueError, match="sensor_pose: expected 3 finite numbers"):
+        detect_obstacles(np.ones(360), ANGLES, [0.0, 0.0], MAX_RANGE)
