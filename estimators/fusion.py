@@ -20,13 +20,16 @@ over a sliding window of keyframes.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from lidar_env.se2 import compose, inverse, relative, wrap_angle
+from estimators.base import Estimator
+from estimators.rotation_pc import PreparedScan, ScanMatcher
+from estimators.scan_image import DEFAULT_SIZE
+from lidar_env.se2 import compose, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -123,9 +126,12 @@ def optimize_poses(
     column = np.full(n_nodes, -1)
     column[free] = np.arange(len(free))
 
+    # The unknowns are corrections to the start poses: starting at exactly zero makes
+    # least_squares open with a unit trust region instead of one as small as the start poses
+    # (a near-zero motion would otherwise never leave its start).
     def unpack(x: FloatArray) -> FloatArray:
         full = poses.copy()
-        full[free] = x.reshape(-1, 3)
+        full[free] += x.reshape(-1, 3)
         return full
 
     # r_t = R(φ)ᵀ (t_b + R(θ_b) m_j - t_a - R(θ_a) m_i) - R(z_θ)ᵀ z_t with φ = θ_a + m_iθ + z_θ,
@@ -164,7 +170,7 @@ def optimize_poses(
 
     result = least_squares(
         residuals,
-        poses[free].ravel(),
+        np.zeros(3 * len(free)),
         jac=jacobian,
         loss="cauchy",
         f_scale=robust_scale,
@@ -189,7 +195,149 @@ def fuse_car_motion(
     return optimize_poses(start, mounts, edges, n_fixed=1, **weights)[1]
 
 
-def motion_from_sensor_match(mount: ArrayLike, sensor_motion: ArrayLike) -> FloatArray:
-    """Car motion ``Δ = mount ⊕ z ⊕ mount⁻¹`` from one sensor's own match ``z`` (same sensor
-    at both times)."""
-    return compose(compose(mount, sensor_motion), inverse(mount))
+@dataclass
+class _Keyframe:
+    """A car pose [m, m, rad] in the trajectory frame and its scans prepared for matching."""
+
+    pose: FloatArray
+    scans: tuple[PreparedScan, ...]
+
+
+@dataclass
+class FusionEstimator(Estimator):
+    """Both Lidars, all four same- and cross-sensor matches, fused on SE(2) over keyframes.
+
+    Every scan pair is matched by :class:`estimators.rotation_pc.ScanMatcher` (rotation-aware
+    phase correlation, then ``icp_iterations`` of point-to-line ICP) against the latest
+    keyframe, and the four edges (paper Fig. 4) give the car pose by :func:`optimize_poses`.
+    When the car has moved ``keyframe_distance`` [m] or turned ``keyframe_turn`` [rad] from that
+    keyframe, the scans become a keyframe: they are also matched against the older keyframes
+    of the window (``window`` keyframes in all) and the window's poses are re-solved with its
+    oldest keyframe held. Matching against keyframes rather than the previous scan means the
+    error grows per keyframe, not per scan, and standing still adds no drift.
+
+    Defaults: ``keyframe_distance`` 0.3 m and ``keyframe_turn`` 0.2 rad keep consecutive
+    keyframes sharing nearly all of a 10 m scan; ``window`` 3 spans about a metre, over which
+    the scenes overlap well; the sigmas and ``robust_scale`` are :func:`optimize_poses`'s.
+    The pi ambiguity of the rotation is resolved with the estimator's own last motion.
+    """
+
+    window: int = 3
+    keyframe_distance: float = 0.3
+    keyframe_turn: float = 0.2
+    image_size: int = DEFAULT_SIZE
+    resolution: float | None = None
+    icp_iterations: int = 5
+    sigma_translation: float = 0.01
+    sigma_heading: float = 0.005
+    robust_scale: float = 3.0
+    _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
+    _keyframes: list[_Keyframe] = field(default_factory=list, init=False, repr=False)
+    _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
+    _n_keyframes: int = field(default=0, init=False, repr=False)
+    _motion: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.window, bool) or not (isinstance(self.window, int) and self.window >= 1):
+            raise ValueError(f"window: expected an integer >= 1 keyframes, got {self.window!r}")
+        if not (self.keyframe_distance > 0 and self.keyframe_turn > 0):
+            raise ValueError(
+                "keyframe_distance [m] and keyframe_turn [rad]: expected positive numbers, got "
+                f"{self.keyframe_distance}, {self.keyframe_turn}"
+            )
+
+    def _reset_state(self) -> None:
+        assert self.setup is not None
+        self._matcher = ScanMatcher(
+            self.setup.max_range, self.image_size, self.resolution, self.icp_iterations
+        )
+        self._keyframes = []
+        self._edges = []
+        self._n_keyframes = 0
+        self._motion = np.zeros(3)
+
+    def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
+        assert self._matcher is not None and self.setup is not None
+        return tuple(
+            self._matcher.prepare(scans[k], self.setup.beam_angles) for k in self.setup.keys
+        )
+
+    def _start(self, scans: dict[str, FloatArray], t: float) -> None:
+        self._add_keyframe(_Keyframe(self._initial_pose.copy(), self._prepare(scans)))
+
+    def _add_keyframe(self, keyframe: _Keyframe) -> None:
+        self._keyframes.append(keyframe)
+        self._n_keyframes += 1
+        if len(self._keyframes) > self.window:
+            self._keyframes.pop(0)
+        first = self._n_keyframes - len(self._keyframes)
+        self._edges = [(a, b, e) for a, b, e in self._edges if a >= first]
+
+    def _match_all(
+        self, keyframe: _Keyframe, scans: tuple[PreparedScan, ...], motion_guess: FloatArray
+    ) -> list[SensorEdge]:
+        """The four (or, with one Lidar, one) matches of ``scans`` against ``keyframe``; nodes
+        0 (keyframe) and 1 (scans)."""
+        assert self._matcher is not None and self.setup is not None
+        mounts = self.setup.mounts
+        edges = []
+        for i, earlier in enumerate(keyframe.scans):
+            for j, later in enumerate(scans):
+                hint = float(wrap_angle(motion_guess[2] + mounts[j, 2] - mounts[i, 2]))
+                match = self._matcher.match(earlier, later, hint)
+                edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
+        return edges
+
+    def _weights(self) -> dict[str, float]:
+        return {
+            "sigma_translation": self.sigma_translation,
+            "sigma_heading": self.sigma_heading,
+            "robust_scale": self.robust_scale,
+        }
+
+    def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
+        assert self.setup is not None
+        mounts = self.setup.mounts
+        current = self._prepare(scans)
+        latest = self._keyframes[-1]
+        predicted = compose(self.pose, self._motion)
+        guess = relative(latest.pose, predicted)
+        edges = self._match_all(latest, current, guess)
+        from_latest = fuse_car_motion(mounts, edges, guess, **self._weights())
+        pose = compose(latest.pose, from_latest)
+        if (
+            np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
+            or abs(from_latest[2]) >= self.keyframe_turn
+        ):
+            pose = self._insert_keyframe(current, pose, edges)
+        self._motion = relative(self.pose, pose)
+        return pose
+
+    def _insert_keyframe(
+        self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge]
+    ) -> FloatArray:
+        """Make ``scans`` a keyframe, match it to the older ones, re-solve the window; return
+        its solved pose."""
+        mounts = self.setup.mounts if self.setup is not None else None
+        assert mounts is not None
+        new_id = self._n_keyframes
+        first = new_id - len(self._keyframes)
+        self._edges.extend((new_id - 1, new_id, e) for e in latest_edges)
+        for offset, keyframe in enumerate(self._keyframes[:-1]):
+            guess = relative(keyframe.pose, pose)
+            ids = (first + offset, new_id)
+            self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
+        self._add_keyframe(_Keyframe(pose, scans))
+        first = self._n_keyframes - len(self._keyframes)
+        if len(self._keyframes) > 1:
+            graph = [
+                SensorEdge(
+                    a - first, e.source_sensor, b - first, e.target_sensor, e.pose, e.confidence
+                )
+                for a, b, e in self._edges
+            ]
+            start = np.array([k.pose for k in self._keyframes])
+            solved = optimize_poses(start, mounts, graph, n_fixed=1, **self._weights())
+            for keyframe, solved_pose in zip(self._keyframes, solved, strict=True):
+                keyframe.pose = solved_pose
+        return self._keyframes[-1].pose.copy()

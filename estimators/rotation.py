@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
@@ -76,7 +77,7 @@ def log_polar_spectrum(
     [frequency bins] to 0.45 of the smaller image side. Values are ``log1p`` of the magnitude
     times the radius, which evens out the 1/f fall-off so fine detail weighs in.
     """
-    image = np.asarray(image, dtype=np.float64)
+    image = np.asarray(image, dtype=np.float32)
     if image.ndim != 2 or min(image.shape) < 16:
         raise ValueError(f"image: expected a 2-D array of at least 16x16 pixels, got {image.shape}")
     if n_angles < 8 or n_radii < 2:
@@ -86,8 +87,8 @@ def log_polar_spectrum(
     if not 0 < min_radius < max_radius:
         raise ValueError(f"min_radius: expected a value in (0, {max_radius}), got {min_radius}")
     # A separable Hann window stops the image border from adding a bright cross to the spectrum.
-    window = np.outer(np.hanning(height), np.hanning(width))
-    magnitude = np.abs(np.fft.fftshift(np.fft.rfft2(image * window), axes=0))
+    window = np.outer(np.hanning(height), np.hanning(width)).astype(np.float32)
+    magnitude = np.abs(np.fft.fftshift(scipy.fft.rfft2(image * window, workers=1), axes=0))
     angles = -0.5 * np.pi + np.pi * np.arange(n_angles) / n_angles
     radii = np.geomspace(min_radius, max_radius, n_radii)
     rows = height // 2 + np.outer(np.sin(angles), radii)
@@ -158,21 +159,21 @@ def resolve_half_turn(angle_mod_pi: float, reference: float) -> float:
 def heading_change(
     polar_a: FloatArray,
     polar_b: FloatArray,
-    *,
-    image_y_down: bool,
+    reference: float | None = None,
     profiles: tuple[ArrayLike, ArrayLike, ArrayLike, float] | None = None,
 ) -> RotationEstimate:
     """Heading change [rad] of the sensor from scan ``a`` to ``b`` from the log-polar spectra
-    of their sensor-frame images.
+    of their sensor-frame images drawn as :mod:`estimators.scan_image` draws them (sensor y
+    pointing up the image, towards row 0).
 
-    ``image_y_down``: the images' row index grows with decreasing sensor y (row 0 on top),
-    which mirrors the angle measured in the pixel frame. ``profiles``: optional
-    ``(ranges_a, ranges_b, beam_angles, max_range)`` of full-turn scans, used to choose
-    between the two pi-apart candidates; without it the smaller turn is taken. The
-    confidence is the spectrum correlation's.
+    Of the two pi-apart candidates, the one closest to ``reference`` [rad] (e.g. a predicted
+    heading change) is taken; else, given ``profiles = (ranges_a, ranges_b, beam_angles,
+    max_range)`` of full-turn scans, the one closest to :func:`range_profile_rotation`; else
+    the smaller turn. The confidence is the spectrum correlation's.
     """
     content = spectrum_rotation(polar_a, polar_b)
-    # The scene turns by -heading change; a y-down image shows it mirrored.
-    angle = content.angle if image_y_down else -content.angle
-    reference = 0.0 if profiles is None else range_profile_rotation(*profiles).angle
-    return RotationEstimate(resolve_half_turn(angle, reference), content.confidence)
+    # The scene turns by minus the heading change; with rows pointing down (-y) the pixel-frame
+    # angle is mirrored, which cancels that sign.
+    if reference is None:
+        reference = 0.0 if profiles is None else range_profile_rotation(*profiles).angle
+    return RotationEstimate(resolve_half_turn(content.angle, reference), content.confidence)

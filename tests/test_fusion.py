@@ -7,10 +7,10 @@ import pytest
 from estimators.fusion import (
     SensorEdge,
     fuse_car_motion,
-    motion_from_sensor_match,
     optimize_poses,
     predict_edges,
 )
+from estimators.rotation_pc import motion_from_sensor_match
 from lidar_env.se2 import compose, relative
 
 MOUNTS = np.array([[0.25, 0.05, 0.1], [-0.25, -0.1, -0.4]])
