@@ -78,9 +78,10 @@ def _interval_pieces(lo: float, width: float) -> tuple:
 def _circle_hit(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float, r: float):
     """Distance along the unit ray ``o + t d`` to the circle (sensor outside), or inf."""
     fx, fy = cx - ox, cy - oy
-    b = fx * dx + fy * dy
-    c = fx * fx + fy * fy - r * r
-    disc = b * b - c
+    b = fx * dx + fy * dy  # distance along the ray to the foot of the centre
+    off_ray = fx * dy - fy * dx  # distance of the centre from the ray's line
+    # (r - p)(r + p) rather than b^2 - |f|^2 + r^2: no cancellation near tangency.
+    disc = (r - off_ray) * (r + off_ray)
     if disc < 0.0 or b < 0.0:
         return math.inf
     return b - math.sqrt(disc)
@@ -328,7 +329,9 @@ class Lidar:
     @cached_property
     def beam_angles(self) -> NDArray[np.float64]:
         """``(n_beams,)`` beam directions [rad] in the sensor frame, ``2 pi i / n``."""
-        return _TWO_PI * np.arange(self.n_beams) / self.n_beams
+        angles = _TWO_PI * np.arange(self.n_beams) / self.n_beams
+        angles.flags.writeable = False
+        return angles
 
     def scan(
         self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator
@@ -341,15 +344,20 @@ class Lidar:
         depends only on the shape; a noiseless Lidar consumes none.
         """
         ranges = cast_rays(world, sensor_poses, self.beam_angles, self.max_range)
+        hit = ranges < self.max_range
+        # The largest float32 below max_range: a hit must never round up to "no return".
+        below_max = float(np.nextafter(np.float32(self.max_range), np.float32(0.0)))
         if self.noise_std > 0:
-            if not isinstance(rng, np.random.Generator):
-                raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-            noise = rng.normal(0.0, self.noise_std, size=ranges.shape)
-            hit = ranges < self.max_range
-            noisy = np.clip(ranges + noise, 0.0, np.nextafter(self.max_range, 0.0))
-            ranges = np.where(hit, noisy, ranges)
+            noise = _check_rng(rng).normal(0.0, self.noise_std, size=ranges.shape)
+            ranges = np.where(hit, ranges + noise, ranges)
+        ranges = np.where(hit, np.clip(ranges, 0.0, below_max), ranges)
         if self.dropout_prob > 0:
-            if not isinstance(rng, np.random.Generator):
-                raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-            ranges = np.where(rng.random(ranges.shape) < self.dropout_prob, self.max_range, ranges)
+            dropped = _check_rng(rng).random(ranges.shape) < self.dropout_prob
+            ranges = np.where(dropped, self.max_range, ranges)
         return ranges.astype(np.float32)
+
+
+def _check_rng(rng: object) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+    return rng
