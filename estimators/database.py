@@ -281,8 +281,9 @@ class TraceDataset:
 
     @property
     def ms_per_step(self) -> float:
-        """Mean wall time of one ``update`` [ms]."""
-        return float(np.mean(self.step_ms))
+        """Mean wall time [ms] of one ``update`` after the first (which only takes the scan),
+        as :class:`estimators.scoring.ScoreEstimator` reports it."""
+        return float(np.mean(self.step_ms[1:] if len(self.step_ms) > 1 else self.step_ms))
 
 
 @dataclass(frozen=True)

@@ -135,6 +135,6 @@ def score(trace: TraceDataset, truth: NDArray[np.float64]) -> dict[str, float]:
     """The trace's metrics against the true car poses ``(N, 3)``, plus its ``ms_per_step``."""
     from estimators.metrics import evaluate
 
-    result = metrics_dict(evaluate(trace.poses, truth, trace.times))
+    result = metrics_dict(evaluate(trace.poses, truth))
     result["ms_per_step"] = trace.ms_per_step
     return result

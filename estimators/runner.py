@@ -32,6 +32,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import numpy as np
+
 from estimators.database import (
     ExperimentDatabase,
     Scenario,
@@ -130,6 +132,57 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
     return outcome
 
 
+@dataclass(frozen=True)
+class RealLog:
+    """A recorded CARMEN log with ground-truth relations, scored on its first ``scans`` scans
+    (all when ``None``); stored as a scenario of kind ``real``."""
+
+    name: str
+    log_path: str
+    relations_path: str
+    scans: int | None = None
+
+    @property
+    def scenario(self) -> Scenario:
+        return Scenario(self.name, "log", 0, {"scans": self.scans}, driver="recorded",
+                        kind="real")
+
+
+@dataclass(frozen=True)
+class RealLogTask:
+    log: RealLog
+    estimator: EstimatorSpec
+
+
+def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
+    """Run one estimator over a real log and score it with the relations metric
+    (Kümmerle et al. 2009): mean translational [m] and rotational [deg] relation errors."""
+    from estimators.carmen import load_log
+    from estimators.real_log import run_on_log, score_relations
+    from estimators.registry import make
+    from estimators.relations import load_relations
+
+    log, spec = task.log, task.estimator
+    outcome = ScenarioOutcome(log.scenario, None, False)
+    try:
+        carmen = load_log(log.log_path)
+        run = run_on_log(make(spec.name, **dict(spec.params)), carmen, limit=log.scans)
+        metrics: dict[str, float] = {"ms_per_step": 1e3 * run.seconds_per_scan}
+        for subset, summary in score_relations(run, load_relations(log.relations_path)).items():
+            metrics.update({
+                f"relations_{subset}_translation_m": summary.translation_mean,
+                f"relations_{subset}_rotation_deg": summary.rotation_mean,
+                f"relations_{subset}_failure_rate": summary.failure_rate,
+                f"relations_{subset}_count": float(summary.count),
+            })
+        step_ms = np.full(len(run.times), 1e3 * run.seconds_per_scan)
+        trace = TraceDataset(spec.name, spec.resolved_params, run.times, run.poses, step_ms)
+        outcome.traces.append((trace, metrics))
+    except Exception:  # e.g. an estimator that needs two Lidars: reported, not fatal
+        outcome.failures[spec.name] = traceback.format_exc(limit=3)
+    return outcome
+
+
 def _pending_task(db: ExperimentDatabase, scenario: Scenario,
                   estimators: Sequence[EstimatorSpec]) -> ScenarioTask | None:
     """The task still to do for ``scenario``, or ``None`` when everything is stored."""
@@ -181,11 +234,8 @@ def run_scenarios(
     each scenario is settled (e.g. to advance a progress bar). Raises :class:`RunInterrupted`
     when the executor breaks (a killed worker); everything committed before stays.
     """
-    if max_in_flight < 1:
-        raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
-    start = time.perf_counter()
     summary = RunSummary()
-    todo: list[ScenarioTask] = []
+    todo = []
     for scenario in scenarios:
         summary.scenarios += 1
         task = _pending_task(db, scenario, estimators)
@@ -195,25 +245,65 @@ def run_scenarios(
                 on_done(scenario)
         else:
             todo.append(task)
+    return _execute(db, run_scenario_task, todo, executor, summary, max_in_flight, on_done)
+
+
+def run_real_logs(
+    db: ExperimentDatabase,
+    logs: Iterable[RealLog],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """Score every estimator on recorded logs (relations metric), skipping stored traces.
+
+    One task per (log, estimator), since a log is one long sequence; tasks, commits and
+    failures behave as in :func:`run_scenarios`.
+    """
+    summary = RunSummary()
+    version = package_version()
+    todo = []
+    for log in logs:
+        for spec in estimators:
+            summary.scenarios += 1
+            if db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
+                summary.skipped += 1
+                if on_done is not None:
+                    on_done(log.scenario)
+            else:
+                todo.append(RealLogTask(log, spec))
+    return _execute(db, run_real_log_task, todo, executor, summary, max_in_flight, on_done)
+
+
+def _execute(db: ExperimentDatabase, function: Callable[[Any], ScenarioOutcome],
+             todo: Sequence[Any], executor: ExecutorLike | None, summary: RunSummary,
+             max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> RunSummary:
+    """Run ``function`` over ``todo`` (here or on ``executor``), committing each outcome."""
+    if max_in_flight < 1:
+        raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
+    start = time.perf_counter()
     if executor is None:
         for task in todo:
-            _commit(db, run_scenario_task(task), summary)
+            outcome = function(task)
+            _commit(db, outcome, summary)
             if on_done is not None:
-                on_done(task.scenario)
+                on_done(outcome.scenario)
     else:
-        _run_on(executor, todo, db, summary, max_in_flight, on_done)
+        _run_on(executor, function, todo, db, summary, max_in_flight, on_done)
     summary.seconds = time.perf_counter() - start
     return summary
 
 
-def _run_on(executor: ExecutorLike, todo: list[ScenarioTask], db: ExperimentDatabase,
-            summary: RunSummary, max_in_flight: int,
-            on_done: Callable[[Scenario], None] | None) -> None:
+def _run_on(executor: ExecutorLike, function: Callable[[Any], ScenarioOutcome],
+            todo: Sequence[Any], db: ExperimentDatabase, summary: RunSummary,
+            max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> None:
     queue = list(reversed(todo))
     pending: set[Any] = set()
     while queue or pending:
         while queue and len(pending) < max_in_flight:
-            pending.add(executor.submit(run_scenario_task, queue.pop()))
+            pending.add(executor.submit(function, queue.pop()))
         for future in _first_done(pending):
             pending.discard(future)
             try:
@@ -224,7 +314,7 @@ def _run_on(executor: ExecutorLike, todo: list[ScenarioTask], db: ExperimentData
                 raise RunInterrupted(
                     f"the executor failed ({type(error).__name__}: {error}); "
                     f"{summary.recorded} sensor datasets and {summary.traces} traces of this run "
-                    f"are committed, {len(pending) + len(queue) + 1} scenarios are not: "
+                    f"are committed, {len(pending) + len(queue) + 1} tasks are not: "
                     "re-run to resume"
                 ) from error
             _commit(db, outcome, summary)

@@ -1,0 +1,489 @@
+"""The leaderboard: every registered estimator on the paper's scenarios, Table I and Fig. 8.
+
+``duallidar-leaderboard`` (or ``python -m estimators.leaderboard``) records each scenario of
+the matrix once into the experiment database (:mod:`estimators.database`), replays it through
+every estimator (:mod:`estimators.runner`), scores it (:mod:`estimators.metrics`) and writes
+
+* ``leaderboard.md`` / ``leaderboard.csv``: estimators ranked by mean ATE over all simulated
+  scenarios (eq. 11 ignores direction, so it cannot rank alone), with eq.-11 accuracy, heading
+  RMSE, drift, ms/step, one column per scenario group and the real-log relation error;
+* ``results.csv``: one row per estimator and scenario;
+* ``table1.md`` / ``table1.csv``: the paper's Table I, our figures beside the printed ones;
+* ``fig8_lidar_image.png`` (an eq.-5 Lidar image) and ``fig8_traces.png`` (per group, the true
+  trace and every estimator's trace over the world map);
+* ``failures.txt`` when an estimator raised (the others still run).
+
+Re-running with the same database skips everything already stored.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from estimators.database import DatabaseError, ExperimentDatabase, Scenario, TraceRecord
+from estimators.registry import names
+from estimators.runner import (
+    EstimatorSpec,
+    RealLog,
+    RunInterrupted,
+    RunSummary,
+    run_real_logs,
+    run_scenarios,
+)
+
+
+@dataclass(frozen=True)
+class Group:
+    """A column of the leaderboard: one world driven along one trace seed."""
+
+    name: str
+    world: str
+    trace: str
+
+
+#: The paper's three groups (Fig. 7) plus the straight seed. The straight run goes through the
+#: hallway: motion along a corridor is the classic hard case for scan matching.
+DEFAULT_GROUPS: tuple[Group, ...] = (
+    Group("G1 open+right_turn", "open_cylinders", "right_turn"),
+    Group("G2 hallway+zigzag", "hallway", "zigzag"),
+    Group("G3 closed-to-open+zigzag", "closed_to_open", "zigzag"),
+    Group("hallway+straight", "hallway", "straight"),
+)
+#: A few seeds per group: each seed draws new range noise (and a new world for "random").
+DEFAULT_SEEDS: tuple[int, ...] = (0, 1)
+#: Range noise [m] of Table I's runs: 1 cm, a cheap time-of-flight Lidar.
+DEFAULT_NOISE = 0.01
+
+
+@dataclass(frozen=True)
+class TableICase:
+    """One row of the paper's Table I (section IV.C)."""
+
+    case: int
+    area: str
+    feature: str
+    pose_graph: bool
+    world: str
+    trace: str
+    paper_accuracy: float
+    estimator: str  # the paper's line colour: brown = offset Lidar only, blue = both + eq. 10
+
+
+TABLE_I: tuple[TableICase, ...] = (
+    TableICase(1, "open", "rich", False, "open_cylinders", "right_turn", 31.25, "pc_offset"),
+    TableICase(2, "open", "rich", True, "open_cylinders", "right_turn", 91.10, "pc_pg"),
+    TableICase(3, "close", "low", False, "hallway", "zigzag", 60.08, "pc_offset"),
+    TableICase(4, "close", "low", True, "hallway", "zigzag", 60.31, "pc_pg"),
+    TableICase(5, "close to open", "medium", False, "closed_to_open", "zigzag", 64.45,
+               "pc_offset"),
+    TableICase(6, "close to open", "medium", True, "closed_to_open", "zigzag", 63.54, "pc_pg"),
+)
+
+#: (metric stored in the database, column title, lower is better)
+METRIC_COLUMNS: tuple[tuple[str, str, bool], ...] = (
+    ("accuracy_percent", "eq.-11 accuracy [%]", False),
+    ("ate_rmse_m", "ATE [m]", True),
+    ("heading_rmse_deg", "heading RMSE [deg]", True),
+    ("drift_percent", "drift [%]", True),
+    ("ms_per_step", "ms/step", True),
+)
+RANK_KEYS: dict[str, str] = {"ate": "ate_rmse_m", "accuracy": "accuracy_percent",
+                             "heading": "heading_rmse_deg", "drift": "drift_percent"}
+REAL_METRIC = "relations_all_translation_m"
+DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+#: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
+#: few hundred ground-truth relations while keeping the default run within a minute.
+DEFAULT_REAL_SCANS = 1000
+
+
+class OutputDirectoryError(OSError):
+    """The output directory cannot be created or written."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="duallidar-leaderboard",
+        description="Rank every registered estimator on recorded DualLidar-v0 scenarios, "
+                    "reproduce the paper's Table I and draw its Fig. 8.",
+    )
+    parser.add_argument("--worlds", nargs="+", metavar="WORLD",
+                        help="worlds to run (default: the paper's groups plus the straight seed)")
+    parser.add_argument("--traces", nargs="+", metavar="TRACE",
+                        help="trace seeds, crossed with --worlds (default: the paper's pairs)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS),
+                        help="env seeds per scenario (default: %(default)s)")
+    parser.add_argument("--estimators", nargs="+", metavar="NAME",
+                        help="estimators to rank (default: every registered one)")
+    parser.add_argument("--noise", type=float, default=DEFAULT_NOISE,
+                        help="range noise std [m] (default: %(default)s, as in Table I)")
+    parser.add_argument("--db", type=Path, default=None,
+                        help="experiment database (default: OUT/experiments.sqlite)")
+    parser.add_argument("--out", type=Path, default=Path("leaderboard"),
+                        help="output directory (default: %(default)s)")
+    parser.add_argument("--workers", type=int, default=2,
+                        help="worker processes, parallel over scenarios; 1 = this process "
+                             "(default: %(default)s)")
+    parser.add_argument("--rank-by", choices=sorted(RANK_KEYS), default="ate",
+                        help="metric that orders the table (default: %(default)s)")
+    parser.add_argument("--no-real", action="store_true",
+                        help="skip the real-log (Radish ACES) results")
+    parser.add_argument("--real-scans", type=int, default=DEFAULT_REAL_SCANS,
+                        help="scans of the real log to replay, 0 = all (default: %(default)s)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def _check_names(parser: argparse.ArgumentParser, kind: str, given: Sequence[str],
+                 valid: Sequence[str]) -> None:
+    for name in given:
+        if name not in valid:
+            parser.error(f"unknown {kind} {name!r}: expected one of {', '.join(valid)}")
+
+
+def build_groups(worlds: Sequence[str] | None, traces: Sequence[str] | None) -> list[Group]:
+    """The scenario groups: the defaults, or ``worlds`` x ``traces`` (each defaulting to the
+    paper's trace of the world / every world of the default groups)."""
+    from lidar_env.worlds import PAPER_TRACES
+
+    if worlds is None and traces is None:
+        return list(DEFAULT_GROUPS)
+    chosen_worlds = list(worlds) if worlds else list(dict.fromkeys(g.world for g in DEFAULT_GROUPS))
+    return [
+        Group(f"{world}+{trace}", world, trace)
+        for world in chosen_worlds
+        for trace in (traces or [PAPER_TRACES[world]])
+    ]
+
+
+def check_output_dir(out: Path) -> None:
+    """Create ``out`` if needed and prove it writable, before any work is done."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as error:
+        raise OutputDirectoryError(
+            f"output directory {out} is not writable ({error.strerror}); "
+            "choose another --out"
+        ) from error
+
+
+def _mean(values: list[float]) -> float:
+    finite = [v for v in values if v is not None and math.isfinite(v)]
+    return float(np.mean(finite)) if finite else math.nan
+
+
+def _fmt(value: float, digits: int = 2) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _current(records: list[TraceRecord], specs: Sequence[EstimatorSpec],
+             version: str) -> dict[tuple[Scenario, str], TraceRecord]:
+    """The records made by exactly the requested estimators, params and package version."""
+    wanted = {spec.name: spec.resolved_params for spec in specs}
+    from estimators.database import canonical_json
+
+    return {
+        (record.scenario, record.trace.estimator): record
+        for record in records
+        if record.trace.estimator in wanted
+        and canonical_json(record.trace.params) == canonical_json(wanted[record.trace.estimator])
+        and record.trace.package_version == version
+    }
+
+
+def rank_table(groups: Sequence[Group], scenarios: dict[str, list[Scenario]],
+               specs: Sequence[EstimatorSpec], records: dict[tuple[Scenario, str], TraceRecord],
+               real: Scenario | None, rank_key: str) -> list[dict[str, Any]]:
+    """One row per estimator: metric means over every simulated scenario, per-group accuracy
+    and ATE, the real-log relation error; sorted best first (NaN last)."""
+    rows = []
+    for spec in specs:
+        mine = [records[(s, spec.name)] for group in groups for s in scenarios[group.name]
+                if (s, spec.name) in records]
+        row: dict[str, Any] = {"estimator": spec.name, "scenarios": len(mine)}
+        for key, _, _ in METRIC_COLUMNS:
+            row[key] = _mean([r.metrics.get(key, math.nan) for r in mine])
+        for group in groups:
+            in_group = [records[(s, spec.name)] for s in scenarios[group.name]
+                        if (s, spec.name) in records]
+            row[f"{group.name} accuracy_percent"] = _mean(
+                [r.metrics.get("accuracy_percent", math.nan) for r in in_group])
+            row[f"{group.name} ate_rmse_m"] = _mean(
+                [r.metrics.get("ate_rmse_m", math.nan) for r in in_group])
+        if real is not None:
+            record = records.get((real, spec.name))
+            row[REAL_METRIC] = math.nan if record is None else record.metrics.get(REAL_METRIC)
+        rows.append(row)
+    lower_better = next(lower for key, _, lower in METRIC_COLUMNS if key == rank_key)
+
+    def order(row: dict[str, Any]) -> tuple[bool, float]:
+        value = row[rank_key]
+        return (not math.isfinite(value), value if lower_better else -value)
+
+    return sorted(rows, key=order)
+
+
+def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in body]
+    return "\n".join(lines) + "\n"
+
+
+def leaderboard_markdown(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
+                         real_name: str | None) -> str:
+    header = ["#", "estimator", *(title for _, title, _ in METRIC_COLUMNS)]
+    header += [f"{g.name}: acc % / ATE m" for g in groups]
+    if real_name:
+        header.append(f"{real_name} rel. error [m]")
+    body = []
+    for rank, row in enumerate(rows, 1):
+        cells = [str(rank), row["estimator"]]
+        cells += [_fmt(row[key], 1 if key.endswith("percent") else 3) for key, _, _ in
+                  METRIC_COLUMNS]
+        cells += [f"{_fmt(row[f'{g.name} accuracy_percent'], 1)} / "
+                  f"{_fmt(row[f'{g.name} ate_rmse_m'], 3)}" for g in groups]
+        if real_name:
+            cells.append(_fmt(row.get(REAL_METRIC, math.nan), 3))
+        body.append(cells)
+    return _markdown(header, body)
+
+
+def table_one(scenarios: dict[tuple[str, str], list[Scenario]],
+              records: dict[tuple[Scenario, str], TraceRecord]) -> list[dict[str, Any]]:
+    """Table I: the paper's accuracy per case beside ours (mean and std over seeds), and, for
+    the cases without pose-graph correlation, the main-Lidar-only ``pc`` as well."""
+    rows = []
+    for case in TABLE_I:
+        runs = scenarios.get((case.world, case.trace), [])
+
+        def accuracies(estimator: str, runs: list[Scenario] = runs) -> list[float]:
+            return [records[(s, estimator)].metrics["accuracy_percent"] for s in runs
+                    if (s, estimator) in records]
+
+        ours = accuracies(case.estimator)
+        main_only = accuracies("pc") if not case.pose_graph else []
+        rows.append({
+            "case": case.case, "area": case.area, "feature": case.feature,
+            "pose_graph": "yes" if case.pose_graph else "no",
+            "scenario": f"{case.world}+{case.trace}", "estimator": case.estimator,
+            "paper_accuracy_percent": case.paper_accuracy,
+            "ours_accuracy_percent": _mean(ours),
+            "ours_std_percent": float(np.std(ours)) if ours else math.nan,
+            "seeds": len(ours),
+            "pc_main_only_accuracy_percent": _mean(main_only),
+        })
+    return rows
+
+
+def table_one_markdown(rows: Sequence[dict[str, Any]]) -> str:
+    header = ["case", "area", "feature", "pose-graph", "scenario", "estimator", "paper [%]",
+              "ours [%] (mean ± std, seeds)", "pc main only [%]"]
+    body = [[str(r["case"]), r["area"], r["feature"], r["pose_graph"], r["scenario"],
+             r["estimator"], f"{r['paper_accuracy_percent']:.2f}",
+             f"{_fmt(r['ours_accuracy_percent'])} ± {_fmt(r['ours_std_percent'])} "
+             f"({r['seeds']})",
+             "" if r["pose_graph"] == "yes" else _fmt(r["pc_main_only_accuracy_percent"])]
+            for r in rows]
+    return _markdown(header, body)
+
+
+def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+    fields = list(dict.fromkeys(key for row in rows for key in row))
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
+                  scenarios: dict[str, list[Scenario]],
+                  records: dict[tuple[Scenario, str], TraceRecord],
+                  specs: Sequence[EstimatorSpec], out: Path) -> list[Path]:
+    """Fig. 8: an eq.-5 Lidar image, and per group (first seed) the true trace and every
+    estimator's trace over the world map. Returns the PNG paths."""
+    from matplotlib.figure import Figure
+
+    from estimators.recording import make_env
+    from estimators.scan_image import scan_to_image
+
+    first = [(group, scenarios[group.name][0]) for group in groups if scenarios[group.name]]
+    first = [(g, s) for g, s in first if db.has_sensor_dataset(s)]
+    if not first:
+        return []
+    paths = []
+    dataset = db.load_sensor_dataset(first[0][1])
+    step = len(dataset) // 2
+    image = scan_to_image(dataset.scans["lidar_1"][step], dataset.setup.beam_angles,
+                          dataset.setup.max_range)
+    figure = Figure(figsize=(5, 5))
+    axes = figure.add_subplot()
+    axes.imshow(image, cmap="gray")
+    axes.set_title(f"eq. 5 Lidar image: {first[0][1].label}, step {step}, lidar_1")
+    axes.set_axis_off()
+    paths.append(out / "fig8_lidar_image.png")
+    figure.savefig(paths[-1], dpi=100, bbox_inches="tight")
+
+    figure = Figure(figsize=(6 * len(first), 6))
+    colours = [f"C{i % 10}" for i in range(len(specs))]
+    for index, (group, scenario) in enumerate(first, 1):
+        axes = figure.add_subplot(1, len(first), index)
+        env = make_env(scenario)
+        try:
+            env.reset(seed=int(scenario.seed))
+            world = env.unwrapped.world
+            xmin, ymin, xmax, ymax = world.bounds
+            axes.imshow(world.to_image(0.05), cmap="gray_r", extent=(xmin, xmax, ymin, ymax),
+                        vmax=400)
+        finally:
+            env.close()
+        truth = db.load_sensor_dataset(scenario).poses
+        axes.plot(truth[:, 0], truth[:, 1], "k-", linewidth=3, label="truth")
+        for spec, colour in zip(specs, colours, strict=True):
+            record = records.get((scenario, spec.name))
+            if record is not None:
+                poses = record.trace.poses
+                axes.plot(poses[:, 0], poses[:, 1], "-", color=colour, linewidth=1.2,
+                          label=spec.name)
+        axes.set_xlim(xmin, xmax)
+        axes.set_ylim(ymin, ymax)
+        axes.set_aspect("equal")
+        axes.set_title(f"{group.name} (seed {scenario.seed})")
+        axes.set_xlabel("x [m]")
+        axes.set_ylabel("y [m]")
+    axes.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
+    paths.append(out / "fig8_traces.png")
+    figure.savefig(paths[-1], dpi=80, bbox_inches="tight")
+    return paths
+
+
+def _progress(total: int, label: str, enabled: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=label, unit="scenario", disable=not enabled, leave=False)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the leaderboard; returns the exit status (2 for bad input)."""
+    from lidar_env.traces import TRACE_NAMES
+    from lidar_env.worlds import WORLD_NAMES
+
+    parser = _parser()
+    args = parser.parse_args(argv)
+    _check_names(parser, "world", args.worlds or [], WORLD_NAMES)
+    _check_names(parser, "trace", args.traces or [], TRACE_NAMES)
+    estimator_names = args.estimators or names()
+    _check_names(parser, "estimator", estimator_names, names())
+    if not estimator_names:
+        parser.error("no estimators are registered")
+    if args.workers < 1:
+        parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
+    if not math.isfinite(args.noise) or args.noise < 0:
+        parser.error(f"--noise: expected a range noise std >= 0 [m], got {args.noise}")
+    if args.real_scans < 0:
+        parser.error(f"--real-scans: expected an integer >= 0, got {args.real_scans}")
+    start = time.perf_counter()
+    try:
+        check_output_dir(args.out)
+        db = ExperimentDatabase(args.db or args.out / "experiments.sqlite")
+    except (OutputDirectoryError, DatabaseError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    with db:
+        return _run(args, db, build_groups(args.worlds, args.traces),
+                    [EstimatorSpec(name) for name in estimator_names], start)
+
+
+def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
+         specs: list[EstimatorSpec], start: float) -> int:
+    from estimators.database import package_version
+
+    config = {"range_noise_std": args.noise}
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config) for seed in args.seeds]
+                 for g in groups}
+    logs = []
+    if not args.no_real:
+        log = RealLog("aces", str(DATA_DIR / "aces.clf.bz2"), str(DATA_DIR / "aces.relations"),
+                      args.real_scans or None)
+        if Path(log.log_path).exists() and Path(log.relations_path).exists():
+            logs.append(log)
+        else:
+            print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
+    executor = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    summaries: list[RunSummary] = []
+    try:
+        every = [s for group in groups for s in scenarios[group.name]]
+        with _progress(len(every) + len(logs) * len(specs), "scenarios",
+                       not args.no_progress) as bar:
+            summaries.append(run_scenarios(db, every, specs, executor,
+                                           on_done=lambda _: bar.update()))
+            summaries.append(run_real_logs(db, logs, specs, executor,
+                                           on_done=lambda _: bar.update()))
+    except RunInterrupted as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    finally:
+        if executor is not None:
+            executor.shutdown(cancel_futures=True)
+
+    records = _current(db.traces(), specs, package_version())
+    real = logs[0].scenario if logs else None
+    rows = rank_table(groups, scenarios, specs, records, real, RANK_KEYS[args.rank_by])
+    out: Path = args.out
+    table = leaderboard_markdown(rows, groups, "ACES" if real else None)
+    by_pair = {(g.world, g.trace): scenarios[g.name] for g in groups}
+    case_rows = table_one(by_pair, records)
+    written = [out / "leaderboard.md", out / "leaderboard.csv", out / "results.csv"]
+    (out / "leaderboard.md").write_text(
+        f"# duallidar leaderboard (ranked by {args.rank_by}; noise {args.noise} m; seeds "
+        f"{', '.join(map(str, args.seeds))})\n\n{table}")
+    _write_csv(out / "leaderboard.csv", rows)
+    _write_csv(out / "results.csv", [
+        {"estimator": name, "kind": scenario.kind, "world": scenario.world,
+         "trace": scenario.trace, "seed": scenario.seed, **record.metrics}
+        for (scenario, name), record in records.items()
+    ])
+    print(table)
+    if any(by_pair.get((c.world, c.trace)) for c in TABLE_I):
+        table_i = table_one_markdown(case_rows)
+        (out / "table1.md").write_text(f"# Table I: eq.-11 accuracy, paper vs ours\n\n{table_i}")
+        _write_csv(out / "table1.csv", case_rows)
+        written += [out / "table1.md", out / "table1.csv"]
+        print("Table I (accuracy = 100% - eq. 11):\n" + table_i)
+    else:
+        print("note: Table I skipped: the run holds none of the paper's world/trace pairs")
+    try:
+        written += draw_figure_8(db, groups, scenarios, records, specs, out)
+    except ImportError as error:
+        print(f"note: Fig. 8 skipped ({error}); install the plots extra: "
+              "pip install 'duallidar[plots]'")
+    failures = {k: v for summary in summaries for k, v in summary.failures.items()}
+    if failures:
+        (out / "failures.txt").write_text(
+            "".join(f"== {stage}\n{error}\n" for stage, error in failures.items()))
+        written.append(out / "failures.txt")
+        print(f"note: {len(failures)} estimator runs failed: {', '.join(sorted(failures))}")
+    done = sum(s.recorded for s in summaries), sum(s.traces for s in summaries)
+    skipped = sum(s.skipped for s in summaries)
+    print(f"leaderboard: {len(specs)} estimators x {len(every)} scenarios"
+          f"{' + ' + str(len(logs)) + ' real log' if logs else ''} in "
+          f"{time.perf_counter() - start:.1f} s ({done[0]} recorded, {done[1]} traces new, "
+          f"{skipped} already stored); database {db.path}; files in {out}/: "
+          f"{', '.join(p.name for p in written)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
