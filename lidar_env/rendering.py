@@ -166,7 +166,6 @@ class Renderer:
             import pygame
 
             pygame.display.quit()
-            pygame.quit()
             self.window = None
 
 
@@ -180,8 +179,7 @@ def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> 
         ) from error
     height, width = frame.shape[:2]
     if renderer.window is None:
-        pygame.init()
-        pygame.display.init()
+        pygame.display.init()  # the display only: no audio device needed
         renderer.window = pygame.display.set_mode((width, height))
         renderer._clock = pygame.time.Clock()
     surface = pygame.surfarray.make_surface(np.transpose(frame, (1, 0, 2)))

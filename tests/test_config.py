@@ -1,0 +1,68 @@
+"""EnvConfig: defaults, validation with readable errors, and its use through gym.make."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import lidar_env  # noqa: F401 - registers DualLidar-v0
+from lidar_env.config import EnvConfig
+
+
+def test_defaults_match_the_documented_car_and_sensors():
+    config = EnvConfig()
+    assert config.control_dt == 0.1 and config.physics_substeps == 4
+    assert config.n_beams == 360 and config.max_range == 10.0
+    mounts = config.mounts_array
+    assert mounts.shape == (2, 3)
+    assert np.linalg.norm(mounts[0, :2] - mounts[1, :2]) == pytest.approx(0.5)
+    assert config.car_half_diagonal == pytest.approx(0.5 * np.hypot(0.8, 0.5))
+    assert config.trace_clearance == pytest.approx(config.car_half_diagonal + config.trace_margin)
+
+
+def test_from_dict_round_trips_and_replace_keeps_the_original():
+    mounts = [[0.3, 0.1, 0.0], [-0.3, 0, 0]]
+    config = EnvConfig.from_dict({"max_range": 8.0, "lidar_mounts": mounts})
+    assert EnvConfig.from_dict(config.to_dict()) == config
+    changed = config.replace(range_noise_std=0.0)
+    assert changed.range_noise_std == 0.0 and config.range_noise_std == 0.01
+    assert changed.lidar_mounts == ((0.3, 0.1, 0.0), (-0.3, 0.0, 0.0))
+
+
+def test_unknown_keys_are_named_with_the_valid_ones():
+    with pytest.raises(ValueError, match=r"unknown config key\(s\) 'max_rnage'.*max_range"):
+        EnvConfig.from_dict({"max_rnage": 5.0})
+    with pytest.raises(ValueError, match="'speed'.*control_dt"):
+        EnvConfig().replace(speed=1.0)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("control_dt", 0.0, "control_dt: expected a positive finite number, got 0.0"),
+        ("control_dt", float("nan"), "control_dt: expected a positive finite number"),
+        ("max_range", -1.0, "max_range: expected a positive finite number"),
+        ("physics_substeps", 0, r"physics_substeps: expected an integer >= 1, got 0"),
+        ("physics_substeps", 2.5, r"physics_substeps: expected an integer >= 1, got 2.5"),
+        ("n_beams", 2, r"n_beams: expected an integer >= 3, got 2"),
+        ("range_noise_std", -0.1, r"range_noise_std: expected a finite number >= 0"),
+        ("dropout_prob", 1.0, r"dropout_prob: expected a number in \[0, 1\), got 1.0"),
+        ("scan_frame", "car", "scan_frame: expected one of sensor, world, got 'car'"),
+        ("lidar_mounts", [[0, 0, 0]], r"lidar_mounts: expected \(2, 3\).*got shape \(1, 3\)"),
+        ("lidar_mounts", [[0, 0, 0], [0, np.inf, 0]], r"lidar_mounts: expected \(2, 3\) finite"),
+    ],
+)
+def test_bad_values_raise_readable_errors(key, value, message):
+    with pytest.raises(ValueError, match=message):
+        EnvConfig.from_dict({key: value})
+
+
+def test_gym_make_takes_a_config_dict_and_rebuilds_spaces():
+    env = gym.make("DualLidar-v0", config={"n_beams": 90, "max_range": 6.0})
+    box = env.observation_space["lidar_1"]
+    assert box.shape == (90,) and box.high.max() == pytest.approx(6.0)
+    observation, _ = env.reset(seed=0)
+    assert observation["lidar_2"].shape == (90,) and observation["lidar_2"].max() <= 6.0
+    with pytest.raises(ValueError, match="unknown config key"):
+        gym.make("DualLidar-v0", config={"beams": 90})
+    with pytest.raises(TypeError, match="config: expected an EnvConfig or a dict, got list"):
+        gym.make("DualLidar-v0", config=[("n_beams", 90)])
