@@ -1,0 +1,253 @@
+"""World geometry: construction, pymunk space, point queries, and image round trips."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pymunk
+import pytest
+
+from lidar_env.world import OBSTACLE_COLLISION_TYPE, World
+
+SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+
+
+def boundary_pixels(occupied: np.ndarray) -> np.ndarray:
+    """Pixels with a 4-neighbour of the other kind (image edges count as free)."""
+    padded = np.pad(occupied, 1)
+    centre = padded[1:-1, 1:-1]
+    return (
+        (centre != padded[:-2, 1:-1])
+        | (centre != padded[2:, 1:-1])
+        | (centre != padded[1:-1, :-2])
+        | (centre != padded[1:-1, 2:])
+    )
+
+
+def blob_image(rng: np.random.Generator, shape: tuple[int, int] = (90, 120)) -> np.ndarray:
+    """Random discs and rectangles, a border wall, and a hole with an island inside."""
+    image = np.zeros(shape, dtype=np.uint8)
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    for _ in range(8):
+        r, c = rng.integers(10, shape[0] - 10), rng.integers(10, shape[1] - 10)
+        radius = rng.integers(2, 9)
+        image[(yy - r) ** 2 + (xx - c) ** 2 < radius**2] = rng.integers(1, 256)
+    image[:2, :] = image[-2:, :] = image[:, :2] = image[:, -2:] = 255
+    image[30:60, 80:110] = 255
+    image[36:54, 86:104] = 0
+    image[42:47, 92:97] = 7
+    return image
+
+
+# ---------------------------------------------------------------------- construction
+def test_arrays_and_bounds() -> None:
+    world = World(
+        circles=[[5.0, 5.0, 1.0]],
+        segments=[[-1.0, 0.0, -1.0, 3.0]],
+        polygons=[np.vstack([SQUARE, SQUARE[:1]])],  # a repeated closing vertex is dropped
+        name="demo",
+    )
+    assert world.name == "demo"
+    assert world.circles.dtype == np.float64 and world.circles.shape == (1, 3)
+    assert len(world.polygons) == 1 and world.polygons[0].shape == (4, 2)
+    assert world.segments.shape == (5, 4), "segments are the wall plus the 4 polygon edges"
+    np.testing.assert_array_equal(world.segments[0], [-1.0, 0.0, -1.0, 3.0])
+    assert world.bounds == (-1.0, 0.0, 6.0, 6.0)
+    assert World(circles=[[0, 0, 1]], bounds=(-5, -5, 5, 5)).bounds == (-5.0, -5.0, 5.0, 5.0)
+    assert World(bounds=(0, 0, 1, 1)).n_primitives == 0
+
+
+def test_pickles_cheaply() -> None:
+    world = World.from_image(blob_image(np.random.default_rng(0)), 0.1)
+    data = pickle.dumps(world)
+    clone = pickle.loads(data)
+    np.testing.assert_array_equal(clone.segments, world.segments)
+    assert clone.bounds == world.bounds and clone.name == world.name
+    assert len(data) < 2 * world.segments.nbytes + 10_000
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"circles": [[0, 0]]}, r"circles: expected shape \(N, 3\), got \(1, 2\)"),
+        ({"circles": [[0, 0, -1]]}, r"circles\[0\]: expected a positive radius, got -1"),
+        ({"circles": [[0, np.nan, 1]]}, "circles: expected finite values"),
+        ({"segments": [[0, 0, 1]]}, r"segments: expected shape \(N, 4\)"),
+        ({"segments": [[1, 1, 1, 1]]}, r"segments\[0\]: expected two distinct end points"),
+        ({"polygons": [[[0, 0], [1, 1]]]}, r"polygons\[0\]: expected >= 3 distinct vertices"),
+        ({"polygons": [[[0, 0], [1, 1], [2, 2]]]}, r"polygons\[0\]: expected a non-zero area"),
+        ({"polygons": [np.zeros((3, 3))]}, r"polygons\[0\]: expected shape \(k, 2\)"),
+        ({"polygons": SQUARE}, "wrap a single polygon in a list"),
+        ({}, "bounds: expected .* for a world without obstacles"),
+        ({"circles": [[0, 0, 1]], "bounds": (1, 0, 0, 1)}, "bounds: expected finite"),
+        ({"circles": [[0, 0, 1]], "bounds": (0, 0, 1)}, "bounds: expected finite"),
+    ],
+)
+def test_bad_geometry_is_a_readable_error(kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        World(**kwargs)
+
+
+# ---------------------------------------------------------------------- pymunk space
+def test_build_space_shapes() -> None:
+    concave = np.array([[10, 0], [14, 0], [14, 4], [12, 1], [10, 4]], dtype=float)
+    world = World(
+        circles=[[5.0, 5.0, 1.0]], segments=[[-1.0, 0.0, -1.0, 3.0]], polygons=[SQUARE, concave]
+    )
+    space = world.build_space()
+    assert space is not world.build_space(), "every call builds a fresh space"
+    shapes = space.shapes
+    assert all(s.body is space.static_body for s in shapes)
+    assert all(s.collision_type == OBSTACLE_COLLISION_TYPE for s in shapes)
+    assert sum(isinstance(s, pymunk.Circle) for s in shapes) == 1
+    assert sum(isinstance(s, pymunk.Segment) for s in shapes) == len(world.segments)
+    polys = [s for s in shapes if isinstance(s, pymunk.Poly)]
+    # The square is one convex piece; the concave polygon's pieces cover exactly its area.
+    assert sum(p.area for p in polys) == pytest.approx(4.0 + 16.0 - 0.5 * 4 * 3)
+    probe = np.random.default_rng(0).uniform(-2, 16, (500, 2))
+    inside_pieces = [
+        any(p.point_query(tuple(q)).distance < -1e-9 for p in polys) for q in probe
+    ]
+    polygons_only = World(polygons=[SQUARE, concave])
+    margin = np.abs(polygons_only.clearance(probe)) > 1e-6
+    np.testing.assert_array_equal(
+        np.array(inside_pieces)[margin], polygons_only.contains(probe)[margin]
+    )
+
+
+def test_nested_polygons_stay_hollow_in_the_space() -> None:
+    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
+    inner = np.array([[1, 1], [9, 1], [9, 9], [1, 9]], dtype=float)
+    space = World(polygons=[outer, inner]).build_space()
+    assert not any(isinstance(s, pymunk.Poly) for s in space.shapes)
+    assert space.point_query((5.0, 5.0), 0.0, pymunk.ShapeFilter()) == []
+
+
+# ---------------------------------------------------------------------- point queries
+def test_contains_even_odd_holes_circles_and_walls() -> None:
+    outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
+    hole = np.array([[2, 2], [8, 2], [8, 8], [2, 8]], dtype=float)
+    island = np.array([[4, 4], [6, 4], [6, 6], [4, 6]], dtype=float)
+    world = World(
+        circles=[[20.0, 0.0, 1.0]], segments=[[30, 0, 30, 5]], polygons=[outer, hole, island]
+    )
+    points = [[1, 1], [3, 3], [5, 5], [20.5, 0.2], [21.5, 0], [30, 2], [-1, 5]]
+    np.testing.assert_array_equal(
+        world.contains(points), [True, False, True, True, False, False, False]
+    )
+
+
+def test_clearance_matches_pymunk_nearest_point_query() -> None:
+    """Oracle: pymunk's signed nearest-shape distance, on convex polygons (one piece each)."""
+    rng = np.random.default_rng(3)
+    triangle = np.array([[6, -3], [9, -2], [7, 1]], dtype=float)
+    world = World(
+        circles=np.column_stack([rng.uniform(-8, 8, (6, 2)), rng.uniform(0.3, 1.5, 6)]),
+        segments=[[-9, -9, 9, -7], [-9, 9, -2, 2]],
+        polygons=[SQUARE, triangle],
+    )
+    space = world.build_space()
+    points = rng.uniform(-10, 10, (400, 2))
+    expected = [
+        space.point_query_nearest(tuple(p), 100.0, pymunk.ShapeFilter()).distance for p in points
+    ]
+    np.testing.assert_allclose(world.clearance(points), expected, atol=1e-9)
+    assert np.any(world.clearance(points) < 0)
+
+
+def test_clearance_of_an_empty_world_is_infinite_and_bad_points_fail() -> None:
+    world = World(bounds=(0, 0, 1, 1))
+    assert np.all(np.isinf(world.clearance([[0.5, 0.5]])))
+    with pytest.raises(ValueError, match=r"points: expected shape \(N, 2\)"):
+        world.clearance([[1, 2, 3]])
+    with pytest.raises(ValueError, match="points: expected finite"):
+        world.contains([[np.nan, 0]])
+
+
+# ---------------------------------------------------------------------- images
+def test_from_image_pixel_convention() -> None:
+    image = np.zeros((4, 5), dtype=np.uint8)
+    image[0, 4] = 255  # top-right pixel
+    world = World.from_image(image, resolution=0.5, origin=(10.0, 20.0))
+    assert world.bounds == (10.0, 20.0, 12.5, 22.0)
+    assert len(world.polygons) == 1
+    vertices = world.polygons[0]
+    np.testing.assert_allclose(vertices.min(axis=0), [12.0, 21.5])
+    np.testing.assert_allclose(vertices.max(axis=0), [12.5, 22.0])
+    assert world.contains([[12.25, 21.75], [10.25, 20.25]]).tolist() == [True, False]
+
+
+def test_image_round_trip_differs_only_on_boundary_pixels() -> None:
+    image = blob_image(np.random.default_rng(5))
+    occupied = image > 0
+    for tolerance in (0.0, 0.5):
+        world = World.from_image(image, 0.05, origin=(-1.0, 2.0), tolerance=tolerance)
+        back = world.to_image(0.05)
+        assert back.shape == image.shape and back.dtype == np.uint8
+        assert set(np.unique(back)) <= {0, 255}
+        differ = (back > 0) != occupied
+        assert not np.any(differ & ~boundary_pixels(occupied))
+        if tolerance == 0.0:
+            assert not np.any(differ), "unsimplified outlines run exactly along pixel edges"
+    # contains() agrees at every pixel centre off the boundary: the walled room's free
+    # interior is a hole and the island in it is solid again.
+    rows, cols = np.nonzero(~boundary_pixels(occupied))
+    centres = np.column_stack([-1.0 + (cols + 0.5) * 0.05, 2.0 + (90 - rows - 0.5) * 0.05])
+    np.testing.assert_array_equal(world.contains(centres), occupied[rows, cols])
+    assert not occupied[38, 88] and occupied[44, 94]
+
+
+def test_to_image_draws_circles_and_thin_walls() -> None:
+    world = World(circles=[[5.0, 5.0, 2.0], [1.0, 1.0, 0.01]], segments=[[0.0, 9.0, 10.0, 8.0]])
+    res = 0.05
+    image = world.to_image(res, bounds=(0, 0, 10, 10))
+    assert image.shape == (200, 200)
+    circle = image[60:140, 60:140] > 0
+    assert abs(circle.sum() * res**2 - math.pi * 4.0) < 2 * math.pi * 2.0 * res
+    row, col = 200 - 1 - int(1.0 / res), int(1.0 / res)
+    assert image[row, col] == 255, "a circle smaller than a pixel still marks its pixel"
+    wall_columns = np.flatnonzero(image[:40].any(axis=0))
+    np.testing.assert_array_equal(wall_columns, np.arange(200))  # drawn unbroken
+    with pytest.raises(ValueError, match="resolution: expected a positive pixel size"):
+        world.to_image(0.0)
+
+
+def test_from_image_reads_png_and_pgm(tmp_path) -> None:
+    from PIL import Image
+
+    image = blob_image(np.random.default_rng(8), (40, 50))
+    expected = World.from_image(image, 0.1).to_image(0.1)
+    for suffix in ("png", "pgm"):
+        path = tmp_path / f"map.{suffix}"
+        Image.fromarray(image).save(path)
+        world = World.from_image(path, 0.1)
+        assert world.name == "map"
+        np.testing.assert_array_equal(world.to_image(0.1), expected)
+    corrupt = tmp_path / "corrupt.png"
+    corrupt.write_bytes(b"\x89PNG not really an image")
+    with pytest.raises(ValueError, match="image: expected a readable image file"):
+        World.from_image(corrupt, 0.1)
+
+
+@pytest.mark.parametrize(
+    ("image", "kwargs", "message"),
+    [
+        (np.zeros((3, 3, 3)), {}, r"image: expected a 2-D occupancy array, got shape \(3, 3, 3\)"),
+        (np.zeros((0, 4)), {}, "image: expected a non-empty image"),
+        (np.ones((4, 4)), {}, "image: expected some free"),
+        (-np.ones((4, 4)), {}, "image: expected finite pixel values >= 0"),
+        (np.array([["a", "b"]]), {}, "image: expected numeric pixel values"),
+        (np.zeros((4, 4)), {"resolution": -1.0}, "resolution: expected a positive pixel size"),
+        (np.zeros((4, 4)), {"tolerance": 2.0}, r"tolerance: expected a value in \[0, 0.5\]"),
+    ],
+)
+def test_from_image_bad_input(image, kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        World.from_image(image, **{"resolution": 0.1, **kwargs})
+
+
+def test_from_image_all_free_is_an_empty_world() -> None:
+    world = World.from_image(np.zeros((10, 20)), 0.5)
+    assert world.n_primitives == 0 and world.bounds == (0.0, 0.0, 10.0, 5.0)
