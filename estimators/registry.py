@@ -17,6 +17,12 @@ _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
     "pc": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 0}),
     "pc_offset": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 1}),
     "pc_pg": ("estimators.paper:PoseGraphCorrelationOdometry", {}),
+    "pc_rot": ("estimators.rotation_pc:RotationPhaseCorrelation", {}),
+    "pc_rot_icp": (
+        "estimators.rotation_pc:RotationPhaseCorrelation",
+        {"icp_iterations": 5, "image_size": 200},
+    ),
+    "pc_fusion": ("estimators.fusion:FusionEstimator", {}),
 }
 
 

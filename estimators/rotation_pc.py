@@ -166,11 +166,12 @@ class RotationPhaseCorrelation(Estimator):
 
     Each step's sensor motion ``z`` becomes the car motion ``mount ⊕ z ⊕ mount⁻¹``. No motion
     model and no odometry: the heading hint for the pi ambiguity is the previous step's own
-    heading change. Parameters: ``lidar`` (observation key used), ``image_size`` [px],
+    heading change. Parameters: ``lidar`` (index into ``setup.keys``: 0 the main Lidar, 1 the
+    offset one), ``image_size`` [px],
     ``resolution`` [m/px] (None: finest holding ``max_range``), ``icp_iterations``.
     """
 
-    lidar: str = "lidar_1"
+    lidar: int = 0
     image_size: int = DEFAULT_SIZE
     resolution: float | None = None
     icp_iterations: int = 0
@@ -188,21 +189,24 @@ class RotationPhaseCorrelation(Estimator):
 
     def _checked_setup(self) -> SensorSetup:
         assert self.setup is not None
-        if self.lidar not in self.setup.keys:
+        if isinstance(self.lidar, bool) or self.lidar not in range(self.setup.n_lidars):
             raise ValueError(
-                f"unknown lidar {self.lidar!r}: expected one of {', '.join(self.setup.keys)}"
+                f"lidar: expected an index in 0..{self.setup.n_lidars - 1} "
+                f"({', '.join(self.setup.keys)}), got {self.lidar!r}"
             )
         return self.setup
 
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
         assert self._matcher is not None and self.setup is not None
-        self._previous = self._matcher.prepare(scans[self.lidar], self.setup.beam_angles)
+        self._previous = self._matcher.prepare(
+            scans[self.setup.keys[self.lidar]], self.setup.beam_angles
+        )
 
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self._matcher is not None and self._previous is not None and self.setup is not None
-        current = self._matcher.prepare(scans[self.lidar], self.setup.beam_angles)
+        current = self._matcher.prepare(scans[self.setup.keys[self.lidar]], self.setup.beam_angles)
         match = self._matcher.match(self._previous, current, self._last_turn)
         self._previous = current
         self._last_turn = float(match.pose[2])
-        mount = self.setup.mounts[self.setup.keys.index(self.lidar)]
+        mount = self.setup.mounts[self.lidar]
         return compose(self.pose, motion_from_sensor_match(mount, match.pose))
