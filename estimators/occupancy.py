@@ -7,9 +7,13 @@ which side owns a boundary), so row 0 is the top (largest ``y``) and a map can b
 by cell with ``world.to_image(res)`` of the same bounds.
 
 Every beam is traced exactly through the cells it crosses (Amanatides & Woo, "A fast voxel
-traversal algorithm", Eurographics 1987): the cells before the return get a "miss", the cell of
-the return a "hit"; a beam that reads ``max_range`` or more marks free space up to ``max_range``
-and nothing occupied. One call of :meth:`OccupancyGrid.integrate` is one observation: each cell
+traversal algorithm", Eurographics 1987): the cells it crosses up to ``free_margin`` before the
+return get a "miss", the cell of the return a "hit", and the cells in between are left alone
+(the obstacle band ``alpha / 2`` of the inverse range sensor model of Thrun, Burgard & Fox,
+"Probabilistic Robotics", table 9.2: a surface met obliquely, or crossing a cell boundary, also
+reaches into the cell before the return, which would otherwise be cleared by every grazing
+beam). A beam that reads ``max_range`` or more marks free space up to ``max_range`` and nothing
+occupied. One call of :meth:`OccupancyGrid.integrate` is one observation: each cell
 changes at most once per call, and a hit in a cell outranks a miss from another beam of the
 same call, so dense near-field cells are not driven to "free" by hundreds of beams at once and a
 thin wall grazed by one beam and hit by another stays occupied.
@@ -73,26 +77,28 @@ def _trace_beams(
     hit_stamp: NDArray[np.int64],
     stamp: int,
     starts: NDArray[np.float64],
-    ends: NDArray[np.float64],
+    free_ends: NDArray[np.float64],
+    hits: NDArray[np.float64],
     is_hit: NDArray[np.bool_],
     miss: float,
     hit: float,
     low: float,
     high: float,
 ) -> None:
-    """Update ``log_odds`` in place for beams ``starts[i] -> ends[i]`` in grid coordinates
-    (column, row) [cells]; ``is_hit[i]`` says whether the end is a return."""
+    """Update ``log_odds`` in place: a miss in each cell the segment ``starts[i] ->
+    free_ends[i]`` crosses, a hit in the cell of ``hits[i]`` where ``is_hit[i]``; all points in
+    grid coordinates (column, row) [cells]."""
     n_rows, n_cols = log_odds.shape
     n_beams = starts.shape[0]
     inside_hit = np.zeros(n_beams, dtype=np.bool_)
     for i in range(n_beams):  # mark this call's hit cells first: hits outrank misses
-        gx, gy = ends[i, 0], ends[i, 1]
+        gx, gy = hits[i, 0], hits[i, 1]
         if is_hit[i] and 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
             inside_hit[i] = True
             hit_stamp[int(gy), int(gx)] = stamp
     for i in range(n_beams):
         x0, y0 = starts[i, 0], starts[i, 1]
-        dx, dy = ends[i, 0] - x0, ends[i, 1] - y0
+        dx, dy = free_ends[i, 0] - x0, free_ends[i, 1] - y0
         t0, t1 = _clip_to_box(x0, y0, dx, dy, float(n_cols), float(n_rows))
         if t0 > t1:
             continue
@@ -115,9 +121,7 @@ def _trace_beams(
             next_row, delta_row = np.inf, np.inf
         # a 4-connected walk from the start cell to the end cell takes exactly this many steps
         n_steps = abs(end_col - col) + abs(end_row - row)
-        for k in range(n_steps + 1):
-            if k == n_steps and inside_hit[i]:
-                break  # the return's own cell is updated below, as a hit
+        for _ in range(n_steps + 1):
             if hit_stamp[row, col] != stamp and free_stamp[row, col] != stamp:
                 free_stamp[row, col] = stamp
                 log_odds[row, col] = max(log_odds[row, col] + miss, low)
@@ -131,7 +135,7 @@ def _trace_beams(
                 break
     for i in range(n_beams):
         if inside_hit[i]:
-            row, col = int(ends[i, 1]), int(ends[i, 0])
+            row, col = int(hits[i, 1]), int(hits[i, 0])
             if hit_stamp[row, col] == stamp:
                 hit_stamp[row, col] = -stamp  # update each hit cell once per call
                 log_odds[row, col] = min(log_odds[row, col] + hit, high)
@@ -149,6 +153,9 @@ class OccupancyGrid:
         p_hit, p_miss: inverse sensor model, probability of occupancy of the cell holding a
             return and of a cell a beam passed through.
         p_min, p_max: clamps of the cell probability (keep the map able to change).
+        free_margin: [m] length before each return that is not marked free (module doc);
+            default one cell, the smallest band that holds a surface crossing the boundary of
+            the return's cell.
         log_odds: ``(rows, cols)`` float64 cell log-odds, 0 = unknown.
     """
 
@@ -158,6 +165,7 @@ class OccupancyGrid:
     p_miss: float = 0.4
     p_min: float = 0.12
     p_max: float = 0.97
+    free_margin: float | None = None
     log_odds: NDArray[np.float64] = field(init=False, repr=False)
     _free_stamp: NDArray[np.int64] = field(init=False, repr=False)
     _hit_stamp: NDArray[np.int64] = field(init=False, repr=False)
@@ -184,6 +192,10 @@ class OccupancyGrid:
             )
         self.bounds = tuple(float(b) for b in bounds)  # type: ignore[assignment]
         self.resolution = float(self.resolution)
+        if self.free_margin is None:
+            self.free_margin = self.resolution
+        if not (math.isfinite(self.free_margin) and self.free_margin >= 0):
+            raise ValueError(f"free_margin: expected a distance >= 0 [m], got {self.free_margin!r}")
         shape = self.shape
         if shape[0] * shape[1] > 200_000_000:
             raise ValueError(f"grid of {shape} cells is too large: coarsen the resolution "
@@ -248,17 +260,17 @@ class OccupancyGrid:
             raise ValueError(f"max_range: expected a positive number [m], got {max_range!r}")
         is_hit = ranges < max_range
         lengths = np.minimum(ranges, max_range)
-        directions = poses[:, 2:3] + angles  # (K, n) world beam directions
-        ends = np.stack(
-            [poses[:, 0:1] + lengths * np.cos(directions),
-             poses[:, 1:2] + lengths * np.sin(directions)],
-            axis=-1,
-        ).reshape(-1, 2)
-        starts = np.repeat(poses[:, :2], len(angles), axis=0)
+        free_lengths = np.where(is_hit, np.maximum(lengths - self.free_margin, 0.0), lengths)
+        directions = np.stack([np.cos(poses[:, 2:3] + angles), np.sin(poses[:, 2:3] + angles)],
+                              axis=-1)  # (K, n, 2) world unit vectors of the beams
+        origins = poses[:, None, :2]
         self._n_updates += 1
         _trace_beams(
             self.log_odds, self._free_stamp, self._hit_stamp, self._n_updates,
-            self.to_grid_coordinates(starts), self.to_grid_coordinates(ends), is_hit.ravel(),
+            self.to_grid_coordinates(np.broadcast_to(origins, directions.shape)),
+            self.to_grid_coordinates(origins + free_lengths[..., None] * directions),
+            self.to_grid_coordinates(origins + lengths[..., None] * directions),
+            is_hit.ravel(),
             logit(self.p_miss), logit(self.p_hit), logit(self.p_min), logit(self.p_max),
         )
 

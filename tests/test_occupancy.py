@@ -61,7 +61,10 @@ def test_each_beam_frees_exactly_the_cells_it_crosses_and_hits_its_end_cell(seed
         angle, length = rng.uniform(-np.pi, np.pi), rng.uniform(0.05, 4.0)
         end = pose[:2] + length * np.array([np.cos(pose[2] + angle), np.sin(pose[2] + angle)])
         grid.integrate([length], [angle], pose, max_range=5.0)
-        crossed = crossed_cells(grid, pose[:2], end)
+        # the last free_margin (one cell) before a return is left alone, as the surface may
+        # reach into it
+        free_end = pose[:2] + max(length - grid.resolution, 0.0) * (end - pose[:2]) / length
+        crossed = crossed_cells(grid, pose[:2], free_end)
         end_col, end_row = np.floor(grid.to_grid_coordinates(end)[0]).astype(int)
         inside = 0 <= end_row < grid.shape[0] and 0 <= end_col < grid.shape[1]
         hit = {(int(end_row), int(end_col))} if inside else set()
@@ -74,6 +77,16 @@ def test_max_range_beams_only_free_space_up_to_max_range():
     grid.integrate([7.0], [0.0], [0.25, 0.25, 0.0], max_range=3.0)
     assert not grid.occupied().any()
     assert cells_where(grid.free()) == {(1, c) for c in range(7)}  # x in [0, 3.25]
+
+
+def test_the_free_margin_before_a_return_is_left_unknown():
+    grid = OccupancyGrid((0.0, 0.0, 2.0, 0.1), resolution=0.1, free_margin=0.25)
+    grid.integrate([1.0], [0.0], [0.05, 0.05, 0.0], max_range=5.0)  # return at x = 1.05
+    assert cells_where(grid.occupied()) == {(0, 10)}
+    assert cells_where(grid.free()) == {(0, c) for c in range(9)}  # up to x = 0.8
+    assert grid.log_odds[0, 9] == 0.0
+    with pytest.raises(ValueError, match="free_margin: expected a distance >= 0"):
+        OccupancyGrid((0.0, 0.0, 1.0, 1.0), free_margin=-0.1)
 
 
 def test_hits_outrank_misses_within_one_observation_and_probabilities_are_clamped():
