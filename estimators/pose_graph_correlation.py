@@ -50,7 +50,10 @@ class PoseGraphCorrelation:
 
 
 def _vector(value: ArrayLike, name: str) -> NDArray[np.float64]:
-    vector = np.asarray(value, dtype=np.float64)
+    try:
+        vector = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        vector = np.empty(0)
     if vector.shape != (2,) or not np.all(np.isfinite(vector)):
         raise ValueError(f"{name}: expected 2 finite numbers (x [m], y [m]), got {value!r}")
     return vector
