@@ -148,14 +148,18 @@ class ICPParams:
     Defaults suit indoor 2D Lidars (1-3 cm range noise, walls metres away) at 5-10 Hz:
     ``max_correspondence_distance`` covers a step of ~1 m/s plus a fast turn's sweep of the
     near walls; the robust ``loss_scale`` is a few times the range noise so wall points keep
-    full weight while clutter and new surfaces fade out.
+    full weight while clutter and new surfaces fade out. ``trim_ratio`` < 1 drops that share
+    of the largest residuals each iteration (Chetverikov's trimmed ICP); it is off by default
+    because in a corridor the few points on the far wall are the only ones that fix the motion
+    along it, and they are the ones a fixed-share trim throws away (measured on ACES: local
+    relation error 0.14 m with 0.9 vs 0.07 m without).
     """
 
     max_iterations: int = 30
     max_correspondence_distance: float = 1.0
     loss: str = "cauchy"
     loss_scale: float = 0.1
-    trim_ratio: float = 0.9
+    trim_ratio: float = 1.0
     inlier_distance: float = 0.1
     tolerance_translation: float = 1e-4
     tolerance_rotation: float = 1e-5
@@ -209,8 +213,9 @@ def register(
     information = None if prior_information is None else np.asarray(prior_information, float)
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     converged = False
-    iteration = 0
-    for iteration in range(1, params.max_iterations + 1):
+    iterations = 0
+    while iterations < params.max_iterations:
+        iterations += 1
         world = transform_points(pose, query_points)
         pairs = reference.correspond(world, params.max_correspondence_distance)
         if len(pairs.index) < 3:
@@ -236,7 +241,7 @@ def register(
         ):
             converged = True
             break
-    return _assess(reference, query_points, pose, params, iteration, converged)
+    return _assess(reference, query_points, pose, params, iterations, converged)
 
 
 def _assess(
@@ -294,7 +299,7 @@ class ICPEstimator(Estimator):
     max_correspondence_distance: float = 1.0
     loss: str = "cauchy"
     loss_scale: float = 0.1
-    trim_ratio: float = 0.9
+    trim_ratio: float = 1.0
     min_range: float = DEFAULT_MIN_RANGE
 
     def __post_init__(self) -> None:

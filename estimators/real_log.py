@@ -101,8 +101,9 @@ def score_relations(
 ) -> dict[str, RelationSummary]:
     """``{"local": ..., "all": ...}`` relation summaries of ``run`` over the relations that
     lie within its time span (local = shorter than 2 s)."""
-    inside = (relations.t1 >= run.times[0] - tolerance) & (relations.t2 <= run.times[-1] + tolerance)
-    inside &= (relations.t2 >= run.times[0] - tolerance) & (relations.t1 <= run.times[-1] + tolerance)
+    start, end = run.times[0] - tolerance, run.times[-1] + tolerance
+    ends = np.stack([relations.t1, relations.t2])
+    inside = np.all((ends >= start) & (ends <= end), axis=0)
     selected = relations.select(inside)
     errors = relation_errors(run.times, run.poses, selected, tolerance)
     local = np.abs(errors.dt) < 2.0

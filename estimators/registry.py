@@ -23,6 +23,8 @@ _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
         {"icp_iterations": 5, "image_size": 200},
     ),
     "pc_fusion": ("estimators.fusion:FusionEstimator", {}),
+    "icp": ("estimators.icp:ICPEstimator", {}),
+    "lidar_odometry": ("estimators.local_map:LocalMapOdometry", {}),
 }
 
 
