@@ -225,8 +225,9 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             world = built_in_layout(world_name).world
             car = Car(self.config.car_length, self.config.car_width, world.circles, world.segments)
             if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
+                x, y, heading = pose
                 raise StartPoseError(
-                    f"start pose {tuple(pose.round(3))} puts the {self.config.car_length} m x "
+                    f"start pose ({x:g}, {y:g}, {heading:g}) puts the {self.config.car_length} m x "
                     f"{self.config.car_width} m car into an obstacle of world {world_name!r}: "
                     f"expected a pose where the car's box is clear"
                 )

@@ -26,7 +26,7 @@ Piece = tuple[float, float]
 WAYPOINT_SPACING = 0.05
 
 #: Scales tried, in order, when a trace does not fit its world: bends shrink before the length.
-LENGTH_SCALES: tuple[float, ...] = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3)
+LENGTH_SCALES: tuple[float, ...] = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1)
 BEND_SCALES: tuple[float, ...] = (1.0, 0.75, 0.5)
 
 #: Shortest trace [m] :func:`make_trace` accepts before giving up.
@@ -320,8 +320,9 @@ def make_trace(
             if worst is None:
                 worst = (float(margin[i] + clearance), trace.waypoints[i])
     free, where = worst if worst is not None else (0.0, np.asarray(start_pose)[:2])
+    x, y, heading = (float(v) for v in np.asarray(start_pose, dtype=np.float64))
     raise TraceFitError(
-        f"trace {seed!r} from {tuple(np.round(np.asarray(start_pose, dtype=float), 3))} does not "
+        f"trace {seed!r} from ({x:.3f}, {y:.3f}, {heading:.3f}) does not "
         f"fit in world {getattr(world, 'name', '?')!r}: expected every waypoint {clearance:.2f} m "
         f"clear of obstacles and bounds, but at full size the point ({where[0]:.2f}, "
         f"{where[1]:.2f}) is {free:.2f} m clear, and no shrunken version down to "
