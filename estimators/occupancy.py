@@ -71,74 +71,96 @@ def _cell_index(coordinate: float, n_cells: int) -> int:
 
 
 @numba.njit(cache=True)
-def _trace_beams(
+def _trace_scans(
     log_odds: NDArray[np.float64],
-    free_stamp: NDArray[np.int64],
-    hit_stamp: NDArray[np.int64],
-    stamp: int,
-    starts: NDArray[np.float64],
-    free_ends: NDArray[np.float64],
-    hits: NDArray[np.float64],
-    is_hit: NDArray[np.bool_],
+    marks: NDArray[np.int32],
+    call: int,
+    origins: NDArray[np.float64],
+    headings: NDArray[np.float64],
+    beam_angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    max_range: float,
+    free_margin: float,
     miss: float,
     hit: float,
     low: float,
     high: float,
 ) -> None:
-    """Update ``log_odds`` in place: a miss in each cell the segment ``starts[i] ->
-    free_ends[i]`` crosses, a hit in the cell of ``hits[i]`` where ``is_hit[i]``; all points in
-    grid coordinates (column, row) [cells]."""
+    """Update ``log_odds`` in place with the scans ``ranges`` (K, n) [cells] taken from
+    ``origins`` (K, 2) (column, row) [cells] at world ``headings`` (K,) [rad]: a miss in each
+    cell a beam crosses up to ``free_margin`` [cells] before its return (or up to ``max_range``
+    [cells]), a hit in the cell of each return. ``marks`` remembers per cell what this ``call``
+    (>= 1) did: ``2 call`` = updated, ``2 call + 1`` = holds a return, not yet updated."""
     n_rows, n_cols = log_odds.shape
-    n_beams = starts.shape[0]
-    inside_hit = np.zeros(n_beams, dtype=np.bool_)
-    for i in range(n_beams):  # mark this call's hit cells first: hits outrank misses
-        gx, gy = hits[i, 0], hits[i, 1]
-        if is_hit[i] and 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
-            inside_hit[i] = True
-            hit_stamp[int(gy), int(gx)] = stamp
-    for i in range(n_beams):
-        x0, y0 = starts[i, 0], starts[i, 1]
-        dx, dy = free_ends[i, 0] - x0, free_ends[i, 1] - y0
-        t0, t1 = _clip_to_box(x0, y0, dx, dy, float(n_cols), float(n_rows))
-        if t0 > t1:
-            continue
-        col = _cell_index(x0 + t0 * dx, n_cols)
-        row = _cell_index(y0 + t0 * dy, n_rows)
-        end_col = _cell_index(x0 + t1 * dx, n_cols)
-        end_row = _cell_index(y0 + t1 * dy, n_rows)
-        step_col = 1 if dx > 0 else -1
-        step_row = 1 if dy > 0 else -1
-        # t at which the ray crosses the next column / row boundary, and the t between crossings
-        if dx != 0.0:
-            next_col = (col + (1 if dx > 0 else 0) - x0) / dx
-            delta_col = abs(1.0 / dx)
-        else:
-            next_col, delta_col = np.inf, np.inf
-        if dy != 0.0:
-            next_row = (row + (1 if dy > 0 else 0) - y0) / dy
-            delta_row = abs(1.0 / dy)
-        else:
-            next_row, delta_row = np.inf, np.inf
-        # a 4-connected walk from the start cell to the end cell takes exactly this many steps
-        n_steps = abs(end_col - col) + abs(end_row - row)
-        for _ in range(n_steps + 1):
-            if hit_stamp[row, col] != stamp and free_stamp[row, col] != stamp:
-                free_stamp[row, col] = stamp
-                log_odds[row, col] = max(log_odds[row, col] + miss, low)
-            if next_col < next_row:
-                col += step_col
-                next_col += delta_col
+    n_scans, n_beams = ranges.shape
+    done, pending = 2 * call, 2 * call + 1
+    flat_odds = log_odds.reshape(n_rows * n_cols)  # views: the walk steps a flat index
+    flat_marks = marks.reshape(n_rows * n_cols)
+    # grid axes: column grows with x, row grows with -y
+    dir_col = np.cos(headings.reshape(-1, 1) + beam_angles.reshape(1, -1))
+    dir_row = -np.sin(headings.reshape(-1, 1) + beam_angles.reshape(1, -1))
+    for k in range(n_scans):  # mark this call's hit cells first: hits outrank misses
+        for j in range(n_beams):
+            if ranges[k, j] < max_range:
+                gx = origins[k, 0] + ranges[k, j] * dir_col[k, j]
+                gy = origins[k, 1] + ranges[k, j] * dir_row[k, j]
+                if 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
+                    marks[int(gy), int(gx)] = pending
+    for k in range(n_scans):
+        x0, y0 = origins[k, 0], origins[k, 1]
+        for j in range(n_beams):
+            if ranges[k, j] < max_range:
+                length = max(ranges[k, j] - free_margin, 0.0)
             else:
-                row += step_row
-                next_row += delta_row
-            if col < 0 or col >= n_cols or row < 0 or row >= n_rows:
-                break
-    for i in range(n_beams):
-        if inside_hit[i]:
-            row, col = int(hits[i, 1]), int(hits[i, 0])
-            if hit_stamp[row, col] == stamp:
-                hit_stamp[row, col] = -stamp  # update each hit cell once per call
-                log_odds[row, col] = min(log_odds[row, col] + hit, high)
+                length = max_range
+            dx, dy = length * dir_col[k, j], length * dir_row[k, j]
+            t0, t1 = _clip_to_box(x0, y0, dx, dy, float(n_cols), float(n_rows))
+            if t0 > t1:
+                continue
+            col = _cell_index(x0 + t0 * dx, n_cols)
+            row = _cell_index(y0 + t0 * dy, n_rows)
+            end_col = _cell_index(x0 + t1 * dx, n_cols)
+            end_row = _cell_index(y0 + t1 * dy, n_rows)
+            step_col = 1 if dx > 0 else -1
+            step_row = 1 if dy > 0 else -1
+            # t at which the ray crosses the next column / row boundary, and t between crossings
+            if dx != 0.0:
+                next_col = (col + (1 if dx > 0 else 0) - x0) / dx
+                delta_col = abs(1.0 / dx)
+            else:
+                next_col, delta_col = np.inf, np.inf
+            if dy != 0.0:
+                next_row = (row + (1 if dy > 0 else 0) - y0) / dy
+                delta_row = abs(1.0 / dy)
+            else:
+                next_row, delta_row = np.inf, np.inf
+            # a 4-connected walk from the start cell to the end cell takes exactly these steps;
+            # it stays inside the grid, as both cells are
+            n_col_steps, n_row_steps = abs(end_col - col), abs(end_row - row)
+            index = row * n_cols + col
+            row_stride = step_row * n_cols
+            for _ in range(n_col_steps + n_row_steps + 1):
+                if flat_marks[index] < done:
+                    flat_marks[index] = done
+                    flat_odds[index] = max(flat_odds[index] + miss, low)
+                if (next_col < next_row and n_col_steps > 0) or n_row_steps == 0:
+                    index += step_col
+                    next_col += delta_col
+                    n_col_steps -= 1
+                else:
+                    index += row_stride
+                    next_row += delta_row
+                    n_row_steps -= 1
+    for k in range(n_scans):
+        for j in range(n_beams):
+            if ranges[k, j] < max_range:
+                gx = origins[k, 0] + ranges[k, j] * dir_col[k, j]
+                gy = origins[k, 1] + ranges[k, j] * dir_row[k, j]
+                if 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
+                    row, col = int(gy), int(gx)
+                    if marks[row, col] == pending:  # update each hit cell once per call
+                        marks[row, col] = done
+                        log_odds[row, col] = min(log_odds[row, col] + hit, high)
 
 
 @dataclass
@@ -167,8 +189,7 @@ class OccupancyGrid:
     p_max: float = 0.97
     free_margin: float | None = None
     log_odds: NDArray[np.float64] = field(init=False, repr=False)
-    _free_stamp: NDArray[np.int64] = field(init=False, repr=False)
-    _hit_stamp: NDArray[np.int64] = field(init=False, repr=False)
+    _marks: NDArray[np.int32] = field(init=False, repr=False)
     _n_updates: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -201,8 +222,7 @@ class OccupancyGrid:
             raise ValueError(f"grid of {shape} cells is too large: coarsen the resolution "
                              f"({self.resolution} m) or shrink the bounds {self.bounds}")
         self.log_odds = np.zeros(shape, dtype=np.float64)
-        self._free_stamp = np.zeros(shape, dtype=np.int64)
-        self._hit_stamp = np.zeros(shape, dtype=np.int64)
+        self._marks = np.zeros(shape, dtype=np.int32)
         self._n_updates = 0
 
     @property
@@ -258,19 +278,14 @@ class OccupancyGrid:
             raise ValueError("sensor_pose and beam_angles: expected finite numbers")
         if not (math.isfinite(max_range) and max_range > 0):
             raise ValueError(f"max_range: expected a positive number [m], got {max_range!r}")
-        is_hit = ranges < max_range
-        lengths = np.minimum(ranges, max_range)
-        free_lengths = np.where(is_hit, np.maximum(lengths - self.free_margin, 0.0), lengths)
-        directions = np.stack([np.cos(poses[:, 2:3] + angles), np.sin(poses[:, 2:3] + angles)],
-                              axis=-1)  # (K, n, 2) world unit vectors of the beams
-        origins = poses[:, None, :2]
+        if self._n_updates >= 2**30 - 1:  # marks are int32 (2 per call): start them afresh
+            self._marks[:] = 0
+            self._n_updates = 0
         self._n_updates += 1
-        _trace_beams(
-            self.log_odds, self._free_stamp, self._hit_stamp, self._n_updates,
-            self.to_grid_coordinates(np.broadcast_to(origins, directions.shape)),
-            self.to_grid_coordinates(origins + free_lengths[..., None] * directions),
-            self.to_grid_coordinates(origins + lengths[..., None] * directions),
-            is_hit.ravel(),
+        _trace_scans(
+            self.log_odds, self._marks, self._n_updates, self.to_grid_coordinates(poses[:, :2]),
+            np.ascontiguousarray(poses[:, 2]), angles, ranges / self.resolution,
+            max_range / self.resolution, self.free_margin / self.resolution,
             logit(self.p_miss), logit(self.p_hit), logit(self.p_min), logit(self.p_max),
         )
 
