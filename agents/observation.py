@@ -1,0 +1,115 @@
+"""What the learned driver sees: both scans, pooled, plus the next trace waypoints.
+
+:class:`TraceFollowingObservation` wraps ``DualLidar-v0`` and replaces its observation by one
+flat float32 vector in ``[-1, 1]`` that an ``MlpPolicy`` can take:
+
+=========================  ===========================================================  =====
+slice                      meaning                                                      units
+=========================  ===========================================================  =====
+``[0, 2 * n_sectors)``     per Lidar, per sector: the nearest return / ``max_range``     [-]
+``[.., + 2 * n_points)``   next trace points, every ``point_spacing`` m of arc ahead,   [-]
+                           in the car frame (x forward, y left), / ``lookahead_scale``
+``[.., + 2)``              the previous action                                          [-]
+=========================  ===========================================================  =====
+
+Sector ``k`` of a Lidar covers beams ``[k n / n_sectors, (k + 1) n / n_sectors)``, i.e. the
+angles ``[2 pi k / n_sectors, 2 pi (k + 1) / n_sectors)`` CCW from that sensor's forward axis.
+The trace points come from the env's active trace and the true car pose (``info["pose"]``): the
+driver is told where to go, like a route planner would; it never feeds an estimator.
+
+The wrapper keeps the env's reward (metres of progress along the trace, a cross-track penalty,
+a collision penalty) and, with ``randomize=True``, draws each episode's world and trace seed
+from the env's ``np_random`` so one policy learns every seed in every world.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from lidar_env import se2
+
+
+class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Flat, normalised observation for a trace-following policy (see the module docstring)."""
+
+    def __init__(
+        self,
+        env: gym.Env,
+        n_sectors: int = 36,
+        n_points: int = 5,
+        point_spacing: float = 0.5,  # [m] of trace arc between two look-ahead points
+        lookahead_scale: float = 3.0,  # [m] a car-frame coordinate of this size maps to 1
+        randomize: bool = False,
+        worlds: Sequence[str] = ("open_cylinders", "hallway", "closed_to_open", "random"),
+        traces: Sequence[str] = ("straight", "right_turn", "zigzag"),
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, n_sectors=n_sectors, n_points=n_points, point_spacing=point_spacing,
+            lookahead_scale=lookahead_scale, randomize=randomize, worlds=worlds, traces=traces,
+        )
+        gym.Wrapper.__init__(self, env)
+        n_beams = env.unwrapped.config.n_beams
+        if n_sectors < 1 or n_beams % n_sectors:
+            raise ValueError(f"n_sectors: expected a divisor of n_beams={n_beams}, got {n_sectors}")
+        if n_points < 1 or point_spacing <= 0 or lookahead_scale <= 0:
+            raise ValueError(
+                "n_points, point_spacing and lookahead_scale must be positive, got "
+                f"{n_points}, {point_spacing}, {lookahead_scale}"
+            )
+        self.n_sectors = n_sectors
+        self.offsets = point_spacing * np.arange(1, n_points + 1)
+        self.lookahead_scale = lookahead_scale
+        self.randomize = randomize
+        self._rng: np.random.Generator | None = None  # draws world and trace when randomizing
+        self.worlds = tuple(worlds)
+        self.traces = tuple(traces)
+        size = 2 * n_sectors + 2 * n_points + 2
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (size,), np.float32)
+        self.last_action = np.zeros(2, np.float32)
+        self._arc = 0.0
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        options = dict(options or {})
+        if self.randomize:
+            if seed is not None or self._rng is None:
+                self._rng = np.random.default_rng(seed)
+            options.setdefault("world", self.worlds[self._rng.integers(len(self.worlds))])
+            options.setdefault("trace", self.traces[self._rng.integers(len(self.traces))])
+        observation, info = self.env.reset(seed=seed, options=options)
+        self.last_action = np.zeros(2, np.float32)
+        self._arc = 0.0
+        return self.observe(observation, info), info
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.last_action = np.clip(np.asarray(action, np.float32), -1.0, 1.0)
+        return self.observe(observation, info), reward, terminated, truncated, info
+
+    def observe(self, observation: dict[str, Any], info: dict[str, Any]) -> NDArray[np.float32]:
+        """The policy input for one raw env observation and its ``info``."""
+        max_range = self.env.unwrapped.config.max_range
+        sectors = [
+            np.asarray(observation[key], np.float32).reshape(self.n_sectors, -1).min(axis=1)
+            for key in ("lidar_1", "lidar_2")
+        ]
+        pose = np.asarray(info["pose"], np.float64)
+        trace = self.env.unwrapped.trace
+        self._arc = trace.project(pose[:2], near=self._arc).arc_position
+        ahead = np.array([trace.point_at(self._arc + d) for d in self.offsets])
+        local = se2.transform_points(se2.inverse(pose), ahead) / self.lookahead_scale
+        return np.concatenate(
+            [
+                np.concatenate(sectors) / max_range,
+                np.clip(local.ravel(), -1.0, 1.0),
+                self.last_action,
+            ]
+        ).astype(np.float32)

@@ -1,0 +1,52 @@
+"""A driver backed by a Stable-Baselines3 PPO policy (needs the ``agents`` extra and torch)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.observation import TraceFollowingObservation
+
+#: The policy shipped with the package (trained by ``python -m agents.train``).
+SHIPPED_MODEL = Path(__file__).with_name("models") / "ppo_driver.zip"
+
+
+class SB3Driver:
+    """Drive the env's active trace with a trained PPO policy.
+
+    ``reset(env)`` then ``act(observation, info) -> action`` like every driver; the raw env
+    observation and ``info`` are turned into the policy's input by the same
+    :class:`~agents.observation.TraceFollowingObservation` logic used in training.
+    """
+
+    def __init__(self, model_path: str | Path = SHIPPED_MODEL, deterministic: bool = True) -> None:
+        try:
+            from stable_baselines3 import PPO
+        except ImportError as error:  # pragma: no cover - depends on the install
+            raise gym.error.DependencyNotInstalled(
+                'the SB3 driver needs stable-baselines3 and torch: pip install torch==2.13.0 '
+                '"duallidar[agents]"'
+            ) from error
+        path = Path(model_path)
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"no trained model at {path}: train one with python -m agents.train"
+            )
+        self.model = PPO.load(path, device="cpu")
+        self.deterministic = deterministic
+        self._view: TraceFollowingObservation | None = None
+
+    def reset(self, env: gym.Env) -> None:
+        self._view = TraceFollowingObservation(env.unwrapped)
+
+    def act(self, observation: dict[str, Any], info: dict[str, Any]) -> NDArray[np.float32]:
+        if self._view is None:
+            raise RuntimeError("call reset(env) before act()")
+        features = self._view.observe(observation, info)
+        action, _ = self.model.predict(features, deterministic=self.deterministic)
+        self._view.last_action = np.clip(np.asarray(action, np.float32), -1.0, 1.0)
+        return self._view.last_action

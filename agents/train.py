@@ -1,0 +1,112 @@
+"""Train the PPO trace-following driver.
+
+    python -m agents.train --timesteps 400000 --seed 0 --out agents/models/ppo_driver.zip
+
+Hyperparameters come from ``agents/ppo_driver.yaml`` (rl-zoo3 layout); ``--timesteps`` and
+``--n-envs`` override it. Every episode draws its world (the built-in ones and ``random``) and
+trace seed, so the policy is not fitted to one scenario; the evaluation callback scores it on a
+fixed, seeded set of episodes and keeps the best model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import yaml
+
+import lidar_env  # noqa: F401 - registers DualLidar-v0
+from agents.observation import TraceFollowingObservation
+from agents.sb3_driver import SHIPPED_MODEL
+
+HYPERPARAMETERS = Path(__file__).with_name("ppo_driver.yaml")
+
+
+def load_hyperparameters(path: Path = HYPERPARAMETERS) -> dict[str, Any]:
+    """The ``DualLidar-v0`` entry of an rl-zoo3-style YAML file."""
+    with open(path) as handle:
+        entry = dict(yaml.safe_load(handle)["DualLidar-v0"])
+    return entry
+
+
+def make_training_env(config: dict[str, Any] | None = None) -> gym.Env:
+    """One randomised, wrapped ``DualLidar-v0`` as the policy sees it."""
+    env = gym.make("DualLidar-v0", config=config or {})
+    return TraceFollowingObservation(env, randomize=True)
+
+
+def train(
+    timesteps: int | None = None,
+    seed: int = 0,
+    out: Path = SHIPPED_MODEL,
+    n_envs: int | None = None,
+    tensorboard: Path | None = None,
+    eval_episodes: int = 12,
+    torch_threads: int = 1,
+) -> Path:
+    """Train PPO and save the best evaluated model to ``out`` (a .zip); return its path."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    torch.set_num_threads(torch_threads)  # small MLP: more threads only add contention
+    params = load_hyperparameters()
+    total = int(timesteps or params.pop("n_timesteps"))
+    params.pop("n_timesteps", None)
+    env_config = params.pop("env_kwargs", {})
+    normalize = params.pop("normalize", False)
+    n_envs = int(n_envs or params.pop("n_envs"))
+    params.pop("n_envs", None)
+    policy = params.pop("policy")
+
+    env_kwargs = {"config": env_config}
+    vec_env = make_vec_env(make_training_env, n_envs, seed=seed, env_kwargs=env_kwargs)
+    eval_env = make_vec_env(make_training_env, 1, seed=seed + 10_000, env_kwargs=env_kwargs)
+    if normalize:
+        vec_env = VecNormalize(vec_env)
+        eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    best_dir = out.parent / f"{out.stem}_best"
+    callback = EvalCallback(
+        eval_env,
+        n_eval_episodes=eval_episodes,
+        eval_freq=max(20_000 // n_envs, 1),
+        best_model_save_path=str(best_dir),
+        deterministic=True,
+        verbose=0,
+    )
+    model = PPO(
+        policy, vec_env, seed=seed, device="cpu", verbose=0,
+        tensorboard_log=str(tensorboard) if tensorboard else None, **params,
+    )
+    start = time.perf_counter()
+    model.learn(total_timesteps=total, callback=callback, progress_bar=False)
+    elapsed = time.perf_counter() - start
+    best = best_dir / "best_model.zip"
+    final = PPO.load(best, device="cpu") if best.is_file() else model
+    final.save(out)
+    if normalize:
+        vec_env.save(str(out.with_suffix(".vecnormalize.pkl")))
+    print(f"trained {total} steps in {elapsed / 60:.1f} min; saved {out}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--timesteps", type=int, default=None, help="override n_timesteps")
+    parser.add_argument("--n-envs", type=int, default=None, help="override n_envs")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=SHIPPED_MODEL)
+    parser.add_argument("--tensorboard", type=Path, default=None, help="TensorBoard log dir")
+    args = parser.parse_args(argv)
+    train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard)
+
+
+if __name__ == "__main__":
+    main()
