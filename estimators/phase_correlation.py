@@ -165,7 +165,7 @@ def _cross_power(reference: NDArray, moving: NDArray) -> NDArray[np.complex64]:
 def _parabola_vertex(below: float, centre: float, above: float) -> float:
     """Offset [px] of the vertex of the parabola through three equally spaced samples."""
     curvature = below - 2.0 * centre + above
-    return 0.0 if curvature >= 0 else float(np.clip(0.5 * (below - above) / curvature, -0.5, 0.5))
+    return 0.0 if curvature >= 0 else min(0.5, max(-0.5, 0.5 * (below - above) / curvature))
 
 
 def _refine_peak(
@@ -182,15 +182,18 @@ def _refine_peak(
     for _ in range(NEWTON_MAX_ITERATIONS):
         # moments[i, j] = sum over the spectrum of d^i/drow^i d^j/dcol^j of the series
         moments = _surface_derivatives(cross, position[0], position[1], cols)
-        gradient = np.array([moments[1, 0], moments[0, 1]])
-        hessian = np.array([[moments[2, 0], moments[1, 1]], [moments[1, 1], moments[0, 2]]])
-        if hessian[0, 0] >= 0 or np.linalg.det(hessian) <= 0:
+        (value_here, d_col, d_col2), (d_row, d_row_col, _), (d_row2, _, _) = moments
+        determinant = d_row2 * d_col2 - d_row_col**2
+        if d_row2 >= 0 or determinant <= 0:  # not a concave peak: Newton would not climb
             break
-        step = -np.linalg.solve(hessian, gradient)
+        # the 2 x 2 Newton step -H^-1 g in closed form
+        step = np.array(
+            [d_row_col * d_col - d_col2 * d_row, d_row_col * d_row - d_row2 * d_col]
+        ) / determinant
         if np.any(np.abs(position + step - start) > 1.0):
             break
         position = position + step
-        value = float(moments[0, 0])
+        value = float(value_here)
         if np.max(np.abs(step)) < NEWTON_TOLERANCE:
             break
     if value is None:
