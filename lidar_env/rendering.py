@@ -8,6 +8,9 @@ top of the world (max y), column 0 its left edge (min x).
 from __future__ import annotations
 
 import math
+import os
+import struct
+import zlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -189,14 +192,10 @@ def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> 
     renderer._clock.tick(fps)
 
 
-def frames_to_png(frames: Sequence[NDArray[np.uint8]], path: Any, columns: int = 3) -> None:
-    """Tile equally sized RGB ``frames`` into a grid and save it as a PNG (needs matplotlib)."""
-    try:
-        import matplotlib.image
-    except ImportError as error:
-        raise DependencyNotInstalled(
-            'matplotlib is not installed: run `pip install "duallidar[plots]"` to write PNGs'
-        ) from error
+def tile_frames(frames: Sequence[NDArray[np.uint8]], columns: int = 3) -> NDArray[np.uint8]:
+    """RGB ``frames`` laid out row by row in a grid of ``columns``, on white."""
+    if not frames:
+        raise ValueError("frames: expected at least one (H, W, 3) frame, got none")
     height = max(f.shape[0] for f in frames)
     width = max(f.shape[1] for f in frames)
     rows = math.ceil(len(frames) / columns)
@@ -205,4 +204,23 @@ def frames_to_png(frames: Sequence[NDArray[np.uint8]], path: Any, columns: int =
         r, c = divmod(i, columns)
         top, left = r * height, c * width
         sheet[top : top + frame.shape[0], left : left + frame.shape[1]] = frame
-    matplotlib.image.imsave(path, sheet)
+    return sheet
+
+
+def write_png(path: str | os.PathLike, image: ArrayLike) -> None:
+    """Save an ``(H, W, 3)`` uint8 RGB image as a PNG file (zlib only, no imaging library)."""
+    rgb = np.asarray(image)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        raise ValueError(f"image: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+    height, width = rgb.shape[:2]
+    # each scanline starts with filter type 0 (none)
+    raw = np.hstack([np.zeros((height, 1), dtype=np.uint8), rgb.reshape(height, -1)]).tobytes()
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)  # 8-bit RGB
+    with open(path, "wb") as file:
+        file.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+                   + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))

@@ -15,6 +15,8 @@ from lidar_env.rendering import (
     OBSTACLE,
     TRACE_COLOUR,
     TRAJECTORY_COLOURS,
+    tile_frames,
+    write_png,
 )
 
 
@@ -62,3 +64,16 @@ def test_human_mode_without_pygame_names_the_extra(no_pygame):
     env = gym.make("DualLidar-v0", render_mode="human")
     with pytest.raises(DependencyNotInstalled, match=r"duallidar\[human\]"):
         env.reset(seed=0)
+
+
+def test_png_writer_round_trips_through_an_independent_reader(tmp_path):
+    image = pytest.importorskip("matplotlib.image")
+    rgb = np.random.default_rng(0).integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    write_png(tmp_path / "x.png", tile_frames([rgb, rgb[:20]], columns=2))
+    back = np.round(image.imread(tmp_path / "x.png")[..., :3] * 255).astype(np.uint8)
+    assert back.shape == (37, 106, 3)
+    np.testing.assert_array_equal(back[:, :53], rgb)
+    np.testing.assert_array_equal(back[:20, 53:], rgb[:20])
+    assert np.all(back[20:, 53:] == 255)
+    with pytest.raises(ValueError, match=r"image: expected \(H, W, 3\) uint8, got \(4, 4\)"):
+        write_png(tmp_path / "y.png", np.zeros((4, 4), dtype=np.uint8))
