@@ -45,6 +45,8 @@ MIN_CONFIDENCE = 1e-3
 
 #: Neighbouring returns further apart than this [m] are not one surface (a depth jump).
 MAX_SURFACE_GAP = 0.3
+#: Neighbours on each side fitted with a return's local quadratic: 5 points for 3 unknowns.
+SURFACE_HALF_WINDOW = 2
 #: Refinement settings [m]: pairs beyond ``MAX_PAIR_DISTANCE`` are ignored; the Cauchy loss
 #: scale and the inlier distance are a few times a cheap Lidar's 1-3 cm range noise.
 MAX_PAIR_DISTANCE = 0.5
@@ -53,15 +55,17 @@ INLIER_DISTANCE = 0.1
 
 
 class CurveReference:
-    """A reference scan as a chain of local parabolas, for point-to-curve refinement.
+    """A scan as a chain of local quadratics, for point-to-curve refinement.
 
     Point-to-line ICP (Censi 2008) pairs a point with the chord through two reference points;
     on a curved surface (a 0.3 m cylinder seen at 3 m with 1-degree beams) the chord lies up
     to ``c^2 / 8R`` ~ 1 mm inside the surface, a bias that changes with the sampling from scan
-    to scan. Here each return carries the parabola through itself and its two neighbours in
-    beam order (a line where only one neighbour is on the same surface), and a point's
-    residual is its distance to that parabola along the parabola's normal. On straight walls
-    this is exactly point-to-line.
+    to scan. Here each return carries the quadratic ``v = c + b u + a u^2`` (``u`` along the
+    local chord, ``v`` across it) fitted by least squares to itself and up to
+    ``SURFACE_HALF_WINDOW`` neighbours on each side in beam order that lie on the same surface
+    (a line with fewer than three points); a point's residual is its distance to that curve
+    along the curve's normal. Fitting more points than parameters also averages the range
+    noise: :attr:`smoothed` holds each return moved onto its own curve.
 
     Args:
         ranges: ``(n,)`` [m]; beam_angles: ``(n,)`` [rad] in beam order; max_range: [m].
@@ -76,35 +80,44 @@ class CurveReference:
             raise ValueError(f"reference scan: expected at least 3 returns, got {count}")
         self.tree = cKDTree(self.points)
         n_beams = len(ranges)
-        before, after = np.roll(self.points, 1, axis=0), np.roll(self.points, -1, axis=0)
-        # Neighbours in beam order, on the same surface: adjacent beams and close together.
-        has_before = ((hit - np.roll(hit, 1)) % n_beams == 1) & (
-            np.hypot(*(before - self.points).T) < MAX_SURFACE_GAP
+        # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
+        # adjacent beams less than MAX_SURFACE_GAP apart.
+        offsets = np.arange(-SURFACE_HALF_WINDOW, SURFACE_HALF_WINDOW + 1)
+        linked = ((np.roll(hit, -1) - hit) % n_beams == 1) & (
+            np.hypot(*(np.roll(self.points, -1, axis=0) - self.points).T) < MAX_SURFACE_GAP
         )
-        has_after = ((np.roll(hit, -1) - hit) % n_beams == 1) & (
-            np.hypot(*(after - self.points).T) < MAX_SURFACE_GAP
-        )
-        chord = np.where(has_before[:, None], before, self.points) - np.where(
-            has_after[:, None], after, self.points
-        )
+        if not _full_turn(beam_angles):
+            linked[-1] = False  # the last beam does not neighbour the first
+        valid = np.ones((count, len(offsets)), dtype=bool)
+        for column, offset in enumerate(offsets):
+            for step in range(min(offset, 0), max(offset, 0)):
+                valid[:, column] &= np.roll(linked, -step)
+        neighbours = np.stack([np.roll(self.points, -o, axis=0) for o in offsets], axis=1)
+        # Local frame: along the chord between the outermost neighbours on the same surface.
+        first = np.argmax(valid, axis=1)
+        last = len(offsets) - 1 - np.argmax(valid[:, ::-1], axis=1)
+        rows = np.arange(count)
+        chord = neighbours[rows, last] - neighbours[rows, first]
         length = np.hypot(*chord.T)
         self.pointlike = length < 1e-9
         self.tangents = chord / np.where(self.pointlike, 1.0, length)[:, None]
         self.normals = np.column_stack([-self.tangents[:, 1], self.tangents[:, 0]])
-        # v = a u^2 + b u through the point (origin) and both neighbours, in (tangent, normal)
-        u_b, v_b = self._local(before), self._local_normal(before)
-        u_a, v_a = self._local(after), self._local_normal(after)
-        det = u_b * u_a * (u_b - u_a)
-        curved = has_before & has_after & (np.abs(det) > 1e-12)
-        safe = np.where(curved, det, 1.0)
-        self.a = np.where(curved, (v_b * u_a - v_a * u_b) / safe, 0.0)
-        self.b = np.where(curved, (u_b**2 * v_a - u_a**2 * v_b) / safe, 0.0)
-
-    def _local(self, points: FloatArray) -> FloatArray:
-        return np.einsum("ij,ij->i", points - self.points, self.tangents)
-
-    def _local_normal(self, points: FloatArray) -> FloatArray:
-        return np.einsum("ij,ij->i", points - self.points, self.normals)
+        local = neighbours - self.points[:, None, :]
+        u = np.einsum("mkj,mj->mk", local, self.tangents)
+        v = np.einsum("mkj,mj->mk", local, self.normals)
+        # Weighted normal equations of v = c + b u + a u^2; the tiny ridge on a turns an
+        # under-determined fit (two points) into the line through them.
+        design = np.stack([np.ones_like(u), u, u**2], axis=-1) * valid[..., None]
+        normal_matrix = np.einsum("mki,mkj->mij", design, design)
+        scale = np.maximum(length, 1e-3) ** 4
+        normal_matrix[:, 2, 2] += 1e-9 * scale
+        normal_matrix[self.pointlike] = np.eye(3)
+        coefficients = np.linalg.solve(
+            normal_matrix, np.einsum("mki,mk->mi", design, v)[..., None]
+        )[..., 0]
+        coefficients[self.pointlike] = 0.0
+        self.c, self.b, self.a = coefficients.T
+        self.smoothed = self.points + self.c[:, None] * self.normals
 
     def correspond(self, points: FloatArray) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
         """For the points ``(M, 2)`` (reference frame) within ``MAX_PAIR_DISTANCE`` of a return:
@@ -119,7 +132,7 @@ class CurveReference:
         anchors = (
             self.points[k]
             + u[:, None] * tangent
-            + (self.a[k] * u**2 + self.b[k] * u)[:, None] * normal
+            + (self.c[k] + self.b[k] * u + self.a[k] * u**2)[:, None] * normal
         )
         normals = (normal - slope[:, None] * tangent) / np.sqrt(1.0 + slope**2)[:, None]
         # A lone return: point-to-point, linearised along the current offset.
@@ -222,14 +235,13 @@ class ScanMatcher:
         angles = np.asarray(beam_angles, dtype=np.float64)
         image = self._image(ranges, angles)
         hit = (ranges < self.max_range) & (ranges > DEFAULT_MIN_RANGE)
+        reference = None
         points = np.column_stack(
             [ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])]
         )
-        reference = (
-            CurveReference(ranges, angles, self.max_range)
-            if self.icp_iterations and len(points) >= 3
-            else None
-        )
+        if self.icp_iterations and len(points) >= 3:
+            reference = CurveReference(ranges, angles, self.max_range)
+            points = reference.smoothed
         return PreparedScan(
             ranges, angles, points, log_polar_spectrum(image), image_spectrum(image), reference
         )
