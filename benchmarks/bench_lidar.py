@@ -1,0 +1,129 @@
+"""Speed of the dual-Lidar kernel against a per-beam pymunk ray-query loop on the same poses.
+
+Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 10 s).
+
+The worlds are built inline and bracket the built-in ones: 40 cylinders + 100 free-standing
+walls, and 80 + 220, inside a 40 m x 40 m boundary (144 and 304 primitives), in which a 10 m
+Lidar sees a fair share of the obstacles. Both methods scan the same random free car poses with the
+default mounts (lidar_1 at +0.25 m, lidar_2 at -0.25 m); their results are checked to agree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import time
+
+import numba
+import numpy as np
+import pymunk
+
+from lidar_env.lidar import Lidar, cast_rays
+from lidar_env.se2 import compose
+from lidar_env.world import World
+
+MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
+
+
+def representative_world(rng: np.random.Generator, n_circles: int, n_walls: int) -> World:
+    """Random circles and walls in a 40 m square with a boundary of 4 walls, in metres."""
+    circles = np.column_stack(
+        [rng.uniform(-18, 18, (n_circles, 2)), rng.uniform(0.15, 1.0, n_circles)]
+    )
+    starts = rng.uniform(-18, 18, (n_walls, 2))
+    angles = rng.uniform(0, 2 * np.pi, n_walls)
+    lengths = rng.uniform(0.5, 4.0, n_walls)
+    ends = starts + lengths[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    corners = np.array([[-20, -20], [20, -20], [20, 20], [-20, 20]], dtype=float)
+    boundary = np.hstack([corners, np.roll(corners, -1, axis=0)])
+    return World(circles, np.vstack([np.hstack([starts, ends]), boundary]), name="bench")
+
+
+def free_sensor_poses(world: World, rng: np.random.Generator, count: int) -> np.ndarray:
+    """``(count, 2, 3)`` sensor poses of cars whose both Lidars have >= 0.3 m clearance."""
+    cars = np.column_stack(
+        [rng.uniform(-19, 19, 20 * count), rng.uniform(-19, 19, 20 * count),
+         rng.uniform(-np.pi, np.pi, 20 * count)]
+    )
+    sensors = np.stack([compose(cars, mount) for mount in MOUNTS], axis=1)
+    clear = np.all(world.clearance(sensors[..., :2].reshape(-1, 2)).reshape(-1, 2) > 0.3, axis=1)
+    if clear.sum() < count:
+        raise RuntimeError(f"found only {clear.sum()} free poses, wanted {count}")
+    return sensors[clear][:count]
+
+
+def pymunk_scan(space: pymunk.Space, sensors: np.ndarray, angles: np.ndarray, max_range: float):
+    """The reference: one ``segment_query_first`` per beam."""
+    every_shape = pymunk.ShapeFilter()
+    out = np.full((len(sensors), len(angles)), max_range)
+    for k, (x, y, heading) in enumerate(sensors):
+        for j, angle in enumerate(angles):
+            direction = heading + angle
+            end = (x + max_range * math.cos(direction), y + max_range * math.sin(direction))
+            hit = space.segment_query_first((x, y), end, 0.0, every_shape)
+            if hit is not None:
+                out[k, j] = hit.alpha * max_range
+    return out
+
+
+def machine() -> str:
+    """CPU model (from /proc/cpuinfo where available), OS and library versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as info:
+            cpu = next(line.split(":", 1)[1].strip() for line in info if "model name" in line)
+    except (OSError, StopIteration):
+        pass
+    return (f"{cpu}, {platform.system()}, python {platform.python_version()}, "
+            f"numba {numba.__version__}, numpy {np.__version__}, pymunk {pymunk.version}")
+
+
+def bench_world(world: World, sensors: np.ndarray, lidar: Lidar) -> None:
+    """Time both methods on the same sensor poses and print one block of figures."""
+    angles, max_range = lidar.beam_angles, lidar.max_range
+    cast_rays(world, sensors[0], angles, max_range)  # compile (or load the numba cache)
+    # CPU time (process_time) is the headline: the machine may be shared, and wall time then
+    # measures the neighbours. Wall time is printed alongside.
+    repeats = 5
+    wall, cpu = time.perf_counter(), time.process_time()
+    for _ in range(repeats):
+        kernel = [cast_rays(world, pair, angles, max_range) for pair in sensors]
+    kernel_wall = (time.perf_counter() - wall) / (repeats * len(sensors)) * 1e6
+    kernel_cpu = (time.process_time() - cpu) / (repeats * len(sensors)) * 1e6
+
+    space = world.build_space()
+    reference_poses = sensors[: max(1, len(sensors) // 10)]
+    wall, cpu = time.perf_counter(), time.process_time()
+    reference = [pymunk_scan(space, pair, angles, max_range) for pair in reference_poses]
+    pymunk_wall = (time.perf_counter() - wall) / len(reference_poses) * 1e6
+    pymunk_cpu = (time.process_time() - cpu) / len(reference_poses) * 1e6
+
+    worst = max(np.max(np.abs(a - b)) for a, b in zip(kernel, reference, strict=False))
+    seen = np.mean(np.array(kernel) < max_range)
+    print(f"\nworld: {len(world.circles)} circles + {len(world.segments)} segments; "
+          f"{len(sensors)} car poses, 2 x {len(angles)} beams, max_range {max_range} m, "
+          f"{seen:.0%} of beams hit")
+    print("per dual scan:                      CPU [us]   wall [us]")
+    print(f"cast_rays (both scans, one call): {kernel_cpu:10.1f}  {kernel_wall:10.1f}")
+    print(f"pymunk segment_query_first loop:  {pymunk_cpu:10.1f}  {pymunk_wall:10.1f}"
+          f"   ({len(reference_poses)} poses)")
+    print(f"speed-up: {pymunk_cpu / kernel_cpu:.0f}x CPU, {pymunk_wall / kernel_wall:.0f}x wall"
+          f"   (max |difference| {worst:.1e} m)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--poses", type=int, default=300, help="car poses (dual scans) to time")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    print(f"machine: {machine()}")
+    rng = np.random.default_rng(args.seed)
+    lidar = Lidar()
+    for n_circles, n_walls in ((40, 100), (80, 220)):
+        world = representative_world(rng, n_circles, n_walls)
+        bench_world(world, free_sensor_poses(world, rng, args.poses), lidar)
+
+if __name__ == "__main__":
+    main()
