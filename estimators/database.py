@@ -190,6 +190,9 @@ class Scenario:
     driver: str = "pure_pursuit"
     kind: str = "sim"
 
+    def __hash__(self) -> int:  # config is a dict: hash its canonical JSON instead
+        return hash((self.kind, self.world, self.trace, self.seed, self.driver, self.config_json))
+
     @property
     def config_json(self) -> str:
         return canonical_json(dict(self.config))

@@ -301,22 +301,32 @@ def _run_on(executor: ExecutorLike, function: Callable[[Any], ScenarioOutcome],
             max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> None:
     queue = list(reversed(todo))
     pending: set[Any] = set()
-    while queue or pending:
-        while queue and len(pending) < max_in_flight:
-            pending.add(executor.submit(function, queue.pop()))
-        for future in _first_done(pending):
+    failure: Exception | None = None
+    lost = 0
+    while (queue or pending) and failure is None:
+        # the tasks catch their own errors: whatever is raised here is the executor's
+        try:
+            while queue and len(pending) < max_in_flight:
+                pending.add(executor.submit(function, queue[-1]))
+                queue.pop()
+            done = _first_done(pending)
+        except Exception as error:
+            failure, done = error, set()
+        for future in done:
             pending.discard(future)
             try:
                 outcome = future.result()
-            except Exception as error:  # the task catches its own errors: this is the executor
-                for other in pending:
-                    other.cancel()
-                raise RunInterrupted(
-                    f"the executor failed ({type(error).__name__}: {error}); "
-                    f"{summary.recorded} sensor datasets and {summary.traces} traces of this run "
-                    f"are committed, {len(pending) + len(queue) + 1} tasks are not: "
-                    "re-run to resume"
-                ) from error
-            _commit(db, outcome, summary)
+            except Exception as error:
+                failure, lost = failure or error, lost + 1
+                continue
+            _commit(db, outcome, summary)  # finished work is kept even when others failed
             if on_done is not None:
                 on_done(outcome.scenario)
+    if failure is not None:
+        for future in pending:
+            future.cancel()
+        raise RunInterrupted(
+            f"the executor failed ({type(failure).__name__}: {failure}); {summary.recorded} "
+            f"sensor datasets and {summary.traces} traces of this run are committed, "
+            f"{len(pending) + len(queue) + lost} tasks are not: re-run to resume"
+        ) from failure
