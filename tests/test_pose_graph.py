@@ -115,15 +115,15 @@ def test_disconnected_graph_is_a_clear_error() -> None:
 
 
 def test_bad_arguments_are_named() -> None:
-    graph, _ = circle_graph(np.random.default_rng(6), n=5)
+    graph, _ = circle_graph(np.random.default_rng(6), n=8)
     with pytest.raises(ValueError, match=r"unknown loss 'l1': expected one of linear, huber"):
         optimize(graph, loss="l1")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"unknown solver 'gn': expected one of lm, scipy"):
         optimize(graph, solver="gn")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="positive-definite"):
         graph.add_edge(0, 2, [0, 0, 0], np.diag([1.0, -1.0, 1.0]))
-    with pytest.raises(IndexError, match=r"expected a node index in \[0, 5\)"):
-        graph.add_edge(0, 5, [0, 0, 0], INFO)
+    with pytest.raises(IndexError, match=r"expected a node index in \[0, 8\)"):
+        graph.add_edge(0, 8, [0, 0, 0], INFO)
     with pytest.raises(ValueError, match="two different nodes"):
         graph.add_edge(1, 1, [0, 0, 0], INFO)
     with pytest.raises(ValueError, match="empty"):
