@@ -7,6 +7,7 @@
 import gymnasium
 
 from lidar_env.config import EnvConfig
+from lidar_env.env import DualLidarEnv
 from lidar_env.traces import TRACE_NAMES, Trace, make_trace
 from lidar_env.world import World
 from lidar_env.worlds import WORLD_NAMES, make_world
@@ -14,4 +15,13 @@ from lidar_env.worlds import WORLD_NAMES, make_world
 if "DualLidar-v0" not in gymnasium.registry:
     gymnasium.register("DualLidar-v0", entry_point="lidar_env.env:DualLidarEnv")
 
-__all__ = ["TRACE_NAMES", "WORLD_NAMES", "EnvConfig", "Trace", "World", "make_trace", "make_world"]
+__all__ = [
+    "TRACE_NAMES",
+    "WORLD_NAMES",
+    "DualLidarEnv",
+    "EnvConfig",
+    "Trace",
+    "World",
+    "make_trace",
+    "make_world",
+]

@@ -5,9 +5,9 @@ Motion is integrated exactly: under a constant linear speed ``v`` [m/s] and yaw 
 error accumulates however long the episode. The control step is split into ``substeps`` poses
 along that arc, and at each one the car's box is tested against every obstacle (circles and
 line segments) by a compiled kernel; the first touching substep ends the motion with the car
-left at the last free substep. Measured against stepping a pymunk body with a collision handler
-this is both exact and about 10x cheaper per control step (see ``benchmarks/bench_env.py``);
-pymunk's own shape query stays the test oracle for the kernel.
+left at the last free substep. Measured against stepping a pymunk body through the same
+substeps plus a shape query, this is exact and about 5x cheaper per control step (see
+``benchmarks/bench_env.py``); pymunk's own shape query stays the test oracle for the kernel.
 
 The car's pymunk body (kinematic, one box shape) lives in the world's space so pymunk users
 see the car; :meth:`Car.sync_body` moves it to the current pose on demand.

@@ -33,6 +33,10 @@ RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
 PROGRESS_WINDOW = 2.0
 
 
+#: Fitted traces kept per env (built-in worlds only): every default start and a few custom ones.
+MAX_CACHED_SCENES = 32
+
+
 class StartPoseError(ValueError):
     """The requested start pose puts the car inside or onto an obstacle."""
 
@@ -242,6 +246,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             return make_scene(world_name, trace_name, self.np_random, clearance, start)
         key = (world_name, trace_name, start)
         if key not in self._scenes:
+            if len(self._scenes) >= MAX_CACHED_SCENES:
+                self._scenes.clear()
             self._scenes[key] = make_scene(world_name, trace_name, None, clearance, start)
         return self._scenes[key]
 
