@@ -291,29 +291,47 @@ def evaluate_run_map(
     return RunMapEvaluation(map_scores, cylinder_scores, grid, tracker)
 
 
-def _as_probability_image(panel: OccupancyGrid | ArrayLike) -> NDArray[np.float64]:
+def _panel_image(
+    panel: OccupancyGrid | ArrayLike, bounds: Bounds | None
+) -> tuple[NDArray[np.float64], tuple[float, float, float, float]]:
+    """A panel as occupancy probabilities and its matplotlib extent (left, right, bottom, top)."""
     if isinstance(panel, OccupancyGrid):
-        return panel.probabilities()
+        xmin, ymin, _, _ = panel.bounds
+        rows, cols = panel.shape
+        extent = (xmin, xmin + cols * panel.resolution, ymin, ymin + rows * panel.resolution)
+        return panel.probabilities(), extent
     image = np.asarray(panel)
     if image.ndim != 2:
         raise ValueError(f"map panel: expected an OccupancyGrid or a 2-D image, got {image.shape}")
-    return image / 255.0 if image.dtype == np.uint8 else image.astype(np.float64)
+    if bounds is None:
+        raise ValueError("bounds: expected (xmin, ymin, xmax, ymax) [m] to place an image panel, "
+                         "got None")
+    xmin, ymin, xmax, ymax = bounds
+    probability = image / 255.0 if image.dtype == np.uint8 else image.astype(np.float64)
+    return probability, (xmin, xmax, ymin, ymax)
 
 
 def save_map_figure(
     path: str | Path,
     panels: Mapping[str, OccupancyGrid | ArrayLike],
-    bounds: Bounds,
+    bounds: Bounds | None = None,
     trajectories: Mapping[str, ArrayLike] | None = None,
     title: str | None = None,
 ) -> Path:
     """Draw maps side by side and save them as a PNG at ``path``; return the path.
 
-    ``panels`` maps a title to an :class:`OccupancyGrid` or an image in the grid layout (row 0
-    = largest y): uint8 with 255 = obstacle (``world.to_image``) or probabilities in [0, 1].
-    All are drawn over ``bounds`` (xmin, ymin, xmax, ymax) [m], dark = occupied, white = free,
-    grey = unknown; ``trajectories`` (name -> (N, 3) or (N, 2) [m]) are drawn on every panel.
-    Needs matplotlib (the ``plots`` extra)."""
+    ``panels`` maps a title to an :class:`OccupancyGrid` (drawn over its own bounds) or an
+    image in the grid layout (row 0 = largest y) drawn over ``bounds`` (xmin, ymin, xmax, ymax)
+    [m]: uint8 with 255 = obstacle (``world.to_image``) or probabilities in [0, 1]. Dark =
+    occupied, white = free, grey = unknown. ``trajectories`` (name -> (N, 3) or (N, 2) [m]) are
+    drawn on every panel. Needs matplotlib (the ``plots`` extra).
+
+    Example (the true map next to the maps built at true and at estimated poses)::
+
+        save_map_figure("maps.png", {"true": world.to_image(0.05), "true poses": grid_true,
+                                     "pc_fusion": grid_best}, world.bounds,
+                        trajectories={"true": truth, "pc_fusion": estimate})
+    """
     try:
         import matplotlib
 
@@ -324,13 +342,13 @@ def save_map_figure(
             from error
     if not panels:
         raise ValueError("panels: expected at least one map to draw, got none")
-    xmin, ymin, xmax, ymax = bounds
-    aspect = (ymax - ymin) / (xmax - xmin)
-    figure, axes = plt.subplots(1, len(panels), figsize=(5.0 * len(panels), 5.0 * aspect + 0.8),
+    images = {name: _panel_image(panel, bounds) for name, panel in panels.items()}
+    aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())
+    figure, axes = plt.subplots(1, len(images), figsize=(5.0 * len(images), 5.0 * aspect + 0.8),
                                 squeeze=False)
-    for axis, (name, panel) in zip(axes[0], panels.items(), strict=True):
-        axis.imshow(_as_probability_image(panel), cmap="gray_r", vmin=0.0, vmax=1.0,
-                    extent=(xmin, xmax, ymin, ymax), origin="upper", interpolation="nearest")
+    for axis, (name, (image, extent)) in zip(axes[0], images.items(), strict=True):
+        axis.imshow(image, cmap="gray_r", vmin=0.0, vmax=1.0, extent=extent, origin="upper",
+                    interpolation="nearest")
         for label, trajectory in (trajectories or {}).items():
             points = np.asarray(trajectory, dtype=np.float64)
             axis.plot(points[:, 0], points[:, 1], linewidth=1.0, label=label)

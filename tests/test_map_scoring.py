@@ -137,3 +137,5 @@ def test_mismatched_shapes_and_bad_tolerance_are_readable_errors():
         score_occupancy(occupied, truth, tolerance_cells=-1)
     with pytest.raises(ValueError, match="at least one map"):
         save_map_figure("unused.png", {}, (0.0, 0.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="bounds: expected"):
+        save_map_figure("unused.png", {"true": truth})
