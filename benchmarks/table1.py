@@ -1,6 +1,7 @@
 """The paper's Table I on DualLidar-v0: eq.-11 accuracy, ATE, drift and ms/step per estimator.
 
-Run: ``python benchmarks/table1.py [--seed 0] [--frames world sensor] [--tum-dir DIR]``
+Run: ``python benchmarks/table1.py [--seed 0] [--frames world sensor] [--tum-dir DIR]
+[--plot table1.png]`` (the plot, like the paper's Fig. 8, needs matplotlib).
 
 Three surroundings as in the paper (section IV.B): a right turn in ``open_cylinders``, a
 zigzag in ``hallway`` and in ``closed_to_open``; one seeded episode each, 1 cm range noise,
@@ -67,7 +68,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--frames", nargs="+", default=["world", "sensor"])
     parser.add_argument("--tum-dir", type=Path, help="write truth and estimates as TUM files")
+    parser.add_argument("--plot", type=Path, help="save true and estimated paths to this image")
     args = parser.parse_args()
+    paths: dict[tuple[str, str], dict[str, np.ndarray]] = {}
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.1f}; seed {args.seed}, noise {RANGE_NOISE} m")
     header = (f"{'frame':6s} {'world':15s} {'trace':10s} {'estimator':9s} {'case':>4s} "
@@ -78,6 +81,7 @@ def main() -> None:
         for world, trace, paper in GROUPS:
             env, observations, times, truth = record_episode(world, trace, scan_frame, args.seed)
             setup = SensorSetup.from_env(env)
+            paths[scan_frame, world] = {"truth": truth}
             if args.tum_dir:
                 args.tum_dir.mkdir(parents=True, exist_ok=True)
                 write_tum(args.tum_dir / f"{scan_frame}_{world}_truth.tum", times, truth)
@@ -90,6 +94,7 @@ def main() -> None:
                     estimator.update(observation, t)
                 ms = 1000.0 * (time.perf_counter() - start) / (len(observations) - 1)
                 metrics = evaluate(estimator.trajectory, truth)
+                paths[scan_frame, world][name] = estimator.trajectory
                 case, paper_accuracy = paper.get(name, ("", float("nan")))
                 print(f"{scan_frame:6s} {world:15s} {trace:10s} {name:9s} {case!s:>4s} "
                       f"{paper_accuracy:7.2f} {metrics.accuracy_percent:6.2f} "
@@ -100,6 +105,35 @@ def main() -> None:
                     path = args.tum_dir / f"{scan_frame}_{world}_{name}.tum"
                     write_tum(path, estimator.times, estimator.trajectory)
             env.close()
+    if args.plot:
+        plot_paths(paths, args.plot)
+
+
+def plot_paths(paths: dict[tuple[str, str], dict[str, np.ndarray]], path: Path) -> None:
+    """One panel per (scan frame, world): the true path and each estimator's, in metres."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frames = sorted({frame for frame, _ in paths}, reverse=True)
+    worlds = [world for world, _, _ in GROUPS]
+    figure, axes = plt.subplots(
+        len(frames), len(worlds), figsize=(5 * len(worlds), 4.2 * len(frames)), squeeze=False
+    )
+    for (frame, world), trajectories in paths.items():
+        axis = axes[frames.index(frame), worlds.index(world)]
+        for name, poses in trajectories.items():
+            style = {"color": "black", "linewidth": 2.5} if name == "truth" else {"linewidth": 1.2}
+            axis.plot(poses[:, 0], poses[:, 1], label=name, **style)
+        axis.set_title(f"{world}, {frame}-frame scans")
+        axis.set_aspect("equal", adjustable="datalim")
+        axis.set_xlabel("x [m]")
+        axis.set_ylabel("y [m]")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    print(f"saved {path}")
 
 
 if __name__ == "__main__":
