@@ -19,6 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 
 #: Default image side [px]: the paper's default 400 x 400.
 DEFAULT_SIZE = 400
+#: Default resolution [m/px] of :func:`points_to_image`: a 10 m range across 200 px.
+DEFAULT_RESOLUTION = 0.05
 
 #: A point's corner measure (see :func:`scan_to_image`) at which its corner weight saturates.
 #: Along a flat wall seen at incidence angle theta the measure is about 2 tan(theta): 7.5 is
@@ -73,7 +75,8 @@ def check_image_geometry(size: int, resolution: float | None, max_range: float) 
 def scan_filter(
     ranges: ArrayLike, beam_angles: ArrayLike, max_range: float
 ) -> NDArray[np.float64]:
-    """The paper's filter Fl(S) (eq. 4) for the beams that returned.
+    """The paper's filter Fl(S) (eq. 4) for the beams that returned (``0 < l < max_range``;
+    a zero range, a sensor touching an obstacle, has no direction to place a point along).
 
     Args:
         ranges: ``(n,)`` ranges [m] of one full revolution; ``>= max_range`` is "no return".
@@ -115,7 +118,7 @@ def points_to_image(
     points: ArrayLike,
     values: ArrayLike,
     size: int = DEFAULT_SIZE,
-    resolution: float = 2.0 * 10.0 / DEFAULT_SIZE,
+    resolution: float = DEFAULT_RESOLUTION,
 ) -> NDArray[np.uint8]:
     """Draw points ``(N, 2)`` [m] (sensor frame) as uint8 ``values`` (N,) into a zero image.
 
@@ -126,6 +129,8 @@ def points_to_image(
     values = np.asarray(values)
     if values.shape != (len(points),):
         raise ValueError(f"values: expected shape ({len(points)},), got {values.shape}")
+    if values.size and (np.min(values) < 0 or np.max(values) > 255):
+        raise ValueError("values: expected pixel values in [0, 255] (uint8)")
     check_image_size(size)
     resolution = _check_resolution(resolution)
     half = size // 2

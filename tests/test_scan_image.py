@@ -115,3 +115,5 @@ def test_bad_scans_are_readable_errors() -> None:
         scan_filter(bad, angles, 10.0)
     with pytest.raises(ValueError, match="values: expected shape"):
         points_to_image([[0.0, 0.0]], np.array([1, 2]))
+    with pytest.raises(ValueError, match=r"values: expected pixel values in \[0, 255\]"):
+        points_to_image([[0.0, 0.0]], np.array([300]))
