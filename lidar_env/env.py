@@ -46,13 +46,14 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     ## Description
 
-    The setting of Cheng et al.'s dual-Lidar pose estimation paper (sections III.A-B, IV): a
-    box-shaped car (0.8 m x 0.5 m) moves as a unicycle through a world of static obstacles
-    (cylinders, walls, polygons; a pymunk ``Space``). Two Lidars sit on the car at a fixed
-    offset ("the main and the offset sensor"; by default 0.25 m ahead of and 0.25 m behind the
-    car's centre on its axis). Each control step both take one exact 360-beam scan. The task
-    is to follow a *trace* (a waypoint path from a start pose: ``straight``, ``right_turn`` or
-    ``zigzag``) to its end; the ground-truth poses in ``info`` are what Lidar-only motion
+    The setting of the paper "Obstacles Detection and Motion Estimation by Using Multiple Lidar
+    Sensors Data" (sections III.A-B, IV): a box-shaped car (0.8 m x 0.5 m) moves as a unicycle
+    through a world of static obstacles (cylinders, walls, polygons; a pymunk ``Space``). Two
+    Lidars sit on the car at a fixed offset ("the main and the offset sensor"; by default
+    0.25 m ahead of and 0.25 m behind the car's centre on its axis). Each control step both
+    take one exact 360-beam scan. The task is to follow a *trace* (a waypoint path from a start
+    pose: ``straight``, ``right_turn`` or ``zigzag``, the paper's "strict, right-turn, zigzag"
+    seeds) to its end; the ground-truth poses in ``info`` are what Lidar-only motion
     estimators are scored against.
 
     ## Action Space
