@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
-from estimators.map_scoring import evaluate_run_map  # noqa: E402
+from estimators.map_scoring import evaluate_run_map, map_truth  # noqa: E402
 from estimators.occupancy import OccupancyGrid, logit, sensor_poses  # noqa: E402
 
 WORLDS = ("open_cylinders", "hallway", "closed_to_open")
@@ -140,9 +140,9 @@ def main() -> None:
             for k, observation in enumerate(observations):
                 estimator.update(observation, k * env.unwrapped.config.control_dt)
             trajectories[name] = estimator.trajectory
+        true_map = map_truth(env.unwrapped.world, truth, setup, RESOLUTION)
         for name, trajectory in trajectories.items():
-            result = evaluate_run_map(env.unwrapped.world, truth, trajectory, observations, setup,
-                                      RESOLUTION)
+            result = evaluate_run_map(true_map, trajectory, observations, setup)
             m, c = result.map_scores, result.cylinder_scores
             cylinders = ("-" if c is None else
                          f"recall {c.recall:.0%} ({c.n_matched}/{c.n_true}), mean error "

@@ -223,6 +223,55 @@ def score_cylinders(
 
 
 @dataclass(frozen=True)
+class MapTruth:
+    """What a map of one run is scored against, computed once per true run.
+
+    Attributes:
+        image: ``(rows, cols)`` uint8 ``world.to_image(resolution)``, 255 = obstacle.
+        visible: ``(rows, cols)`` the true occupied cells some beam could have hit.
+        circles: ``(N, 3)`` true cylinders ``cx, cy, r`` [m].
+        observable: ``(N,)`` cylinders with enough returns in one true scan.
+        bounds: ``world.bounds`` [m], over which maps are built.
+        resolution: [m] cell size.
+    """
+
+    image: NDArray[np.uint8]
+    visible: NDArray[np.bool_]
+    circles: NDArray[np.float64]
+    observable: NDArray[np.bool_]
+    bounds: Bounds
+    resolution: float
+
+
+def map_truth(
+    world: Any,
+    true_trajectory: ArrayLike,
+    setup: SensorSetup,
+    resolution: float = 0.05,
+    min_circle_points: int = DetectorParams().min_circle_points,
+) -> MapTruth:
+    """The :class:`MapTruth` of ``world`` seen by the Lidars of ``setup`` along the true car
+    poses ``true_trajectory`` (N, 3); cylinders need ``min_circle_points`` returns in one scan
+    to count as observable (the detector's own threshold by default)."""
+    true_trajectory = np.asarray(true_trajectory, dtype=np.float64)
+    if true_trajectory.ndim != 2 or true_trajectory.shape[1] != 3:
+        raise ValueError(f"true_trajectory: expected shape (N, 3), got {true_trajectory.shape}")
+    true_poses = sensor_poses(true_trajectory, setup).reshape(-1, 3)
+    grid = OccupancyGrid(world.bounds, resolution)
+    circles = np.asarray(world.circles, dtype=np.float64).reshape(-1, 3)
+    observable = observable_cylinders(world, true_poses, setup.beam_angles, setup.max_range,
+                                      min_circle_points)
+    return MapTruth(
+        image=world.to_image(resolution),
+        visible=visible_cells(world, true_poses[:, :2], grid, setup.max_range),
+        circles=circles,
+        observable=observable,
+        bounds=grid.bounds,
+        resolution=grid.resolution,
+    )
+
+
+@dataclass(frozen=True)
 class RunMapEvaluation:
     """What :func:`evaluate_run_map` measured, and the map and tracker it built."""
 
@@ -254,40 +303,25 @@ def track_obstacles(
 
 
 def evaluate_run_map(
-    world: Any,
-    true_trajectory: ArrayLike,
+    truth: MapTruth,
     estimated_trajectory: ArrayLike,
     observations: Sequence[Mapping[str, ArrayLike]],
     setup: SensorSetup,
-    resolution: float = 0.05,
     tolerance_cells: int = 1,
     params: DetectorParams | None = None,
 ) -> RunMapEvaluation:
-    """Map and track obstacles from ``observations`` at ``estimated_trajectory`` (N, 3), and
-    score both against ``world`` seen from ``true_trajectory`` (N, 3): occupied cells at
-    ``tolerance_cells`` over the visible cells, and cylinders (confirmed round tracks, at least 3
-    hits) against the observable ``world.circles``."""
-    true_trajectory = np.asarray(true_trajectory, dtype=np.float64)
-    estimated_trajectory = np.asarray(estimated_trajectory, dtype=np.float64)
-    if true_trajectory.shape != estimated_trajectory.shape:
-        raise ValueError(f"true_trajectory {true_trajectory.shape} and estimated_trajectory "
-                         f"{estimated_trajectory.shape}: expected the same shape (N, 3)")
-    grid = from_estimator_run(estimated_trajectory, observations, setup, resolution,
-                              bounds=world.bounds)
-    true_poses = sensor_poses(true_trajectory, setup).reshape(-1, 3)
-    visible = visible_cells(world, true_poses[:, :2], grid, setup.max_range)
-    map_scores = score_occupancy(grid.occupied(), world.to_image(resolution), tolerance_cells,
-                                 visible)
-    params = DetectorParams() if params is None else params
+    """Map and track obstacles from ``observations`` at the car poses ``estimated_trajectory``
+    (N, 3), and score both against ``truth`` (:func:`map_truth` of the same run): occupied cells
+    at ``tolerance_cells`` over the visible cells, and cylinders (round tracks with at least 3
+    hits) against the observable true ones."""
+    grid = from_estimator_run(estimated_trajectory, observations, setup, truth.resolution,
+                              bounds=truth.bounds)
+    map_scores = score_occupancy(grid.occupied(), truth.image, tolerance_cells, truth.visible)
     tracker = track_obstacles(estimated_trajectory, observations, setup, params)
     cylinder_scores = None
-    if len(world.circles):
-        if setup.world_aligned:
-            true_poses[:, 2] = 0.0
-        observable = observable_cylinders(world, true_poses, setup.beam_angles, setup.max_range,
-                                          params.min_circle_points)
-        cylinder_scores = score_cylinders(tracker.cylinders(), world.circles,
-                                          observable=observable)
+    if len(truth.circles):
+        cylinder_scores = score_cylinders(tracker.cylinders(), truth.circles,
+                                          observable=truth.observable)
     return RunMapEvaluation(map_scores, cylinder_scores, grid, tracker)
 
 

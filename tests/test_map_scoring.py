@@ -8,6 +8,7 @@ import pytest
 from estimators.base import SensorSetup, default_beam_angles
 from estimators.map_scoring import (
     evaluate_run_map,
+    map_truth,
     observable_cylinders,
     save_map_figure,
     score_cylinders,
@@ -112,21 +113,24 @@ def test_true_pose_run_maps_the_world_and_finds_its_cylinders(tmp_path):
         ranges = cast_rays(world, sensors, setup.beam_angles, setup.max_range)
         ranges = np.where(ranges < 10.0, ranges + rng.normal(0, 0.01, ranges.shape), ranges)
         observations.append(dict(zip(setup.keys, ranges, strict=True)))
-    result = evaluate_run_map(world, trajectory, trajectory, observations, setup)
+    truth = map_truth(world, trajectory, setup, resolution=0.05)
+    result = evaluate_run_map(truth, trajectory, observations, setup)
     assert result.map_scores.iou >= 0.9
     assert result.cylinder_scores.recall == 1.0
     assert result.cylinder_scores.max_error <= 0.05
     # a map from a trajectory shifted by 0.3 m scores clearly worse
     shifted = trajectory + [0.3, 0.0, 0.0]
-    worse = evaluate_run_map(world, trajectory, shifted, observations, setup)
+    worse = evaluate_run_map(truth, shifted, observations, setup)
     assert worse.map_scores.iou < result.map_scores.iou - 0.3
     figure = save_map_figure(tmp_path / "maps.png",
                              {"true": world.to_image(0.05), "true poses": result.grid},
                              world.bounds, trajectories={"truth": trajectory})
     assert figure.stat().st_size > 1000
     assert occupancy_to_rgb(result.grid).shape == (*result.grid.shape, 3)
-    with pytest.raises(ValueError, match="expected the same shape"):
-        evaluate_run_map(world, trajectory, trajectory[:5], observations, setup)
+    with pytest.raises(ValueError, match="one per trajectory row"):
+        evaluate_run_map(truth, trajectory[:5], observations, setup)
+    with pytest.raises(ValueError, match=r"true_trajectory: expected shape \(N, 3\)"):
+        map_truth(world, trajectory[:, :2], setup)
 
 
 def test_mismatched_shapes_and_bad_tolerance_are_readable_errors():
