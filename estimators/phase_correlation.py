@@ -212,7 +212,9 @@ def phase_correlate(
         reference, moving: equal-shape 2-D real images, or their :func:`image_spectrum`
             (pass spectra to transform each image only once over a sequence).
         subpixel: refine the integer peak to the exact maximum of the Fourier-interpolated
-            surface (Newton's method, see the module docstring).
+            surface (Newton's method, see the module docstring), started from a parabola
+            through the peak's neighbours, whose vertex is kept if Newton finds no concave
+            peak within 1 px of it.
 
     Returns:
         :class:`PhaseCorrelation`; ``shift`` is ``(d_row, d_col)`` [px] such that
