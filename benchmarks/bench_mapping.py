@@ -129,7 +129,7 @@ def main() -> None:
     print(f"  speed-up: {reference / ours:.1f}x")
 
     print("\nmap scores at one-cell tolerance on the visible occupied cells; cylinders:")
-    header = f"  {'world':15s} {'poses':10s} {'IoU':>6s} {'prec':>6s} {'recall':>6s}  cylinders"
+    header = f"  {'world':15s} {'poses':14s} {'IoU':>6s} {'prec':>6s} {'recall':>6s}  cylinders"
     print(header)
     for world, (env, observations, truth) in runs.items():
         setup = SensorSetup.from_env(env)
@@ -148,7 +148,7 @@ def main() -> None:
                          f"recall {c.recall:.0%} ({c.n_matched}/{c.n_true}), mean error "
                          f"{c.mean_error * 100:.1f} cm, max {c.max_error * 100:.1f} cm, "
                          f"precision {c.precision:.0%}")
-            print(f"  {world:15s} {name:10s} {m.iou:6.3f} {m.precision:6.3f} {m.recall:6.3f}  "
+            print(f"  {world:15s} {name:14s} {m.iou:6.3f} {m.precision:6.3f} {m.recall:6.3f}  "
                   f"{cylinders}")
 
 
