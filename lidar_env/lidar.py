@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.world import World
+from lidar_env.world import PrimitiveGrid, World, segment_distance2
 
 #: Extra angle [rad] each subtended interval is widened by. It covers the error of
 #: :func:`_bearing` (< 1.7e-6 rad) so no beam that grazes a primitive is dropped; the exact
@@ -144,30 +144,69 @@ def _segment_hit(ox: float, oy: float, dx: float, dy: float, seg: NDArray[np.flo
 
 
 @njit(cache=True, fastmath=False)
-def _segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
-    """Squared distance [m^2] from the point to the segment (no sqrt, at most one division)."""
-    ex, ey = seg[2] - seg[0], seg[3] - seg[1]
-    wx, wy = px - seg[0], py - seg[1]
-    along = wx * ex + wy * ey
-    if along <= 0.0:
-        return wx * wx + wy * wy
-    length2 = ex * ex + ey * ey
-    if along >= length2:
-        return (wx - ex) * (wx - ex) + (wy - ey) * (wy - ey)
-    cross = wx * ey - wy * ex
-    return cross * cross / length2
+def _cell(value: float, origin: float, cell: float, count: int) -> int:
+    """Grid index of a coordinate [m], clipped to ``[0, count)``; as :func:`world.cell_index`."""
+    return min(max(int(math.floor((value - origin) / cell)), 0), count - 1)
 
 
 @njit(cache=True, fastmath=False)
-def _inside_polygons(px: float, py: float, edges: NDArray[np.float64]) -> bool:
-    """Even-odd crossing test of the point against all polygon edges."""
+def _inside_polygons(
+    px: float,
+    py: float,
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
+) -> bool:
+    """Even-odd crossing test (ray towards +x) of the point against all polygon edges.
+
+    Only the grid row holding ``py`` can contain edges that cross the ray's line; an edge listed
+    in several cells of the row is counted only in the cell of its crossing point.
+    """
+    if first_polygon_edge >= segments.shape[0]:
+        return False
+    row = _cell(py, grid.y0, grid.cell, grid.ny)
     inside = False
-    for i in range(edges.shape[0]):
-        x1, y1, x2, y2 = edges[i, 0], edges[i, 1], edges[i, 2], edges[i, 3]
-        if (y1 > py) != (y2 > py):
-            if px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
-                inside = not inside
+    for column in range(grid.nx):
+        c = row * grid.nx + column
+        for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
+            i = grid.segment_ids[p]
+            if i < first_polygon_edge:
+                continue
+            x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+            if (y1 > py) != (y2 > py):
+                x_cross = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
+                if px < x_cross:
+                    # Clip to the edge's own columns: rounding may put x_cross just outside.
+                    first = _cell(min(x1, x2), grid.x0, grid.cell, grid.nx)
+                    last = _cell(max(x1, x2), grid.x0, grid.cell, grid.nx)
+                    cross_column = _cell(x_cross, grid.x0, grid.cell, grid.nx)
+                    if min(max(cross_column, first), last) == column:
+                        inside = not inside
     return inside
+
+
+@njit(cache=True, fastmath=False)
+def _gather(
+    start: NDArray[np.int64],
+    ids: NDArray[np.int64],
+    columns: tuple[int, int],
+    rows: tuple[int, int],
+    nx: int,
+    seen: NDArray[np.int64],
+    stamp: int,
+    out: NDArray[np.int64],
+) -> int:
+    """Write the distinct ids listed in a block of grid cells to ``out``; return how many."""
+    count = 0
+    for row in range(rows[0], rows[1] + 1):
+        for c in range(row * nx + columns[0], row * nx + columns[1] + 1):
+            for p in range(start[c], start[c + 1]):
+                i = ids[p]
+                if seen[i] != stamp:
+                    seen[i] = stamp
+                    out[count] = i
+                    count += 1
+    return count
 
 
 @njit(cache=True, fastmath=False)
@@ -178,7 +217,8 @@ def _scan_one(
     heading: float,
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
-    first_polygon_edge: int,
+    circle_ids: NDArray[np.int64],
+    segment_ids: NDArray[np.int64],
     sorted_angles: NDArray[np.float64],
     order: NDArray[np.int64],
     step: float,
@@ -186,14 +226,12 @@ def _scan_one(
     sin_beam: NDArray[np.float64],
     max_range: float,
 ) -> None:
-    """Fill ``ranges`` (n,) for one sensor at ``(ox, oy, heading)``; see :func:`cast_rays`."""
+    """Fill ``ranges`` (n,) for one sensor at ``(ox, oy, heading)`` from the candidate
+    primitives ``circle_ids`` and ``segment_ids``; see :func:`cast_rays`."""
     ranges[:] = max_range
     ch, sh = math.cos(heading), math.sin(heading)
     heading = heading % _TWO_PI
-    if _inside_polygons(ox, oy, segments[first_polygon_edge:]):
-        ranges[:] = 0.0
-        return
-    for i in range(circles.shape[0]):
+    for i in circle_ids:
         cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
         fx, fy = cx - ox, cy - oy
         if max(abs(fx), abs(fy)) - r >= max_range:  # a cheap bounding-box test first
@@ -215,14 +253,14 @@ def _scan_one(
             t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
             if t < ranges[j]:
                 ranges[j] = t
-    for i in range(segments.shape[0]):
+    for i in segment_ids:
         seg = segments[i]
         # A cheap bounding-box test first (few branches), then the exact distance.
         gap_x = max(min(seg[0], seg[2]) - ox, ox - max(seg[0], seg[2]))
         gap_y = max(min(seg[1], seg[3]) - oy, oy - max(seg[1], seg[3]))
         if max(gap_x, gap_y) >= max_range:
             continue
-        d2 = _segment_distance2(ox, oy, seg)
+        d2 = segment_distance2(ox, oy, seg)
         if d2 >= max_range * max_range:
             continue
         if d2 == 0.0:
@@ -256,24 +294,43 @@ def _cast_rays_kernel(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
     first_polygon_edge: int,
+    grid: PrimitiveGrid,
     sensor_poses: NDArray[np.float64],
     beams: tuple,
     max_range: float,
 ) -> NDArray[np.float64]:
     sorted_angles, order, step, cos_beam, sin_beam = beams
     out = np.empty((sensor_poses.shape[0], cos_beam.shape[0]))
+    circle_seen = np.zeros(circles.shape[0], dtype=np.int64)
+    segment_seen = np.zeros(segments.shape[0], dtype=np.int64)
+    circle_ids = np.empty(circles.shape[0], dtype=np.int64)
+    segment_ids = np.empty(segments.shape[0], dtype=np.int64)
     for k in range(sensor_poses.shape[0]):
+        ox, oy = sensor_poses[k, 0], sensor_poses[k, 1]
         for i in range(3):
             if not math.isfinite(sensor_poses[k, i]):
                 raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
+        if _inside_polygons(ox, oy, segments, first_polygon_edge, grid):
+            out[k] = 0.0
+            continue
+        # Only primitives in the grid cells that overlap the sensor's range box can be seen.
+        columns = (_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
+                   _cell(ox + max_range, grid.x0, grid.cell, grid.nx))
+        rows = (_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
+                _cell(oy + max_range, grid.y0, grid.cell, grid.ny))
+        n_circles = _gather(grid.circle_start, grid.circle_ids, columns, rows, grid.nx,
+                            circle_seen, k + 1, circle_ids)
+        n_segments = _gather(grid.segment_start, grid.segment_ids, columns, rows, grid.nx,
+                             segment_seen, k + 1, segment_ids)
         _scan_one(
             out[k],
-            sensor_poses[k, 0],
-            sensor_poses[k, 1],
+            ox,
+            oy,
             sensor_poses[k, 2],
             circles,
             segments,
-            first_polygon_edge,
+            circle_ids[:n_circles],
+            segment_ids[:n_segments],
             sorted_angles,
             order,
             step,
@@ -302,18 +359,17 @@ def _beam_geometry(angle_bytes: bytes) -> tuple:
 Geometry = World | tuple[ArrayLike, ArrayLike]
 
 
-def _geometry_arrays(world_or_arrays: Geometry) -> tuple[NDArray, NDArray, int]:
-    """``(circles (N,3), segments (M,4), index of the first polygon edge in segments)``."""
+def _as_world(world_or_arrays: Geometry) -> tuple[World, int]:
+    """The world to scan and the index of its first polygon edge in ``world.segments``."""
     if isinstance(world_or_arrays, World):
-        world = world_or_arrays
-        return world.circles, world.segments, len(world.walls)
+        return world_or_arrays, len(world_or_arrays.walls)
     if not isinstance(world_or_arrays, tuple) or len(world_or_arrays) != 2:
         raise TypeError(
             "world_or_arrays: expected a World or a (circles (N,3), segments (M,4)) tuple, "
             f"got {type(world_or_arrays).__name__}"
         )
     world = World(*world_or_arrays, bounds=(0.0, 0.0, 1.0, 1.0))
-    return world.circles, world.segments, len(world.segments)
+    return world, len(world.segments)
 
 
 def cast_rays(
@@ -335,7 +391,7 @@ def cast_rays(
         ``(K, n)`` float64 ranges [m] in ``[0, max_range]``; all ``0.0`` for a sensor inside an
         obstacle or touching a wall.
     """
-    circles, segments, first_polygon_edge = _geometry_arrays(world_or_arrays)
+    world, first_polygon_edge = _as_world(world_or_arrays)
     poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
     if poses.ndim == 1:
         poses = poses[None, :]
@@ -353,7 +409,9 @@ def cast_rays(
         raise ValueError(f"max_range: expected a positive finite number [m], got {max_range}")
     beams = _beam_geometry(angles.tobytes())
     # The kernel itself rejects non-finite poses: checking here would cost more than a scan.
-    return _cast_rays_kernel(circles, segments, first_polygon_edge, poses, beams, max_range)
+    return _cast_rays_kernel(
+        world.circles, world.segments, first_polygon_edge, world.grid, poses, beams, max_range
+    )
 
 
 @dataclass(frozen=True)

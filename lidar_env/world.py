@@ -11,19 +11,87 @@ polygons when you mean a union.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
+from functools import cached_property
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pymunk
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 #: ``collision_type`` of every static obstacle shape added by :meth:`World.build_space`.
 OBSTACLE_COLLISION_TYPE: int = 1
 
-#: Points per chunk in the vectorised point queries: bounds memory to ~chunk x primitives.
-_POINT_CHUNK = 4096
+#: Average primitives per cell of :attr:`World.grid`: a few, so a range query visits few empty
+#: cells yet culls most far primitives.
+_PRIMITIVES_PER_CELL = 4.0
+#: Cap on grid cells along one axis (keeps skinny worlds from exploding the cell count).
+_MAX_CELLS_PER_AXIS = 2048
+
+
+class PrimitiveGrid(NamedTuple):
+    """A uniform grid over the primitives' bounding boxes, for range queries.
+
+    Cell ``(ix, iy)`` covers ``x in x0 + [ix, ix + 1) * cell`` and likewise ``y``; its id is
+    ``iy * nx + ix``. ``circle_ids[circle_start[c]:circle_start[c + 1]]`` are the circles whose
+    bounding box touches cell ``c`` (the same for segments, indexing :attr:`World.segments`).
+    Indices of points outside the grid are clipped to its border cells.
+    """
+
+    x0: float
+    y0: float
+    cell: float  # [m]
+    nx: int
+    ny: int
+    circle_start: NDArray[np.int64]
+    circle_ids: NDArray[np.int64]
+    segment_start: NDArray[np.int64]
+    segment_ids: NDArray[np.int64]
+
+
+def cell_index(value: NDArray | float, origin: float, cell: float, count: int) -> NDArray:
+    """Grid index of coordinates [m], clipped to ``[0, count)``."""
+    return np.clip(np.floor((np.asarray(value) - origin) / cell), 0, count - 1).astype(np.int64)
+
+
+def _build_grid(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> PrimitiveGrid:
+    """Bucket every primitive's bounding box (circles first, then segments) into cells."""
+    starts, ends = segments[:, 0:2], segments[:, 2:4]
+    lo = np.vstack([circles[:, :2] - circles[:, 2:3], np.minimum(starts, ends)])
+    hi = np.vstack([circles[:, :2] + circles[:, 2:3], np.maximum(starts, ends)])
+    if len(lo) == 0:
+        empty = np.zeros(2, dtype=np.int64)
+        return PrimitiveGrid(0.0, 0.0, 1.0, 1, 1, empty, empty[:0], empty, empty[:0])
+    x0, y0 = lo.min(axis=0)
+    width, height = np.maximum(hi.max(axis=0) - (x0, y0), 1e-9)
+    cell = max(
+        float(np.sqrt(width * height * _PRIMITIVES_PER_CELL / len(lo))),
+        max(width, height) / _MAX_CELLS_PER_AXIS,
+    )
+    nx, ny = int(np.ceil(width / cell)) + 1, int(np.ceil(height / cell)) + 1
+    ix0, ix1 = cell_index(lo[:, 0], x0, cell, nx), cell_index(hi[:, 0], x0, cell, nx)
+    iy0, iy1 = cell_index(lo[:, 1], y0, cell, ny), cell_index(hi[:, 1], y0, cell, ny)
+    span_x = ix1 - ix0 + 1
+    counts = span_x * (iy1 - iy0 + 1)
+    owner = np.repeat(np.arange(len(lo)), counts)
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    cells = (iy0[owner] + local // span_x[owner]) * nx + ix0[owner] + local % span_x[owner]
+
+    def csr(members: NDArray[np.bool_], offset: int) -> tuple[NDArray, NDArray]:
+        order = np.argsort(cells[members], kind="stable")
+        start = np.concatenate([[0], np.cumsum(np.bincount(cells[members], minlength=nx * ny))])
+        return start.astype(np.int64), (owner[members][order] - offset).astype(np.int64)
+
+    is_circle = owner < len(circles)
+    circle_start, circle_ids = csr(is_circle, 0)
+    segment_start, segment_ids = csr(~is_circle, len(circles))
+    return PrimitiveGrid(
+        float(x0), float(y0), cell, nx, ny, circle_start, circle_ids, segment_start, segment_ids
+    )
 
 
 def _as_rows(values: ArrayLike, width: int, what: str) -> NDArray[np.float64]:
@@ -173,6 +241,11 @@ class World:
             f"polygons={len(self.polygons)}, bounds={self.bounds})"
         )
 
+    @cached_property
+    def grid(self) -> PrimitiveGrid:
+        """The primitives bucketed in a uniform grid (built on first use, then kept)."""
+        return _build_grid(self.circles, self.segments)
+
     @property
     def n_primitives(self) -> int:
         """Circles plus segments (walls and polygon edges): what the Lidar kernel tests."""
@@ -292,16 +365,8 @@ class World:
 
         Walls have zero thickness and contain nothing.
         """
-        pts = _as_rows(points, 2, "points")
-        out = np.zeros(len(pts), dtype=bool)
-        for chunk in range(0, len(pts), _POINT_CHUNK):
-            p = pts[chunk : chunk + _POINT_CHUNK]
-            if len(self.circles):
-                d = np.hypot(p[:, None, 0] - self.circles[:, 0], p[:, None, 1] - self.circles[:, 1])
-                out[chunk : chunk + len(p)] |= np.any(d < self.circles[:, 2], axis=1)
-            if len(self.polygon_edges):
-                out[chunk : chunk + len(p)] |= even_odd_inside(p, self.polygon_edges)
-        return out
+        pts = np.ascontiguousarray(_as_rows(points, 2, "points"))
+        return _point_queries(pts, self.circles, self.walls, self.polygon_edges)[1]
 
     def clearance(self, points: ArrayLike) -> NDArray[np.float64]:
         """``(N,)`` signed distance [m] from each point ``(N, 2)`` to the nearest obstacle surface.
@@ -309,22 +374,61 @@ class World:
         Positive in free space; negative inside a circle or polygon (minus the distance to the
         surface it is under). With no obstacles at all, ``inf``.
         """
-        pts = _as_rows(points, 2, "points")
-        out = np.full(len(pts), np.inf)
-        for chunk in range(0, len(pts), _POINT_CHUNK):
-            p = pts[chunk : chunk + _POINT_CHUNK]
-            best = np.full(len(p), np.inf)
-            if len(self.circles):
-                d = np.hypot(p[:, None, 0] - self.circles[:, 0], p[:, None, 1] - self.circles[:, 1])
-                best = np.minimum(best, np.min(d - self.circles[:, 2], axis=1))
-            if len(self.walls):
-                best = np.minimum(best, np.min(segment_distances(p, self.walls), axis=1))
-            if len(self.polygon_edges):
-                d = np.min(segment_distances(p, self.polygon_edges), axis=1)
-                inside = even_odd_inside(p, self.polygon_edges)
-                best = np.minimum(best, np.where(inside, -d, d))
-            out[chunk : chunk + len(p)] = best
-        return out
+        pts = np.ascontiguousarray(_as_rows(points, 2, "points"))
+        return _point_queries(pts, self.circles, self.walls, self.polygon_edges)[0]
+
+
+@njit(cache=True, fastmath=False)
+def segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
+    """Squared distance [m^2] from a point to a segment ``x1, y1, x2, y2`` (no sqrt, at most
+    one division)."""
+    ex, ey = seg[2] - seg[0], seg[3] - seg[1]
+    wx, wy = px - seg[0], py - seg[1]
+    along = wx * ex + wy * ey
+    if along <= 0.0:
+        return wx * wx + wy * wy
+    length2 = ex * ex + ey * ey
+    if along >= length2:
+        return (wx - ex) * (wx - ex) + (wy - ey) * (wy - ey)
+    cross = wx * ey - wy * ex
+    return cross * cross / length2
+
+
+@njit(cache=True, fastmath=False)
+def _point_queries(
+    points: NDArray[np.float64],
+    circles: NDArray[np.float64],
+    walls: NDArray[np.float64],
+    polygon_edges: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Signed clearance [m] and inside flag of each point: the minimum of the signed distance
+    of every circle, wall (unsigned) and the even-odd polygon region. Brute force over
+    primitives, compiled: no temporaries, ~1 ns per point-primitive pair."""
+    n = points.shape[0]
+    clearance = np.empty(n)
+    inside = np.zeros(n, dtype=np.bool_)
+    for k in range(n):
+        px, py = points[k, 0], points[k, 1]
+        best = math.inf
+        for i in range(circles.shape[0]):
+            d = math.sqrt((px - circles[i, 0]) ** 2 + (py - circles[i, 1]) ** 2) - circles[i, 2]
+            best = min(best, d)
+        inside[k] = best < 0.0
+        for i in range(walls.shape[0]):
+            best = min(best, math.sqrt(segment_distance2(px, py, walls[i])))
+        if polygon_edges.shape[0]:
+            nearest2 = math.inf
+            odd = False
+            for i in range(polygon_edges.shape[0]):
+                edge = polygon_edges[i]
+                nearest2 = min(nearest2, segment_distance2(px, py, edge))
+                if (edge[1] > py) != (edge[3] > py):
+                    if px < edge[0] + (py - edge[1]) * (edge[2] - edge[0]) / (edge[3] - edge[1]):
+                        odd = not odd
+            best = min(best, -math.sqrt(nearest2) if odd else math.sqrt(nearest2))
+            inside[k] = inside[k] or odd
+        clearance[k] = best
+    return clearance, inside
 
 
 def _convex_pieces(polygon: NDArray[np.float64]) -> list[NDArray[np.float64]]:
