@@ -36,7 +36,7 @@ from scipy import ndimage
 from scipy.optimize import linear_sum_assignment
 
 from estimators.base import SensorSetup
-from estimators.obstacles import DetectorParams, ObstacleTracker, detect_obstacles
+from estimators.obstacles import DetectorParams, ObstacleTracker, detect_in_observation
 from estimators.occupancy import Bounds, OccupancyGrid, from_estimator_run, sensor_poses
 
 
@@ -291,14 +291,8 @@ def track_obstacles(
     """Detect the obstacles of every scan at the (estimated) sensor poses of ``trajectory``
     (N, 3) and track them across steps (one tracker step per observation)."""
     tracker = ObstacleTracker(gate=gate)
-    poses = sensor_poses(trajectory, setup)
-    for observation, step_poses in zip(observations, poses, strict=True):
-        scans = setup.check_observation(observation)
-        detections = []
-        for key, pose in zip(setup.keys, step_poses, strict=True):
-            detections += detect_obstacles(scans[key], setup.beam_angles, pose, setup.max_range,
-                                           params)
-        tracker.update(detections)
+    for observation, car_pose in zip(observations, np.asarray(trajectory), strict=True):
+        tracker.update(detect_in_observation(observation, car_pose, setup, params))
     return tracker
 
 

@@ -26,11 +26,14 @@ it was given, so its centre sharpens as the arc is seen from more sides.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.base import SensorSetup
+from estimators.occupancy import sensor_poses
 from lidar_env.se2 import transform_points
 
 
@@ -255,6 +258,22 @@ def detect_obstacles(
             [ranges[beams] * np.cos(angles[beams]), ranges[beams] * np.sin(angles[beams])]
         )
         obstacles.append(describe_cluster(transform_points(pose, local), beams, pose[:2], params))
+    return obstacles
+
+
+def detect_in_observation(
+    observation: Mapping[str, ArrayLike],
+    car_pose: ArrayLike,
+    setup: SensorSetup,
+    params: DetectorParams | None = None,
+) -> list[Obstacle]:
+    """The obstacles in every scan of one env observation (keyed by ``setup.keys``) taken at
+    the (estimated) car pose ``car_pose`` (3,), each Lidar at car pose ⊕ its mount."""
+    scans = setup.check_observation(observation)
+    obstacles = []
+    for key, pose in zip(setup.keys, sensor_poses(car_pose, setup)[0], strict=True):
+        obstacles += detect_obstacles(scans[key], setup.beam_angles, pose, setup.max_range,
+                                      params)
     return obstacles
 
 

@@ -289,6 +289,16 @@ class OccupancyGrid:
             logit(self.p_miss), logit(self.p_hit), logit(self.p_min), logit(self.p_max),
         )
 
+    def integrate_observation(
+        self, observation: Mapping[str, ArrayLike], car_pose: ArrayLike, setup: SensorSetup
+    ) -> None:
+        """Add one env observation (scans keyed by ``setup.keys``) taken at the (estimated) car
+        pose ``car_pose`` (3,) [m, m, rad]: each Lidar at car pose ⊕ its mount. This is the
+        online use: call it every step with the estimator's latest pose."""
+        scans = setup.check_observation(observation)
+        self.integrate(np.stack([scans[key] for key in setup.keys]), setup.beam_angles,
+                       sensor_poses(car_pose, setup)[0], setup.max_range)
+
     def probabilities(self) -> NDArray[np.float64]:
         """``(rows, cols)`` occupancy probability of each cell; 0.5 = never observed."""
         return 1.0 / (1.0 + np.exp(-self.log_odds))
@@ -353,10 +363,8 @@ def from_estimator_run(
     if bounds is None:
         bounds = bounds_around(poses[..., :2].reshape(-1, 2), setup.max_range)
     grid = OccupancyGrid(bounds, resolution, **grid_params)
-    for observation, sensor_pose in zip(observations, poses, strict=True):
-        scans = setup.check_observation(observation)
-        ranges = np.stack([scans[key] for key in setup.keys])
-        grid.integrate(ranges, setup.beam_angles, sensor_pose, setup.max_range)
+    for observation, car_pose in zip(observations, trajectory, strict=True):
+        grid.integrate_observation(observation, car_pose, setup)
     return grid
 
 
