@@ -89,6 +89,29 @@ def test_matches_pymunk_ray_query(make_world) -> None:
     assert np.mean(ranges < MAX_RANGE) > 0.2, "the scans should see plenty of obstacles"
 
 
+def test_large_map_through_the_grid_matches_pymunk_and_contains() -> None:
+    """A map of thousands of edges: the grid must neither miss primitives nor double-count
+    polygon edges in the inside test, also for sensors outside the map."""
+    rng = np.random.default_rng(4)
+    image = (rng.random((120, 160)) < 0.08).astype(np.uint8)
+    image[40:80, 60:100] = 255
+    image[45:75, 65:95] = 0  # a room ...
+    image[55:60, 75:80] = 255  # ... with an island
+    world = World.from_image(image, 0.1, origin=(-3.0, 1.0))
+    assert len(world.segments) > 1500 and world.grid.nx * world.grid.ny > 100
+    xmin, ymin, xmax, ymax = world.bounds
+    poses = np.column_stack([rng.uniform(xmin - 2, xmax + 2, 400),
+                             rng.uniform(ymin - 2, ymax + 2, 400), rng.uniform(-4, 4, 400)])
+    ranges = cast_rays(world, poses, BEAMS, 3.0)
+    blind = np.all(ranges == 0.0, axis=1)
+    np.testing.assert_array_equal(blind, world.contains(poses[:, :2]))
+    assert 20 < blind.sum() < 200
+    free = np.flatnonzero(world.clearance(poses[:, :2]) > 1e-3)[:12]
+    np.testing.assert_allclose(
+        ranges[free], pymunk_ranges(world, poses[free], BEAMS, 3.0), rtol=0, atol=1e-6
+    )
+
+
 @pytest.mark.parametrize(
     "angles",
     [

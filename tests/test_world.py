@@ -9,7 +9,7 @@ import numpy as np
 import pymunk
 import pytest
 
-from lidar_env.world import OBSTACLE_COLLISION_TYPE, World
+from lidar_env.world import OBSTACLE_COLLISION_TYPE, World, even_odd_inside
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 
@@ -125,6 +125,30 @@ def test_nested_polygons_stay_hollow_in_the_space() -> None:
     assert space.point_query((5.0, 5.0), 0.0, pymunk.ShapeFilter()) == []
 
 
+def test_grid_lists_each_primitive_in_exactly_the_cells_its_box_touches() -> None:
+    rng = np.random.default_rng(9)
+    starts = rng.uniform(-20, 20, (300, 2))
+    walls = np.hstack([starts, starts + rng.normal(0, 3, (300, 2))])
+    circles = np.column_stack([rng.uniform(-20, 20, (100, 2)), rng.uniform(0.1, 2, 100)])
+    world = World(circles, walls, [SQUARE + 30.0])
+    grid = world.grid
+    assert grid.nx * grid.ny > 50
+    boxes = {
+        "circle": (circles[:, :2] - circles[:, 2:], circles[:, :2] + circles[:, 2:]),
+        "segment": (np.minimum(world.segments[:, :2], world.segments[:, 2:]),
+                    np.maximum(world.segments[:, :2], world.segments[:, 2:])),
+    }
+    for kind, (lo, hi) in boxes.items():
+        start, ids = getattr(grid, f"{kind}_start"), getattr(grid, f"{kind}_ids")
+        assert start[-1] == len(ids)
+        for cell in rng.choice(grid.nx * grid.ny, 60, replace=False):
+            ix, iy = cell % grid.nx, cell // grid.nx
+            cell_lo = np.array([grid.x0 + ix * grid.cell, grid.y0 + iy * grid.cell])
+            touches = np.all((lo < cell_lo + grid.cell) & (hi >= cell_lo), axis=1)
+            listed = np.sort(ids[start[cell] : start[cell + 1]])
+            np.testing.assert_array_equal(listed, np.flatnonzero(touches))
+
+
 # ---------------------------------------------------------------------- point queries
 def test_contains_even_odd_holes_circles_and_walls() -> None:
     outer = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
@@ -137,6 +161,15 @@ def test_contains_even_odd_holes_circles_and_walls() -> None:
     np.testing.assert_array_equal(
         world.contains(points), [True, False, True, True, False, False, False]
     )
+
+
+def test_contains_matches_a_numpy_crossing_count() -> None:
+    rng = np.random.default_rng(2)
+    world = World.from_image(blob_image(rng), 0.1)
+    points = rng.uniform(-0.5, 12.5, (3000, 2))
+    expected = even_odd_inside(points, world.polygon_edges)
+    np.testing.assert_array_equal(world.contains(points), expected)
+    assert 0.1 < expected.mean() < 0.9
 
 
 def test_clearance_matches_pymunk_nearest_point_query() -> None:
