@@ -1,7 +1,7 @@
 """Occupancy mapping: update time per step, and map scores with true (or estimated) poses.
 
-Run: ``python benchmarks/bench_mapping.py [--estimators pc pc_fusion] [--seed 0]`` (about 15 s
-without estimators).
+Run: ``python benchmarks/bench_mapping.py [--estimators pc lidar_odometry] [--figures DIR]``
+(about 15 s without estimators).
 
 1. Speed: the map update of one step (both 360-beam scans, 5 cm cells over the whole
    40 m x 40 m ``open_cylinders`` world) on the scans of a scripted drive, against a plain
@@ -20,6 +20,7 @@ import argparse
 import os
 import platform
 import time
+from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # the target is for one core
 
@@ -30,26 +31,28 @@ import numpy as np  # noqa: E402
 import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
-from estimators.map_scoring import evaluate_run_map, map_truth  # noqa: E402
+from estimators.map_scoring import evaluate_run_map, map_truth, save_map_figure  # noqa: E402
 from estimators.occupancy import OccupancyGrid, logit, sensor_poses  # noqa: E402
 
 WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 RESOLUTION = 0.05  # [m]
 
 
-def drive(world: str, seed: int) -> tuple[gym.Env, list[dict], np.ndarray]:
-    """The observations and true car poses of one scripted drive along the paper's trace."""
+def drive(world: str, seed: int) -> tuple[gym.Env, list[dict], np.ndarray, np.ndarray]:
+    """The observations, true car poses and times [s] of one scripted drive along the paper's
+    trace."""
     env = gym.make("DualLidar-v0", world=world)
     observation, info = env.reset(seed=seed)
     driver = PurePursuitDriver()
     driver.reset(env)
-    observations, poses = [observation], [info["pose"]]
+    observations, poses, times = [observation], [info["pose"]], [info["time"]]
     while True:
         observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
         observations.append(observation)
         poses.append(info["pose"])
+        times.append(info["time"])
         if terminated or truncated:
-            return env, observations, np.array(poses)
+            return env, observations, np.array(poses), np.array(times)
 
 
 def numpy_update(
@@ -101,6 +104,8 @@ def main() -> None:
     parser.add_argument("--estimators", nargs="*", default=[],
                         help="also score the maps built at these estimators' poses")
     parser.add_argument("--seed", type=int, default=0, help="env reset seed (range noise)")
+    parser.add_argument("--figures", type=Path, default=None,
+                        help="save the true world next to each map as DIR/maps_<world>.png")
     args = parser.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
@@ -108,7 +113,7 @@ def main() -> None:
           f"numpy {np.__version__}")
     runs = {world: drive(world, args.seed) for world in WORLDS}
 
-    env, observations, truth = runs["open_cylinders"]
+    env, observations, truth, _ = runs["open_cylinders"]
     setup = SensorSetup.from_env(env)
     scans = np.array([[o[key] for key in setup.keys] for o in observations], dtype=np.float64)
     poses = sensor_poses(truth, setup)
@@ -131,18 +136,20 @@ def main() -> None:
     print("\nmap scores at one-cell tolerance on the visible occupied cells; cylinders:")
     header = f"  {'world':15s} {'poses':14s} {'IoU':>6s} {'prec':>6s} {'recall':>6s}  cylinders"
     print(header)
-    for world, (env, observations, truth) in runs.items():
+    for world, (env, observations, truth, times) in runs.items():
         setup = SensorSetup.from_env(env)
         trajectories = {"true": truth}
         for name in args.estimators:
             estimator = make(name)
             estimator.reset(setup, truth[0])
-            for k, observation in enumerate(observations):
-                estimator.update(observation, k * env.unwrapped.config.control_dt)
+            for observation, t in zip(observations, times, strict=True):
+                estimator.update(observation, t)
             trajectories[name] = estimator.trajectory
         true_map = map_truth(env.unwrapped.world, truth, setup, RESOLUTION)
+        panels = {"true world": true_map.image}
         for name, trajectory in trajectories.items():
             result = evaluate_run_map(true_map, trajectory, observations, setup)
+            panels[f"map at {name} poses (IoU {result.map_scores.iou:.2f})"] = result.grid
             m, c = result.map_scores, result.cylinder_scores
             cylinders = ("-" if c is None else
                          f"recall {c.recall:.0%} ({c.n_matched}/{c.n_true}), mean error "
@@ -150,6 +157,11 @@ def main() -> None:
                          f"precision {c.precision:.0%}")
             print(f"  {world:15s} {name:14s} {m.iou:6.3f} {m.precision:6.3f} {m.recall:6.3f}  "
                   f"{cylinders}")
+        if args.figures is not None:
+            args.figures.mkdir(parents=True, exist_ok=True)
+            path = save_map_figure(args.figures / f"maps_{world}.png", panels, true_map.bounds,
+                                   trajectories, title=f"{world}, {RESOLUTION} m cells")
+            print(f"  -> {path}")
 
 
 if __name__ == "__main__":

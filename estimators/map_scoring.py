@@ -382,6 +382,8 @@ def save_map_figure(
             axis.plot(points[:, 0], points[:, 1], linewidth=1.0, label=label)
         if trajectories:
             axis.legend(loc="upper right", fontsize="small")
+        axis.set_xlim(extent[0], extent[1])  # a trajectory that strays keeps the map in view
+        axis.set_ylim(extent[2], extent[3])
         axis.set_title(name)
         axis.set_xlabel("x [m]")
         axis.set_ylabel("y [m]")
