@@ -145,7 +145,7 @@ def _segment_hit(ox: float, oy: float, dx: float, dy: float, seg: NDArray[np.flo
 
 @njit(cache=True, fastmath=False)
 def _cell(value: float, origin: float, cell: float, count: int) -> int:
-    """Grid index of a coordinate [m], clipped to ``[0, count)``; as :func:`world.cell_index`."""
+    """Grid index of a coordinate [m], clipped to ``[0, count)``."""
     return min(max(int(math.floor((value - origin) / cell)), 0), count - 1)
 
 
@@ -156,32 +156,27 @@ def _inside_polygons(
     segments: NDArray[np.float64],
     first_polygon_edge: int,
     grid: PrimitiveGrid,
+    seen: NDArray[np.int64],
+    stamp: int,
 ) -> bool:
     """Even-odd crossing test (ray towards +x) of the point against all polygon edges.
 
-    Only the grid row holding ``py`` can contain edges that cross the ray's line; an edge listed
-    in several cells of the row is counted only in the cell of its crossing point.
+    Only the grid row holding ``py`` can list edges that cross the ray's line; ``seen`` and
+    ``stamp`` make an edge listed in several cells of the row count once.
     """
     if first_polygon_edge >= segments.shape[0]:
         return False
     row = _cell(py, grid.y0, grid.cell, grid.ny)
     inside = False
-    for column in range(grid.nx):
-        c = row * grid.nx + column
+    for c in range(row * grid.nx, (row + 1) * grid.nx):
         for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
             i = grid.segment_ids[p]
-            if i < first_polygon_edge:
+            if i < first_polygon_edge or seen[i] == stamp:
                 continue
+            seen[i] = stamp
             x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
-            if (y1 > py) != (y2 > py):
-                x_cross = x1 + (py - y1) * (x2 - x1) / (y2 - y1)
-                if px < x_cross:
-                    # Clip to the edge's own columns: rounding may put x_cross just outside.
-                    first = _cell(min(x1, x2), grid.x0, grid.cell, grid.nx)
-                    last = _cell(max(x1, x2), grid.x0, grid.cell, grid.nx)
-                    cross_column = _cell(x_cross, grid.x0, grid.cell, grid.nx)
-                    if min(max(cross_column, first), last) == column:
-                        inside = not inside
+            if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
+                inside = not inside
     return inside
 
 
@@ -310,7 +305,7 @@ def _cast_rays_kernel(
         for i in range(3):
             if not math.isfinite(sensor_poses[k, i]):
                 raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
-        if _inside_polygons(ox, oy, segments, first_polygon_edge, grid):
+        if _inside_polygons(ox, oy, segments, first_polygon_edge, grid, segment_seen, -(k + 1)):
             out[k] = 0.0
             continue
         # Only primitives in the grid cells that overlap the sensor's range box can be seen.

@@ -34,12 +34,13 @@ _MAX_CELLS_PER_AXIS = 2048
 
 
 class PrimitiveGrid(NamedTuple):
-    """A uniform grid over the primitives' bounding boxes, for range queries.
+    """A uniform grid over the primitives, for range queries.
 
     Cell ``(ix, iy)`` covers ``x in x0 + [ix, ix + 1) * cell`` and likewise ``y``; its id is
     ``iy * nx + ix``. ``circle_ids[circle_start[c]:circle_start[c + 1]]`` are the circles whose
-    bounding box touches cell ``c`` (the same for segments, indexing :attr:`World.segments`).
-    Indices of points outside the grid are clipped to its border cells.
+    bounding box touches cell ``c``; likewise the segments (indexing :attr:`World.segments`)
+    that pass through cell ``c`` (listed conservatively: possibly in a few neighbouring cells
+    too). Points outside the grid belong to its border cells.
     """
 
     x0: float
@@ -53,13 +54,13 @@ class PrimitiveGrid(NamedTuple):
     segment_ids: NDArray[np.int64]
 
 
-def cell_index(value: NDArray | float, origin: float, cell: float, count: int) -> NDArray:
+def _cell_index(value: NDArray, origin: float, cell: float, count: int) -> NDArray[np.int64]:
     """Grid index of coordinates [m], clipped to ``[0, count)``."""
-    return np.clip(np.floor((np.asarray(value) - origin) / cell), 0, count - 1).astype(np.int64)
+    return np.clip(np.floor((value - origin) / cell), 0, count - 1).astype(np.int64)
 
 
 def _build_grid(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> PrimitiveGrid:
-    """Bucket every primitive's bounding box (circles first, then segments) into cells."""
+    """Bucket the circles' bounding boxes and the cells each segment passes through."""
     starts, ends = segments[:, 0:2], segments[:, 2:4]
     lo = np.vstack([circles[:, :2] - circles[:, 2:3], np.minimum(starts, ends)])
     hi = np.vstack([circles[:, :2] + circles[:, 2:3], np.maximum(starts, ends)])
@@ -73,22 +74,37 @@ def _build_grid(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> 
         max(width, height) / _MAX_CELLS_PER_AXIS,
     )
     nx, ny = int(np.ceil(width / cell)) + 1, int(np.ceil(height / cell)) + 1
-    ix0, ix1 = cell_index(lo[:, 0], x0, cell, nx), cell_index(hi[:, 0], x0, cell, nx)
-    iy0, iy1 = cell_index(lo[:, 1], y0, cell, ny), cell_index(hi[:, 1], y0, cell, ny)
-    span_x = ix1 - ix0 + 1
-    counts = span_x * (iy1 - iy0 + 1)
-    owner = np.repeat(np.arange(len(lo)), counts)
-    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    cells = (iy0[owner] + local // span_x[owner]) * nx + ix0[owner] + local % span_x[owner]
 
-    def csr(members: NDArray[np.bool_], offset: int) -> tuple[NDArray, NDArray]:
-        order = np.argsort(cells[members], kind="stable")
-        start = np.concatenate([[0], np.cumsum(np.bincount(cells[members], minlength=nx * ny))])
-        return start.astype(np.int64), (owner[members][order] - offset).astype(np.int64)
+    def box_cells(box_lo: NDArray, box_hi: NDArray) -> tuple[NDArray, NDArray]:
+        """(box index, cell id) of every cell each box touches."""
+        ix0, ix1 = _cell_index(box_lo[:, 0], x0, cell, nx), _cell_index(box_hi[:, 0], x0, cell, nx)
+        iy0, iy1 = _cell_index(box_lo[:, 1], y0, cell, ny), _cell_index(box_hi[:, 1], y0, cell, ny)
+        span_x = ix1 - ix0 + 1
+        counts = span_x * (iy1 - iy0 + 1)
+        box = np.repeat(np.arange(len(box_lo)), counts)
+        local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        return box, (iy0[box] + local // span_x[box]) * nx + ix0[box] + local % span_x[box]
 
-    is_circle = owner < len(circles)
-    circle_start, circle_ids = csr(is_circle, 0)
-    segment_start, segment_ids = csr(~is_circle, len(circles))
+    def csr(owner: NDArray, cells: NDArray) -> tuple[NDArray, NDArray]:
+        order = np.argsort(cells, kind="stable")
+        start = np.concatenate([[0], np.cumsum(np.bincount(cells, minlength=nx * ny))])
+        return start.astype(np.int64), owner[order].astype(np.int64)
+
+    n = len(circles)
+    circle_start, circle_ids = csr(*box_cells(lo[:n], hi[:n]))
+    # A long diagonal segment's box covers many cells it never enters: split each segment into
+    # pieces no longer than a cell and take the pieces' boxes, padded against rounding.
+    lengths = np.hypot(*(ends - starts).T)
+    pieces = np.maximum(np.ceil(lengths / cell), 1).astype(np.int64)
+    owner = np.repeat(np.arange(len(segments)), pieces)
+    k = np.arange(pieces.sum()) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    u0, u1 = (k / pieces[owner])[:, None], ((k + 1) / pieces[owner])[:, None]
+    a = starts[owner] + u0 * (ends - starts)[owner]
+    b = starts[owner] + u1 * (ends - starts)[owner]
+    pad = 1e-9 * cell
+    piece, cells = box_cells(np.minimum(a, b) - pad, np.maximum(a, b) + pad)
+    key = np.unique(owner[piece] * (nx * ny) + cells)
+    segment_start, segment_ids = csr(key // (nx * ny), key % (nx * ny))
     return PrimitiveGrid(
         float(x0), float(y0), cell, nx, ny, circle_start, circle_ids, segment_start, segment_ids
     )

@@ -125,28 +125,51 @@ def test_nested_polygons_stay_hollow_in_the_space() -> None:
     assert space.point_query((5.0, 5.0), 0.0, pymunk.ShapeFilter()) == []
 
 
-def test_grid_lists_each_primitive_in_exactly_the_cells_its_box_touches() -> None:
+def segments_meet_box(segments: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M,) True where a segment meets the closed box ``[lo, hi]`` (Liang-Barsky clipping)."""
+    start, delta = segments[:, :2], segments[:, 2:] - segments[:, :2]
+    t0, t1 = np.zeros(len(segments)), np.ones(len(segments))
+    ok = np.ones(len(segments), dtype=bool)
+    for axis in (0, 1):
+        for p, q in ((-delta[:, axis], start[:, axis] - lo[axis]),
+                     (delta[:, axis], hi[axis] - start[:, axis])):
+            ok &= ~((p == 0) & (q < 0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = q / p
+            t0 = np.where(p < 0, np.maximum(t0, r), t0)
+            t1 = np.where(p > 0, np.minimum(t1, r), t1)
+    return ok & (t0 <= t1)
+
+
+def test_grid_lists_primitives_in_the_cells_they_touch() -> None:
+    """Circles: exactly the cells their bounding box touches. Segments: every cell they pass
+    through, and none outside their bounding box."""
     rng = np.random.default_rng(9)
     starts = rng.uniform(-20, 20, (300, 2))
-    walls = np.hstack([starts, starts + rng.normal(0, 3, (300, 2))])
+    walls = np.vstack([np.hstack([starts, starts + rng.normal(0, 3, (300, 2))]),
+                       [[-20, -20, 20, 20], [-20, 20, 19, -19]]])  # long diagonals
     circles = np.column_stack([rng.uniform(-20, 20, (100, 2)), rng.uniform(0.1, 2, 100)])
     world = World(circles, walls, [SQUARE + 30.0])
     grid = world.grid
     assert grid.nx * grid.ny > 50
-    boxes = {
-        "circle": (circles[:, :2] - circles[:, 2:], circles[:, :2] + circles[:, 2:]),
-        "segment": (np.minimum(world.segments[:, :2], world.segments[:, 2:]),
-                    np.maximum(world.segments[:, :2], world.segments[:, 2:])),
-    }
-    for kind, (lo, hi) in boxes.items():
-        start, ids = getattr(grid, f"{kind}_start"), getattr(grid, f"{kind}_ids")
-        assert start[-1] == len(ids)
-        for cell in rng.choice(grid.nx * grid.ny, 60, replace=False):
-            ix, iy = cell % grid.nx, cell // grid.nx
-            cell_lo = np.array([grid.x0 + ix * grid.cell, grid.y0 + iy * grid.cell])
-            touches = np.all((lo < cell_lo + grid.cell) & (hi >= cell_lo), axis=1)
-            listed = np.sort(ids[start[cell] : start[cell + 1]])
-            np.testing.assert_array_equal(listed, np.flatnonzero(touches))
+    assert grid.segment_start[-1] == len(grid.segment_ids)
+    segment_lo = np.minimum(world.segments[:, :2], world.segments[:, 2:])
+    segment_hi = np.maximum(world.segments[:, :2], world.segments[:, 2:])
+    for cell in rng.choice(grid.nx * grid.ny, 80, replace=False):
+        ix, iy = cell % grid.nx, cell // grid.nx
+        lo = np.array([grid.x0 + ix * grid.cell, grid.y0 + iy * grid.cell])
+        hi = lo + grid.cell
+        circles_touching = np.all((circles[:, :2] - circles[:, 2:] < hi)
+                                  & (circles[:, :2] + circles[:, 2:] >= lo), axis=1)
+        listed = grid.circle_ids[grid.circle_start[cell] : grid.circle_start[cell + 1]]
+        np.testing.assert_array_equal(np.sort(listed), np.flatnonzero(circles_touching))
+        listed = set(grid.segment_ids[grid.segment_start[cell] : grid.segment_start[cell + 1]])
+        passing = set(np.flatnonzero(segments_meet_box(world.segments, lo, hi)))
+        in_box = set(np.flatnonzero(np.all((segment_lo <= hi) & (segment_hi >= lo), axis=1)))
+        assert passing <= listed <= in_box
+    diagonal = len(world.walls) - 2
+    cells_listing_diagonal = np.count_nonzero(grid.segment_ids == diagonal)
+    assert cells_listing_diagonal < 4 * max(grid.nx, grid.ny), "not its whole bounding box"
 
 
 # ---------------------------------------------------------------------- point queries
