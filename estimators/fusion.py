@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from estimators.base import Estimator
-from estimators.rotation_pc import PreparedScan, ScanMatcher
+from estimators.rotation_pc import PreparedScan, ScanMatcher, constant_velocity
 from lidar_env.se2 import compose, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -220,7 +220,8 @@ class FusionEstimator(Estimator):
     ``keyframe_distance`` 0.3 m and ``keyframe_turn`` 0.2 rad keep consecutive
     keyframes sharing nearly all of a 10 m scan; ``window`` 3 spans about a metre, over which
     the scenes overlap well; the sigmas and ``robust_scale`` are :func:`optimize_poses`'s.
-    The pi ambiguity of the rotation is resolved with the estimator's own last motion.
+    Each match gets the estimator's own last motion at constant velocity as a weak prior
+    (it resolves the rotation's pi ambiguity and featureless corridors; never odometry).
     """
 
     window: int = 3
@@ -237,6 +238,7 @@ class FusionEstimator(Estimator):
     _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
     _n_keyframes: int = field(default=0, init=False, repr=False)
     _motion: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
+    _last_dt: float = field(default=0.0, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.window, bool) or not (isinstance(self.window, int) and self.window >= 1):
@@ -256,6 +258,7 @@ class FusionEstimator(Estimator):
         self._edges = []
         self._n_keyframes = 0
         self._motion = np.zeros(3)
+        self._last_dt = 0.0
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
@@ -278,14 +281,15 @@ class FusionEstimator(Estimator):
         self, keyframe: _Keyframe, scans: tuple[PreparedScan, ...], motion_guess: FloatArray
     ) -> list[SensorEdge]:
         """The four (or, with one Lidar, one) matches of ``scans`` against ``keyframe``; nodes
-        0 (keyframe) and 1 (scans)."""
+        0 (keyframe) and 1 (scans). ``motion_guess``: predicted car motion between them, which
+        each match gets as its prior ``mount_i⁻¹ ⊕ guess ⊕ mount_j``."""
         assert self._matcher is not None and self.setup is not None
         mounts = self.setup.mounts
         edges = []
         for i, earlier in enumerate(keyframe.scans):
             for j, later in enumerate(scans):
-                hint = float(wrap_angle(motion_guess[2] + mounts[j, 2] - mounts[i, 2]))
-                match = self._matcher.match(earlier, later, hint)
+                prior = relative(mounts[i], compose(motion_guess, mounts[j]))
+                match = self._matcher.match(earlier, later, prior)
                 edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
         return edges
 
@@ -301,7 +305,8 @@ class FusionEstimator(Estimator):
         mounts = self.setup.mounts
         current = self._prepare(scans)
         latest = self._keyframes[-1]
-        predicted = compose(self.pose, self._motion)
+        dt = t - self._times[-1]
+        predicted = compose(self.pose, constant_velocity(self._motion, self._last_dt, dt))
         guess = relative(latest.pose, predicted)
         edges = self._match_all(latest, current, guess)
         from_latest = fuse_car_motion(mounts, edges, guess, **self._weights())
@@ -311,7 +316,7 @@ class FusionEstimator(Estimator):
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
             pose = self._insert_keyframe(current, pose, edges)
-        self._motion = relative(self.pose, pose)
+        self._motion, self._last_dt = relative(self.pose, pose), dt
         return pose
 
     def _insert_keyframe(

@@ -52,6 +52,19 @@ SURFACE_HALF_WINDOW = 2
 MAX_PAIR_DISTANCE = 0.5
 LOSS_SCALE = 0.05
 INLIER_DISTANCE = 0.1
+#: Information of a motion prior relative to one return's: ``(sigma_r / sigma_p)^2`` with the
+#: range noise ``sigma_r`` = 1 cm and a prior good to ``sigma_p`` = 5 cm and 0.05 rad (a car
+#: changes its step by ``a dt^2`` = 5 cm at 5 m/s^2 and 10 Hz). Hundreds of returns outweigh
+#: it wherever they constrain the pose.
+PRIOR_SIGMA = np.array([0.05, 0.05, 0.05])
+PRIOR_INFORMATION = (0.01 / PRIOR_SIGMA) ** 2
+#: A translation direction with less information than this share of the best direction's is
+#: open: the spurious information of normals tilted by noise (a few hundredths of a radian
+#: on 1 cm noise) is a share of about their tilt squared, well under 2 %.
+DEGENERACY_RATIO = 0.02
+#: Two refinements whose inlier shares differ by less than this are equally good fits (a
+#: featureless corridor fits anywhere along it); the one nearer the prior then wins.
+QUALITY_TOLERANCE = 0.02
 
 
 class CurveReference:
@@ -120,10 +133,17 @@ class CurveReference:
         self.smoothed = self.points + self.c[:, None] * self.normals
 
     def correspond(self, points: FloatArray) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
-        """For the points ``(M, 2)`` (reference frame) within ``MAX_PAIR_DISTANCE`` of a return:
-        their index, the nearest point on that return's parabola, and its unit normal."""
+        """For the points ``(M, 2)`` (reference frame) whose nearest return lies within
+        ``MAX_PAIR_DISTANCE`` and on a surface: their index, the nearest point on that return's
+        curve, and its unit normal.
+
+        A lone return (no neighbour on the same surface: a thin post, or a wall seen so
+        obliquely that its returns lie far apart) pairs with nothing: point-to-point pairs with
+        the same beams of the other scan would pull the match towards no motion.
+        """
         distance, nearest = self.tree.query(points, distance_upper_bound=MAX_PAIR_DISTANCE)
         index = np.flatnonzero(np.isfinite(distance))
+        index = index[~self.pointlike[nearest[index]]]
         k = nearest[index]
         offset = points[index] - self.points[k]
         tangent, normal = self.tangents[k], self.normals[k]
@@ -135,22 +155,30 @@ class CurveReference:
             + (self.c[k] + self.b[k] * u + self.a[k] * u**2)[:, None] * normal
         )
         normals = (normal - slope[:, None] * tangent) / np.sqrt(1.0 + slope**2)[:, None]
-        # A lone return: point-to-point, linearised along the current offset.
-        lone = self.pointlike[k]
-        span = np.maximum(np.hypot(*offset[lone].T), 1e-12)
-        normals[lone] = offset[lone] / span[:, None]
-        anchors[lone] = self.points[k[lone]]
         return index, anchors, normals
 
 
 def refine_on_curves(
-    reference: CurveReference, points: FloatArray, initial: FloatArray, iterations: int
+    reference: CurveReference,
+    points: FloatArray,
+    initial: FloatArray,
+    iterations: int,
+    prior: FloatArray | None = None,
 ) -> tuple[FloatArray, float]:
     """Point-to-curve ICP of ``points`` (M, 2, query sensor frame) onto ``reference`` from the
     pose ``initial`` (3,); returns the pose and the share of points within
     ``INLIER_DISTANCE`` of the reference surface (the match's confidence). The Gauss-Newton
-    step and robust weights are :mod:`estimators.icp`'s."""
+    step and robust weights are :mod:`estimators.icp`'s.
+
+    ``prior`` (3,): a predicted pose, added with the weak information ``PRIOR_INFORMATION``.
+    Where the scans leave a translation direction open (a featureless corridor) their
+    information along it is not zero but noise (normals fitted to noisy walls tilt by a few
+    hundredths of a radian), and that noise would outweigh any weak prior; so a direction
+    whose information is below ``DEGENERACY_RATIO`` of the best direction's takes the prior's
+    value outright (solution remapping, Zhang, Kaess & Singh, ICRA 2016).
+    """
     pose = np.asarray(initial, dtype=np.float64).copy()
+    information = None if prior is None else PRIOR_INFORMATION
     for _ in range(iterations):
         moved = transform_points(pose, points)
         index, anchors, normals = reference.correspond(moved)
@@ -159,7 +187,16 @@ def refine_on_curves(
         residuals = np.einsum("ij,ij->i", moved[index] - anchors, normals)
         jacobian = point_to_line_jacobian(moved[index], pose[:2], normals)
         weights = robust_weights(residuals, "cauchy", LOSS_SCALE)
-        step = gauss_newton_step(jacobian, residuals, weights)
+        offset = None
+        if prior is not None:
+            offset = prior - pose
+            offset[2] = float(wrap_angle(offset[2]))
+        step = gauss_newton_step(jacobian, residuals, weights, information, offset)
+        if prior is not None:
+            open_direction = _degenerate_translation(jacobian, weights)
+            if open_direction is not None:
+                miss = prior[:2] - pose[:2] - step[:2]
+                step[:2] += open_direction * (open_direction @ miss)
         pose = pose + step
         pose[2] = float(wrap_angle(pose[2]))
         if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
@@ -168,6 +205,25 @@ def refine_on_curves(
     index, anchors, normals = reference.correspond(moved)
     residuals = np.abs(np.einsum("ij,ij->i", moved[index] - anchors, normals))
     return pose, float(np.count_nonzero(residuals < INLIER_DISTANCE) / max(len(points), 1))
+
+
+def _degenerate_translation(jacobian: FloatArray, weights: FloatArray) -> FloatArray | None:
+    """The unit translation direction (2,) the weighted pairs do not constrain, or None.
+
+    The information on translation with the heading marginalised out is the Schur complement
+    of the 3x3 normal matrix; its weaker eigen-direction is open when its eigenvalue is under
+    ``DEGENERACY_RATIO`` times the stronger one.
+    """
+    information = (jacobian * weights[:, None]).T @ jacobian
+    if information[2, 2] <= 0:
+        return None
+    translation = (
+        information[:2, :2] - np.outer(information[:2, 2], information[2, :2]) / (information[2, 2])
+    )
+    values, vectors = np.linalg.eigh(translation)
+    if values[1] <= 0 or values[0] >= DEGENERACY_RATIO * values[1]:
+        return None
+    return vectors[:, 0]
 
 
 @dataclass(frozen=True)
@@ -247,18 +303,21 @@ class ScanMatcher:
         )
 
     def match(
-        self, earlier: PreparedScan, later: PreparedScan, heading_hint: float | None = None
+        self, earlier: PreparedScan, later: PreparedScan, prior: ArrayLike | None = None
     ) -> ScanMatch:
         """Pose of the ``later`` scan's sensor in the ``earlier`` scan's sensor frame.
 
-        ``heading_hint`` [rad]: an expected heading change (e.g. from the motion so far), used
-        only to choose between the two pi-apart spectrum candidates; without it the range
-        profiles choose (full-turn scans) or the smaller turn wins.
+        ``prior``: a predicted pose (3,) (e.g. from the estimator's own recent motion). Its
+        heading chooses between the two pi-apart spectrum candidates (without it the range
+        profiles choose for full-turn scans, else the smaller turn wins), and the refinement
+        uses it as a weak prior (see :func:`refine_on_curves`).
         """
+        prior = None if prior is None else np.asarray(prior, dtype=np.float64)
         profiles = None
-        if heading_hint is None and _full_turn(earlier.beam_angles, later.beam_angles):
+        if prior is None and _full_turn(earlier.beam_angles, later.beam_angles):
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
-        rotation = heading_change(earlier.polar, later.polar, heading_hint, profiles)
+        hint = None if prior is None else float(prior[2])
+        rotation = heading_change(earlier.polar, later.polar, hint, profiles)
         turned = image_spectrum(self._image(later.ranges, later.beam_angles, rotation.angle))
         correlation = phase_correlate(earlier.spectrum, turned)
         # The turned later image sees the scene shifted by minus the sensor's translation.
@@ -267,10 +326,28 @@ class ScanMatcher:
         # Peak-to-runner-up ratio r >= 1 maps to 1 - 1/r: 0 when ambiguous, -> 1 when unique.
         confidence = rotation.confidence * (1.0 - 1.0 / max(correlation.confidence, 1.0))
         if earlier.reference is not None and len(later.points) >= 3:
-            pose, confidence = refine_on_curves(
-                earlier.reference, later.points, pose, self.icp_iterations
-            )
+            starts = [pose]
+            if prior is not None and np.any(np.abs(_pose_difference(pose, prior)) > PRIOR_SIGMA):
+                starts.append(prior)  # the correlation disagrees with the motion so far
+            refined = [
+                refine_on_curves(earlier.reference, later.points, start, self.icp_iterations, prior)
+                for start in starts
+            ]
+            best_quality = max(quality for _, quality in refined)
+            candidates = [r for r in refined if r[1] >= best_quality - QUALITY_TOLERANCE]
+            if prior is not None:
+                candidates.sort(
+                    key=lambda r: float(np.sum((_pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
+                )
+            pose, confidence = candidates[0]
         return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+
+
+def _pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a - b`` with the heading difference wrapped."""
+    difference = np.asarray(a, dtype=np.float64) - b
+    difference[2] = float(wrap_angle(difference[2]))
+    return difference
 
 
 def motion_from_sensor_match(mount: ArrayLike, sensor_motion: ArrayLike) -> FloatArray:
@@ -288,15 +365,21 @@ def _full_turn(*angle_sets: FloatArray) -> bool:
     return True
 
 
+def constant_velocity(last_motion: FloatArray, last_dt: float, dt: float) -> FloatArray:
+    """The motion (3,) over ``dt`` [s] at the velocity of ``last_motion`` over ``last_dt`` [s]
+    (a prediction from the estimator's own increments, never from odometry)."""
+    return np.asarray(last_motion, dtype=np.float64) * (dt / last_dt if last_dt > 0 else 1.0)
+
+
 @dataclass
 class RotationPhaseCorrelation(Estimator):
     """Car poses from one Lidar's consecutive scans, matched by :class:`ScanMatcher`.
 
-    Each step's sensor motion ``z`` becomes the car motion ``mount ⊕ z ⊕ mount⁻¹``. No motion
-    model and no odometry: the heading hint for the pi ambiguity is the previous step's own
-    heading change. Parameters: ``lidar`` (index into ``setup.keys``: 0 the main Lidar, 1 the
-    offset one), ``image_size`` [px],
-    ``resolution`` [m/px] (None: finest holding ``max_range``), ``icp_iterations``.
+    Each step's sensor motion ``z`` becomes the car motion ``mount ⊕ z ⊕ mount⁻¹``. No
+    odometry: the prior handed to the matcher is the previous step's own motion at constant
+    velocity (:func:`constant_velocity`). Parameters: ``lidar`` (index into ``setup.keys``:
+    0 the main Lidar, 1 the offset one), ``image_size`` [px], ``resolution`` [m/px] (None:
+    finest holding ``max_range``), ``icp_iterations``.
     """
 
     lidar: int = 0
@@ -305,7 +388,8 @@ class RotationPhaseCorrelation(Estimator):
     icp_iterations: int = 0
     _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
     _previous: PreparedScan | None = field(default=None, init=False, repr=False)
-    _last_turn: float | None = field(default=None, init=False, repr=False)
+    _last_motion: FloatArray | None = field(default=None, init=False, repr=False)
+    _last_dt: float = field(default=0.0, init=False, repr=False)
 
     def _reset_state(self) -> None:
         setup = self._checked_setup()
@@ -313,7 +397,8 @@ class RotationPhaseCorrelation(Estimator):
             setup.max_range, self.image_size, self.resolution, self.icp_iterations
         )
         self._previous = None
-        self._last_turn = None
+        self._last_motion = None
+        self._last_dt = 0.0
 
     def _checked_setup(self) -> SensorSetup:
         assert self.setup is not None
@@ -333,8 +418,12 @@ class RotationPhaseCorrelation(Estimator):
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self._matcher is not None and self._previous is not None and self.setup is not None
         current = self._matcher.prepare(scans[self.setup.keys[self.lidar]], self.setup.beam_angles)
-        match = self._matcher.match(self._previous, current, self._last_turn)
+        dt = t - self._times[-1]
+        prior = None
+        if self._last_motion is not None:
+            prior = constant_velocity(self._last_motion, self._last_dt, dt)
+        match = self._matcher.match(self._previous, current, prior)
         self._previous = current
-        self._last_turn = float(match.pose[2])
+        self._last_motion, self._last_dt = match.pose, dt
         mount = self.setup.mounts[self.lidar]
         return compose(self.pose, motion_from_sensor_match(mount, match.pose))
