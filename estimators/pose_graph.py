@@ -162,6 +162,16 @@ class PoseGraph:
         """``(E,)`` True for loop-closure edges (as opposed to odometry)."""
         return np.array(self._is_loop, dtype=bool)
 
+    def remove_edges(self, indices: ArrayLike) -> None:
+        """Delete the edges at ``indices`` (e.g. loop closures the optimiser could not
+        reconcile); the others keep their order."""
+        drop = set(np.atleast_1d(np.asarray(indices, dtype=np.int64)).tolist())
+        keep = [k for k in range(self.n_edges) if k not in drop]
+        self._edge_nodes = [self._edge_nodes[k] for k in keep]
+        self._measurements = [self._measurements[k] for k in keep]
+        self._information = [self._information[k] for k in keep]
+        self._is_loop = [self._is_loop[k] for k in keep]
+
     def copy(self) -> PoseGraph:
         other = PoseGraph()
         other._poses = [p.copy() for p in self._poses]
@@ -192,11 +202,16 @@ class PoseGraph:
             )
 
     def cost(self, poses: ArrayLike | None = None, loss: Loss = "linear",
-             loss_scale: float = 1.0) -> float:
-        """``0.5 * sum rho(r^T Omega r)`` at ``poses`` (default: the graph's own poses)."""
+             loss_scale: float = 1.0, robust_edges: ArrayLike | None = None) -> float:
+        """``0.5 * sum rho(r^T Omega r)`` at ``poses`` (default: the graph's own poses);
+        ``rho`` is ``loss`` on the ``robust_edges`` (boolean mask, default all), plain
+        least squares on the others."""
         poses = self.poses if poses is None else np.asarray(poses, dtype=np.float64)
         chi2 = edge_chi2(poses, self.edges, self.measurements, self.information)
-        return 0.5 * float(np.sum(robust_rho(chi2, loss, loss_scale)[0]))
+        rho = robust_rho(chi2, loss, loss_scale)[0]
+        if robust_edges is not None:
+            rho = np.where(robust_edges, rho, chi2)
+        return 0.5 * float(np.sum(rho))
 
     def chi2(self, poses: ArrayLike | None = None) -> NDArray[np.float64]:
         """``(E,)`` Mahalanobis squared error ``r^T Omega r`` of every edge."""
@@ -354,6 +369,7 @@ def optimize(
     fixed: int = 0,
     max_iterations: int = 100,
     tolerance: float = 1e-10,
+    robust_edges: ArrayLike | None = None,
 ) -> OptimizationResult:
     """Minimise ``0.5 * sum rho(r^T Omega r)`` over all node poses except ``graph``'s node
     ``fixed``; the graph itself is left unchanged (assign ``result.poses`` to keep them).
@@ -370,6 +386,9 @@ def optimize(
             with the same analytic sparse Jacobian; its robust loss acts per residual component.
         max_iterations: cap on linear solves (``lm``) or function evaluations (``scipy``).
         tolerance: stop when the relative cost decrease falls below it.
+        robust_edges: ``(E,)`` boolean mask of the edges the robust kernel applies to
+            (default all; e.g. ``graph.is_loop`` to trust odometry and doubt loop closures).
+            Only the ``lm`` solver honours it.
     """
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver {solver!r}: expected one of {', '.join(SOLVERS)}")
@@ -382,8 +401,13 @@ def optimize(
     if not 0 <= fixed < graph.n_nodes:
         raise IndexError(f"fixed={fixed}: expected a node index in [0, {graph.n_nodes})")
     graph.check_connected()
+    if robust_edges is not None:
+        robust_edges = np.asarray(robust_edges, dtype=bool)
+        if robust_edges.shape != (graph.n_edges,):
+            raise ValueError(f"robust_edges: expected a boolean mask of shape ({graph.n_edges},),"
+                             f" got {robust_edges.shape}")
     start = time.perf_counter()
-    initial_cost = graph.cost(loss=loss, loss_scale=loss_scale)
+    initial_cost = graph.cost(loss=loss, loss_scale=loss_scale, robust_edges=robust_edges)
     if graph.n_nodes == 1 or graph.n_edges == 0:
         return OptimizationResult(graph.poses, initial_cost, initial_cost, 0,
                                   time.perf_counter() - start, True, graph.chi2())
@@ -391,7 +415,7 @@ def optimize(
     x0 = graph.poses[problem.free].ravel()
     if solver == "lm":
         x, iterations, converged = _levenberg_marquardt(
-            problem, x0, loss, loss_scale, max_iterations, tolerance
+            problem, x0, loss, loss_scale, max_iterations, tolerance, robust_edges
         )
     else:
         scipy_loss = "soft_l1" if loss == "huber" else loss
@@ -406,7 +430,7 @@ def optimize(
     return OptimizationResult(
         poses=poses,
         initial_cost=initial_cost,
-        final_cost=graph.cost(poses, loss=loss, loss_scale=loss_scale),
+        final_cost=graph.cost(poses, loss=loss, loss_scale=loss_scale, robust_edges=robust_edges),
         iterations=iterations,
         seconds=time.perf_counter() - start,
         converged=converged,
@@ -421,6 +445,7 @@ def _levenberg_marquardt(
     loss_scale: float,
     max_iterations: int,
     tolerance: float,
+    robust_edges: NDArray[np.bool_] | None,
 ) -> tuple[NDArray[np.float64], int, bool]:
     """LM with GTSAM's damping schedule (lambda x10 on rejection, /10 on success) on
     ``(J^T W J + lambda diag) dx = -J^T W f``; ``W`` are the robust per-edge weights."""
@@ -429,6 +454,9 @@ def _levenberg_marquardt(
         f = problem.residuals(x).reshape(-1, 3)
         s = np.einsum("ei,ei->e", f, f)
         rho, weight = robust_rho(s, loss, loss_scale)
+        if robust_edges is not None:
+            rho = np.where(robust_edges, rho, s)
+            weight = np.where(robust_edges, weight, 1.0)
         return 0.5 * float(rho.sum()), f, weight
 
     cost, f, weight = evaluate(x)

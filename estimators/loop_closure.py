@@ -1,0 +1,312 @@
+"""Loop-closure detection and verification for 2D Lidar keyframes.
+
+Three stages, each a pure function of plain arrays:
+
+1. **Place descriptor** (:func:`range_histogram`): the histogram of the ranges of a
+   keyframe's points from the car's origin. It does not change when the car turns on the
+   spot, so it ranks candidate places without knowing the heading. It only ranks: where the
+   drift is small the candidates come from the pose uncertainty.
+2. **Verification** (:func:`verify_loop`): a correlative scan match (Olson, "Real-time
+   correlative scan matching", ICRA 2009) over a window of headings and translations on a
+   likelihood field of the old place's points, searched exactly by a two-level
+   branch-and-bound (:func:`correlative_match`), then refined by robust point-to-line ICP
+   (:func:`estimators.icp.register`).
+3. **Rejection** of false loops: a match is accepted only if enough of the scan lands on the
+   old map (ICP inlier share and likelihood-field score) and if the best match is clearly
+   better than the best match elsewhere in the window (ambiguity test); the pose graph then
+   weighs loop edges with a robust kernel and drops those it cannot reconcile
+   (:mod:`estimators.slam`).
+
+Frames: a keyframe's points are in its own car frame; a loop measurement is the pose of the
+query keyframe in the frame of the reference keyframe. Distances [m], angles [rad].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from estimators.icp import ICPParams, PointToLineReference, point_to_line_jacobian, register
+from estimators.scan_matching import LikelihoodField, estimate_normals, voxel_downsample
+from lidar_env.se2 import transform_points, wrap_angle
+
+#: Far coarse cells expanded to find the runner-up match (best bounds first).
+_RUNNER_UP_EXPANSIONS = 8
+
+
+def range_histogram(
+    points: NDArray[np.float64], n_bins: int = 40, max_range: float = 20.0
+) -> NDArray[np.float64]:
+    """Rotation-invariant place descriptor: normalised histogram ``(n_bins,)`` of the
+    distances [m] of ``points`` (M, 2, car frame) from the origin, up to ``max_range``.
+
+    Default 40 bins over 20 m (0.5 m bins): coarser than a step between keyframes changes
+    most ranges, finer than the layout of a room."""
+    if n_bins < 1 or not max_range > 0:
+        raise ValueError(f"n_bins, max_range: expected >= 1 and > 0, got {n_bins}, {max_range}")
+    ranges = np.hypot(points[:, 0], points[:, 1]) if len(points) else np.zeros(0)
+    counts, _ = np.histogram(np.minimum(ranges, max_range), bins=n_bins, range=(0.0, max_range))
+    total = counts.sum()
+    return counts / total if total else counts.astype(np.float64)
+
+
+def descriptor_distance(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Half the L1 distance of two normalised histograms: 0 = identical, 1 = disjoint."""
+    return 0.5 * float(np.abs(a - b).sum())
+
+
+@dataclass(frozen=True)
+class LoopClosureParams:
+    """Settings of :func:`verify_loop`; distances [m], angles [rad].
+
+    Defaults are for indoor 2D Lidars with 1-3 cm range noise, not for one log:
+
+    Attributes:
+        resolution: likelihood-field cell and fine translation step (0.05 m, a few range-noise
+            sigmas: finer gives no better pose, ICP refines anyway).
+        sigma: likelihood-field width (0.1 m).
+        coarse_factor: the coarse level covers ``2 * coarse_factor + 1`` fine cells per axis
+            (2: 0.25 m cells, a 25x reduction of the translations scored at full resolution).
+        angular_step: heading step (1 deg: a point 6 m away moves one 0.1 m field width).
+        angular_window: heading window around the graph's guess (20 deg: the rotation drift a
+            good front end accumulates over a loop of a few hundred metres).
+        voxel_size: query points are thinned to this grid before the search (0.1 m).
+        min_quality: share of query points within ``inlier_distance`` of the old map after ICP
+            (0.6: an honest revisit sees mostly the same walls; new clutter or open doors
+            take the rest).
+        inlier_distance: (0.1 m).
+        min_score: mean likelihood-field score after ICP (0.4).
+        ambiguity_ratio: reject when a match at least ``ambiguity_distance`` away scores above
+            this share of the best (0.9: a corridor's repetitive structure gives two
+            near-equal peaks; a real place gives one clear peak).
+        ambiguity_distance: (0.5 m).
+        point_sigma, effective_points: the ICP Hessian becomes the edge's information
+            matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
+            made it (0.05 m, 20: neighbouring residuals are strongly correlated, so hundreds
+            of pairs would claim mm accuracy; loop matches are good to ~1-2 cm).
+    """
+
+    resolution: float = 0.05
+    sigma: float = 0.1
+    coarse_factor: int = 2
+    angular_step: float = np.radians(1.0)
+    angular_window: float = np.radians(20.0)
+    voxel_size: float = 0.1
+    min_quality: float = 0.6
+    inlier_distance: float = 0.1
+    min_score: float = 0.4
+    ambiguity_ratio: float = 0.9
+    ambiguity_distance: float = 0.5
+    point_sigma: float = 0.05
+    effective_points: float = 20.0
+
+    def __post_init__(self) -> None:
+        for name in ("resolution", "sigma", "angular_step", "voxel_size", "inlier_distance",
+                     "point_sigma", "ambiguity_distance", "effective_points"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        if self.angular_window < 0 or self.coarse_factor < 0:
+            raise ValueError("angular_window and coarse_factor: expected values >= 0, got "
+                             f"{self.angular_window}, {self.coarse_factor}")
+        for name in ("min_quality", "min_score", "ambiguity_ratio"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name}: expected a share in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class LoopVerification:
+    """Outcome of :func:`verify_loop`.
+
+    Attributes:
+        accepted: the match passed every test; ``reason`` says which failed otherwise.
+        pose: ``(3,)`` pose of the query keyframe in the reference keyframe's frame.
+        information: ``(3, 3)`` information matrix of ``pose`` from the ICP Hessian.
+        quality: ICP inlier share; score: mean likelihood-field score; runner_up: best score
+            of a match at least ``ambiguity_distance`` away, relative to the best.
+    """
+
+    accepted: bool
+    reason: str
+    pose: NDArray[np.float64]
+    information: NDArray[np.float64]
+    quality: float
+    score: float
+    runner_up: float
+
+
+class PlaceMap:
+    """The old place's points (reference frame) ready for matching: likelihood field, a
+    coarse max-pooled copy that bounds it from above, and a point-to-line ICP reference."""
+
+    def __init__(self, points: ArrayLike, params: LoopClosureParams) -> None:
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
+            raise ValueError(f"reference points: expected shape (N >= 3, 2), got {points.shape}")
+        thinned = voxel_downsample(points, params.resolution)
+        if len(thinned) < 3:
+            thinned = points
+        self.field = LikelihoodField(thinned, params.resolution, params.sigma)
+        size = 2 * params.coarse_factor + 1
+        # Every cell holds the max over the +-coarse_factor cells around it: the score of a
+        # coarse translation bounds every fine translation it stands for.
+        self.coarse_grid = ndimage.maximum_filter(self.field.grid, size=size, mode="constant")
+        rough = PointToLineReference(thinned)
+        normals, valid = estimate_normals(thinned, rough.tree)
+        self.reference = PointToLineReference(thinned, normals, valid)
+
+
+def _grid_scores(
+    grid: NDArray[np.float64], origin: NDArray[np.float64], resolution: float,
+    points: NDArray[np.float64], shifts: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Mean grid value of ``points`` (M, 2) under every translation ``shifts`` (S, 2)."""
+    base = np.floor((points - origin) / resolution).astype(np.int64)
+    offsets = np.rint(shifts / resolution).astype(np.int64)
+    cells = base[None, :, :] + offsets[:, None, :]
+    inside = ((cells[..., 0] >= 0) & (cells[..., 0] < grid.shape[0])
+              & (cells[..., 1] >= 0) & (cells[..., 1] < grid.shape[1]))
+    values = np.zeros(cells.shape[:2])
+    values[inside] = grid[cells[inside][:, 0], cells[inside][:, 1]]
+    return values.mean(axis=1)
+
+
+def correlative_match(
+    place: PlaceMap,
+    points: NDArray[np.float64],
+    guess: ArrayLike,
+    linear_window: float,
+    params: LoopClosureParams,
+) -> tuple[NDArray[np.float64], float, float]:
+    """Best pose of ``points`` (M, 2, query frame) in ``place`` within ``guess[:2] ±
+    linear_window`` [m] and ``guess[2] ± params.angular_window``: two-level branch-and-bound,
+    exact on the fine grid (coarse scores are upper bounds, expanded best first).
+
+    Returns the pose (3,), its mean likelihood score, and the best fine score of a pose at
+    least ``params.ambiguity_distance`` from it relative to that score (the ambiguity
+    measure; the few best coarse cells that far away are expanded to find it).
+    """
+    guess = np.asarray(guess, dtype=np.float64)
+    res = params.resolution
+    step = (2 * params.coarse_factor + 1) * res
+    n_coarse = int(np.ceil(linear_window / step))
+    coarse = step * np.arange(-n_coarse, n_coarse + 1)
+    grid_x, grid_y = np.meshgrid(coarse, coarse, indexing="ij")
+    coarse_shifts = np.column_stack([grid_x.ravel(), grid_y.ravel()])
+    fine = res * np.arange(-params.coarse_factor, params.coarse_factor + 1)
+    fine_x, fine_y = np.meshgrid(fine, fine, indexing="ij")
+    fine_shifts = np.column_stack([fine_x.ravel(), fine_y.ravel()])
+    n_ang = int(np.ceil(params.angular_window / params.angular_step))
+    headings = guess[2] + params.angular_step * np.arange(-n_ang, n_ang + 1)
+
+    rotated_sets, bounds = [], []
+    for heading in headings:
+        c, s = np.cos(heading), np.sin(heading)
+        rotated = points @ np.array([[c, s], [-s, c]]) + guess[:2]
+        rotated_sets.append(rotated)
+        bounds.append(_grid_scores(place.coarse_grid, place.field.origin, res, rotated,
+                                   coarse_shifts))
+    bound = np.stack(bounds)  # (headings, coarse shifts)
+    order = np.argsort(bound, axis=None)[::-1]
+    best_score, best = -1.0, (0, 0, 0)
+    for flat in order:
+        if bound.flat[flat] <= best_score:
+            break
+        h, k = np.unravel_index(flat, bound.shape)
+        scores = _grid_scores(place.field.grid, place.field.origin, res, rotated_sets[h],
+                              coarse_shifts[k] + fine_shifts)
+        f = int(np.argmax(scores))
+        if scores[f] > best_score:
+            best_score, best = float(scores[f]), (h, k, f)
+    h, k, f = best
+    shift = coarse_shifts[k] + fine_shifts[f]
+    pose = np.array([guess[0] + shift[0], guess[1] + shift[1], float(wrap_angle(headings[h]))])
+    far = np.hypot(*(coarse_shifts - coarse_shifts[k]).T) >= params.ambiguity_distance + step
+    runner_up = 0.0
+    far_bounds = np.where(far[None, :], bound, -1.0)
+    for flat in np.argsort(far_bounds, axis=None)[::-1][:_RUNNER_UP_EXPANSIONS]:
+        if far_bounds.flat[flat] <= runner_up:
+            break
+        h2, k2 = np.unravel_index(flat, bound.shape)
+        scores = _grid_scores(place.field.grid, place.field.origin, res, rotated_sets[h2],
+                              coarse_shifts[k2] + fine_shifts)
+        runner_up = max(runner_up, float(scores.max()))
+    return pose, best_score, runner_up / max(best_score, 1e-12)
+
+
+def match_information(
+    reference: PointToLineReference, points: NDArray[np.float64], pose: NDArray[np.float64],
+    params: LoopClosureParams,
+) -> NDArray[np.float64]:
+    """``(3, 3)`` information of a registration: the point-to-line Gauss-Newton Hessian over
+    the inlier pairs at ``pose``, ``mean(J^T J) * effective_points / point_sigma^2``; small
+    along directions the scene leaves free (a corridor's axis), large across them.
+
+    Expressed in the pose graph's residual coordinates (the pose's own frame): the Hessian
+    over a reference-frame perturbation ``(dx, dy, dtheta)`` is rotated by ``R(theta)``."""
+    world = transform_points(pose, points)
+    pairs = reference.correspond(world, params.inlier_distance)
+    if len(pairs.index) == 0:
+        return 1e-2 * np.eye(3)
+    jacobian = point_to_line_jacobian(world[pairs.index], pose[:2], pairs.normals)
+    hessian = jacobian.T @ jacobian / len(jacobian) * params.effective_points
+    hessian /= params.point_sigma**2
+    to_local = np.eye(3)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    to_local[:2, :2] = [[c, -s], [s, c]]
+    hessian = to_local.T @ hessian @ to_local
+    # A floor (sigma 10 m / 10 rad) keeps the matrix invertible in a degenerate scene without
+    # adding information the scan does not hold.
+    return hessian + 1e-2 * np.eye(3)
+
+
+def verify_loop(
+    place: PlaceMap,
+    query_points: ArrayLike,
+    guess: ArrayLike,
+    linear_window: float,
+    params: LoopClosureParams = LoopClosureParams(),
+) -> LoopVerification:
+    """Verify a loop candidate: is the query keyframe (points (M, 2) in its own frame) at the
+    old place, near the pose ``guess`` (3,) in the place's frame predicted by the graph?
+
+    ``linear_window`` [m] is how far the truth may be from the guess (the pose uncertainty).
+    Never raises for a bad candidate: the result says ``accepted=False`` and why.
+    """
+    query = np.asarray(query_points, dtype=np.float64)
+    if query.ndim != 2 or query.shape[1] != 2:
+        raise ValueError(f"query points: expected shape (M, 2), got {query.shape}")
+    guess = np.asarray(guess, dtype=np.float64)
+    if guess.shape != (3,) or not np.all(np.isfinite(guess)):
+        raise ValueError(f"guess: expected a finite pose (x, y, heading), got {guess}")
+    if not linear_window >= 0:
+        raise ValueError(f"linear_window: expected a distance >= 0 [m], got {linear_window}")
+    nothing = np.zeros((3, 3))
+    if len(query) < 10:
+        return LoopVerification(False, f"too few query points ({len(query)} < 10)", guess,
+                                nothing, 0.0, 0.0, 0.0)
+    thinned = voxel_downsample(query, params.voxel_size)
+    start, _, runner_up = correlative_match(place, thinned, guess, linear_window, params)
+    icp = ICPParams(max_correspondence_distance=3 * params.inlier_distance,
+                    inlier_distance=params.inlier_distance)
+    result = register(place.reference, query, start, icp)
+    pose = result.pose
+    score = float(place.field.score(transform_points(pose, query)).mean())
+    information = match_information(place.reference, query, pose, params)
+    failures = []
+    if result.quality < params.min_quality:
+        failures.append(f"ICP inlier share {result.quality:.2f} < {params.min_quality}")
+    if score < params.min_score:
+        failures.append(f"likelihood score {score:.2f} < {params.min_score}")
+    if runner_up > params.ambiguity_ratio:
+        failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
+                        f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
+    offset = np.hypot(*(pose[:2] - guess[:2]))
+    turn = abs(float(wrap_angle(pose[2] - guess[2])))
+    if offset > linear_window + params.inlier_distance or turn > params.angular_window + 1e-9:
+        failures.append(f"ICP left the search window ({offset:.2f} m, {np.degrees(turn):.1f} deg)")
+    reason = "; ".join(failures) if failures else "accepted"
+    return LoopVerification(not failures, reason, pose, information, result.quality, score,
+                            runner_up)

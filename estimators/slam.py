@@ -1,0 +1,296 @@
+"""Graph SLAM: a Lidar odometry front end, loop closure, and pose-graph optimisation
+(the ``slam`` estimator).
+
+The front end (any registered estimator, by name) turns every scan into an odometry pose.
+Every ``keyframe_distance`` of travel (or ``keyframe_angle`` of turn) the scan becomes a
+keyframe: a node of a :class:`~estimators.pose_graph.PoseGraph`, linked to the previous one
+by an odometry edge whose uncertainty grows with the distance driven. Each new keyframe looks
+for old keyframes it may revisit: those at least ``min_loop_separation`` of path behind it
+and within the pose uncertainty (``loop_radius`` plus ``loop_drift`` of the path since then)
+of its current estimate, ranked by place descriptor; each candidate is verified by a
+correlative scan match plus ICP against the old keyframe and its neighbours
+(:func:`estimators.loop_closure.verify_loop`) and, if accepted, becomes a loop edge. After new
+loop edges the graph is optimised (Levenberg–Marquardt, a Cauchy kernel on loop edges); loop
+edges it still cannot reconcile (Mahalanobis error above ``max_loop_sigma``) are dropped and
+the graph optimised again: a false loop must not bend the map.
+
+Poses: ``update`` returns the online estimate (the latest keyframe's pose as optimised so
+far, plus the front end's motion since it); :attr:`GraphSlam.trajectory` returns the smoothed
+trajectory, every scan re-anchored on its keyframe's final pose after a last optimisation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.base import Estimator
+from estimators.loop_closure import (
+    LoopClosureParams,
+    LoopVerification,
+    PlaceMap,
+    descriptor_distance,
+    range_histogram,
+    verify_loop,
+)
+from estimators.pose_graph import PoseGraph, optimize
+from estimators.registry import make
+from estimators.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
+from lidar_env.se2 import compose, relative, transform_points, wrap_angle
+
+
+@dataclass
+class Keyframe:
+    """A graph node's data: its car-frame points (M, 2), place descriptor, the front end's
+    pose when it was taken, and the path length [m] driven up to it."""
+
+    points: NDArray[np.float64]
+    descriptor: NDArray[np.float64]
+    odometry: NDArray[np.float64]
+    path_length: float
+
+
+@dataclass
+class GraphSlam(Estimator):
+    """Front end + loop closure + pose-graph optimisation. Distances [m], angles [rad].
+
+    Defaults are for 2D Lidars indoors driven at walking speed, not tuned to one log:
+
+    Attributes:
+        frontend, frontend_params: the odometry estimator by registry name ("lidar_odometry":
+            the most accurate registered one on ACES local relations) and its parameters.
+        keyframe_distance, keyframe_angle: a new keyframe every 0.5 m or 20 deg (keyframes
+            overlap heavily; a graph of them stays ~10x smaller than one of scans).
+        odometry_sigma, odometry_drift, odometry_sigma_rotation, odometry_drift_rotation:
+            standard deviation of an odometry edge, ``sigma + drift * distance`` for position
+            and ``sigma_rotation + drift_rotation * distance`` for heading (1 cm + 2 %,
+            0.2 deg + 0.5 deg/m: a scan-to-map front end's error on local relations, measured
+            around 3-4 cm and 0.35 deg per ~1 m on ACES, with a margin).
+        loop_radius, loop_drift, max_search_window: candidates lie within
+            ``loop_radius + loop_drift * path`` of the current estimate, where ``path`` is the
+            distance driven since the candidate (1 m + 5 %, capped at 3 m: the drift of a good
+            front end is about 1 % of distance; the search window costs grow with its area).
+        min_loop_separation: candidates are at least 10 m of path back (nearer ones are the
+            front end's own local map, not a loop).
+        max_candidates: verify at most 3 candidates per keyframe, best descriptor first.
+        submap_neighbours: the old place is the candidate keyframe plus this many keyframes
+            on each side (2: ~2 m of travel, enough walls to match a 180-degree scan).
+        loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
+        max_loop_sigma: loop edges whose Mahalanobis error after optimisation exceeds this
+            are dropped (5: far outside any honest measurement's spread).
+        optimize_every: after a loop closure, optimise again once this many keyframes were
+            added (5, i.e. ~2.5 m; the final trajectory is always optimised).
+        min_range: readings at or below this [m] are "no return".
+    """
+
+    frontend: str = "lidar_odometry"
+    frontend_params: dict[str, Any] = field(default_factory=dict)
+    keyframe_distance: float = 0.5
+    keyframe_angle: float = np.radians(20.0)
+    odometry_sigma: float = 0.01
+    odometry_drift: float = 0.02
+    odometry_sigma_rotation: float = np.radians(0.2)
+    odometry_drift_rotation: float = np.radians(0.5)
+    loop_radius: float = 1.0
+    loop_drift: float = 0.05
+    max_search_window: float = 3.0
+    min_loop_separation: float = 10.0
+    max_candidates: int = 3
+    submap_neighbours: int = 2
+    loss_scale: float = 3.0
+    max_loop_sigma: float = 5.0
+    optimize_every: int = 5
+    min_range: float = DEFAULT_MIN_RANGE
+    loop_params: LoopClosureParams = field(default_factory=LoopClosureParams)
+
+    def __post_init__(self) -> None:
+        for name in ("keyframe_distance", "keyframe_angle", "odometry_sigma",
+                     "odometry_sigma_rotation", "loop_radius", "max_search_window",
+                     "loss_scale", "max_loop_sigma"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        for name in ("odometry_drift", "odometry_drift_rotation", "loop_drift",
+                     "min_loop_separation"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name}: expected a value >= 0, got {getattr(self, name)}")
+        for name in ("max_candidates", "optimize_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {getattr(self, name)}")
+        if self.submap_neighbours < 0:
+            raise ValueError(f"submap_neighbours: expected >= 0, got {self.submap_neighbours}")
+        if self.frontend == "slam":
+            raise ValueError("frontend: expected an odometry estimator, got 'slam' itself")
+        make(self.frontend, **self.frontend_params)  # unknown names fail here, listing valid ones
+
+    # ------------------------------------------------------------------ Estimator hooks
+    def _reset_state(self) -> None:
+        assert self.setup is not None
+        self._frontend = make(self.frontend, **self.frontend_params)
+        self._frontend.reset(self.setup, self._initial_pose)
+        self.graph = PoseGraph()
+        self.keyframes: list[Keyframe] = []
+        self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
+        self._scan_odometry: list[NDArray[np.float64]] = []
+        self._places: dict[int, PlaceMap] = {}
+        self._dirty = False
+        self._since_optimized = 0
+        self.loop_attempts: list[tuple[int, int, LoopVerification]] = []
+        self.dropped_loops: list[tuple[int, int]] = []
+
+    def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
+        self._frontend.update(scans, t)
+        self.add_scan(scans_to_car_points(scans, self.setup, self.min_range), self._initial_pose)
+
+    def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
+        odometry = self._frontend.update(scans, t)
+        return self.add_scan(scans_to_car_points(scans, self.setup, self.min_range), odometry)
+
+    # ------------------------------------------------------------------ the pipeline
+    def add_scan(self, points: NDArray[np.float64], odometry: NDArray[np.float64]
+                 ) -> NDArray[np.float64]:
+        """Take one scan's car-frame points (M, 2) and the front end's pose for it; return the
+        online pose estimate (3,). Public so a recorded front-end run can be replayed."""
+        odometry = np.asarray(odometry, dtype=np.float64)
+        if not self.keyframes:
+            self._add_keyframe(points, odometry, 0.0)
+        else:
+            last = self.keyframes[-1]
+            step = relative(last.odometry, odometry)
+            if (np.hypot(step[0], step[1]) >= self.keyframe_distance
+                    or abs(step[2]) >= self.keyframe_angle):
+                self._add_keyframe(points, odometry, last.path_length + np.hypot(*step[:2]))
+        self._scan_keyframe.append(len(self.keyframes) - 1)
+        self._scan_odometry.append(odometry.copy())
+        last = self.keyframes[-1]
+        return compose(self.graph.poses[-1], relative(last.odometry, odometry))
+
+    def _add_keyframe(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
+                      path_length: float) -> None:
+        keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
+        if not self.keyframes:
+            self.graph.add_node(odometry)
+        else:
+            previous = self.keyframes[-1]
+            step = relative(previous.odometry, odometry)
+            index = self.graph.add_node(compose(self.graph.poses[-1], step))
+            self.graph.add_edge(index - 1, index, step, self._odometry_information(step))
+        self.keyframes.append(keyframe)
+        self._since_optimized += 1
+        if self._close_loops(len(self.keyframes) - 1):
+            self._dirty = True
+        if self._dirty and self._since_optimized >= self.optimize_every:
+            self.optimize()
+
+    def _odometry_information(self, step: NDArray[np.float64]) -> NDArray[np.float64]:
+        distance = float(np.hypot(step[0], step[1]))
+        sigma_xy = self.odometry_sigma + self.odometry_drift * distance
+        sigma_th = self.odometry_sigma_rotation + self.odometry_drift_rotation * distance
+        return np.diag([sigma_xy**-2, sigma_xy**-2, sigma_th**-2])
+
+    def _place(self, index: int) -> PlaceMap:
+        """The old place around keyframe ``index``: its points and its neighbours', in its
+        frame (cached; the neighbours' relative poses hardly change once optimised)."""
+        if index not in self._places:
+            poses = self.graph.poses
+            lo = max(0, index - self.submap_neighbours)
+            hi = min(len(self.keyframes), index + self.submap_neighbours + 1)
+            points = np.concatenate([
+                transform_points(relative(poses[index], poses[k]), self.keyframes[k].points)
+                for k in range(lo, hi)
+            ])
+            self._places[index] = PlaceMap(points, self.loop_params)
+        return self._places[index]
+
+    def loop_candidates(self, index: int) -> list[tuple[int, float]]:
+        """Old keyframes keyframe ``index`` may revisit, with their search window [m]: within
+        the pose uncertainty, best place descriptor first, at most ``max_candidates``."""
+        current = self.keyframes[index]
+        if index == 0:
+            return []
+        path = np.array([k.path_length for k in self.keyframes[:index]])
+        behind = current.path_length - path
+        radius = self.loop_radius + self.loop_drift * behind
+        poses = self.graph.poses
+        distance = np.hypot(*(poses[:index, :2] - poses[index, :2]).T)
+        eligible = np.flatnonzero((behind >= self.min_loop_separation) & (distance <= radius))
+        if len(eligible) == 0:
+            return []
+        similarity = np.array([descriptor_distance(current.descriptor,
+                                                   self.keyframes[k].descriptor)
+                               for k in eligible])
+        chosen: list[tuple[int, float]] = []
+        for k in eligible[np.argsort(similarity, kind="stable")]:
+            # one candidate per stretch of old path: neighbours share a submap anyway
+            if all(abs(k - other) > 2 * self.submap_neighbours for other, _ in chosen):
+                chosen.append((int(k), float(min(radius[k], self.max_search_window))))
+            if len(chosen) == self.max_candidates:
+                break
+        return chosen
+
+    def _close_loops(self, index: int) -> bool:
+        """Verify the candidates of keyframe ``index``; add the accepted ones as loop edges."""
+        added = False
+        poses = self.graph.poses
+        for old, window in self.loop_candidates(index):
+            guess = relative(poses[old], poses[index])
+            result = verify_loop(self._place(old), self.keyframes[index].points, guess, window,
+                                 self.loop_params)
+            self.loop_attempts.append((old, index, result))
+            if result.accepted:
+                self.graph.add_edge(old, index, result.pose, result.information, is_loop=True)
+                added = True
+        return added
+
+    def add_loop_closure(self, old: int, new: int, pose: NDArray[np.float64],
+                         information: NDArray[np.float64]) -> None:
+        """Add a loop edge by hand (keyframe ``new``'s pose in keyframe ``old``'s frame); it
+        is treated like a detected one: robust kernel, dropped if irreconcilable."""
+        self.graph.add_edge(old, new, pose, information, is_loop=True)
+        self._dirty = True
+
+    def optimize(self) -> None:
+        """Optimise the graph (Cauchy kernel on loop edges); drop loop edges whose error is
+        still above ``max_loop_sigma`` and optimise again without them."""
+        while True:
+            loops = self.graph.is_loop
+            result = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale,
+                              robust_edges=loops, max_iterations=50, tolerance=1e-8)
+            self.graph.poses = result.poses
+            bad = np.flatnonzero(loops & (result.chi2 > self.max_loop_sigma**2))
+            if len(bad) == 0:
+                break
+            edges = self.graph.edges
+            self.dropped_loops.extend((int(edges[k, 0]), int(edges[k, 1])) for k in bad)
+            self.graph.remove_edges(bad)
+        self._places.clear()
+        self._dirty = False
+        self._since_optimized = 0
+
+    # ------------------------------------------------------------------ results
+    @property
+    def trajectory(self) -> NDArray[np.float64]:
+        """``(N, 3)`` smoothed car poses, one per observation: each scan placed on its
+        keyframe's optimised pose by the front end's motion since that keyframe."""
+        if not self._scan_keyframe:
+            return np.zeros((0, 3))
+        if self._dirty:
+            self.optimize()
+        anchors = np.array(self._scan_keyframe)
+        keyframe_odometry = np.array([k.odometry for k in self.keyframes])[anchors]
+        offsets = relative(keyframe_odometry, np.array(self._scan_odometry))
+        smoothed = compose(self.graph.poses[anchors], offsets)
+        smoothed[:, 2] = wrap_angle(smoothed[:, 2])
+        return smoothed
+
+    @property
+    def odometry_trajectory(self) -> NDArray[np.float64]:
+        """``(N, 3)`` the front end's own poses, without loop closure."""
+        return np.array(self._scan_odometry).reshape(-1, 3)
+
+    @property
+    def n_loops(self) -> int:
+        """Loop edges in the graph now (accepted and kept)."""
+        return int(self.graph.is_loop.sum()) if self.graph.n_edges else 0
