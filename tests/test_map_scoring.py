@@ -143,3 +143,30 @@ def test_mismatched_shapes_and_bad_tolerance_are_readable_errors():
         save_map_figure("unused.png", {}, (0.0, 0.0, 1.0, 1.0))
     with pytest.raises(ValueError, match="bounds: expected"):
         save_map_figure("unused.png", {"true": truth})
+
+
+@pytest.mark.parametrize("world_name", ["open_cylinders", "hallway", "closed_to_open"])
+def test_true_pose_maps_of_the_built_in_worlds_reach_the_issue_targets(world_name):
+    import gymnasium as gym
+
+    import lidar_env  # noqa: F401  (registers DualLidar-v0)
+    from agents.scripted import PurePursuitDriver
+
+    env = gym.make("DualLidar-v0", world=world_name)
+    observation, info = env.reset(seed=0)
+    driver = PurePursuitDriver()
+    driver.reset(env)
+    observations, poses = [observation], [info["pose"]]
+    for _ in range(1000):
+        observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
+        observations.append(observation)
+        poses.append(info["pose"])
+        if terminated or truncated:
+            break
+    setup = SensorSetup.from_env(env)
+    truth = map_truth(env.unwrapped.world, np.array(poses), setup)
+    result = evaluate_run_map(truth, np.array(poses), observations, setup)
+    assert result.map_scores.iou >= 0.9
+    if result.cylinder_scores is not None:
+        assert result.cylinder_scores.recall >= 0.95
+        assert result.cylinder_scores.max_error <= 0.05
