@@ -25,6 +25,7 @@ _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
     "pc_fusion": ("estimators.fusion:FusionEstimator", {}),
     "icp": ("estimators.icp:ICPEstimator", {}),
     "lidar_odometry": ("estimators.local_map:LocalMapOdometry", {}),
+    "slam": ("estimators.slam:GraphSlam", {}),
 }
 
 

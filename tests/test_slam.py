@@ -1,0 +1,109 @@
+"""GraphSlam: a drifting odometry loop closes; an injected false loop does not bend the map;
+the registered pipeline runs end to end on ray-cast scans."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators import SensorSetup, make
+from estimators.scan_matching import scan_to_points
+from estimators.slam import GraphSlam
+from lidar_env.lidar import cast_rays
+from lidar_env.se2 import compose, relative, wrap_angle
+
+ANGLES = 2 * np.pi * np.arange(360) / 360
+MAX_RANGE = 12.0
+WALLS = np.array([[0, 0, 20, 0], [20, 0, 20, 14], [20, 14, 0, 14], [0, 14, 0, 0],
+                  [7, 0, 7, 3], [13, 14, 13, 11], [0, 7, 2.5, 7]], dtype=float)
+PILLARS = np.array([[5, 10, 0.4], [15, 4, 0.3], [10, 7, 1.0], [16.5, 10.5, 0.25]])
+
+
+def loop_poses(n: int = 300) -> np.ndarray:
+    """An ellipse around the central pillar, driven counter-clockwise, returning to its start
+    and going on for a tenth of a lap (so the start is revisited)."""
+    phase = 2 * np.pi * 1.1 * np.arange(n) / n
+    x, y = 10 + 6.5 * np.cos(phase), 7 + 4.2 * np.sin(phase)
+    heading = np.arctan2(4.2 * np.cos(phase), -6.5 * np.sin(phase))
+    return np.column_stack([x, y, heading])
+
+
+def scans(poses: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
+    ranges = cast_rays((PILLARS, WALLS), poses, ANGLES, MAX_RANGE)
+    noise = rng.normal(0, 0.01, ranges.shape)
+    noisy = np.where(ranges < MAX_RANGE, np.maximum(ranges + noise, 0.0), ranges)
+    return [row for row in noisy]
+
+
+def drifting_odometry(truth: np.ndarray) -> np.ndarray:
+    """Dead reckoning with a 2 % scale error and a 0.3 deg/m heading drift."""
+    steps = relative(truth[:-1], truth[1:])
+    distance = np.hypot(steps[:, 0], steps[:, 1])
+    steps[:, :2] *= 1.02
+    steps[:, 2] += np.radians(0.3) * distance
+    odometry = [truth[0]]
+    for step in steps:
+        odometry.append(compose(odometry[-1], step))
+    return np.array(odometry)
+
+
+def replay(slam: GraphSlam, truth: np.ndarray, odometry: np.ndarray, seed: int) -> None:
+    slam.reset(SensorSetup(np.zeros((1, 3)), ANGLES, MAX_RANGE), truth[0])
+    for ranges, odom in zip(scans(truth, np.random.default_rng(seed)), odometry, strict=True):
+        slam.add_scan(scan_to_points(ranges, ANGLES, MAX_RANGE), odom)
+
+
+@pytest.mark.slow
+def test_loop_closure_removes_the_drift_of_the_odometry() -> None:
+    truth = loop_poses()
+    odometry = drifting_odometry(truth)
+    slam = GraphSlam(min_loop_separation=8.0)
+    replay(slam, truth, odometry, seed=0)
+    smoothed = slam.trajectory
+    assert smoothed.shape == truth.shape
+    assert slam.n_loops >= 3
+    drift = np.hypot(*(odometry[-1, :2] - truth[-1, :2]))
+    assert drift > 0.5  # the test is worth running
+    assert np.hypot(*(smoothed[-1, :2] - truth[-1, :2])) < 0.05
+    ate = np.sqrt(np.mean(np.sum((smoothed[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    ate_odometry = np.sqrt(np.mean(np.sum((odometry[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    assert ate < ate_odometry / 3
+    assert np.all(np.abs(wrap_angle(smoothed[:, 2] - truth[:, 2])) < np.radians(1.0))
+
+
+@pytest.mark.slow
+def test_injected_false_loop_does_not_destroy_the_map() -> None:
+    truth = loop_poses()
+    slam = GraphSlam(min_loop_separation=8.0)
+    replay(slam, truth, drifting_odometry(truth), seed=1)
+    honest = slam.trajectory
+    # claim that a keyframe on the far side of the pillar is 0.3 m from the first one,
+    # as confidently as a real scan match would
+    far = int(np.argmax(np.hypot(*(slam.graph.poses[:, :2] - slam.graph.poses[0, :2]).T)))
+    slam.add_loop_closure(0, far, np.array([0.3, 0.0, 0.0]), np.diag([1e4, 1e4, 1e4]))
+    corrupted = slam.trajectory
+    assert (0, far) in slam.dropped_loops
+    np.testing.assert_allclose(corrupted[:, :2], honest[:, :2], atol=0.02)
+    assert np.hypot(*(corrupted[-1, :2] - truth[-1, :2])) < 0.05
+
+
+def test_registered_pipeline_runs_on_scans_and_reports_online_poses() -> None:
+    truth = loop_poses(120)[:60]
+    slam = make("slam")
+    assert isinstance(slam, GraphSlam)
+    setup = SensorSetup(np.zeros((1, 3)), ANGLES, MAX_RANGE)
+    slam.reset(setup, truth[0])
+    online = [slam.update({"lidar_1": r}, 0.1 * k)
+              for k, r in enumerate(scans(truth, np.random.default_rng(2)))]
+    assert np.hypot(*(online[-1][:2] - truth[-1, :2])) < 0.1
+    assert slam.trajectory.shape == (60, 3)
+    assert len(slam.keyframes) >= 10
+
+
+def test_bad_settings_are_named() -> None:
+    with pytest.raises(KeyError, match="unknown estimator 'nope': expected one of"):
+        GraphSlam(frontend="nope")
+    with pytest.raises(ValueError, match="frontend: expected an odometry estimator"):
+        GraphSlam(frontend="slam")
+    with pytest.raises(ValueError, match="keyframe_distance: expected a positive value"):
+        GraphSlam(keyframe_distance=0.0)
