@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
@@ -158,6 +159,24 @@ class PlaceMap:
         self.reference = PointToLineReference(thinned, normals, valid)
 
 
+@njit(cache=True)
+def _sum_cells(grid: NDArray[np.float64], base: NDArray[np.int64],
+               offsets: NDArray[np.int64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
+    """Mean of ``grid`` over the cells ``base`` (M, 2) moved by each of ``offsets`` (S, 2);
+    cells outside the grid count 0."""
+    n_rows, n_cols = grid.shape
+    out = np.zeros(len(offsets))
+    for s in range(len(offsets)):
+        total = 0.0
+        for m in range(len(base)):
+            i = base[m, 0] + offsets[s, 0]
+            j = base[m, 1] + offsets[s, 1]
+            if 0 <= i < n_rows and 0 <= j < n_cols:
+                total += grid[i, j]
+        out[s] = total / max(len(base), 1)
+    return out
+
+
 def _grid_scores(
     grid: NDArray[np.float64], origin: NDArray[np.float64], resolution: float,
     points: NDArray[np.float64], shifts: NDArray[np.float64],
@@ -165,12 +184,7 @@ def _grid_scores(
     """Mean grid value of ``points`` (M, 2) under every translation ``shifts`` (S, 2)."""
     base = np.floor((points - origin) / resolution).astype(np.int64)
     offsets = np.rint(shifts / resolution).astype(np.int64)
-    cells = base[None, :, :] + offsets[:, None, :]
-    inside = ((cells[..., 0] >= 0) & (cells[..., 0] < grid.shape[0])
-              & (cells[..., 1] >= 0) & (cells[..., 1] < grid.shape[1]))
-    values = np.zeros(cells.shape[:2])
-    values[inside] = grid[cells[inside][:, 0], cells[inside][:, 1]]
-    return values.mean(axis=1)
+    return _sum_cells(grid, base, offsets)
 
 
 def correlative_match(
