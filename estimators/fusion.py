@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 
 from estimators.base import Estimator
 from estimators.rotation_pc import PreparedScan, ScanMatcher, constant_velocity
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -206,9 +206,10 @@ class _Keyframe:
 class FusionEstimator(Estimator):
     """Both Lidars, all four same- and cross-sensor matches, fused on SE(2) over keyframes.
 
-    Every scan pair is matched by :class:`estimators.rotation_pc.ScanMatcher` (rotation-aware
-    phase correlation, then ``icp_iterations`` of point-to-line ICP) against the latest
-    keyframe, and the four edges (paper Fig. 4) give the car pose by :func:`optimize_poses`.
+    Every scan pair is matched by :class:`estimators.rotation_pc.ScanMatcher` against the
+    latest keyframe -- the same-sensor pairs by rotation-aware phase correlation, all four by
+    ``icp_iterations`` of point-to-curve ICP -- and the four edges (paper Fig. 4) give the car
+    pose by :func:`optimize_poses`.
     When the car has moved ``keyframe_distance`` [m] or turned ``keyframe_turn`` [rad] from that
     keyframe, the scans become a keyframe: they are also matched against the older keyframes
     of the window (``window`` keyframes in all) and the window's poses are re-solved with its
@@ -241,6 +242,13 @@ class FusionEstimator(Estimator):
     _last_dt: float = field(default=0.0, init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if isinstance(self.icp_iterations, bool) or not (
+            isinstance(self.icp_iterations, int) and self.icp_iterations >= 1
+        ):
+            raise ValueError(
+                f"icp_iterations: expected an integer >= 1 (the cross-sensor edges are "
+                f"refined matches), got {self.icp_iterations!r}"
+            )
         if isinstance(self.window, bool) or not (isinstance(self.window, int) and self.window >= 1):
             raise ValueError(f"window: expected an integer >= 1 keyframes, got {self.window!r}")
         if not (self.keyframe_distance > 0 and self.keyframe_turn > 0):
@@ -278,18 +286,43 @@ class FusionEstimator(Estimator):
         self._edges = [(a, b, e) for a, b, e in self._edges if a >= first]
 
     def _match_all(
-        self, keyframe: _Keyframe, scans: tuple[PreparedScan, ...], motion_guess: FloatArray
+        self,
+        keyframe: _Keyframe,
+        scans: tuple[PreparedScan, ...],
+        motion_guess: FloatArray,
+        correlate: bool,
     ) -> list[SensorEdge]:
         """The four (or, with one Lidar, one) matches of ``scans`` against ``keyframe``; nodes
         0 (keyframe) and 1 (scans). ``motion_guess``: predicted car motion between them, which
-        each match gets as its prior ``mount_i⁻¹ ⊕ guess ⊕ mount_j``."""
+        each match gets as its prior ``mount_i⁻¹ ⊕ guess ⊕ mount_j``.
+
+        ``correlate``: the same-sensor pairs run the full rotation-aware phase correlation and
+        the cross-sensor pairs are refined from the car motion those imply (the correlation's
+        FFTs are the dearest part of a match, and the same-sensor pairs share the most scene);
+        otherwise every pair is refined from ``motion_guess``.
+        """
         assert self._matcher is not None and self.setup is not None
         mounts = self.setup.mounts
+        sensors = range(len(scans))
+        same = {}
+        if correlate:
+            for i in sensors:
+                prior = relative(mounts[i], compose(motion_guess, mounts[i]))
+                same[i] = self._matcher.match(keyframe.scans[i], scans[i], prior)
+            # The cross pairs start from the car motion of the most confident same-sensor match.
+            best = max(same, key=lambda i: same[i].confidence)
+            seed = compose(compose(mounts[best], same[best].pose), inverse(mounts[best]))
+        else:
+            seed = motion_guess
         edges = []
-        for i, earlier in enumerate(keyframe.scans):
-            for j, later in enumerate(scans):
+        for i in sensors:
+            for j in sensors:
                 prior = relative(mounts[i], compose(motion_guess, mounts[j]))
-                match = self._matcher.match(earlier, later, prior)
+                if i in same and i == j:
+                    match = same[i]
+                else:
+                    start = relative(mounts[i], compose(seed, mounts[j]))
+                    match = self._matcher.refine(keyframe.scans[i], scans[j], [start], prior)
                 edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
         return edges
 
@@ -308,7 +341,7 @@ class FusionEstimator(Estimator):
         dt = t - self._times[-1]
         predicted = compose(self.pose, constant_velocity(self._motion, self._last_dt, dt))
         guess = relative(latest.pose, predicted)
-        edges = self._match_all(latest, current, guess)
+        edges = self._match_all(latest, current, guess, correlate=True)
         from_latest = fuse_car_motion(mounts, edges, guess, **self._weights())
         pose = compose(latest.pose, from_latest)
         if (
@@ -332,7 +365,9 @@ class FusionEstimator(Estimator):
         for offset, keyframe in enumerate(self._keyframes[:-1]):
             guess = relative(keyframe.pose, pose)
             ids = (first + offset, new_id)
-            self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
+            self._edges.extend(
+                (*ids, e) for e in self._match_all(keyframe, scans, guess, correlate=False)
+            )
         self._add_keyframe(_Keyframe(pose, scans))
         first = self._n_keyframes - len(self._keyframes)
         if len(self._keyframes) > 1:

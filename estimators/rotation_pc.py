@@ -325,21 +325,37 @@ class ScanMatcher:
         pose = np.array([translation[0], translation[1], rotation.angle])
         # Peak-to-runner-up ratio r >= 1 maps to 1 - 1/r: 0 when ambiguous, -> 1 when unique.
         confidence = rotation.confidence * (1.0 - 1.0 / max(correlation.confidence, 1.0))
-        if earlier.reference is not None and len(later.points) >= 3:
-            starts = [pose]
-            if prior is not None and np.any(np.abs(_pose_difference(pose, prior)) > PRIOR_SIGMA):
-                starts.append(prior)  # the correlation disagrees with the motion so far
-            refined = [
-                refine_on_curves(earlier.reference, later.points, start, self.icp_iterations, prior)
-                for start in starts
-            ]
-            best_quality = max(quality for _, quality in refined)
-            candidates = [r for r in refined if r[1] >= best_quality - QUALITY_TOLERANCE]
-            if prior is not None:
-                candidates.sort(
-                    key=lambda r: float(np.sum((_pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
-                )
-            pose, confidence = candidates[0]
+        if earlier.reference is None or len(later.points) < 3:
+            return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+        starts = [pose]
+        if prior is not None and np.any(np.abs(_pose_difference(pose, prior)) > PRIOR_SIGMA):
+            starts.append(prior)  # the correlation disagrees with the motion so far
+        return self.refine(earlier, later, starts, prior)
+
+    def refine(
+        self,
+        earlier: PreparedScan,
+        later: PreparedScan,
+        starts: list[FloatArray],
+        prior: FloatArray | None = None,
+    ) -> ScanMatch:
+        """Point-to-curve refinement (:func:`refine_on_curves`) from each of the ``starts``
+        (poses of the later sensor in the earlier one's frame); the best fit wins, and among
+        fits equally good within ``QUALITY_TOLERANCE`` the one nearest ``prior``.
+        Needs a matcher with ``icp_iterations > 0``."""
+        if earlier.reference is None:
+            raise ValueError("refine: expected a matcher with icp_iterations > 0, got 0")
+        refined = [
+            refine_on_curves(earlier.reference, later.points, start, self.icp_iterations, prior)
+            for start in starts
+        ]
+        best_quality = max(quality for _, quality in refined)
+        candidates = [r for r in refined if r[1] >= best_quality - QUALITY_TOLERANCE]
+        if prior is not None:
+            candidates.sort(
+                key=lambda r: float(np.sum((_pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
+            )
+        pose, confidence = candidates[0]
         return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
 
 
