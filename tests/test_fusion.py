@@ -4,14 +4,19 @@ least squares. Oracle: edges generated from known car poses and mounts."""
 import numpy as np
 import pytest
 
+import estimators
+from estimators.base import LIDAR_KEYS, SensorSetup, default_beam_angles
 from estimators.fusion import (
     SensorEdge,
     fuse_car_motion,
     optimize_poses,
     predict_edges,
 )
+from estimators.metrics import evaluate
 from estimators.rotation_pc import motion_from_sensor_match
+from lidar_env.lidar import Lidar
 from lidar_env.se2 import compose, relative
+from lidar_env.world import World
 
 MOUNTS = np.array([[0.25, 0.05, 0.1], [-0.25, -0.1, -0.4]])
 
@@ -113,3 +118,60 @@ def test_bad_graphs_raise_readable_errors(kwargs, message) -> None:
     arguments.update(kwargs)
     with pytest.raises(ValueError, match=message):
         optimize_poses(**arguments)
+
+
+def drive_in_room(steps: int, motion: np.ndarray, n_lidars: int = 2):
+    """Noisy scans of a car moving by ``motion`` per scan through a room of cylinders."""
+    rng = np.random.default_rng(21)
+    walls = [[-8, -8, 8, -8], [8, -8, 8, 8], [8, 8, -8, 8], [-8, 8, -8, -8]]
+    centres = rng.uniform(-7, 7, (60, 2))
+    centres = centres[np.hypot(*centres.T) > 3.5][:14]
+    world = World(np.column_stack([centres, rng.uniform(0.15, 0.5, len(centres))]), walls)
+    mounts = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])[:n_lidars]
+    poses = [np.array([-1.0, -0.5, 0.3])]
+    for _ in range(steps):
+        poses.append(compose(poses[-1], motion))
+    poses = np.array(poses)
+    lidar = Lidar(noise_std=0.01)
+    observations = [
+        dict(zip(LIDAR_KEYS, lidar.scan(world, compose(pose, mounts), rng), strict=False))
+        for pose in poses
+    ]
+    return SensorSetup(mounts, default_beam_angles(360), 10.0), observations, poses
+
+
+@pytest.mark.parametrize("n_lidars", [2, 1])
+def test_fusion_estimator_follows_a_curve_to_millimetres_per_step(n_lidars) -> None:
+    setup, observations, truth = drive_in_room(40, np.array([0.1, 0.0, 0.04]), n_lidars)
+    estimator = estimators.make("pc_fusion")
+    estimator.reset(setup, truth[0])
+    for k, observation in enumerate(observations):
+        estimator.update(observation, 0.1 * k)
+    scores = evaluate(estimator.trajectory, truth)
+    assert scores.accuracy_percent > 98.0
+    assert scores.drift_percent < 0.5
+    assert scores.heading_rmse_deg < 0.2
+
+
+def test_fusion_estimator_standing_still_does_not_drift() -> None:
+    setup, observations, truth = drive_in_room(30, np.zeros(3))
+    estimator = estimators.make("pc_fusion")
+    estimator.reset(setup, truth[0])
+    for k, observation in enumerate(observations):
+        estimator.update(observation, 0.1 * k)
+    errors = estimator.trajectory - truth
+    assert np.abs(errors[:, :2]).max() < 0.003
+    assert np.abs(errors[:, 2]).max() < np.radians(0.1)
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"window": 0}, "window"),
+        ({"keyframe_distance": 0.0}, "keyframe_distance"),
+        ({"icp_iterations": 0}, "icp_iterations"),
+    ],
+)
+def test_bad_fusion_settings_raise_readable_errors(params, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        estimators.make("pc_fusion", **params)
