@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from estimators.base import SensorSetup
 from estimators.occupancy import sensor_poses
@@ -286,6 +287,7 @@ class Track:
         position: ``(2,)`` world position [m]: the circle centre of a round track, else the
             latest centroid.
         circle: joint circle fit of all round detections, or ``None``.
+        points: ``(m, 2)`` world returns [m] of the latest step it was detected in.
         hits: detections joined so far.
         first_step, last_step: steps of the first and the latest detection.
     """
@@ -293,15 +295,36 @@ class Track:
     id: int
     position: NDArray[np.float64]
     circle: CircleFit | None
+    points: NDArray[np.float64]
     hits: int
     first_step: int
     last_step: int
     _origin: NDArray[np.float64] = field(repr=False)
-    _normal: NDArray[np.float64] = field(repr=False)
-    _rhs: NDArray[np.float64] = field(repr=False)
+    _reach: tuple[NDArray[np.float64], float] = field(init=False, repr=False)
+    _tree: cKDTree | None = field(default=None, init=False, repr=False)
+    _normal: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)), repr=False)
+    _rhs: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), repr=False)
+
+    def __post_init__(self) -> None:
+        self._reach = _bounding_circle(self.points)
+
+    @property
+    def reach(self) -> tuple[NDArray[np.float64], float]:
+        """Centre (2,) [m] and radius [m] of a circle holding :attr:`points`."""
+        return self._reach
+
+    def surface_distance(self, points: NDArray[np.float64]) -> float:
+        """Smallest distance [m] from ``points`` (m, 2) to this track's latest returns."""
+        if self._tree is None:
+            self._tree = cKDTree(self.points)
+        return float(np.min(self._tree.query(points)[0]))
 
     def add(self, obstacle: Obstacle, step: int) -> None:
         """Join ``obstacle`` (detected at ``step``) to this track."""
+        same_step = self.hits > 0 and step == self.last_step  # e.g. seen by both Lidars
+        self.points = np.vstack([self.points, obstacle.points]) if same_step else obstacle.points
+        self._reach = _bounding_circle(self.points)
+        self._tree = None
         self.hits += 1
         self.last_step = step
         if obstacle.circle is None:
@@ -319,48 +342,75 @@ class Track:
             self.position = self.circle.centre
 
 
+def _bounding_circle(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """A circle holding ``points`` (m, 2): their mean and the largest distance from it [m]."""
+    centre = points.mean(axis=0)
+    return centre, float(np.sqrt(np.max(np.sum((points - centre) ** 2, axis=1))))
+
+
 @dataclass
 class ObstacleTracker:
-    """Gives each static obstacle one id across steps (nearest neighbour within ``gate`` [m]).
+    """Gives each static obstacle one id across steps (nearest neighbour within a gate).
+
+    A detection joins the nearest track by position (circle centre or centroid) within
+    ``gate`` [m]; an extended (not round) detection may instead join the track whose latest
+    returns come within ``surface_gate`` [m] of its own, so a wall whose centroid wanders as
+    the car drives along it keeps its id.
 
     ``gate`` defaults to 0.5 m: several times the per-step drift of a usable pose estimate and
     larger than the radius of the round obstacles we fit (so an arc's centroid and its fitted
     centre fall in one gate), yet below the spacing of obstacles a car can pass between
-    (its width, 0.5 m here, plus margins)."""
+    (its width, 0.5 m here, plus margins). ``surface_gate`` defaults to 0.2 m: the returns of
+    one surface in consecutive scans lie within one beam spacing of each other (0.17 m at 10 m
+    for 1-degree beams), while distinct obstacles this close are one obstacle to a car."""
 
     gate: float = 0.5
+    surface_gate: float = 0.2
     tracks: list[Track] = field(default_factory=list)
     _step: int = field(default=-1, repr=False)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.gate) and self.gate > 0):
-            raise ValueError(f"gate: expected a positive distance [m], got {self.gate!r}")
+        for name in ("gate", "surface_gate"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a positive distance [m], got {value!r}")
 
     def update(self, obstacles: list[Obstacle]) -> list[int]:
         """Associate one step's detections (from any number of Lidars); return their track ids."""
         self._step += 1
         ids = []
         for obstacle in obstacles:
-            track = self.nearest(obstacle.position)
+            track = self.nearest(obstacle)
             if track is None:
                 track = Track(
-                    id=len(self.tracks), position=obstacle.position.copy(), circle=None, hits=0,
-                    first_step=self._step, last_step=self._step,
-                    _origin=obstacle.centroid.copy(), _normal=np.zeros((3, 3)), _rhs=np.zeros(3),
+                    id=len(self.tracks), position=obstacle.position.copy(), circle=None,
+                    points=obstacle.points, hits=0, first_step=self._step,
+                    last_step=self._step, _origin=obstacle.centroid.copy(),
                 )
                 self.tracks.append(track)
             track.add(obstacle, self._step)
             ids.append(track.id)
         return ids
 
-    def nearest(self, position: NDArray[np.float64]) -> Track | None:
-        """The track nearest to ``position`` (2,) [m] within the gate, or ``None``."""
+    def nearest(self, obstacle: Obstacle) -> Track | None:
+        """The track ``obstacle`` belongs to (see the class doc), or ``None``."""
         if not self.tracks:
             return None
         positions = np.array([t.position for t in self.tracks])
-        distances = np.hypot(*(positions - position).T)
+        distances = np.hypot(*(positions - obstacle.position).T)
+        distances[distances > self.gate] = np.inf
+        if obstacle.circle is None:
+            # only tracks whose returns could be within surface_gate: bounding circles first
+            centre, radius = _bounding_circle(obstacle.points)
+            centres = np.array([t.reach[0] for t in self.tracks])
+            radii = np.array([t.reach[1] for t in self.tracks])
+            near = np.hypot(*(centres - centre).T) <= radius + radii + self.surface_gate
+            for i in np.flatnonzero(near):
+                surface = self.tracks[i].surface_distance(obstacle.points)
+                if surface <= self.surface_gate:
+                    distances[i] = min(distances[i], surface)
         best = int(np.argmin(distances))
-        return self.tracks[best] if distances[best] <= self.gate else None
+        return self.tracks[best] if np.isfinite(distances[best]) else None
 
     def cylinders(self, min_hits: int = 3) -> NDArray[np.float64]:
         """``(M, 3)`` rows ``cx, cy, r`` [m] of the round tracks seen at least ``min_hits``

@@ -108,6 +108,22 @@ def test_track_ids_stay_stable_while_the_car_drives_by_with_both_lidars():
         assert cylinders[best, 2] == pytest.approx(r, abs=0.02)
 
 
+def test_a_wall_keeps_its_id_while_its_centroid_moves_along_with_the_car():
+    # two 30 m walls of a 4 m wide corridor; a fast car (6 m/s at 10 Hz) drives 6 m along it:
+    # the visible part of each wall (and so its centroid) jumps 0.6 m per step, beyond the
+    # position gate, but its returns overlap from step to step
+    world = World(segments=[[-15.0, 2.0, 15.0, 2.0], [-15.0, -2.0, 15.0, -2.0]])
+    rng = np.random.default_rng(2)
+    tracker = ObstacleTracker()
+    ids = {2.0: set(), -2.0: set()}
+    for k in range(11):
+        pose = np.array([-3.0 + 0.6 * k, 0.3, 0.02 * np.sin(k)])
+        detections = detect_obstacles(noisy_scan(world, pose, rng), ANGLES, pose, MAX_RANGE)
+        for detection, track_id in zip(detections, tracker.update(detections), strict=True):
+            ids[round(float(np.median(detection.points[:, 1])))].add(track_id)
+    assert len(ids[2.0]) == 1 and len(ids[-2.0]) == 1 and ids[2.0] != ids[-2.0]
+
+
 def test_bad_parameters_are_readable_errors():
     with pytest.raises(ValueError, match="grazing_angle"):
         DetectorParams(grazing_angle=2.0)
@@ -115,5 +131,7 @@ def test_bad_parameters_are_readable_errors():
         DetectorParams(min_circle_points=3)
     with pytest.raises(ValueError, match="gate: expected a positive distance"):
         ObstacleTracker(gate=0.0)
+    with pytest.raises(ValueError, match="surface_gate: expected a positive distance"):
+        ObstacleTracker(surface_gate=-1.0)
     with pytest.raises(ValueError, match="sensor_pose: expected 3 finite numbers"):
         detect_obstacles(np.ones(360), ANGLES, [0.0, 0.0], MAX_RANGE)
