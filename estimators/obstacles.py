@@ -15,8 +15,10 @@ the sensor and no larger than ``max_radius``, is a round obstacle with a centre 
 
 Tracking (:class:`ObstacleTracker`): nearest-neighbour association with a gate. A detection
 joins the track whose position (circle centre for round obstacles, else centroid) is nearest,
-if it lies within ``gate`` [m]; several detections may join one track in one step, which is how
-the same obstacle seen by both Lidars gets one id. The gate must exceed how far a static
+if it lies within ``gate`` [m], or, if it is extended, the track whose latest returns come
+within ``surface_gate`` [m] of its own (a wall's centroid moves with the car, its surface does
+not); several detections may join one track in one step, which is how the same obstacle seen
+by both Lidars gets one id. The gate must exceed how far a static
 obstacle's reported position moves between steps (pose-estimate drift per step, and for a round
 obstacle the jump from arc centroid to fitted centre, at most its radius) and stay below the
 distance between distinct obstacles. A round track's circle is the joint Kåsa fit of every point
