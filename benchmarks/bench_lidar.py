@@ -4,8 +4,10 @@ Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 10 s).
 
 The worlds are built inline and bracket the built-in ones: 40 cylinders + 100 free-standing
 walls, and 80 + 220, inside a 40 m x 40 m boundary (144 and 304 primitives), in which a 10 m
-Lidar sees a fair share of the obstacles. Both methods scan the same random free car poses with the
-default mounts (lidar_1 at +0.25 m, lidar_2 at -0.25 m); their results are checked to agree.
+Lidar sees a fair share of the obstacles; and a 1000 x 1000 px occupancy map at 5 cm traced
+by ``World.from_image`` (thousands of edges), the paper's kind of world. Both methods scan the
+same random free car poses with the default mounts (lidar_1 at +0.25 m, lidar_2 at -0.25 m);
+their results are checked to agree.
 """
 
 from __future__ import annotations
@@ -40,10 +42,26 @@ def representative_world(rng: np.random.Generator, n_circles: int, n_walls: int)
     return World(circles, np.vstack([np.hstack([starts, ends]), boundary]), name="bench")
 
 
+def occupancy_map_world(rng: np.random.Generator, pixels: int = 1000) -> World:
+    """A ``pixels`` x ``pixels`` occupancy image at 5 cm (the paper's kind of world map):
+    a border wall, 150 discs and 60 rectangles, traced by :meth:`World.from_image`."""
+    image = np.zeros((pixels, pixels), dtype=np.uint8)
+    image[:8], image[-8:], image[:, :8], image[:, -8:] = 255, 255, 255, 255
+    rows, cols = np.ogrid[:pixels, :pixels]
+    for _ in range(150):
+        r, c, radius = rng.integers(20, pixels - 20, 2).tolist() + [rng.integers(4, 20)]
+        image[(rows - r) ** 2 + (cols - c) ** 2 < radius**2] = 255
+    for _ in range(60):
+        r, c = rng.integers(20, pixels - 60, 2)
+        image[r : r + rng.integers(4, 50), c : c + rng.integers(4, 50)] = 255
+    return World.from_image(image, 0.05, name="occupancy map")
+
+
 def free_sensor_poses(world: World, rng: np.random.Generator, count: int) -> np.ndarray:
     """``(count, 2, 3)`` sensor poses of cars whose both Lidars have >= 0.3 m clearance."""
+    xmin, ymin, xmax, ymax = world.bounds
     cars = np.column_stack(
-        [rng.uniform(-19, 19, 20 * count), rng.uniform(-19, 19, 20 * count),
+        [rng.uniform(xmin + 1, xmax - 1, 20 * count), rng.uniform(ymin + 1, ymax - 1, 20 * count),
          rng.uniform(-np.pi, np.pi, 20 * count)]
     )
     sensors = np.stack([compose(cars, mount) for mount in MOUNTS], axis=1)
@@ -124,6 +142,8 @@ def main() -> None:
     for n_circles, n_walls in ((40, 100), (80, 220)):
         world = representative_world(rng, n_circles, n_walls)
         bench_world(world, free_sensor_poses(world, rng, args.poses), lidar)
+    world = occupancy_map_world(rng)
+    bench_world(world, free_sensor_poses(world, rng, args.poses), lidar)
 
 if __name__ == "__main__":
     main()
