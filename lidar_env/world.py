@@ -131,8 +131,9 @@ def _as_polygon(vertices: ArrayLike, index: int) -> NDArray[np.float64]:
         raise ValueError(f"polygons[{index}]: expected shape (k, 2), got {polygon.shape}")
     if not np.all(np.isfinite(polygon)):
         raise ValueError(f"polygons[{index}]: expected finite vertices, got NaN or inf")
-    if len(polygon) > 1 and np.array_equal(polygon[0], polygon[-1]):
-        polygon = polygon[:-1]
+    # Drop repeated consecutive vertices (including a closing copy of the first): they would
+    # make zero-length edges.
+    polygon = polygon[np.any(polygon != np.roll(polygon, 1, axis=0), axis=1)].copy()
     if len(polygon) < 3:
         raise ValueError(f"polygons[{index}]: expected >= 3 distinct vertices, got {len(polygon)}")
     if abs(_signed_area(polygon)) <= 0.0:
@@ -205,13 +206,13 @@ class World:
         bounds: Sequence[float] | None = None,
     ) -> None:
         self.name = str(name)
-        self.circles = _as_rows(circles, 3, "circles")
+        self.circles = _as_rows(circles, 3, "circles").copy()
         if np.any(self.circles[:, 2] <= 0):
             bad = int(np.argmax(self.circles[:, 2] <= 0))
             raise ValueError(
                 f"circles[{bad}]: expected a positive radius, got {self.circles[bad, 2]}"
             )
-        self.walls = _as_rows(segments, 4, "segments")
+        self.walls = _as_rows(segments, 4, "segments").copy()
         lengths = np.hypot(*(self.walls[:, 2:4] - self.walls[:, 0:2]).T)
         if np.any(lengths <= 0):
             bad = int(np.argmax(lengths <= 0))
@@ -228,6 +229,9 @@ class World:
         self.polygon_edges = np.vstack(edges) if edges else np.zeros((0, 4))
         self.segments = np.ascontiguousarray(np.vstack([self.walls, self.polygon_edges]))
         self.bounds = self._check_bounds(bounds)
+        # Read-only: the lazily built grid (and anyone holding the arrays) must stay valid.
+        for array in (self.circles, self.walls, self.polygon_edges, self.segments, *self.polygons):
+            array.flags.writeable = False
 
     def _check_bounds(self, bounds: Sequence[float] | None) -> tuple[float, float, float, float]:
         if bounds is None:

@@ -59,6 +59,18 @@ def test_arrays_and_bounds() -> None:
     assert World(bounds=(0, 0, 1, 1)).n_primitives == 0
 
 
+def test_arrays_are_read_only_copies() -> None:
+    circles = np.array([[0.0, 0.0, 1.0]])
+    square = np.vstack([SQUARE[:2], SQUARE[1:2], SQUARE[2:]])  # a repeated vertex
+    world = World(circles, polygons=[square])
+    assert circles.flags.writeable, "the caller's array is left alone"
+    assert len(world.polygons[0]) == 4, "repeated vertices make no zero-length edges"
+    with pytest.raises(ValueError, match="read-only"):
+        world.circles[0, 2] = 5.0
+    with pytest.raises(ValueError, match="read-only"):
+        world.segments[0, 0] = 5.0
+
+
 def test_pickles_cheaply() -> None:
     world = World.from_image(blob_image(np.random.default_rng(0)), 0.1)
     data = pickle.dumps(world)
