@@ -21,7 +21,7 @@ trajectory, every scan re-anchored on its keyframe's final pose after a last opt
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +39,7 @@ from estimators.loop_closure import (
 from estimators.pose_graph import PoseGraph, optimize
 from estimators.registry import make
 from estimators.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
-from lidar_env.se2 import compose, relative, transform_points, wrap_angle
+from lidar_env.se2 import compose, inverse, relative, transform_points, wrap_angle
 
 
 @dataclass
@@ -83,6 +83,17 @@ class GraphSlam(Estimator):
             are dropped (5: far outside any honest measurement's spread).
         optimize_every: after a loop closure, optimise again once this many keyframes were
             added (5, i.e. ~2.5 m; the final trajectory is always optimised).
+        global_every, global_candidates, global_window, max_descriptor_distance: when the
+            drift may exceed any local window, every ``global_every``-th keyframe without a
+            recent local loop is matched against the 2 old keyframes with the most similar
+            descriptor (closer than 0.3), over all headings and +-2 m (true revisits pass
+            within a keyframe spacing plus a corridor's width of the old path). Off by
+            default (0): on ACES its look-alike corridors gave more false matches than true
+            ones (see the benchmark notes in the report).
+        global_confirmation: a global match becomes a loop edge only when a second one within
+            this many keyframes implies the same correction (10 keyframes; agreement within
+            ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
+            place is common indoors, two consistent ones in a row rarely are.
         min_range: readings at or below this [m] are "no return".
     """
 
@@ -103,6 +114,13 @@ class GraphSlam(Estimator):
     loss_scale: float = 3.0
     max_loop_sigma: float = 5.0
     optimize_every: int = 5
+    global_every: int = 0
+    global_candidates: int = 2
+    global_window: float = 2.0
+    max_descriptor_distance: float = 0.3
+    global_confirmation: int = 10
+    consistency_distance: float = 0.3
+    consistency_angle: float = np.radians(3.0)
     min_range: float = DEFAULT_MIN_RANGE
     loop_params: LoopClosureParams = field(default_factory=LoopClosureParams)
 
@@ -116,7 +134,10 @@ class GraphSlam(Estimator):
                      "min_loop_separation"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name}: expected a value >= 0, got {getattr(self, name)}")
-        for name in ("max_candidates", "optimize_every"):
+        if self.global_every < 0:
+            raise ValueError(f"global_every: expected >= 0 (0 = off), got {self.global_every}")
+        for name in ("max_candidates", "optimize_every", "global_candidates",
+                     "global_confirmation"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.submap_neighbours < 0:
@@ -139,6 +160,9 @@ class GraphSlam(Estimator):
         self._since_optimized = 0
         self.loop_attempts: list[tuple[int, int, LoopVerification]] = []
         self.dropped_loops: list[tuple[int, int]] = []
+        self._pending: list[tuple[int, int, LoopVerification]] = []
+        self._last_loop = -(10**9)
+        self._global_params = replace(self.loop_params, angular_window=np.pi)
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._frontend.update(scans, t)
@@ -179,8 +203,13 @@ class GraphSlam(Estimator):
             self.graph.add_edge(index - 1, index, step, self._odometry_information(step))
         self.keyframes.append(keyframe)
         self._since_optimized += 1
-        if self._close_loops(len(self.keyframes) - 1):
+        index = len(self.keyframes) - 1
+        if self._close_loops(index):
             self._dirty = True
+            self._last_loop = index
+        elif (self.global_every and index % self.global_every == 0
+              and index - self._last_loop > self.global_confirmation):
+            self._close_global_loops(index)
         if self._dirty and self._since_optimized >= self.optimize_every:
             self.optimize()
 
@@ -244,6 +273,43 @@ class GraphSlam(Estimator):
                 added = True
         return added
 
+    def _close_global_loops(self, index: int) -> None:
+        """Match keyframe ``index`` over all headings against look-alike old keyframes; add
+        loop edges once two matches agree on the correction (then optimise at once, trusting
+        them: the robust kernel would otherwise refuse a correction of many metres)."""
+        current = self.keyframes[index]
+        path = np.array([k.path_length for k in self.keyframes[:index]])
+        old = np.flatnonzero(current.path_length - path >= self.min_loop_separation)
+        if len(old) == 0:
+            return
+        distance = np.array([descriptor_distance(current.descriptor, self.keyframes[k].descriptor)
+                             for k in old])
+        order = np.argsort(distance, kind="stable")[: self.global_candidates]
+        self._pending = [p for p in self._pending if index - p[1] <= self.global_confirmation]
+        poses = self.graph.poses
+        for k in old[order][distance[order] <= self.max_descriptor_distance]:
+            result = verify_loop(self._place(int(k)), current.points, np.zeros(3),
+                                 self.global_window, self._global_params)
+            self.loop_attempts.append((int(k), index, result))
+            if not result.accepted:
+                continue
+            # where the match puts this keyframe, as a correction of the whole graph
+            correction = compose(compose(poses[k], result.pose), inverse(poses[index]))
+            for old_k, new_k, other in self._pending:
+                predicted = relative(poses[old_k], compose(correction, poses[new_k]))
+                error = relative(predicted, other.pose)
+                if (np.hypot(error[0], error[1]) <= self.consistency_distance
+                        and abs(error[2]) <= self.consistency_angle):
+                    self.graph.add_edge(old_k, new_k, other.pose, other.information, True)
+                    self.graph.add_edge(int(k), index, result.pose, result.information, True)
+                    trusted = np.zeros(self.graph.n_edges, dtype=bool)
+                    trusted[-2:] = True
+                    self.optimize(trusted=trusted)
+                    self._pending.clear()
+                    self._last_loop = index
+                    return
+            self._pending.append((int(k), index, result))
+
     def add_loop_closure(self, old: int, new: int, pose: NDArray[np.float64],
                          information: NDArray[np.float64]) -> None:
         """Add a loop edge by hand (keyframe ``new``'s pose in keyframe ``old``'s frame); it
@@ -251,9 +317,17 @@ class GraphSlam(Estimator):
         self.graph.add_edge(old, new, pose, information, is_loop=True)
         self._dirty = True
 
-    def optimize(self) -> None:
+    def optimize(self, trusted: NDArray[np.bool_] | None = None) -> None:
         """Optimise the graph (Cauchy kernel on loop edges); drop loop edges whose error is
-        still above ``max_loop_sigma`` and optimise again without them."""
+        still above ``max_loop_sigma`` and optimise again without them.
+
+        ``trusted`` (E,) marks loop edges that get plain least squares in a first pass (a
+        confirmed global loop that moves the graph by more than the kernel's scale)."""
+        if trusted is not None:
+            first = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale,
+                             robust_edges=self.graph.is_loop & ~trusted, max_iterations=100,
+                             tolerance=1e-8)
+            self.graph.poses = first.poses
         while True:
             loops = self.graph.is_loop
             result = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale,
