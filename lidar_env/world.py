@@ -452,10 +452,22 @@ def _point_queries(
 
 
 def _convex_pieces(polygon: NDArray[np.float64]) -> list[NDArray[np.float64]]:
-    """Convex pieces covering a simple polygon: itself if convex, else an ear-clip triangulation."""
+    """Convex pieces exactly covering a simple polygon: itself if convex, else pymunk's convex
+    decomposition, or (if that fails or loses area) an ear-clip triangulation."""
     if _is_convex(polygon):
         return [polygon]
-    return _ear_clip(polygon)
+    from pymunk import autogeometry
+
+    ccw = polygon if _signed_area(polygon) > 0 else polygon[::-1]
+    try:
+        pieces = autogeometry.convex_decomposition([*map(tuple, ccw), tuple(ccw[0])], 0.0)
+    except AssertionError:  # pymunk's way of rejecting a polygon it cannot decompose
+        return _ear_clip(polygon)
+    arrays = [np.array([(v.x, v.y) for v in piece]) for piece in pieces]
+    area = sum(abs(_signed_area(piece)) for piece in arrays)
+    if not np.isclose(area, abs(_signed_area(polygon)), rtol=1e-9, atol=0.0):
+        return _ear_clip(polygon)
+    return arrays
 
 
 def _is_convex(polygon: NDArray[np.float64]) -> bool:

@@ -9,7 +9,15 @@ import numpy as np
 import pymunk
 import pytest
 
-from lidar_env.world import OBSTACLE_COLLISION_TYPE, World, even_odd_inside
+from lidar_env.world import (
+    OBSTACLE_COLLISION_TYPE,
+    World,
+    _convex_pieces,
+    _ear_clip,
+    _is_convex,
+    _signed_area,
+    even_odd_inside,
+)
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 
@@ -127,6 +135,24 @@ def test_build_space_shapes() -> None:
     np.testing.assert_array_equal(
         np.array(inside_pieces)[margin], polygons_only.contains(probe)[margin]
     )
+
+
+@pytest.mark.parametrize("split", [_convex_pieces, _ear_clip])
+def test_convex_pieces_cover_a_star_exactly(split) -> None:
+    angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    radii = np.where(np.arange(24) % 2 == 0, 3.0, 1.0)
+    star = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])[::-1]  # clockwise
+    pieces = split(star)
+    star_world = World(polygons=[star])
+    assert sum(abs(_signed_area(p)) for p in pieces) == pytest.approx(
+        abs(_signed_area(star)), rel=1e-12
+    )
+    probe = np.random.default_rng(1).uniform(-3, 3, (2000, 2))
+    in_pieces = np.zeros(len(probe), dtype=bool)
+    for piece in pieces:
+        assert _is_convex(piece)
+        in_pieces |= World(polygons=[piece]).contains(probe)
+    np.testing.assert_array_equal(in_pieces, star_world.contains(probe))
 
 
 def test_nested_polygons_stay_hollow_in_the_space() -> None:
