@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.world import PrimitiveGrid, World, segment_distance2
+from lidar_env.world import PrimitiveGrid, World, grid_cell, odd_crossings, segment_distance2
 
 #: Extra angle [rad] each subtended interval is widened by. It covers the error of
 #: :func:`_bearing` (< 1.7e-6 rad) so no beam that grazes a primitive is dropped; the exact
@@ -141,43 +141,6 @@ def _segment_hit(ox: float, oy: float, dx: float, dy: float, seg: NDArray[np.flo
     if t < 0.0 or u < -_ENDPOINT_TOLERANCE or u > 1.0 + _ENDPOINT_TOLERANCE:
         return math.inf
     return t
-
-
-@njit(cache=True, fastmath=False)
-def _cell(value: float, origin: float, cell: float, count: int) -> int:
-    """Grid index of a coordinate [m], clipped to ``[0, count)``."""
-    return min(max(int(math.floor((value - origin) / cell)), 0), count - 1)
-
-
-@njit(cache=True, fastmath=False)
-def _inside_polygons(
-    px: float,
-    py: float,
-    segments: NDArray[np.float64],
-    first_polygon_edge: int,
-    grid: PrimitiveGrid,
-    seen: NDArray[np.int64],
-    stamp: int,
-) -> bool:
-    """Even-odd crossing test (ray towards +x) of the point against all polygon edges.
-
-    Only the grid row holding ``py`` can list edges that cross the ray's line; ``seen`` and
-    ``stamp`` make an edge listed in several cells of the row count once.
-    """
-    if first_polygon_edge >= segments.shape[0]:
-        return False
-    row = _cell(py, grid.y0, grid.cell, grid.ny)
-    inside = False
-    for c in range(row * grid.nx, (row + 1) * grid.nx):
-        for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
-            i = grid.segment_ids[p]
-            if i < first_polygon_edge or seen[i] == stamp:
-                continue
-            seen[i] = stamp
-            x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
-            if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
-                inside = not inside
-    return inside
 
 
 @njit(cache=True, fastmath=False)
@@ -305,14 +268,14 @@ def _cast_rays_kernel(
         for i in range(3):
             if not math.isfinite(sensor_poses[k, i]):
                 raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
-        if _inside_polygons(ox, oy, segments, first_polygon_edge, grid, segment_seen, -(k + 1)):
+        if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -(k + 1)):
             out[k] = 0.0
             continue
         # Only primitives in the grid cells that overlap the sensor's range box can be seen.
-        columns = (_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
-                   _cell(ox + max_range, grid.x0, grid.cell, grid.nx))
-        rows = (_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
-                _cell(oy + max_range, grid.y0, grid.cell, grid.ny))
+        columns = (grid_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
+                   grid_cell(ox + max_range, grid.x0, grid.cell, grid.nx))
+        rows = (grid_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
+                grid_cell(oy + max_range, grid.y0, grid.cell, grid.ny))
         n_circles = _gather(grid.circle_start, grid.circle_ids, columns, rows, grid.nx,
                             circle_seen, k + 1, circle_ids)
         n_segments = _gather(grid.segment_start, grid.segment_ids, columns, rows, grid.nx,

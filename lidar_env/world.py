@@ -386,7 +386,7 @@ class World:
         Walls have zero thickness and contain nothing.
         """
         pts = np.ascontiguousarray(_as_rows(points, 2, "points"))
-        return _point_queries(pts, self.circles, self.walls, self.polygon_edges)[1]
+        return _point_queries(pts, self.circles, self.segments, len(self.walls), self.grid)[1]
 
     def clearance(self, points: ArrayLike) -> NDArray[np.float64]:
         """``(N,)`` signed distance [m] from each point ``(N, 2)`` to the nearest obstacle surface.
@@ -395,7 +395,7 @@ class World:
         surface it is under). With no obstacles at all, ``inf``.
         """
         pts = np.ascontiguousarray(_as_rows(points, 2, "points"))
-        return _point_queries(pts, self.circles, self.walls, self.polygon_edges)[0]
+        return _point_queries(pts, self.circles, self.segments, len(self.walls), self.grid)[0]
 
 
 @njit(cache=True, fastmath=False)
@@ -415,39 +415,114 @@ def segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
 
 
 @njit(cache=True, fastmath=False)
+def grid_cell(value: float, origin: float, cell: float, count: int) -> int:
+    """Grid index of a coordinate [m], clipped to ``[0, count)``."""
+    return min(max(int(math.floor((value - origin) / cell)), 0), count - 1)
+
+
+@njit(cache=True, fastmath=False)
+def odd_crossings(
+    px: float,
+    py: float,
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
+    seen: NDArray[np.int64],
+    stamp: int,
+) -> bool:
+    """Even-odd crossing test (ray towards +x) of the point against all polygon edges.
+
+    Only the grid row holding ``py`` can list edges that cross the ray's line; ``seen`` and
+    ``stamp`` make an edge listed in several cells of the row count once.
+    """
+    if first_polygon_edge >= segments.shape[0]:
+        return False
+    row = grid_cell(py, grid.y0, grid.cell, grid.ny)
+    inside = False
+    for c in range(row * grid.nx, (row + 1) * grid.nx):
+        for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
+            i = grid.segment_ids[p]
+            if i < first_polygon_edge or seen[i] == stamp:
+                continue
+            seen[i] = stamp
+            x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+            if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
+                inside = not inside
+    return inside
+
+
+@njit(cache=True, fastmath=False)
 def _point_queries(
     points: NDArray[np.float64],
     circles: NDArray[np.float64],
-    walls: NDArray[np.float64],
-    polygon_edges: NDArray[np.float64],
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Signed clearance [m] and inside flag of each point: the minimum of the signed distance
-    of every circle, wall (unsigned) and the even-odd polygon region. Brute force over
-    primitives, compiled: no temporaries, ~1 ns per point-primitive pair."""
-    n = points.shape[0]
-    clearance = np.empty(n)
-    inside = np.zeros(n, dtype=np.bool_)
-    for k in range(n):
+    """Signed clearance [m] and inside flag of each point.
+
+    The clearance is the minimum over the signed distance of every circle, the distance of every
+    wall and +-(distance to the nearest polygon edge), minus inside the even-odd polygon region.
+    Nearest primitives are found by searching grid cells in square rings around the point's
+    cell until no unvisited cell can hold anything nearer.
+    """
+    circle_seen = np.zeros(circles.shape[0], dtype=np.int64)
+    segment_seen = np.zeros(segments.shape[0], dtype=np.int64)
+    clearance = np.empty(points.shape[0])
+    inside = np.zeros(points.shape[0], dtype=np.bool_)
+    x0, y0, size, nx, ny = grid.x0, grid.y0, grid.cell, grid.nx, grid.ny
+    for k in range(points.shape[0]):
         px, py = points[k, 0], points[k, 1]
-        best = math.inf
-        for i in range(circles.shape[0]):
-            d = math.sqrt((px - circles[i, 0]) ** 2 + (py - circles[i, 1]) ** 2) - circles[i, 2]
-            best = min(best, d)
-        inside[k] = best < 0.0
-        for i in range(walls.shape[0]):
-            best = min(best, math.sqrt(segment_distance2(px, py, walls[i])))
-        if polygon_edges.shape[0]:
-            nearest2 = math.inf
-            odd = False
-            for i in range(polygon_edges.shape[0]):
-                edge = polygon_edges[i]
-                nearest2 = min(nearest2, segment_distance2(px, py, edge))
-                if (edge[1] > py) != (edge[3] > py):
-                    if px < edge[0] + (py - edge[1]) * (edge[2] - edge[0]) / (edge[3] - edge[1]):
-                        odd = not odd
-            best = min(best, -math.sqrt(nearest2) if odd else math.sqrt(nearest2))
-            inside[k] = inside[k] or odd
-        clearance[k] = best
+        odd = odd_crossings(px, py, segments, first_polygon_edge, grid, segment_seen, -(k + 1))
+        nearest = math.inf  # over circles (signed) and walls
+        nearest_edge = math.inf  # over polygon edges
+        sx, sy = grid_cell(px, x0, size, nx), grid_cell(py, y0, size, ny)
+        ring = 0
+        while True:
+            for iy in range(max(0, sy - ring), min(ny - 1, sy + ring) + 1):
+                if iy == sy - ring or iy == sy + ring:  # the ring's top or bottom row
+                    ix, ix_last, ix_step = max(0, sx - ring), min(nx - 1, sx + ring), 1
+                else:  # the ring's left and right cells
+                    ix, ix_last, ix_step = sx - ring, sx + ring, 2 * ring
+                while ix <= ix_last:
+                    column = ix
+                    ix += ix_step
+                    if column < 0 or column >= nx:  # that side of the ring is off the grid
+                        continue
+                    c = iy * nx + column
+                    for p in range(grid.circle_start[c], grid.circle_start[c + 1]):
+                        i = grid.circle_ids[p]
+                        if circle_seen[i] != k + 1:
+                            circle_seen[i] = k + 1
+                            d = math.sqrt((px - circles[i, 0]) ** 2 + (py - circles[i, 1]) ** 2)
+                            nearest = min(nearest, d - circles[i, 2])
+                    for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
+                        i = grid.segment_ids[p]
+                        if segment_seen[i] != k + 1:
+                            segment_seen[i] = k + 1
+                            d = math.sqrt(segment_distance2(px, py, segments[i]))
+                            if i < first_polygon_edge:
+                                nearest = min(nearest, d)
+                            else:
+                                nearest_edge = min(nearest_edge, d)
+            # Distance from the point to the nearest cell not yet visited (inf: none left).
+            unvisited = math.inf
+            if sx + ring < nx - 1:
+                unvisited = min(unvisited, x0 + (sx + ring + 1) * size - px)
+            if sx - ring > 0:
+                unvisited = min(unvisited, px - (x0 + (sx - ring) * size))
+            if sy + ring < ny - 1:
+                unvisited = min(unvisited, y0 + (sy + ring + 1) * size - py)
+            if sy - ring > 0:
+                unvisited = min(unvisited, py - (y0 + (sy - ring) * size))
+            # Inside a polygon its nearest edge sets the depth; a circle around the point is
+            # listed in the point's own cell.
+            found = nearest_edge if odd else min(nearest, nearest_edge)
+            if found <= unvisited:
+                break
+            ring += 1
+        clearance[k] = min(nearest, -nearest_edge if odd else nearest_edge)
+        inside[k] = odd or nearest < 0.0
     return clearance, inside
 
 

@@ -17,6 +17,7 @@ from lidar_env.world import (
     _is_convex,
     _signed_area,
     even_odd_inside,
+    segment_distances,
 )
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
@@ -231,6 +232,29 @@ def test_contains_matches_a_numpy_crossing_count() -> None:
     expected = even_odd_inside(points, world.polygon_edges)
     np.testing.assert_array_equal(world.contains(points), expected)
     assert 0.1 < expected.mean() < 0.9
+
+
+def test_clearance_and_contains_on_a_large_map_match_brute_force() -> None:
+    """The grid's ring search must find the nearest surface also far from everything, in holes,
+    and outside the map."""
+    rng = np.random.default_rng(12)
+    image = blob_image(rng, (150, 200))
+    image[rng.random(image.shape) < 0.04] = 255  # speckle: thousands of edges
+    world = World(
+        circles=[[2.0, 14.0, 0.5], [30.0, -5.0, 1.0]],
+        segments=[[-4.0, -4.0, 3.0, -2.0], [1.0, 1.0, 1.5, 1.0]],
+        polygons=World.from_image(image, 0.1).polygons,
+    )
+    points = np.vstack([rng.uniform(-5, 25, (1500, 2)), [[200.0, -300.0], [10.0, 7.5]]])
+    circle_sdf = np.hypot(*(points[:, None, :] - world.circles[None, :, :2]).transpose(2, 0, 1))
+    circle_sdf -= world.circles[:, 2]
+    wall = segment_distances(points, world.walls).min(axis=1)
+    edge = segment_distances(points, world.polygon_edges).min(axis=1)
+    odd = even_odd_inside(points, world.polygon_edges)
+    expected = np.minimum(np.minimum(circle_sdf.min(axis=1), wall), np.where(odd, -edge, edge))
+    np.testing.assert_allclose(world.clearance(points), expected, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(world.contains(points), odd | (circle_sdf.min(axis=1) < 0))
+    assert world.grid.nx * world.grid.ny > 100
 
 
 def test_clearance_matches_pymunk_nearest_point_query() -> None:
