@@ -13,7 +13,8 @@ of every trace, in a single SQLite file (embedded, no server). Schema version 1:
                      env.reset seed; config the canonical JSON of the env config overrides.
     sensor_datasets  (scenario_id PK -> scenarios, n_steps, n_beams, max_range, world_aligned,
                       mounts JSON (K,3) [m, m, rad] car frame, beam_angles BLOB float64 (n,)
-                      [rad], env_config JSON (every resolved setting), package_version,
+                      [rad], env_config JSON (every resolved setting), world JSON (the map's
+                      geometry [m]: name, circles, walls, polygons, bounds), package_version,
                       recorded_at)
     sensor_steps     (scenario_id, step, time [s], lidar_1 BLOB, lidar_2 BLOB,
                       x, y, heading, lidar_poses BLOB, PRIMARY KEY (scenario_id, step))
@@ -82,6 +83,7 @@ CREATE TABLE sensor_datasets (
     mounts TEXT NOT NULL,
     beam_angles BLOB NOT NULL,
     env_config TEXT NOT NULL,
+    world TEXT NOT NULL,
     package_version TEXT NOT NULL,
     recorded_at TEXT NOT NULL
 );
@@ -215,6 +217,9 @@ class SensorDataset:
         poses: ``(N, 3)`` true car poses (x [m], y [m], heading [rad]) in the world frame.
         lidar_poses: ``(N, K, 3)`` true sensor poses in the world frame.
         env_config: every resolved env setting (JSON-able), for the record.
+        world: the world map's geometry (``name``, ``circles`` (N, 3), ``walls`` (M, 4),
+            ``polygons``, ``bounds``; metres, world frame), so the map can be drawn as it was
+            when recorded; empty when unknown.
     """
 
     setup: SensorSetup
@@ -223,6 +228,7 @@ class SensorDataset:
     poses: NDArray[np.float64]
     lidar_poses: NDArray[np.float64]
     env_config: Mapping[str, Any] = field(default_factory=dict)
+    world: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n = len(self.times)
@@ -490,12 +496,12 @@ class ExperimentDatabase:
             scenario_id = self._ensure_scenario(scenario)
             stored = conn.execute(
                 "INSERT OR IGNORE INTO sensor_datasets (scenario_id, n_steps, n_beams, max_range, "
-                "world_aligned, mounts, beam_angles, env_config, package_version, recorded_at) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "world_aligned, mounts, beam_angles, env_config, world, package_version, "
+                "recorded_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (scenario_id, len(dataset), len(setup.beam_angles), setup.max_range,
                  int(setup.world_aligned), canonical_json(setup.mounts),
                  _blob(setup.beam_angles, "<f8"), canonical_json(dict(dataset.env_config)),
-                 package_version(), _now()),
+                 canonical_json(dict(dataset.world)), package_version(), _now()),
             ).rowcount
             if not stored:
                 return False
@@ -518,12 +524,12 @@ class ExperimentDatabase:
         """The stored sensor dataset of ``scenario`` (KeyError naming it when absent)."""
         scenario_id = self._scenario_id(scenario)
         header = None if scenario_id is None else self._conn.execute(
-            "SELECT n_steps, n_beams, max_range, world_aligned, mounts, beam_angles, env_config "
-            "FROM sensor_datasets WHERE scenario_id = ?", (scenario_id,)
+            "SELECT n_steps, n_beams, max_range, world_aligned, mounts, beam_angles, env_config, "
+            "world FROM sensor_datasets WHERE scenario_id = ?", (scenario_id,)
         ).fetchone()
         if header is None:
             raise KeyError(f"no sensor dataset recorded for scenario {scenario.label}")
-        n_steps, n_beams, max_range, world_aligned, mounts, angles, env_config = header
+        n_steps, n_beams, max_range, world_aligned, mounts, angles, env_config, world = header
         setup = SensorSetup(np.array(json.loads(mounts), dtype=np.float64),
                             np.frombuffer(angles, dtype="<f8").copy(), max_range,
                             bool(world_aligned))
@@ -548,6 +554,7 @@ class ExperimentDatabase:
                 [np.frombuffer(r[6], dtype="<f8").reshape(setup.n_lidars, 3) for r in rows]
             ),
             env_config=json.loads(env_config),
+            world=json.loads(world),
         )
 
     # -- trace datasets and results --------------------------------------------------------
@@ -603,8 +610,13 @@ class ExperimentDatabase:
             )
         return trace_id
 
-    def traces(self, scenario: Scenario | None = None) -> list[TraceRecord]:
-        """Stored traces (all, or those of one scenario) with their metrics, by insertion."""
+    def traces(self, scenario: Scenario | None = None, *,
+               poses: bool = True) -> list[TraceRecord]:
+        """Stored traces (all, or those of one scenario) with their metrics, by insertion.
+
+        ``poses=False`` reads the metrics only (the trace's times, poses and step_ms are then
+        empty), which is what a summary over many scenarios needs.
+        """
         query = (
             "SELECT traces.id, kind, world, trace, seed, driver, config, estimator, params, "
             "package_version FROM traces JOIN scenarios ON scenarios.id = traces.scenario_id"
@@ -620,21 +632,21 @@ class ExperimentDatabase:
         for row in self._conn.execute(query + " ORDER BY traces.id", args).fetchall():
             trace_id, kind, world, trace_name, seed, driver, config = row[:7]
             estimator, params, version = row[7:]
-            poses = self._conn.execute(
-                "SELECT time, x, y, heading, ms FROM trace_poses WHERE trace_id = ? ORDER BY step",
-                (trace_id,),
-            ).fetchall()
-            table = np.array(poses, dtype=np.float64).reshape(-1, 5)
-            metrics = dict(self._conn.execute(
+            table = np.empty((0, 5))
+            if poses:
+                table = np.array(self._conn.execute(
+                    "SELECT time, x, y, heading, ms FROM trace_poses WHERE trace_id = ? "
+                    "ORDER BY step", (trace_id,),
+                ).fetchall(), dtype=np.float64).reshape(-1, 5)
+            metrics = self._conn.execute(
                 "SELECT metric, value FROM results WHERE trace_id = ?", (trace_id,)
-            ).fetchall())
+            ).fetchall()
             records.append(TraceRecord(
                 trace_id=trace_id,
                 scenario=Scenario(world, trace_name, seed, json.loads(config), driver, kind),
                 trace=TraceDataset(estimator, json.loads(params), table[:, 0], table[:, 1:4],
                                    table[:, 4], version),
-                metrics={name: (np.nan if value is None else value)
-                         for name, value in metrics.items()},
+                metrics={name: (np.nan if value is None else value) for name, value in metrics},
             ))
         return records
 

@@ -32,7 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from estimators.database import DatabaseError, ExperimentDatabase, Scenario, TraceRecord
+from estimators.database import (
+    DatabaseError,
+    ExperimentDatabase,
+    Scenario,
+    TraceRecord,
+    canonical_json,
+    package_version,
+)
 from estimators.registry import names
 from estimators.runner import (
     EstimatorSpec,
@@ -193,8 +200,6 @@ def _current(records: list[TraceRecord], specs: Sequence[EstimatorSpec],
              version: str) -> dict[tuple[Scenario, str], TraceRecord]:
     """The records made by exactly the requested estimators, params and package version."""
     wanted = {spec.name: spec.resolved_params for spec in specs}
-    from estimators.database import canonical_json
-
     return {
         (record.scenario, record.trace.estimator): record
         for record in records
@@ -316,7 +321,7 @@ def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
     estimator's trace over the world map. Returns the PNG paths."""
     from matplotlib.figure import Figure
 
-    from estimators.recording import make_env
+    from estimators.recording import world_from_geometry
     from estimators.scan_image import scan_to_image
 
     first = [(group, scenarios[group.name][0]) for group in groups if scenarios[group.name]]
@@ -328,31 +333,33 @@ def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
     step = len(dataset) // 2
     image = scan_to_image(dataset.scans["lidar_1"][step], dataset.setup.beam_angles,
                           dataset.setup.max_range)
-    figure = Figure(figsize=(5, 5))
+    figure = Figure(figsize=(6, 5))
     axes = figure.add_subplot()
-    axes.imshow(image, cmap="gray")
-    axes.set_title(f"eq. 5 Lidar image: {first[0][1].label}, step {step}, lidar_1")
-    axes.set_axis_off()
+    shown = axes.imshow(image, cmap="gray_r", interpolation="none")
+    figure.colorbar(shown, ax=axes, label="pixel value (eq. 5)")
+    axes.set_title(f"eq. 5 Lidar image: {first[0][1].label}, step {step}, lidar_1", fontsize=9)
+    axes.set_xlabel("column [px]")
+    axes.set_ylabel("row [px]")
     paths.append(out / "fig8_lidar_image.png")
-    figure.savefig(paths[-1], dpi=100, bbox_inches="tight")
+    figure.savefig(paths[-1], dpi=150, bbox_inches="tight")
 
-    figure = Figure(figsize=(6 * len(first), 6))
+    columns = min(2, len(first))
+    rows = -(-len(first) // columns)
+    figure = Figure(figsize=(7 * columns, 5 * rows), layout="constrained")
     colours = [f"C{i % 10}" for i in range(len(specs))]
     for index, (group, scenario) in enumerate(first, 1):
-        axes = figure.add_subplot(1, len(first), index)
-        env = make_env(scenario)
-        try:
-            env.reset(seed=int(scenario.seed))
-            world = env.unwrapped.world
-            xmin, ymin, xmax, ymax = world.bounds
-            axes.imshow(world.to_image(0.05), cmap="gray_r", extent=(xmin, xmax, ymin, ymax),
-                        vmax=400)
-        finally:
-            env.close()
-        truth = db.load_sensor_dataset(scenario).poses
+        axes = figure.add_subplot(rows, columns, index)
+        dataset = db.load_sensor_dataset(scenario)
+        world = world_from_geometry(dataset.world)  # the map as it was recorded
+        xmin, ymin, xmax, ymax = world.bounds
+        axes.imshow(world.to_image(0.05), cmap="gray_r", extent=(xmin, xmax, ymin, ymax),
+                    vmax=400)
+        truth = dataset.poses
         axes.plot(truth[:, 0], truth[:, 1], "k-", linewidth=3, label="truth")
+        with_poses = {r.trace_id: r for r in db.traces(scenario)}
         for spec, colour in zip(specs, colours, strict=True):
-            record = records.get((scenario, spec.name))
+            key = (scenario, spec.name)
+            record = with_poses[records[key].trace_id] if key in records else None
             if record is not None:
                 poses = record.trace.poses
                 axes.plot(poses[:, 0], poses[:, 1], "-", color=colour, linewidth=1.2,
@@ -363,7 +370,8 @@ def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
         axes.set_title(f"{group.name} (seed {scenario.seed})")
         axes.set_xlabel("x [m]")
         axes.set_ylabel("y [m]")
-    axes.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
+    figure.legend(*axes.get_legend_handles_labels(), loc="outside right upper",
+                  fontsize="small")
     paths.append(out / "fig8_traces.png")
     figure.savefig(paths[-1], dpi=80, bbox_inches="tight")
     return paths
@@ -408,8 +416,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
          specs: list[EstimatorSpec], start: float) -> int:
-    from estimators.database import package_version
-
     config = {"range_noise_std": args.noise}
     scenarios = {g.name: [Scenario(g.world, g.trace, seed, config) for seed in args.seeds]
                  for g in groups}
@@ -438,7 +444,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         if executor is not None:
             executor.shutdown(cancel_futures=True)
 
-    records = _current(db.traces(), specs, package_version())
+    records = _current(db.traces(poses=False), specs, package_version())
     real = logs[0].scenario if logs else None
     rows = rank_table(groups, scenarios, specs, records, real, RANK_KEYS[args.rank_by])
     out: Path = args.out

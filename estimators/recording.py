@@ -62,6 +62,26 @@ def _config_dict(config: Any) -> dict[str, Any]:
     return dict(config)
 
 
+def world_geometry(world: Any) -> dict[str, Any]:
+    """A :class:`lidar_env.World`'s geometry as plain lists (metres, world frame)."""
+    return {
+        "name": world.name,
+        "circles": np.asarray(world.circles).tolist(),
+        "walls": np.asarray(world.walls).tolist(),
+        "polygons": [np.asarray(polygon).tolist() for polygon in world.polygons],
+        "bounds": [float(v) for v in world.bounds],
+    }
+
+
+def world_from_geometry(geometry: Mapping[str, Any]) -> Any:
+    """The :class:`lidar_env.World` stored by :func:`world_geometry`."""
+    from lidar_env.world import World
+
+    return World(circles=geometry["circles"], segments=geometry["walls"],
+                 polygons=geometry["polygons"], name=geometry["name"],
+                 bounds=geometry["bounds"])
+
+
 def record(scenario: Scenario) -> SensorDataset:
     """Drive the scenario's trace once with its driver; return every observation and the truth.
 
@@ -82,6 +102,7 @@ def record(scenario: Scenario) -> SensorDataset:
             done = terminated or truncated
         setup = SensorSetup.from_env(env)
         env_config = _config_dict(env.unwrapped.config)
+        world = world_geometry(env.unwrapped.world)
     finally:
         env.close()
     return SensorDataset(
@@ -92,6 +113,7 @@ def record(scenario: Scenario) -> SensorDataset:
         poses=np.array([i["pose"] for i in infos], dtype=np.float64),
         lidar_poses=np.array([i["lidar_poses"] for i in infos], dtype=np.float64),
         env_config=env_config,
+        world=world,
     )
 
 

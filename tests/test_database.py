@@ -44,6 +44,8 @@ def synthetic_dataset(rng: np.random.Generator, n_steps: int = 40) -> SensorData
         poses=rng.normal(size=(n_steps, 3)),
         lidar_poses=rng.normal(size=(n_steps, 2, 3)),
         env_config={"range_noise_std": 0.01, "lidar_mounts": [[0.25, 0, 0], [-0.25, 0, 0]]},
+        world={"name": "box", "circles": [[1.0, 2.0, 0.5]], "walls": [], "polygons": [],
+               "bounds": [0.0, 0.0, 5.0, 5.0]},
     )
 
 
@@ -83,7 +85,7 @@ def test_round_trip_is_exact_and_survives_reopening(tmp_path: Path) -> None:
         np.testing.assert_array_equal(loaded.setup.mounts, dataset.setup.mounts)
         np.testing.assert_array_equal(loaded.setup.beam_angles, dataset.setup.beam_angles)
         assert loaded.setup.max_range == 10.0 and not loaded.setup.world_aligned
-        assert loaded.env_config == dataset.env_config
+        assert loaded.env_config == dataset.env_config and loaded.world == dataset.world
         (record,) = db.traces(SCENARIO)
         assert record.trace_id == trace_id and record.scenario == SCENARIO
         np.testing.assert_array_equal(record.trace.poses, trace.poses)

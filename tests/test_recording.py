@@ -10,8 +10,16 @@ import pytest
 
 from agents.scripted import PurePursuitDriver
 from estimators.database import ExperimentDatabase, Scenario
-from estimators.recording import make_driver, make_env, record, replay, score
+from estimators.recording import (
+    make_driver,
+    make_env,
+    record,
+    replay,
+    score,
+    world_from_geometry,
+)
 from estimators.scoring import ScoreEstimator
+from lidar_env.se2 import compose
 
 # 6 s of driving keeps the test short; the env truncates the episode there.
 SCENARIO = Scenario("open_cylinders", "right_turn", 7,
@@ -66,13 +74,15 @@ def test_recording_is_deterministic_and_keeps_the_truth(stored: Path) -> None:
     # the stored sensor poses are the mounts composed onto the stored car poses
     env = gym.make("DualLidar-v0", world=SCENARIO.world, trace=SCENARIO.trace)
     mounts = env.unwrapped.config.mounts_array
-    env.close()
-    from lidar_env.se2 import compose
-
     for k in range(2):
         expected = compose(stored_dataset.poses, np.broadcast_to(mounts[k], (len(again), 3)))
         np.testing.assert_allclose(stored_dataset.lidar_poses[:, k], expected, atol=1e-9)
     assert stored_dataset.env_config["max_episode_time"] == 6.0
+    # the stored map rasterises exactly like the env's own world
+    env.reset(seed=SCENARIO.seed)
+    np.testing.assert_array_equal(world_from_geometry(stored_dataset.world).to_image(0.1),
+                                  env.unwrapped.world.to_image(0.1))
+    env.close()
 
 
 def test_bad_names_are_readable_errors() -> None:
