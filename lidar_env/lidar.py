@@ -5,7 +5,12 @@ beam against every primitive, it sweeps the primitives: each one within ``max_ra
 only the beams inside the angular interval it subtends from the sensor, found by index
 arithmetic for uniformly spaced beams and by binary search otherwise. Every candidate beam then
 gets the exact ray-circle or ray-segment intersection, so the interval only has to be
-conservative (it is widened by :data:`_ANGLE_MARGIN`).
+conservative (it is widened by :data:`_ANGLE_MARGIN`). The candidate primitives come from the
+cells of :attr:`World.grid` that overlap the sensor's range box, so large maps (thousands of
+edges traced from an image) cost little more than small ones.
+
+Speed (``python benchmarks/bench_lidar.py``, one AMD EPYC core): ~13 us per dual 360-beam scan
+on 144 primitives and ~20 us on 304, 85-120x faster than a per-beam pymunk ray query loop.
 
 Conventions: a pose is ``(x [m], y [m], heading [rad])`` in the world; beam ``j`` of sensor
 ``k`` points at world angle ``sensor_poses[k, 2] + beam_angles[j]``; a beam that hits nothing
@@ -348,6 +353,14 @@ def cast_rays(
     Returns:
         ``(K, n)`` float64 ranges [m] in ``[0, max_range]``; all ``0.0`` for a sensor inside an
         obstacle or touching a wall.
+
+    Pass a :class:`World` when scanning repeatedly: a tuple is turned into one (validated, with
+    its grid built) on every call.
+
+    Example:
+        >>> world = World(circles=[[5.0, 0.0, 1.0]])
+        >>> cast_rays(world, [0.0, 0.0, 0.0], np.array([0.0, np.pi / 2]), 10.0)
+        array([[ 4., 10.]])
     """
     world, first_polygon_edge = _as_world(world_or_arrays)
     poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
