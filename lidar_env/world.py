@@ -229,9 +229,22 @@ class World:
         self.polygon_edges = np.vstack(edges) if edges else np.zeros((0, 4))
         self.segments = np.ascontiguousarray(np.vstack([self.walls, self.polygon_edges]))
         self.bounds = self._check_bounds(bounds)
-        # Read-only: the lazily built grid (and anyone holding the arrays) must stay valid.
+        self._freeze()
+
+    def _freeze(self) -> None:
+        """Make the arrays read-only: the lazily built grid (and anyone holding them) stays
+        valid."""
         for array in (self.circles, self.walls, self.polygon_edges, self.segments, *self.polygons):
             array.flags.writeable = False
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("grid", None)  # cheap to rebuild; keeps pickles small
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._freeze()
 
     def _check_bounds(self, bounds: Sequence[float] | None) -> tuple[float, float, float, float]:
         if bounds is None:

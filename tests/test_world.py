@@ -82,11 +82,15 @@ def test_arrays_are_read_only_copies() -> None:
 
 def test_pickles_cheaply() -> None:
     world = World.from_image(blob_image(np.random.default_rng(0)), 0.1)
+    world.clearance([[1.0, 1.0]])  # builds the grid, which is not pickled
     data = pickle.dumps(world)
     clone = pickle.loads(data)
     np.testing.assert_array_equal(clone.segments, world.segments)
     assert clone.bounds == world.bounds and clone.name == world.name
     assert len(data) < 2 * world.segments.nbytes + 10_000
+    assert not clone.segments.flags.writeable
+    points = np.random.default_rng(1).uniform(0, 12, (50, 2))
+    np.testing.assert_array_equal(clone.clearance(points), world.clearance(points))
 
 
 @pytest.mark.parametrize(
