@@ -142,6 +142,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=int, default=2,
                         help="worker processes, parallel over scenarios; 1 = this process "
                              "(default: %(default)s)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the scenarios on this Dask scheduler (e.g. tcp://host:8786) "
+                             "instead of local worker processes; needs dask.distributed")
     parser.add_argument("--rank-by", choices=sorted(RANK_KEYS), default="ate",
                         help="metric that orders the table (default: %(default)s)")
     parser.add_argument("--no-real", action="store_true",
@@ -377,6 +380,16 @@ def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
     return paths
 
 
+def _executor(args: argparse.Namespace) -> Any:
+    """A Dask client when ``--scheduler`` is given, else a local process pool (``None`` for
+    one worker: run in this process)."""
+    if args.scheduler:
+        from distributed import Client
+
+        return Client(args.scheduler)
+    return ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+
+
 def _progress(total: int, label: str, enabled: bool) -> Any:
     from tqdm import tqdm
 
@@ -400,6 +413,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
     if not math.isfinite(args.noise) or args.noise < 0:
         parser.error(f"--noise: expected a range noise std >= 0 [m], got {args.noise}")
+    if args.scheduler:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            parser.error("--scheduler needs dask.distributed: pip install 'duallidar[distributed]'")
     if args.real_scans < 0:
         parser.error(f"--real-scans: expected an integer >= 0, got {args.real_scans}")
     start = time.perf_counter()
@@ -427,7 +445,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
             logs.append(log)
         else:
             print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
-    executor = ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    executor = _executor(args)
     summaries: list[RunSummary] = []
     try:
         every = [s for group in groups for s in scenarios[group.name]]
@@ -441,8 +459,10 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         print(f"error: {error}", file=sys.stderr)
         return 1
     finally:
-        if executor is not None:
+        if isinstance(executor, ProcessPoolExecutor):
             executor.shutdown(cancel_futures=True)
+        elif executor is not None:
+            executor.close()  # a Dask client: disconnect, the cluster stays up
 
     records = _current(db.traces(poses=False), specs, package_version())
     real = logs[0].scenario if logs else None
@@ -488,6 +508,11 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
           f"{time.perf_counter() - start:.1f} s ({done[0]} recorded, {done[1]} traces new, "
           f"{skipped} already stored); database {db.path}; files in {out}/: "
           f"{', '.join(p.name for p in written)}")
+    unrecorded = [stage for stage in failures if stage.endswith(": record")]
+    if unrecorded:  # an estimator may legitimately not apply; a scenario must record
+        print(f"error: {len(unrecorded)} scenarios could not be recorded (see failures.txt)",
+              file=sys.stderr)
+        return 1
     return 0
 
 

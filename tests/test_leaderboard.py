@@ -85,6 +85,20 @@ def test_real_log_results_join_the_table(tmp_path: Path,
     assert "ACES rel. error [m]" in capsys.readouterr().out
 
 
+def test_scenarios_run_on_a_dask_scheduler(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        status = leaderboard.main(["--worlds", "hallway", "--traces", "straight", "--seeds", "0",
+                                   "1", "--estimators", "zero", "--no-real", "--no-progress",
+                                   "--scheduler", cluster.scheduler_address,
+                                   "--out", str(tmp_path)])
+    assert status == 0
+    assert "2 recorded, 2 traces new" in capsys.readouterr().out
+    assert sorted(r["seed"] for r in read_csv(tmp_path / "results.csv")) == ["0", "1"]
+
+
 @pytest.mark.parametrize(("option", "value", "message"), [
     ("--estimators", "pcc", "unknown estimator 'pcc': expected one of"),
     ("--worlds", "moon", "unknown world 'moon': expected one of open_cylinders"),
