@@ -27,7 +27,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from estimators.base import Estimator
-from estimators.rotation_pc import PreparedScan, ScanMatcher, constant_velocity
+from estimators.rotation_pc import (
+    PRIOR_SIGMA,
+    PreparedScan,
+    ScanMatcher,
+    constant_velocity,
+    pose_difference,
+)
 from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -296,34 +302,36 @@ class FusionEstimator(Estimator):
         0 (keyframe) and 1 (scans). ``motion_guess``: predicted car motion between them, which
         each match gets as its prior ``mount_i⁻¹ ⊕ guess ⊕ mount_j``.
 
-        ``correlate``: the same-sensor pairs run the full rotation-aware phase correlation and
-        the cross-sensor pairs are refined from the car motion those imply (the correlation's
-        FFTs are the dearest part of a match, and the same-sensor pairs share the most scene);
-        otherwise every pair is refined from ``motion_guess``.
+        ``correlate``: the main Lidar's pair runs the full rotation-aware phase correlation and
+        the other pairs are refined from the car motion it implies (the correlation's FFTs are
+        the dearest part of a match; one finds the basin for all); otherwise every pair is
+        refined from ``motion_guess``, and only the same-sensor pairs are matched (these are the
+        extra edges to older keyframes, where the cross pairs would add cost, not coverage).
+        A refinement also starts from the prior where that
+        disagrees with its first start (see :meth:`ScanMatcher.refine`).
         """
         assert self._matcher is not None and self.setup is not None
         mounts = self.setup.mounts
         sensors = range(len(scans))
-        same = {}
+        correlated = None
+        seed = motion_guess
         if correlate:
-            for i in sensors:
-                prior = relative(mounts[i], compose(motion_guess, mounts[i]))
-                same[i] = self._matcher.match(keyframe.scans[i], scans[i], prior)
-            # The cross pairs start from the car motion of the most confident same-sensor match.
-            best = max(same, key=lambda i: same[i].confidence)
-            seed = compose(compose(mounts[best], same[best].pose), inverse(mounts[best]))
-        else:
-            seed = motion_guess
+            prior = relative(mounts[0], compose(motion_guess, mounts[0]))
+            correlated = self._matcher.match(keyframe.scans[0], scans[0], prior)
+            seed = compose(compose(mounts[0], correlated.pose), inverse(mounts[0]))
         edges = []
-        for i in sensors:
-            for j in sensors:
+        pairs = [(i, j) for i in sensors for j in sensors if correlate or i == j]
+        for i, j in pairs:
+            if correlated is not None and i == j == 0:
+                match = correlated
+            else:
                 prior = relative(mounts[i], compose(motion_guess, mounts[j]))
-                if i in same and i == j:
-                    match = same[i]
-                else:
-                    start = relative(mounts[i], compose(seed, mounts[j]))
-                    match = self._matcher.refine(keyframe.scans[i], scans[j], [start], prior)
-                edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
+                start = relative(mounts[i], compose(seed, mounts[j]))
+                starts = [start]
+                if np.any(np.abs(pose_difference(start, prior)) > PRIOR_SIGMA):
+                    starts.append(prior)
+                match = self._matcher.refine(keyframe.scans[i], scans[j], starts, prior)
+            edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
         return edges
 
     def _weights(self) -> dict[str, float]:

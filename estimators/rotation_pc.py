@@ -19,6 +19,7 @@ chains the matches of one Lidar's consecutive scans into car poses.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,6 +44,11 @@ FloatArray = NDArray[np.float64]
 MIN_CONFIDENCE = 1e-3
 
 
+#: Log-polar grid of the rotation search: 1-degree bins over the half turn the magnitude
+#: spectrum needs, refined to a fraction of a bin, and 32 radii -- enough to land well within
+#: the refinement's basin at a quarter of the cost of a finer grid.
+POLAR_ANGLES = 180
+POLAR_RADII = 32
 #: Neighbouring returns further apart than this [m] are not one surface (a depth jump).
 MAX_SURFACE_GAP = 0.3
 #: Neighbours on each side fitted with a return's local quadratic: 5 points for 3 unknowns.
@@ -226,21 +232,40 @@ def _degenerate_translation(jacobian: FloatArray, weights: FloatArray) -> FloatA
     return vectors[:, 0]
 
 
-@dataclass(frozen=True)
+@dataclass
 class PreparedScan:
     """What matching needs of one scan, computed once however often the scan is matched.
 
     ``ranges`` [m] and ``beam_angles`` [rad] as measured; ``points`` ``(M, 2)`` [m] the
-    returns in the sensor frame; ``polar`` the image's log-polar magnitude spectrum;
-    ``spectrum`` the image's whitened FFT; ``reference`` the scan's surfaces for refinement.
+    returns in the sensor frame (smoothed onto their surfaces when ``reference`` is set);
+    ``reference`` the scan's surfaces for refinement. The eq.-5 image (``image_size`` [px],
+    ``resolution`` [m/px]) and its spectra are made on first use, since a scan that is only
+    refined never needs them.
     """
 
     ranges: FloatArray
     beam_angles: FloatArray
     points: FloatArray
-    polar: FloatArray
-    spectrum: ImageSpectrum
     reference: CurveReference | None
+    max_range: float
+    image_size: int
+    resolution: float
+
+    def image(self, turn: float = 0.0) -> NDArray[np.uint8]:
+        """The scan's eq.-5 image, its beams turned by ``turn`` [rad]."""
+        return scan_to_image(
+            self.ranges, self.beam_angles + turn, self.max_range, self.image_size, self.resolution
+        )
+
+    @cached_property
+    def polar(self) -> FloatArray:
+        """The image's log-polar magnitude spectrum (:func:`log_polar_spectrum`)."""
+        return log_polar_spectrum(self.image(), n_angles=POLAR_ANGLES, n_radii=POLAR_RADII)
+
+    @cached_property
+    def spectrum(self) -> ImageSpectrum:
+        """The image's whitened FFT (:func:`image_spectrum`)."""
+        return image_spectrum(self.image())
 
 
 @dataclass(frozen=True)
@@ -280,16 +305,10 @@ class ScanMatcher:
                 f"icp_iterations: expected an integer >= 0, got {self.icp_iterations!r}"
             )
 
-    def _image(self, ranges: FloatArray, beam_angles: FloatArray, turn: float = 0.0) -> NDArray:
-        return scan_to_image(
-            ranges, beam_angles + turn, self.max_range, self.image_size, self._resolution
-        )
-
     def prepare(self, ranges: ArrayLike, beam_angles: ArrayLike) -> PreparedScan:
         """Precompute a scan ``(n,)`` [m] with beam directions ``(n,)`` [rad] for matching."""
         ranges = np.asarray(ranges, dtype=np.float64)
         angles = np.asarray(beam_angles, dtype=np.float64)
-        image = self._image(ranges, angles)
         hit = (ranges < self.max_range) & (ranges > DEFAULT_MIN_RANGE)
         reference = None
         points = np.column_stack(
@@ -299,7 +318,7 @@ class ScanMatcher:
             reference = CurveReference(ranges, angles, self.max_range)
             points = reference.smoothed
         return PreparedScan(
-            ranges, angles, points, log_polar_spectrum(image), image_spectrum(image), reference
+            ranges, angles, points, reference, self.max_range, self.image_size, self._resolution
         )
 
     def match(
@@ -318,7 +337,7 @@ class ScanMatcher:
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
         hint = None if prior is None else float(prior[2])
         rotation = heading_change(earlier.polar, later.polar, hint, profiles)
-        turned = image_spectrum(self._image(later.ranges, later.beam_angles, rotation.angle))
+        turned = image_spectrum(later.image(rotation.angle))
         correlation = phase_correlate(earlier.spectrum, turned)
         # The turned later image sees the scene shifted by minus the sensor's translation.
         translation = -pixel_shift_to_metres(correlation.shift, self._resolution)
@@ -328,7 +347,7 @@ class ScanMatcher:
         if earlier.reference is None or len(later.points) < 3:
             return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
         starts = [pose]
-        if prior is not None and np.any(np.abs(_pose_difference(pose, prior)) > PRIOR_SIGMA):
+        if prior is not None and np.any(np.abs(pose_difference(pose, prior)) > PRIOR_SIGMA):
             starts.append(prior)  # the correlation disagrees with the motion so far
         return self.refine(earlier, later, starts, prior)
 
@@ -353,13 +372,13 @@ class ScanMatcher:
         candidates = [r for r in refined if r[1] >= best_quality - QUALITY_TOLERANCE]
         if prior is not None:
             candidates.sort(
-                key=lambda r: float(np.sum((_pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
+                key=lambda r: float(np.sum((pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
             )
         pose, confidence = candidates[0]
         return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
 
 
-def _pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
+def pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a - b`` with the heading difference wrapped."""
     difference = np.asarray(a, dtype=np.float64) - b
     difference[2] = float(wrap_angle(difference[2]))
