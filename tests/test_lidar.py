@@ -118,6 +118,9 @@ def test_large_map_through_the_grid_matches_pymunk_and_contains() -> None:
         pytest.param(np.random.default_rng(3).uniform(-7, 7, 200), id="unsorted-random"),
         pytest.param(np.linspace(-3 * np.pi / 4, 3 * np.pi / 4, 271), id="270-degree-fan"),
         pytest.param(BEAMS[::-1] - np.pi, id="descending-shifted"),
+        pytest.param(np.array([0.3, 0.3, 1.0, 1.0]), id="duplicates"),
+        pytest.param(np.array([0.3]), id="single-beam"),
+        pytest.param(np.array([1e-17, -1e-17, 2 * np.pi, -2 * np.pi]), id="around-zero"),
     ],
 )
 def test_general_beam_angles_match_pymunk(angles: np.ndarray) -> None:
