@@ -30,6 +30,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np
@@ -120,7 +121,7 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         try:
             dataset, recorded = record(task.scenario), True
         except Exception:  # reported per stage; the rest of the run goes on
-            outcome.failures["record"] = traceback.format_exc(limit=3)
+            outcome.failures["record"] = traceback.format_exc(limit=-6)
             return outcome
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
     for spec in task.estimators:
@@ -128,7 +129,7 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             trace = replay(dataset, spec.name, spec.params, resolved_params=spec.resolved_params)
             outcome.traces.append((trace, score(trace, dataset.poses)))
         except Exception:  # a broken estimator must not sink the others
-            outcome.failures[spec.name] = traceback.format_exc(limit=3)
+            outcome.failures[spec.name] = traceback.format_exc(limit=-6)
     return outcome
 
 
@@ -154,10 +155,17 @@ class RealLogTask:
     estimator: EstimatorSpec
 
 
+@lru_cache(maxsize=2)
+def _load_log(path: str) -> Any:
+    """A parsed CARMEN log, kept per worker process: every estimator replays the same log."""
+    from estimators.carmen import load_log
+
+    return load_log(path)
+
+
 def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
     """Run one estimator over a real log and score it with the relations metric
     (Kümmerle et al. 2009): mean translational [m] and rotational [deg] relation errors."""
-    from estimators.carmen import load_log
     from estimators.real_log import run_on_log, score_relations
     from estimators.registry import make
     from estimators.relations import load_relations
@@ -165,7 +173,7 @@ def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
     log, spec = task.log, task.estimator
     outcome = ScenarioOutcome(log.scenario, None, False)
     try:
-        carmen = load_log(log.log_path)
+        carmen = _load_log(log.log_path)
         run = run_on_log(make(spec.name, **dict(spec.params)), carmen, limit=log.scans)
         metrics: dict[str, float] = {"ms_per_step": 1e3 * run.seconds_per_scan}
         for subset, summary in score_relations(run, load_relations(log.relations_path)).items():
@@ -179,7 +187,7 @@ def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
         trace = TraceDataset(spec.name, spec.resolved_params, run.times, run.poses, step_ms)
         outcome.traces.append((trace, metrics))
     except Exception:  # e.g. an estimator that needs two Lidars: reported, not fatal
-        outcome.failures[spec.name] = traceback.format_exc(limit=3)
+        outcome.failures[spec.name] = traceback.format_exc(limit=-6)
     return outcome
 
 
