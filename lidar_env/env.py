@@ -53,8 +53,9 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     0.25 m ahead of and 0.25 m behind the car's centre on its axis). Each control step both
     take one exact 360-beam scan. The task is to follow a *trace* (a waypoint path from a start
     pose: ``straight``, ``right_turn`` or ``zigzag``, the paper's "strict, right-turn, zigzag"
-    seeds) to its end; the ground-truth poses in ``info`` are what Lidar-only motion
-    estimators are scored against.
+    seeds; or, to test loop closure, ``loop``, a closed circuit driven once round, and
+    ``out_and_back``, which turns around and comes back beside its outward lane) to its end;
+    the ground-truth poses in ``info`` are what Lidar-only motion estimators are scored against.
 
     ## Action Space
 
@@ -99,7 +100,9 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     ## Episode End
 
-    Termination: 1. the car is within ``goal_tolerance`` (0.3 m) of arc from the trace's end;
+    Termination: 1. the car is within ``goal_tolerance`` (0.3 m) of arc from the trace's end
+    (on a ``loop``: it has driven the whole lap but ``goal_tolerance``, counted along the lap,
+    so standing at the start does not count);
     2. the car's box touches an obstacle (it is stopped at the last free physics substep).
     Truncation: 3. the episode time reaches ``max_episode_time`` (120 s).
 
@@ -110,21 +113,24 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     | "pose"              | true car pose (x, y, heading), float64 (3,), world     | m, m, rad |
     | "lidar_poses"       | true world poses of lidar_1 and lidar_2, float64 (2,3)  | m, m, rad |
     | "time"              | time since reset                                        | s         |
-    | "progress"          | arc position / trace length, in [0, 1]                  | -         |
-    | "arc_position"      | arc length of the car's projection onto the trace       | m         |
+    | "progress"          | arc position / trace length, in [0, 1] (*)              | -         |
+    | "arc_position"      | arc length of the car's projection onto the trace (*)   | m         |
     | "cross_track_error" | signed distance from the trace, positive = left of it   | m         |
     | "collision"         | the car touched an obstacle this step                   | -         |
 
     Progress is tracked locally (within 2 m of arc of the previous step's), so it cannot jump
-    to a neighbouring leg of a zigzag.
+    to a neighbouring leg of a zigzag. (*) On a closed trace (``loop``) it is the distance
+    driven around the lap, tracked through the start/end seam: it goes negative if the car
+    backs up behind the start, and never jumps by a lap.
 
     ## Arguments
 
     | Argument    | Default          | Meaning                                                  |
     |-------------|------------------|----------------------------------------------------------|
     | world       | "open_cylinders" | "open_cylinders", "hallway", "closed_to_open", "random"  |
-    | trace       | None             | "straight", "right_turn", "zigzag"; None: the world's    |
-    |             |                  | paper trace (right_turn, zigzag, zigzag, zigzag)         |
+    | trace       | None             | "straight", "right_turn", "zigzag", "loop",              |
+    |             |                  | "out_and_back"; None: the world's paper trace            |
+    |             |                  | (right_turn, zigzag, zigzag, zigzag)                     |
     | config      | None             | an :class:`EnvConfig` or a dict of its fields            |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
 
@@ -288,7 +294,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         assert self.car is not None and self.trace is not None
         pose = self.car.pose
         arc, cross_track = project_onto_polyline(
-            self.trace.waypoints, self.trace.arc, pose[0], pose[1], self._arc, PROGRESS_WINDOW
+            self.trace.waypoints, self.trace.arc, pose[0], pose[1], self._arc, PROGRESS_WINDOW,
+            self.trace.closed,
         )
         self._arc = arc
         return arc, cross_track

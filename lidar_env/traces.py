@@ -32,6 +32,10 @@ BEND_SCALES: tuple[float, ...] = (1.0, 0.75, 0.5)
 #: Shortest trace [m] :func:`make_trace` accepts before giving up.
 MIN_TRACE_LENGTH = 2.0
 
+#: [m] how far a closed trace's last waypoint may lie from its first: far above the rounding
+#: error of laying arcs down in closed form (~1e-13 m), far below the waypoint spacing.
+CLOSURE_TOLERANCE = 1e-6
+
 
 class TraceFitError(ValueError):
     """No shrunken version of a trace keeps the required clearance in its world."""
@@ -86,6 +90,47 @@ def _zigzag(length: float, bend: float) -> list[Piece]:
     return pieces
 
 
+LOOP_CORNER_RADIUS = 2.5  # [m] at bend scale 1, as gentle as the right turn's
+LOOP_ASPECT = 2.0  # [-] long straight side / short straight side of the loop
+
+
+def _loop(length: float, bend: float) -> list[Piece]:
+    """A closed counter-clockwise circuit: a rectangle with quarter-circle corners.
+
+    It starts (and ends) in the middle of a long side, so the seam lies on a straight. Corners
+    never take more than half the length (short loops get tighter corners, not no straights).
+    """
+    radius = min(LOOP_CORNER_RADIUS * bend, length / (4.0 * math.pi))
+    short = (length - 2.0 * math.pi * radius) / (2.0 * (1.0 + LOOP_ASPECT))
+    long = LOOP_ASPECT * short
+    corner = (0.5 * math.pi * radius, 1.0 / radius)
+    return [(long / 2, 0.0), corner, (short, 0.0), corner, (long, 0.0), corner, (short, 0.0),
+            corner, (long / 2, 0.0)]
+
+
+OUT_AND_BACK_RADIUS = 2.0  # [m] radius of the turn-around's arcs at bend scale 1
+OUT_AND_BACK_OFFSET = 2.0  # [m] return lane left of the outward one at bend scale 1: both lanes
+#                            fit a 5 m corridor with 1.5 m to spare on either side
+
+
+def _out_and_back(length: float, bend: float) -> list[Piece]:
+    """Out along a straight, turn around, and back along a parallel lane to the left.
+
+    The turn-around is a bulb of three arcs of one radius ``R``: right by ``a``, left by
+    ``pi + 2 a``, right by ``a``; it shifts the path ``R (4 cos a - 2)`` to the left, which sets
+    ``a`` for the wanted offset (a plain U-turn would need ``R`` = offset / 2, too tight to see
+    much of the turn). The trace ends beside its start, facing back. The turn-around shrinks
+    (radius and offset together) so that it takes at most half the length.
+    """
+    angle = math.acos((OUT_AND_BACK_OFFSET / OUT_AND_BACK_RADIUS + 2.0) / 4.0)
+    turn_at_scale_1 = OUT_AND_BACK_RADIUS * (math.pi + 4.0 * angle)
+    radius = OUT_AND_BACK_RADIUS * min(bend, length / (2.0 * turn_at_scale_1))
+    straight = (length - radius * (math.pi + 4.0 * angle)) / 2.0
+    return [(straight, 0.0), (radius * angle, -1.0 / radius),
+            (radius * (math.pi + 2.0 * angle), 1.0 / radius), (radius * angle, -1.0 / radius),
+            (straight, 0.0)]
+
+
 @dataclass(frozen=True)
 class TraceSeed:
     """A named trace shape.
@@ -93,7 +138,7 @@ class TraceSeed:
     Attributes:
         name: the seed's name.
         pieces: ``(length [m], bend scale) -> [(arc length [m], curvature [1/m]), ...]``.
-        closed: the trace ends where it starts (a circuit); progress then wraps around.
+        closed: the trace ends where it starts, with the same heading (a circuit).
     """
 
     name: str
@@ -107,6 +152,8 @@ TRACE_SEEDS: dict[str, TraceSeed] = {
         TraceSeed("straight", _straight),
         TraceSeed("right_turn", _right_turn),
         TraceSeed("zigzag", _zigzag),
+        TraceSeed("loop", _loop, closed=True),
+        TraceSeed("out_and_back", _out_and_back),
     )
 }
 TRACE_NAMES: tuple[str, ...] = tuple(TRACE_SEEDS)
@@ -151,28 +198,25 @@ def integrate_pieces(
 class TraceProjection(NamedTuple):
     """Where a point lies relative to a trace."""
 
-    progress: float  # [-] arc_position / length, in [0, 1]
+    progress: float  # [-] arc_position / length: in [0, 1], except on a closed trace (see below)
     cross_track_error: float  # [m] signed distance to the trace, positive = left of it
     arc_position: float  # [m] arc length of the closest trace point from the start
 
 
 @numba.njit(cache=True)
-def project_onto_polyline(
-    points: np.ndarray, arc: np.ndarray, px: float, py: float, near: float, window: float
-) -> tuple[float, float]:
-    """Closest point to (px, py) on the polyline ``points`` (M, 2) with arc lengths ``arc``.
+def _closest_on_segments(
+    points: np.ndarray, arc: np.ndarray, px: float, py: float, lo: float, hi: float
+) -> tuple[float, float, float]:
+    """Closest point to (px, py) on the segments of ``points`` overlapping arc [lo, hi] [m].
 
-    Only segments within ``window`` [m] of arc position ``near`` are searched (``window = inf``
-    searches all). Returns (arc position [m], signed distance [m], positive = left).
+    Returns (squared distance [m^2], arc position [m], side: > 0 left of the trace); the
+    distance is ``inf`` when no segment overlaps.
     """
-    first, last = 0, points.shape[0] - 1
-    if window < np.inf:
-        first = max(np.searchsorted(arc, near - window) - 1, 0)
-        last = min(np.searchsorted(arc, near + window) + 1, last)
-    best_d2 = np.inf
-    best_s = 0.0
-    best_side = 0.0
-    for i in range(first, last):
+    last = points.shape[0] - 1
+    first = max(np.searchsorted(arc, lo) - 1, 0)
+    stop = min(np.searchsorted(arc, hi) + 1, last)
+    best_d2, best_s, best_side = np.inf, 0.0, 0.0
+    for i in range(first, stop):
         ax, ay = points[i, 0], points[i, 1]
         dx, dy = points[i + 1, 0] - ax, points[i + 1, 1] - ay
         seg2 = dx * dx + dy * dy
@@ -185,6 +229,46 @@ def project_onto_polyline(
             best_d2 = d2
             best_s = arc[i] + u * (arc[i + 1] - arc[i])
             best_side = dx * ey - dy * ex
+    return best_d2, best_s, best_side
+
+
+@numba.njit(cache=True)
+def project_onto_polyline(
+    points: np.ndarray,
+    arc: np.ndarray,
+    px: float,
+    py: float,
+    near: float,
+    window: float,
+    closed: bool = False,
+) -> tuple[float, float]:
+    """Closest point to (px, py) on the polyline ``points`` (M, 2) with arc lengths ``arc``.
+
+    Only the polyline within ``window`` [m] of arc position ``near`` is searched
+    (``window = inf`` searches all and returns an arc position in [0, arc[-1]]). On a
+    ``closed`` polyline (last point = first) the window wraps across the seam and the arc
+    position is unwrapped to the lap of ``near``: it keeps growing past ``arc[-1]`` through
+    the seam and goes negative behind the start, so it counts distance driven around the loop.
+    Returns (arc position [m], signed distance [m], positive = left).
+    """
+    length = arc[-1]
+    if window == np.inf:
+        best_d2, best_s, best_side = _closest_on_segments(points, arc, px, py, -np.inf, np.inf)
+    elif not closed:
+        best_d2, best_s, best_side = _closest_on_segments(
+            points, arc, px, py, near - window, near + window
+        )
+    else:
+        lap = math.floor(near / length) * length
+        local = near - lap  # in [0, length)
+        best_d2, best_s, best_side = np.inf, 0.0, 0.0
+        for shift in (-length, 0.0, length):  # the window's part on the previous, same, next lap
+            lo, hi = local - window - shift, local + window - shift
+            if hi < 0.0 or lo > length:
+                continue
+            d2, s, side = _closest_on_segments(points, arc, px, py, lo, hi)
+            if d2 < best_d2:
+                best_d2, best_s, best_side = d2, s + shift + lap, side
     distance = math.sqrt(best_d2)
     return best_s, distance if best_side >= 0.0 else -distance
 
@@ -195,9 +279,10 @@ class Trace:
     Attributes:
         seed: name of the seed it was built from.
         waypoints: ``(M, 2)`` [m] world-frame points, at most ``WAYPOINT_SPACING`` apart.
-        headings: ``(M,)`` [rad] path direction at each waypoint.
+        headings: ``(M,)`` [rad] path direction at each waypoint, continuous (not wrapped: a
+            counter-clockwise loop ends at its start heading + 2 pi).
         arc: ``(M,)`` [m] arc length from the start to each waypoint.
-        closed: a circuit (its end meets its start).
+        closed: a circuit: its last waypoint is its first, and arc positions wrap around.
     """
 
     def __init__(
@@ -216,6 +301,12 @@ class Trace:
         steps = np.hypot(*np.diff(waypoints, axis=0).T)
         self.arc = np.concatenate([[0.0], np.cumsum(steps)])
         self.closed = closed
+        gap = float(np.hypot(*(waypoints[-1] - waypoints[0])))
+        if closed and gap > CLOSURE_TOLERANCE:
+            raise ValueError(
+                f"closed trace {seed!r}: expected the last waypoint to meet the first (within "
+                f"{CLOSURE_TOLERANCE:g} m), got a gap of {gap:.6g} m"
+            )
         for array in (self.waypoints, self.headings, self.arc):
             array.flags.writeable = False
 
@@ -247,12 +338,18 @@ class Trace:
 
         With ``near`` (an arc position [m], e.g. the previous projection), only the trace within
         ``window`` metres of it is searched: progress then cannot jump across to a neighbouring
-        leg of a zigzag that passes close by.
+        leg of a zigzag that passes close by. On a closed trace the search wraps across the
+        seam and the arc position is the one nearest ``near`` on any lap: tracked step by step it
+        counts the distance driven around the loop (past ``length`` after the seam, negative
+        behind the start), and so does ``progress`` (1 = one lap). Without ``near`` the whole
+        trace is searched and the arc position lies in [0, length].
         """
         x, y = (float(v) for v in np.asarray(point, dtype=np.float64)[:2])
         if near is None:
             near, window = 0.0, np.inf
-        s, cte = project_onto_polyline(self.waypoints, self.arc, x, y, float(near), window)
+        s, cte = project_onto_polyline(
+            self.waypoints, self.arc, x, y, float(near), window, self.closed
+        )
         return TraceProjection(s / self.length, cte, s)
 
     def point_at(self, arc_position: float) -> NDArray[np.float64]:

@@ -95,9 +95,14 @@ def _open_cylinders(clearance: float) -> WorldLayout:
     The jitter and radii follow fixed trigonometric patterns (no random generator: the world
     is the same everywhere); cylinders within ``clearance`` of a default trace are left out.
     """
+    # the loop and out_and_back mostly reuse the lanes the other traces clear (one cylinder more
+    # each is removed): the loop runs between the zigzag's and the right turn's, out_and_back
+    # goes out along the straight's
     starts = {"right_turn": (6.0, 30.0, 0.0), "straight": (4.0, 8.0, 0.0),
-              "zigzag": (4.0, 20.0, 0.0)}
-    lengths = {"right_turn": 30.0, "straight": 32.0, "zigzag": 32.0}
+              "zigzag": (4.0, 20.0, 0.0), "loop": (18.0, 21.0, 0.0),
+              "out_and_back": (12.0, 8.0, 0.0)}
+    lengths = {"right_turn": 30.0, "straight": 32.0, "zigzag": 32.0, "loop": 40.0,
+               "out_and_back": 40.0}
     i, j = np.meshgrid(np.arange(12), np.arange(12), indexing="ij")
     i, j = i.ravel().astype(float), j.ravel().astype(float)
     x = 1.5 + 3.5 * i + 0.9 * np.sin(1.7 * i + 2.3 * j)
@@ -119,9 +124,13 @@ def _hallway(clearance: float) -> WorldLayout:
     outline = np.array(upper + lower, dtype=float)
     world = World(segments=_polyline(outline, closed=True), name="hallway",
                   bounds=(-1.0, -8.0, 41.0, 8.0))
+    # the loop circles the broad middle; out_and_back goes out through the narrow start, turns
+    # around in the broad part and comes back through the narrow part 2 m to the left
     starts = {"zigzag": (1.5, 0.0, 0.0), "straight": (1.5, 0.0, 0.0),
-              "right_turn": (12.0, 4.0, 0.0)}
-    lengths = {"zigzag": 40.0, "straight": 37.0, "right_turn": 18.0}
+              "right_turn": (12.0, 4.0, 0.0), "loop": (20.0, -4.5, 0.0),
+              "out_and_back": (1.5, -1.0, 0.0)}
+    lengths = {"zigzag": 40.0, "straight": 37.0, "right_turn": 18.0, "loop": 40.0,
+               "out_and_back": 40.0}
     return WorldLayout(world, starts, lengths)
 
 
@@ -131,9 +140,13 @@ def _closed_to_open(clearance: float) -> WorldLayout:
         [(0, -2.5), (0, 2.5), (14, 2.5), (14, 15), (40, 15), (40, -15), (14, -15), (14, -2.5)],
         dtype=float,
     )
+    # the loop circles a cylinder in the hall; out_and_back goes out of the corridor, turns
+    # around at the hall's entrance and comes back through the corridor 2 m to the left
     starts = {"zigzag": (1.5, 0.0, 0.0), "straight": (1.5, 0.0, 0.0),
-              "right_turn": (1.5, 1.0, 0.0)}
-    lengths = {"zigzag": 36.0, "straight": 36.0, "right_turn": 28.0}
+              "right_turn": (1.5, 1.0, 0.0), "loop": (32.0, -7.0, 0.0),
+              "out_and_back": (1.5, -1.0, 0.0)}
+    lengths = {"zigzag": 36.0, "straight": 36.0, "right_turn": 28.0, "loop": 40.0,
+               "out_and_back": 40.0}
     circles = np.array(
         [(18, 6, 0.4), (21, -5, 0.3), (25, 9, 0.5), (27, -9, 0.4), (31, 5, 0.3), (33, -4, 0.5),
          (36, 10, 0.4), (22, 12, 0.3), (37, -11, 0.3), (19, -11, 0.5), (29, 0, 0.3)],

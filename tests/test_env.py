@@ -53,8 +53,9 @@ def _rollout(env, seed, steps=60):
 NOISY = {"range_noise_std": 0.05, "dropout_prob": 0.1}
 
 
-def test_same_seed_gives_bit_identical_rollouts_and_other_seeds_differ():
-    env = gym.make("DualLidar-v0", world="random", config=NOISY)
+@pytest.mark.parametrize("trace", [None, "loop", "out_and_back"])
+def test_same_seed_gives_bit_identical_rollouts_and_other_seeds_differ(trace):
+    env = gym.make("DualLidar-v0", world="random", trace=trace, config=NOISY)
     first, second, other = _rollout(env, 7), _rollout(env, 7), _rollout(env, 8)
     assert first.tobytes() == second.tobytes()
     assert len(first) != len(other) or first.tobytes() != other.tobytes()
@@ -227,8 +228,8 @@ def test_bad_actions_raise(action, message):
 def test_bad_names_options_and_start_poses_raise():
     with pytest.raises(ValueError, match="unknown world 'moon': expected one of open_cylinders"):
         gym.make("DualLidar-v0", world="moon")
-    with pytest.raises(ValueError, match="unknown trace 'loop': expected one of straight"):
-        gym.make("DualLidar-v0", trace="loop")
+    with pytest.raises(ValueError, match="unknown trace 'lap': expected one of straight"):
+        gym.make("DualLidar-v0", trace="lap")
     env = gym.make("DualLidar-v0", world="hallway")
     with pytest.raises(ValueError, match="unknown trace 'zig'"):
         env.reset(options={"trace": "zig"})

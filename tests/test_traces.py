@@ -104,7 +104,7 @@ def test_an_impossible_fit_says_where_it_is_tight():
 
 def test_unknown_seed_and_bad_arguments_are_readable():
     with pytest.raises(ValueError, match="unknown trace 'zig': expected one of straight, "
-                                         "right_turn, zigzag"):
+                                         "right_turn, zigzag, loop, out_and_back"):
         build_trace("zig", (0, 0, 0), 10.0)
     with pytest.raises(ValueError, match="start_pose: expected 3 finite numbers"):
         build_trace("straight", (0, 0), 10.0)

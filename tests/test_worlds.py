@@ -66,10 +66,11 @@ def test_closed_to_open_widens_from_a_corridor_into_a_hall():
     assert len(world.circles) + len(world.polygons) >= 5  # some features in the hall
 
 
-def test_random_worlds_come_from_the_generator_and_keep_the_trace_clear():
+@pytest.mark.parametrize("trace", ["zigzag", "loop", "out_and_back"])
+def test_random_worlds_come_from_the_generator_and_keep_the_trace_clear(trace):
     worlds = []
     for seed in (0, 0, 1):
-        scene = make_scene("random", "zigzag", np.random.default_rng(seed))
+        scene = make_scene("random", trace, np.random.default_rng(seed))
         worlds.append(scene)
         assert np.min(scene.world.clearance(scene.trace.waypoints)) >= LAYOUT_CLEARANCE
         assert len(scene.world.walls) >= 4  # the room, at least
@@ -82,7 +83,7 @@ def test_bad_names_and_a_missing_generator_are_readable():
     with pytest.raises(ValueError, match="unknown world 'maze': expected one of open_cylinders, "
                                          "hallway, closed_to_open, random"):
         make_world("maze")
-    with pytest.raises(ValueError, match="unknown trace 'loop'"):
-        make_scene("hallway", "loop")
+    with pytest.raises(ValueError, match="unknown trace 'lap'"):
+        make_scene("hallway", "lap")
     with pytest.raises(TypeError, match="world 'random' needs a numpy.random.Generator, got int"):
         make_scene("random", "straight", 3)
