@@ -195,6 +195,10 @@ class World:
             every line the Lidar can see.
         polygons: list of ``(k, 2)`` float64 vertex arrays.
         bounds: ``(xmin, ymin, xmax, ymax)`` tuple of floats.
+        grid: :class:`PrimitiveGrid` bucketing the primitives for range and nearest queries
+            (built on first use; not pickled).
+
+    All arrays are read-only copies, so the cached grid always matches the geometry.
     """
 
     def __init__(
@@ -309,7 +313,8 @@ class World:
 
         The outlines come from ``pymunk.autogeometry.march_hard`` on pixel centres, so they run
         along pixel edges before simplification; outlines of free regions enclosed by obstacles
-        become holes by the even-odd rule. The world's bounds are the image extent.
+        become holes by the even-odd rule. The world's bounds are the image extent. Tracing
+        calls back into Python once per pixel: about 5 s for 2000 x 2000 pixels.
         """
         if name is None:
             name = Path(image).stem if isinstance(image, (str, os.PathLike)) else "image"
