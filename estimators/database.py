@@ -672,6 +672,16 @@ class ExperimentDatabase:
         write_tum(out, table[:, 0], table[:, 1:4])
         return out
 
+    def export_truth_tum(self, scenario: Scenario, path: str | os.PathLike[str]) -> Path:
+        """Write a sensor dataset's true car poses as a TUM file (the reference for
+        ``evo_ape tum truth.tum estimate.tum``)."""
+        from estimators.tum import write_tum
+
+        dataset = self.load_sensor_dataset(scenario)
+        out = Path(path)
+        write_tum(out, dataset.times, dataset.poses)
+        return out
+
 
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")

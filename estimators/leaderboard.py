@@ -151,6 +151,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="skip the real-log (Radish ACES) results")
     parser.add_argument("--real-scans", type=int, default=DEFAULT_REAL_SCANS,
                         help="scans of the real log to replay, 0 = all (default: %(default)s)")
+    parser.add_argument("--tum", action="store_true",
+                        help="also write every trace of the run and its ground truth as TUM "
+                             "files (OUT/tum/), for evo")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
@@ -390,6 +393,19 @@ def _executor(args: argparse.Namespace) -> Any:
     return ProcessPoolExecutor(args.workers) if args.workers > 1 else None
 
 
+def export_tum_files(db: ExperimentDatabase, records: dict[tuple[Scenario, str], TraceRecord],
+                     directory: Path) -> Path:
+    """``<scenario>_<estimator>.tum`` per trace and ``<scenario>_truth.tum`` per simulated
+    scenario in ``directory``; returns it."""
+    directory.mkdir(exist_ok=True)
+    for (scenario, estimator), record in records.items():
+        stem = scenario.label.replace("/", "_")
+        db.export_tum(record.trace_id, directory / f"{stem}_{estimator}.tum")
+        if scenario.kind == "sim" and not (directory / f"{stem}_truth.tum").exists():
+            db.export_truth_tum(scenario, directory / f"{stem}_truth.tum")
+    return directory
+
+
 def _progress(total: int, label: str, enabled: bool) -> Any:
     from tqdm import tqdm
 
@@ -495,6 +511,8 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     except ImportError as error:
         print(f"note: Fig. 8 skipped ({error}); install the plots extra: "
               "pip install 'duallidar[plots]'")
+    if args.tum:
+        written.append(export_tum_files(db, records, out / "tum"))
     failures = {k: v for summary in summaries for k, v in summary.failures.items()}
     if failures:
         (out / "failures.txt").write_text(

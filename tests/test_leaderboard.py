@@ -52,9 +52,17 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
     assert float(case_1["pc_main_only_accuracy_percent"]) == pytest.approx(
         float(next(r for r in results if r["estimator"] == "pc")["accuracy_percent"]))
 
-    assert leaderboard.main([*TINY, "--no-real", "--out", str(out)]) == 0
+    assert leaderboard.main([*TINY, "--no-real", "--tum", "--out", str(out)]) == 0
     assert "0 recorded, 0 traces new, 1 already stored" in capsys.readouterr().out
     assert read_csv(out / "leaderboard.csv") == board
+    tum = sorted(p.name for p in (out / "tum").iterdir())
+    assert tum == [f"open_cylinders_right_turn_s3_{name}.tum" for name in ("pc", "truth", "zero")]
+    file_interface = pytest.importorskip("evo.tools.file_interface")
+    truth = file_interface.read_tum_trajectory_file(str(out / "tum" / tum[1]))
+    estimate = file_interface.read_tum_trajectory_file(str(out / "tum" / tum[2]))
+    assert truth.num_poses == estimate.num_poses > 100
+    np.testing.assert_allclose(estimate.positions_xyz, estimate.positions_xyz[:1].repeat(
+        estimate.num_poses, axis=0))  # "zero" never moves
 
 
 def test_missing_real_data_is_a_printed_note(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
