@@ -347,6 +347,10 @@ def test_from_image_reads_png_and_pgm(tmp_path) -> None:
         world = World.from_image(path, 0.1)
         assert world.name == "map"
         np.testing.assert_array_equal(world.to_image(0.1), expected)
+    deep = (image > 0).astype(np.uint16) * np.uint16(1000)  # 16-bit map
+    Image.fromarray(deep).save(tmp_path / "deep.png")
+    deep_world = World.from_image(tmp_path / "deep.png", 0.1)
+    np.testing.assert_array_equal(deep_world.to_image(0.1), expected)
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(b"\x89PNG not really an image")
     with pytest.raises(ValueError, match="image: expected a readable image file"):
