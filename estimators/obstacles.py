@@ -113,6 +113,7 @@ class Obstacle:
             axis.
         axis_angle: [rad] world direction of the principal axis.
         circle: the fitted circle if the cluster is round, else ``None``.
+        circle_tested: whether the cluster had enough returns to be tested for roundness.
     """
 
     points: NDArray[np.float64]
@@ -121,6 +122,7 @@ class Obstacle:
     extent: NDArray[np.float64]
     axis_angle: float
     circle: CircleFit | None
+    circle_tested: bool
 
     @property
     def position(self) -> NDArray[np.float64]:
@@ -206,6 +208,27 @@ def split_scan(
     return [order[c] for c in clusters]
 
 
+def line_rms(points: NDArray[np.float64]) -> float:
+    """rms [m] of the perpendicular distances of ``points`` (m >= 2, 2) to their total least
+    squares line."""
+    offsets = points - points.mean(axis=0)
+    singular_values = np.linalg.svd(offsets, compute_uv=False)
+    return float(singular_values[-1] / math.sqrt(len(points)))
+
+
+def corner_rms(points: NDArray[np.float64]) -> float:
+    """rms [m] of the best two-segment fit of ``points`` (m >= 3, 2), ordered along the scan:
+    split at the point farthest from the chord of the ends (as in Douglas-Peucker), one
+    total least squares line per side, the split point on both."""
+    chord = points[-1] - points[0]
+    normal = np.array([-chord[1], chord[0]]) / max(float(np.hypot(*chord)), 1e-12)
+    split = int(np.argmax(np.abs((points - points[0]) @ normal)))
+    split = min(max(split, 1), len(points) - 2)
+    first, second = points[: split + 1], points[split:]
+    squares = line_rms(first) ** 2 * len(first) + line_rms(second) ** 2 * len(second)
+    return float(math.sqrt(squares / (len(points) + 1)))
+
+
 def describe_cluster(
     points: NDArray[np.float64],
     beams: NDArray[np.int64],
@@ -233,9 +256,13 @@ def describe_cluster(
             # convex towards the sensor: the centre lies beyond the arc, not in front of it
             and np.linalg.norm(fit.centre - sensor_position)
             > np.linalg.norm(centroid - sensor_position)
+            # a circle with fewer degrees of freedom (3) than two lines (4) must still fit
+            # better: the convex corner of a box or of two walls is not a cylinder
+            and fit.rms < corner_rms(points)
         ):
             circle = fit
-    return Obstacle(points, beams, centroid, extent, float(math.atan2(axis[1], axis[0])), circle)
+    return Obstacle(points, beams, centroid, extent, float(math.atan2(axis[1], axis[0])), circle,
+                    circle_tested=len(points) >= params.min_circle_points)
 
 
 def detect_obstacles(
@@ -291,6 +318,7 @@ class Track:
         circle: joint circle fit of all round detections, or ``None``.
         points: ``(m, 2)`` world returns [m] of the latest step it was detected in.
         hits: detections joined so far.
+        round_hits, circle_tests: detections found round, and tested for roundness.
         first_step, last_step: steps of the first and the latest detection.
     """
 
@@ -302,6 +330,8 @@ class Track:
     first_step: int
     last_step: int
     _origin: NDArray[np.float64] = field(repr=False)
+    round_hits: int = 0
+    circle_tests: int = 0
     _reach: tuple[NDArray[np.float64], float] = field(init=False, repr=False)
     _tree: cKDTree | None = field(default=None, init=False, repr=False)
     _normal: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)), repr=False)
@@ -329,10 +359,12 @@ class Track:
         self._tree = None
         self.hits += 1
         self.last_step = step
+        self.circle_tests += obstacle.circle_tested
         if obstacle.circle is None:
             if self.circle is None:
                 self.position = obstacle.centroid.copy()
             return
+        self.round_hits += 1
         points = obstacle.points - self._origin
         normal, rhs = kasa_normal_equations(points)
         self._normal += normal
@@ -414,12 +446,21 @@ class ObstacleTracker:
         best = int(np.argmin(distances))
         return self.tracks[best] if np.isfinite(distances[best]) else None
 
-    def cylinders(self, min_hits: int = 3) -> NDArray[np.float64]:
-        """``(M, 3)`` rows ``cx, cy, r`` [m] of the round tracks seen at least ``min_hits``
-        times (a single detection may be a coincidence of noise)."""
+    def cylinders(self, min_hits: int = 3, min_round_share: float = 0.1) -> NDArray[np.float64]:
+        """``(M, 3)`` rows ``cx, cy, r`` [m] of the round tracks detected at least ``min_hits``
+        times (one detection may be a coincidence of noise) and found round in at least
+        ``min_round_share`` of their roundness tests. A free-standing cylinder is round in
+        most of them; one touching a wall, which merges it into the wall's cluster from many
+        viewpoints, in 20 % or more of them in our random worlds; the convex corner of a box
+        or of two walls in a few percent (a short arc of returns around it fits a circle)."""
+        if not 0.0 <= min_round_share <= 1.0:
+            raise ValueError(
+                f"min_round_share: expected a share in [0, 1], got {min_round_share!r}"
+            )
         rows = [
             (t.circle.cx, t.circle.cy, t.circle.radius)
             for t in self.tracks
             if t.circle is not None and t.hits >= min_hits
+            and t.round_hits >= min_round_share * t.circle_tests
         ]
         return np.array(rows, dtype=np.float64).reshape(-1, 3)

@@ -63,6 +63,23 @@ def test_walls_are_extended_not_round_and_a_corner_is_one_cluster():
     assert np.all(corner.points[:, 0] <= 4.0 + 1e-9) and np.all(corner.points[:, 1] <= 3 + 1e-9)
 
 
+def test_a_small_box_seen_from_all_around_is_not_taken_for_a_cylinder():
+    # 0.4 m x 0.4 m: the arc of returns around a corner of it would fit a circle well
+    world = World(polygons=[[[2.0, 0.0], [2.4, 0.0], [2.4, 0.4], [2.0, 0.4]]])
+    rng = np.random.default_rng(4)
+    tracker = ObstacleTracker()
+    n_detections = n_round = 0
+    for angle in np.linspace(-np.pi, np.pi, 36, endpoint=False):
+        for distance in (1.5, 3.0, 6.0):
+            pose = np.array([2.2 + distance * np.cos(angle), 0.2 + distance * np.sin(angle), 0.3])
+            detections = detect_obstacles(noisy_scan(world, pose, rng), ANGLES, pose, MAX_RANGE)
+            n_detections += len(detections)
+            n_round += sum(d.circle is not None for d in detections)
+            tracker.update(detections)
+    assert n_round <= 0.05 * n_detections
+    assert len(tracker.cylinders()) == 0
+
+
 def test_clusters_split_at_range_jumps_and_join_across_zero_radians():
     ranges = np.full(360, MAX_RANGE)
     ranges[[357, 358, 359, 0, 1, 2]] = 2.0  # an arc of radius 2 m seen across 0 rad
