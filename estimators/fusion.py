@@ -213,14 +213,15 @@ class FusionEstimator(Estimator):
     """Both Lidars, all four same- and cross-sensor matches, fused on SE(2) over keyframes.
 
     Every scan pair is matched by :class:`estimators.rotation_pc.ScanMatcher` against the
-    latest keyframe -- the same-sensor pairs by rotation-aware phase correlation, all four by
+    latest keyframe -- the main Lidar's pair by rotation-aware phase correlation, all four by
     ``icp_iterations`` of point-to-curve ICP -- and the four edges (paper Fig. 4) give the car
     pose by :func:`optimize_poses`.
     When the car has moved ``keyframe_distance`` [m] or turned ``keyframe_turn`` [rad] from that
-    keyframe, the scans become a keyframe: they are also matched against the older keyframes
-    of the window (``window`` keyframes in all) and the window's poses are re-solved with its
-    oldest keyframe held. Matching against keyframes rather than the previous scan means the
-    error grows per keyframe, not per scan, and standing still adds no drift.
+    keyframe, the scans become a keyframe: they are also matched (same-sensor pairs) against
+    the older keyframes of the window (``window`` keyframes in all) and the window's poses are
+    re-solved with its oldest keyframe held. Matching against keyframes rather than the
+    previous scan means the error grows per keyframe, not per scan, and standing still adds no
+    drift.
 
     Defaults: ``image_size`` 200 px (10 cm pixels for a 10 m range): the correlation only
     has to land within ICP's basin, and it costs a quarter of the paper's 400 px;

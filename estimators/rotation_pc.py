@@ -8,9 +8,11 @@ so needs scans that share an orientation. Between sensor-frame scans the pipelin
 2. draws the later scan turned back by that angle and phase-correlates it with the earlier
    one's image (:func:`estimators.phase_correlation.phase_correlate`, subpixel) for the
    translation;
-3. optionally polishes the pose with a few point-to-line ICP iterations started from it
-   (:func:`estimators.icp.register`) -- a correlative-then-refine pipeline as in Olson's and
-   Cartographer's matchers: the correlation finds the basin, ICP its bottom.
+3. optionally polishes the pose with a few ICP iterations started from it -- point-to-curve
+   (:class:`CurveReference`, :func:`refine_on_curves`) with :mod:`estimators.icp`'s
+   Gauss-Newton step -- a correlative-then-refine pipeline as in Olson's and Cartographer's
+   matchers: the correlation finds the basin, ICP its bottom. A weak motion prior from the
+   estimator's own increments holds what the scans leave open (corridors).
 
 :class:`ScanMatcher` does one pair of scans (any two sensors); :class:`RotationPhaseCorrelation`
 chains the matches of one Lidar's consecutive scans into car poses.
@@ -42,8 +44,6 @@ FloatArray = NDArray[np.float64]
 
 #: Lowest confidence a match reports, so that a poor match still counts a little in a fusion.
 MIN_CONFIDENCE = 1e-3
-
-
 #: Log-polar grid of the rotation search: 1-degree bins over the half turn the magnitude
 #: spectrum needs, refined to a fraction of a bin, and 32 radii -- enough to land well within
 #: the refinement's basin at a quarter of the cost of a finer grid.
@@ -285,8 +285,8 @@ class ScanMatcher:
         max_range: [m] of the scans (readings at or beyond it are "no return").
         image_size: [px] side of the eq.-5 images (default 400, the paper's).
         resolution: [m/px]; default ``2 max_range / image_size``, the finest that holds a scan.
-        icp_iterations: point-to-line ICP iterations after the correlation (0: none). A handful
-            suffices because the correlation already lands within a pixel or two.
+        icp_iterations: point-to-curve ICP iterations after the correlation (0: none). A
+            handful suffices because the correlation already lands within a pixel or two.
     """
 
     max_range: float
