@@ -8,10 +8,12 @@ what removes most of scan-to-scan ICP's error (compare KISS-ICP, Vizzo et al. 20
 al. 2016, Cartographer's local SLAM).
 
 The initial guess and a weak prior come from a constant-velocity model of the estimator's own
-recent increments (never odometry): where the scan constrains the pose (almost everywhere)
-the data dominate; along a featureless corridor the prior holds the motion. When the match is
-poor (few points explained) a correlative search over headings and translations on a
-likelihood field of the map (Olson 2009) finds a new start, and ICP refines it.
+last increment (never odometry), counted per scan rather than per second: logged timestamps
+jitter (``intel.clf`` has 631 stamps out of order), while scanners run at a fixed rate. Where
+the scan constrains the pose (almost everywhere) the data dominate; along a featureless
+corridor the prior holds the motion. When the match is poor (few points explained) a
+correlative search over headings and translations on a likelihood field of the map
+(Olson 2009) finds a new start, and ICP refines it.
 
 Two Lidars are merged into one point set in the car frame through their known mounts
 (:func:`estimators.scan_matching.scans_to_car_points`).
@@ -115,8 +117,7 @@ class LocalMapOdometry(Estimator):
         )
         self._reference: PointToLineReference | None = None
         self._field: LikelihoodField | None = None
-        self._velocity = np.zeros(3)  # car-frame increment per second [m/s, m/s, rad/s]
-        self._last_time = 0.0
+        self._increment = np.zeros(3)  # last car-frame motion per scan [m, m, rad]
         self.fallbacks = 0
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -137,11 +138,7 @@ class LocalMapOdometry(Estimator):
         self._field = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
-        self._last_time = t
         self._add_keyframe(self._initial_pose, self._points(scans))
-
-    def _predict(self, dt: float) -> NDArray[np.float64]:
-        return compose(self.pose, self._velocity * dt)
 
     def _fallback(self, points: NDArray[np.float64], guess: NDArray[np.float64]) -> MatchResult:
         assert self._reference is not None
@@ -153,9 +150,7 @@ class LocalMapOdometry(Estimator):
         return register(self._reference, points, start, self.params)
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
-        dt = t - self._last_time
-        self._last_time = t
-        guess = self._predict(dt)
+        guess = compose(self.pose, self._increment)
         points = self._points(scans)
         if self._reference is None or len(points) < 3:
             if len(points) >= 2:
@@ -170,8 +165,7 @@ class LocalMapOdometry(Estimator):
             if retry.quality > result.quality:
                 result = retry
         pose = result.pose
-        if dt > 0:
-            self._velocity = relative(self.pose, pose) / dt
+        self._increment = relative(self.pose, pose)
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
         if (

@@ -123,7 +123,9 @@ def pseudo_truth_relations(
     """Relations from a ``*-corrected`` log's SLAM poses (pseudo ground truth, logger clock):
     ``"consecutive"`` keyframes and one entry per window [s], e.g. ``"1 s"``."""
     times = reference.scan_times("logger")
-    poses = reference.logged_poses()
+    # intel-corrected.log.gz lists a few keyframes out of time order; the poses are what count.
+    order = np.argsort(times, kind="stable")
+    times, poses = times[order], reference.logged_poses()[order]
     return {
         ("consecutive" if w is None else f"{w:g} s"): relations_from_trajectory(times, poses, w)
         for w in windows

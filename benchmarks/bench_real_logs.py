@@ -1,0 +1,93 @@
+"""Real-log benchmark: Lidar-only estimators on ACES (Kümmerle relations) and Intel
+(SLAM-corrected poses as pseudo ground truth), with ms/scan and the real-time factor.
+
+    python benchmarks/bench_real_logs.py                      # icp and lidar_odometry, full logs
+    python benchmarks/bench_real_logs.py --limit 1500 --estimators lidar_odometry
+
+No estimator reads odometry. ``icp`` (scan-to-previous-scan PL-ICP from the identity) is the
+reference every ratio is measured against, in the same run on the same machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+from pathlib import Path
+
+from estimators import make
+from estimators.carmen import load_log
+from estimators.real_log import LogRun, pseudo_truth_relations, run_on_log, score_relations
+from estimators.relations import load_relations, relation_errors
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+REFERENCE = "icp"
+#: Published mean translational errors, ACES, all relations (SOURCE.md in the data folder).
+PUBLISHED_ACES = (
+    "Kümmerle 2009 scan matching 0.173 m; graph mapping 0.044 m; "
+    "Cartographer (Hess 2016) 0.0375 m / 0.373 deg (all relations, with loop closure); "
+    "PL-ICP given wheel odometry 0.036 m / 0.32 deg (local, issue 7)"
+)
+#: Intel pseudo ground-truth poses come from SLAM with a few cm of error of their own.
+INTEL_WINDOWS: tuple[float | None, ...] = (None, 1.0, 5.0)
+
+
+def _line(name: str, label: str, summary: object, run: LogRun) -> str:
+    return (
+        f"  {name:15s} {label:12s} {summary}  "
+        f"{1e3 * run.seconds_per_scan:6.2f} ms/scan, {run.realtime_factor:6.1f}x real time"
+    )
+
+
+def bench_aces(names: list[str], limit: int | None) -> None:
+    log = load_log(DATA / "aces.clf.bz2")
+    relations = load_relations(DATA / "aces.relations")
+    print(f"ACES ({len(log.scans) if limit is None else limit} scans), Kümmerle relations:")
+    print(f"  published: {PUBLISHED_ACES}")
+    reference_ms = None
+    for name in names:
+        run = run_on_log(make(name), log, limit=limit)
+        scores = score_relations(run, relations)
+        for subset in ("local", "all"):
+            print(_line(name, f"{subset}:", scores[subset], run))
+        reference_ms = run.seconds_per_scan if name == REFERENCE else reference_ms
+        if reference_ms is not None and name != REFERENCE:
+            print(f"  {name}: {run.seconds_per_scan / reference_ms:.2f}x the time of {REFERENCE}")
+
+
+def bench_intel(names: list[str], limit: int | None) -> None:
+    log = load_log(DATA / "intel.clf.bz2")
+    reference = pseudo_truth_relations(load_log(DATA / "intel-corrected.log.gz"), INTEL_WINDOWS)
+    print(
+        f"Intel ({len(log.scans) if limit is None else limit} scans) vs intel-corrected.log.gz "
+        "(PSEUDO ground truth: SLAM output, keyframes ~0.6 m apart):"
+    )
+    for name in names:
+        run = run_on_log(make(name), log, clock="logger", limit=limit)
+        for label, relations in reference.items():
+            inside = relations.select(
+                (relations.t1 >= run.times[0]) & (relations.t2 <= run.times[-1] + 0.01)
+            )
+            # The corrected log prints 6 significant digits: 10 ms covers its rounding.
+            summary = relation_errors(run.times, run.poses, inside, tolerance=0.01).summary()
+            print(_line(name, f"{label}:", summary, run))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--estimators", nargs="+", default=[REFERENCE, "lidar_odometry"])
+    parser.add_argument("--limit", type=int, default=None, help="first N scans of each log")
+    parser.add_argument("--logs", nargs="+", default=["aces", "intel"], choices=["aces", "intel"])
+    args = parser.parse_args()
+    if not DATA.is_dir():
+        raise SystemExit(f"real logs not found: expected them in {DATA}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
+          f"python {platform.python_version()}")
+    if "aces" in args.logs:
+        bench_aces(args.estimators, args.limit)
+    if "intel" in args.logs:
+        bench_intel(args.estimators, args.limit)
+
+
+if __name__ == "__main__":
+    main()
