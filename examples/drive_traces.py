@@ -65,7 +65,7 @@ def main() -> None:
     parser.add_argument("--worlds", nargs="+", default=list(WORLD_NAMES), choices=WORLD_NAMES,
                         help="worlds to drive (default: all)")
     args = parser.parse_args()
-    print(f"{'world':<15}{'trace':<11}{'length m':>9}{'time s':>8}{'steps':>6}{'progress':>9}"
+    print(f"{'world':<15}{'trace':<13}{'length m':>9}{'time s':>8}{'steps':>6}{'progress':>9}"
           f"{'max cte m':>10}{'mean cte m':>11}{'collision':>10}{'return':>8}{'steps/s':>9}")
     frames, failures = [], 0
     for world in args.worlds:
@@ -73,7 +73,7 @@ def main() -> None:
             figures, frame = drive_episode(world, trace, args.seed)
             frames.append(frame)
             failures += bool(figures["collision"]) or figures["progress"] < 0.98
-            print(f"{world:<15}{trace:<11}{figures['length_m']:>9.2f}{figures['time_s']:>8.1f}"
+            print(f"{world:<15}{trace:<13}{figures['length_m']:>9.2f}{figures['time_s']:>8.1f}"
                   f"{figures['steps']:>6d}{figures['progress']:>9.3f}{figures['max_cte_m']:>10.3f}"
                   f"{figures['mean_cte_m']:>11.4f}{figures['collision']!s:>10}"
                   f"{figures['return']:>8.2f}{figures['steps_per_s']:>9.0f}")
