@@ -44,11 +44,12 @@ FloatArray = NDArray[np.float64]
 
 #: Lowest confidence a match reports, so that a poor match still counts a little in a fusion.
 MIN_CONFIDENCE = 1e-3
-#: Log-polar grid of the rotation search: 1-degree bins over the half turn the magnitude
-#: spectrum needs, refined to a fraction of a bin, and 32 radii -- enough to land well within
-#: the refinement's basin at a quarter of the cost of a finer grid.
-POLAR_ANGLES = 180
-POLAR_RADII = 32
+#: Log-polar grids (angles over the half turn the magnitude spectrum needs, radii) of the
+#: rotation search: half-degree bins when the correlation is the answer, 1-degree bins and
+#: fewer radii when a refinement follows (enough to land well within its basin, at a quarter
+#: of the cost).
+POLAR_GRID = (360, 64)
+POLAR_GRID_BEFORE_REFINEMENT = (180, 32)
 #: Neighbouring returns further apart than this [m] are not one surface (a depth jump).
 MAX_SURFACE_GAP = 0.3
 #: Neighbours on each side fitted with a return's local quadratic: 5 points for 3 unknowns.
@@ -239,8 +240,8 @@ class PreparedScan:
     ``ranges`` [m] and ``beam_angles`` [rad] as measured; ``points`` ``(M, 2)`` [m] the
     returns in the sensor frame (smoothed onto their surfaces when ``reference`` is set);
     ``reference`` the scan's surfaces for refinement. The eq.-5 image (``image_size`` [px],
-    ``resolution`` [m/px]) and its spectra are made on first use, since a scan that is only
-    refined never needs them.
+    ``resolution`` [m/px]) and its spectra (log-polar ``polar_grid``: angles, radii) are made
+    on first use, since a scan that is only refined never needs them.
     """
 
     ranges: FloatArray
@@ -250,6 +251,7 @@ class PreparedScan:
     max_range: float
     image_size: int
     resolution: float
+    polar_grid: tuple[int, int] = POLAR_GRID
 
     def image(self, turn: float = 0.0) -> NDArray[np.uint8]:
         """The scan's eq.-5 image, its beams turned by ``turn`` [rad]."""
@@ -260,7 +262,8 @@ class PreparedScan:
     @cached_property
     def polar(self) -> FloatArray:
         """The image's log-polar magnitude spectrum (:func:`log_polar_spectrum`)."""
-        return log_polar_spectrum(self.image(), n_angles=POLAR_ANGLES, n_radii=POLAR_RADII)
+        n_angles, n_radii = self.polar_grid
+        return log_polar_spectrum(self.image(), n_angles=n_angles, n_radii=n_radii)
 
     @cached_property
     def spectrum(self) -> ImageSpectrum:
@@ -317,8 +320,16 @@ class ScanMatcher:
         if self.icp_iterations and len(points) >= 3:
             reference = CurveReference(ranges, angles, self.max_range)
             points = reference.smoothed
+        grid = POLAR_GRID_BEFORE_REFINEMENT if self.icp_iterations else POLAR_GRID
         return PreparedScan(
-            ranges, angles, points, reference, self.max_range, self.image_size, self._resolution
+            ranges,
+            angles,
+            points,
+            reference,
+            self.max_range,
+            self.image_size,
+            self._resolution,
+            grid,
         )
 
     def match(
