@@ -34,9 +34,6 @@ from estimators.icp import ICPParams, PointToLineReference, point_to_line_jacobi
 from estimators.scan_matching import LikelihoodField, estimate_normals, voxel_downsample
 from lidar_env.se2 import transform_points, wrap_angle
 
-#: Far coarse cells expanded to find the runner-up match (best bounds first).
-_RUNNER_UP_EXPANSIONS = 8
-
 
 def range_histogram(
     points: NDArray[np.float64], n_bins: int = 40, max_range: float = 20.0
@@ -160,31 +157,51 @@ class PlaceMap:
 
 
 @njit(cache=True)
-def _sum_cells(grid: NDArray[np.float64], base: NDArray[np.int64],
-               offsets: NDArray[np.int64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
-    """Mean of ``grid`` over the cells ``base`` (M, 2) moved by each of ``offsets`` (S, 2);
-    cells outside the grid count 0."""
+def _mean_scores(grid: NDArray[np.float64], base: NDArray[np.int64],
+                 offsets: NDArray[np.int64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
+    """``(H, S)`` mean of ``grid`` over the cells ``base[h]`` (M, 2) moved by each of
+    ``offsets`` (S, 2); cells outside the grid count 0."""
     n_rows, n_cols = grid.shape
-    out = np.zeros(len(offsets))
-    for s in range(len(offsets)):
-        total = 0.0
-        for m in range(len(base)):
-            i = base[m, 0] + offsets[s, 0]
-            j = base[m, 1] + offsets[s, 1]
-            if 0 <= i < n_rows and 0 <= j < n_cols:
-                total += grid[i, j]
-        out[s] = total / max(len(base), 1)
+    n_headings, n_points = base.shape[0], base.shape[1]
+    out = np.zeros((n_headings, len(offsets)))
+    for h in range(n_headings):
+        for s in range(len(offsets)):
+            total = 0.0
+            for m in range(n_points):
+                i = base[h, m, 0] + offsets[s, 0]
+                j = base[h, m, 1] + offsets[s, 1]
+                if 0 <= i < n_rows and 0 <= j < n_cols:
+                    total += grid[i, j]
+            out[h, s] = total / max(n_points, 1)
     return out
 
 
-def _grid_scores(
-    grid: NDArray[np.float64], origin: NDArray[np.float64], resolution: float,
-    points: NDArray[np.float64], shifts: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Mean grid value of ``points`` (M, 2) under every translation ``shifts`` (S, 2)."""
-    base = np.floor((points - origin) / resolution).astype(np.int64)
-    offsets = np.rint(shifts / resolution).astype(np.int64)
-    return _sum_cells(grid, base, offsets)
+@njit(cache=True)
+def _branch_and_bound(
+    grid: NDArray[np.float64], base: NDArray[np.int64], coarse: NDArray[np.int64],
+    fine: NDArray[np.int64], bounds: NDArray[np.float64], order: NDArray[np.int64],
+) -> tuple[float, int, int, int]:  # pragma: no cover (numba)
+    """Expand coarse nodes (heading h, shift k) = ``divmod(order[i], n_coarse)`` best bound
+    first, scoring their fine shifts, until no bound beats the best score; return it and its
+    (h, k, f)."""
+    n_rows, n_cols = grid.shape
+    n_coarse, n_points = len(coarse), base.shape[1]
+    best, best_h, best_k, best_f = -1.0, 0, 0, 0
+    for flat in order:
+        h, k = flat // n_coarse, flat % n_coarse
+        if bounds[h, k] <= best:
+            break
+        for f in range(len(fine)):
+            di, dj = coarse[k, 0] + fine[f, 0], coarse[k, 1] + fine[f, 1]
+            total = 0.0
+            for m in range(n_points):
+                i, j = base[h, m, 0] + di, base[h, m, 1] + dj
+                if 0 <= i < n_rows and 0 <= j < n_cols:
+                    total += grid[i, j]
+            score = total / max(n_points, 1)
+            if score > best:
+                best, best_h, best_k, best_f = score, h, k, f
+    return best, best_h, best_k, best_f
 
 
 def correlative_match(
@@ -198,56 +215,35 @@ def correlative_match(
     linear_window`` [m] and ``guess[2] ± params.angular_window``: two-level branch-and-bound,
     exact on the fine grid (coarse scores are upper bounds, expanded best first).
 
-    Returns the pose (3,), its mean likelihood score, and the best fine score of a pose at
-    least ``params.ambiguity_distance`` from it relative to that score (the ambiguity
-    measure; the few best coarse cells that far away are expanded to find it).
+    Returns the pose (3,), its mean likelihood score, and the best score of a pose at least
+    ``params.ambiguity_distance`` from it relative to that score (the ambiguity measure,
+    found by the same branch-and-bound over the far coarse cells).
     """
     guess = np.asarray(guess, dtype=np.float64)
-    res = params.resolution
-    step = (2 * params.coarse_factor + 1) * res
-    n_coarse = int(np.ceil(linear_window / step))
-    coarse = step * np.arange(-n_coarse, n_coarse + 1)
-    grid_x, grid_y = np.meshgrid(coarse, coarse, indexing="ij")
-    coarse_shifts = np.column_stack([grid_x.ravel(), grid_y.ravel()])
-    fine = res * np.arange(-params.coarse_factor, params.coarse_factor + 1)
-    fine_x, fine_y = np.meshgrid(fine, fine, indexing="ij")
-    fine_shifts = np.column_stack([fine_x.ravel(), fine_y.ravel()])
+    res, c = params.resolution, params.coarse_factor
+    n_coarse = int(np.ceil(linear_window / ((2 * c + 1) * res)))
+    coarse_axis = (2 * c + 1) * np.arange(-n_coarse, n_coarse + 1)
+    grid_x, grid_y = np.meshgrid(coarse_axis, coarse_axis, indexing="ij")
+    coarse = np.column_stack([grid_x.ravel(), grid_y.ravel()]).astype(np.int64)
+    fine_axis = np.arange(-c, c + 1)
+    fine_x, fine_y = np.meshgrid(fine_axis, fine_axis, indexing="ij")
+    fine = np.column_stack([fine_x.ravel(), fine_y.ravel()]).astype(np.int64)
     n_ang = int(np.ceil(params.angular_window / params.angular_step))
     headings = guess[2] + params.angular_step * np.arange(-n_ang, n_ang + 1)
-
-    rotated_sets, bounds = [], []
-    for heading in headings:
-        c, s = np.cos(heading), np.sin(heading)
-        rotated = points @ np.array([[c, s], [-s, c]]) + guess[:2]
-        rotated_sets.append(rotated)
-        bounds.append(_grid_scores(place.coarse_grid, place.field.origin, res, rotated,
-                                   coarse_shifts))
-    bound = np.stack(bounds)  # (headings, coarse shifts)
-    order = np.argsort(bound, axis=None)[::-1]
-    best_score, best = -1.0, (0, 0, 0)
-    for flat in order:
-        if bound.flat[flat] <= best_score:
-            break
-        h, k = np.unravel_index(flat, bound.shape)
-        scores = _grid_scores(place.field.grid, place.field.origin, res, rotated_sets[h],
-                              coarse_shifts[k] + fine_shifts)
-        f = int(np.argmax(scores))
-        if scores[f] > best_score:
-            best_score, best = float(scores[f]), (h, k, f)
-    h, k, f = best
-    shift = coarse_shifts[k] + fine_shifts[f]
+    cos, sin = np.cos(headings), np.sin(headings)
+    rotated = np.stack([cos[:, None] * points[:, 0] - sin[:, None] * points[:, 1],
+                        sin[:, None] * points[:, 0] + cos[:, None] * points[:, 1]], axis=-1)
+    base = np.floor((rotated + guess[:2] - place.field.origin) / res).astype(np.int64)
+    bounds = _mean_scores(place.coarse_grid, base, coarse)  # (headings, coarse shifts)
+    order = np.argsort(bounds, axis=None)[::-1].astype(np.int64)
+    best, h, k, f = _branch_and_bound(place.field.grid, base, coarse, fine, bounds, order)
+    shift = res * (coarse[k] + fine[f])
     pose = np.array([guess[0] + shift[0], guess[1] + shift[1], float(wrap_angle(headings[h]))])
-    far = np.hypot(*(coarse_shifts - coarse_shifts[k]).T) >= params.ambiguity_distance + step
-    runner_up = 0.0
-    far_bounds = np.where(far[None, :], bound, -1.0)
-    for flat in np.argsort(far_bounds, axis=None)[::-1][:_RUNNER_UP_EXPANSIONS]:
-        if far_bounds.flat[flat] <= runner_up:
-            break
-        h2, k2 = np.unravel_index(flat, bound.shape)
-        scores = _grid_scores(place.field.grid, place.field.origin, res, rotated_sets[h2],
-                              coarse_shifts[k2] + fine_shifts)
-        runner_up = max(runner_up, float(scores.max()))
-    return pose, best_score, runner_up / max(best_score, 1e-12)
+    reach = params.ambiguity_distance / res + (2 * c + 1)
+    far = np.hypot(*(coarse - coarse[k]).T) >= reach
+    far_order = order[far[order % len(coarse)]]
+    runner_up = _branch_and_bound(place.field.grid, base, coarse, fine, bounds, far_order)[0]
+    return pose, best, max(runner_up, 0.0) / max(best, 1e-12)
 
 
 def match_information(

@@ -90,6 +90,10 @@ class GraphSlam(Estimator):
             within a keyframe spacing plus a corridor's width of the old path). Off by
             default (0): on ACES its look-alike corridors gave more false matches than true
             ones (see the benchmark notes in the report).
+        global_submap_keyframes, global_min_quality, global_ambiguity_ratio: a global match
+            compares the last 6 keyframes (~3 m of path) with 6 on each side of the old one,
+            and must explain 75 % of the points with no other match within 80 % of its score
+            (stricter than local matches: nothing but the scans vouches for it).
         global_confirmation: a global match becomes a loop edge only when a second one within
             this many keyframes implies the same correction (10 keyframes; agreement within
             ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
@@ -119,6 +123,9 @@ class GraphSlam(Estimator):
     global_window: float = 2.0
     max_descriptor_distance: float = 0.3
     global_confirmation: int = 10
+    global_submap_keyframes: int = 6
+    global_min_quality: float = 0.75
+    global_ambiguity_ratio: float = 0.8
     consistency_distance: float = 0.3
     consistency_angle: float = np.radians(3.0)
     min_range: float = DEFAULT_MIN_RANGE
@@ -155,14 +162,18 @@ class GraphSlam(Estimator):
         self.keyframes: list[Keyframe] = []
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
         self._scan_odometry: list[NDArray[np.float64]] = []
-        self._places: dict[int, PlaceMap] = {}
+        self._places: dict[tuple[int, int], PlaceMap] = {}
         self._dirty = False
         self._since_optimized = 0
         self.loop_attempts: list[tuple[int, int, LoopVerification]] = []
         self.dropped_loops: list[tuple[int, int]] = []
         self._pending: list[tuple[int, int, LoopVerification]] = []
         self._last_loop = -(10**9)
-        self._global_params = replace(self.loop_params, angular_window=np.pi)
+        self._global_params = replace(
+            self.loop_params, angular_window=np.pi,
+            min_quality=max(self.loop_params.min_quality, self.global_min_quality),
+            ambiguity_ratio=min(self.loop_params.ambiguity_ratio, self.global_ambiguity_ratio),
+        )
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._frontend.update(scans, t)
@@ -219,19 +230,26 @@ class GraphSlam(Estimator):
         sigma_th = self.odometry_sigma_rotation + self.odometry_drift_rotation * distance
         return np.diag([sigma_xy**-2, sigma_xy**-2, sigma_th**-2])
 
-    def _place(self, index: int) -> PlaceMap:
-        """The old place around keyframe ``index``: its points and its neighbours', in its
-        frame (cached; the neighbours' relative poses hardly change once optimised)."""
-        if index not in self._places:
-            poses = self.graph.poses
-            lo = max(0, index - self.submap_neighbours)
-            hi = min(len(self.keyframes), index + self.submap_neighbours + 1)
-            points = np.concatenate([
-                transform_points(relative(poses[index], poses[k]), self.keyframes[k].points)
-                for k in range(lo, hi)
-            ])
-            self._places[index] = PlaceMap(points, self.loop_params)
-        return self._places[index]
+    def _submap(self, index: int, before: int, after: int) -> NDArray[np.float64]:
+        """Points (M, 2) of keyframes ``index - before .. index + after`` in the frame of
+        keyframe ``index``, placed by the graph's current poses."""
+        poses = self.graph.poses
+        lo, hi = max(0, index - before), min(len(self.keyframes), index + after + 1)
+        return np.concatenate([
+            transform_points(relative(poses[index], poses[k]), self.keyframes[k].points)
+            for k in range(lo, hi)
+        ])
+
+    def _place(self, index: int, neighbours: int | None = None) -> PlaceMap:
+        """The old place around keyframe ``index``: its points and its ``neighbours`` on each
+        side (default ``submap_neighbours``), in its frame (cached; the neighbours' relative
+        poses hardly change once optimised)."""
+        neighbours = self.submap_neighbours if neighbours is None else neighbours
+        key = (index, neighbours)
+        if key not in self._places:
+            self._places[key] = PlaceMap(self._submap(index, neighbours, neighbours),
+                                         self.loop_params)
+        return self._places[key]
 
     def loop_candidates(self, index: int) -> list[tuple[int, float]]:
         """Old keyframes keyframe ``index`` may revisit, with their search window [m]: within
@@ -287,9 +305,11 @@ class GraphSlam(Estimator):
         order = np.argsort(distance, kind="stable")[: self.global_candidates]
         self._pending = [p for p in self._pending if index - p[1] <= self.global_confirmation]
         poses = self.graph.poses
+        # A few keyframes of the recent path on both sides: more walls, fewer look-alikes.
+        query = self._submap(index, self.global_submap_keyframes, 0)
         for k in old[order][distance[order] <= self.max_descriptor_distance]:
-            result = verify_loop(self._place(int(k)), current.points, np.zeros(3),
-                                 self.global_window, self._global_params)
+            result = verify_loop(self._place(int(k), self.global_submap_keyframes), query,
+                                 np.zeros(3), self.global_window, self._global_params)
             self.loop_attempts.append((int(k), index, result))
             if not result.accepted:
                 continue
