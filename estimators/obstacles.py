@@ -10,8 +10,9 @@ i.e. the gap a surface seen at the grazing angle ``lambda`` would leave between 
 ``dphi`` apart, plus three range-noise sigmas. Each cluster is reported in the world frame at
 the (estimated) sensor pose with its centroid and extent (along and across its principal axis);
 a cluster that an algebraic circle fit (Kåsa, "A circle fitting procedure and its error
-analysis", IEEE Trans. Instrum. Meas. 1976) explains to within the range noise, convex towards
-the sensor and no larger than ``max_radius``, is a round obstacle with a centre and a radius.
+analysis", IEEE Trans. Instrum. Meas. 1976) explains to within the range noise, better than two
+line segments would (a corner), convex towards the sensor and no larger than ``max_radius``, is
+a round obstacle with a centre and a radius.
 
 Tracking (:class:`ObstacleTracker`): nearest-neighbour association with a gate. A detection
 joins the track whose position (circle centre for round obstacles, else centroid) is nearest,
