@@ -351,7 +351,9 @@ class FusionEstimator(Estimator):
         predicted = compose(self.pose, constant_velocity(self._motion, self._last_dt, dt))
         guess = relative(latest.pose, predicted)
         edges = self._match_all(latest, current, guess, correlate=True)
-        from_latest = fuse_car_motion(mounts, edges, guess, **self._weights())
+        # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
+        start = compose(compose(mounts[0], edges[0].pose), inverse(mounts[0]))
+        from_latest = fuse_car_motion(mounts, edges, start, **self._weights())
         pose = compose(latest.pose, from_latest)
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance

@@ -173,9 +173,9 @@ def refine_on_curves(
     prior: FloatArray | None = None,
 ) -> tuple[FloatArray, float]:
     """Point-to-curve ICP of ``points`` (M, 2, query sensor frame) onto ``reference`` from the
-    pose ``initial`` (3,); returns the pose and the share of points within
-    ``INLIER_DISTANCE`` of the reference surface (the match's confidence). The Gauss-Newton
-    step and robust weights are :mod:`estimators.icp`'s.
+    pose ``initial`` (3,) for at most ``iterations`` (>= 1); returns the pose and the share of
+    points within ``INLIER_DISTANCE`` of the reference surface (the match's confidence). The
+    Gauss-Newton step and robust weights are :mod:`estimators.icp`'s.
 
     ``prior`` (3,): a predicted pose, added with the weak information ``PRIOR_INFORMATION``.
     Where the scans leave a translation direction open (a featureless corridor) their
@@ -186,18 +186,20 @@ def refine_on_curves(
     """
     pose = np.asarray(initial, dtype=np.float64).copy()
     information = None if prior is None else PRIOR_INFORMATION
+    quality = 0.0
     for _ in range(iterations):
         moved = transform_points(pose, points)
         index, anchors, normals = reference.correspond(moved)
         if len(index) < 3:
             break
         residuals = np.einsum("ij,ij->i", moved[index] - anchors, normals)
+        # Scored before the step, which by then is tiny: one correspondence search saved.
+        quality = np.count_nonzero(np.abs(residuals) < INLIER_DISTANCE) / len(points)
         jacobian = point_to_line_jacobian(moved[index], pose[:2], normals)
         weights = robust_weights(residuals, "cauchy", LOSS_SCALE)
         offset = None
         if prior is not None:
-            offset = prior - pose
-            offset[2] = float(wrap_angle(offset[2]))
+            offset = pose_difference(prior, pose)
         step = gauss_newton_step(jacobian, residuals, weights, information, offset)
         if prior is not None:
             open_direction = _degenerate_translation(jacobian, weights)
@@ -208,10 +210,7 @@ def refine_on_curves(
         pose[2] = float(wrap_angle(pose[2]))
         if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
             break
-    moved = transform_points(pose, points)
-    index, anchors, normals = reference.correspond(moved)
-    residuals = np.abs(np.einsum("ij,ij->i", moved[index] - anchors, normals))
-    return pose, float(np.count_nonzero(residuals < INLIER_DISTANCE) / max(len(points), 1))
+    return pose, float(quality)
 
 
 def _degenerate_translation(jacobian: FloatArray, weights: FloatArray) -> FloatArray | None:
