@@ -9,6 +9,8 @@ slice                      meaning                                              
 ``[0, 2 * n_sectors)``     per Lidar, per sector: the nearest return / ``max_range``     [-]
 ``[.., + 2 * n_points)``   next trace points, every ``point_spacing`` m of arc ahead,   [-]
                            in the car frame (x forward, y left), / ``lookahead_scale``
+``[.., + 2)``              signed cross-track error / ``cross_track_scale`` (left +),   [-]
+                           heading error to the trace tangent / pi (CCW +), clipped
 ``[.., + 2)``              the previous action                                          [-]
 =========================  ===========================================================  =====
 
@@ -17,9 +19,11 @@ angles ``[2 pi k / n_sectors, 2 pi (k + 1) / n_sectors)`` CCW from that sensor's
 The trace points come from the env's active trace and the true car pose (``info["pose"]``): the
 driver is told where to go, like a route planner would; it never feeds an estimator.
 
-The wrapper keeps the env's reward (metres of progress along the trace, a cross-track penalty,
-a collision penalty) and, with ``randomize=True``, draws each episode's world and trace seed
-from the env's ``np_random`` so one policy learns every seed in every world.
+The reward is the env's (metres of progress along the trace, a small cross-track penalty, a
+collision penalty) minus ``cross_track_weight * |cross-track error| * dt``: the env's own
+penalty is sized for a scripted driver, too weak to teach a policy to hold the line. With
+``randomize=True`` each episode's world and trace seed are drawn from a generator seeded by
+``reset(seed=...)``, so one policy learns every seed in every world.
 """
 
 from __future__ import annotations
@@ -44,34 +48,43 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         n_points: int = 5,
         point_spacing: float = 0.5,  # [m] of trace arc between two look-ahead points
         lookahead_scale: float = 3.0,  # [m] a car-frame coordinate of this size maps to 1
+        cross_track_scale: float = 0.5,  # [m] a cross-track error of this size maps to 1
+        cross_track_weight: float = 1.0,  # [1/(m s)] extra reward penalty per metre off the trace
         randomize: bool = False,
         worlds: Sequence[str] = ("open_cylinders", "hallway", "closed_to_open", "random"),
         traces: Sequence[str] = ("straight", "right_turn", "zigzag"),
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, n_sectors=n_sectors, n_points=n_points, point_spacing=point_spacing,
-            lookahead_scale=lookahead_scale, randomize=randomize, worlds=worlds, traces=traces,
+            lookahead_scale=lookahead_scale, cross_track_scale=cross_track_scale,
+            cross_track_weight=cross_track_weight, randomize=randomize, worlds=worlds,
+            traces=traces,
         )
         gym.Wrapper.__init__(self, env)
         n_beams = env.unwrapped.config.n_beams
         if n_sectors < 1 or n_beams % n_sectors:
             raise ValueError(f"n_sectors: expected a divisor of n_beams={n_beams}, got {n_sectors}")
-        if n_points < 1 or point_spacing <= 0 or lookahead_scale <= 0:
+        scales = (n_points, point_spacing, lookahead_scale, cross_track_scale)
+        if min(scales) <= 0 or cross_track_weight < 0:
             raise ValueError(
-                "n_points, point_spacing and lookahead_scale must be positive, got "
-                f"{n_points}, {point_spacing}, {lookahead_scale}"
+                "n_points, point_spacing, lookahead_scale and cross_track_scale must be positive "
+                f"and cross_track_weight >= 0, got {scales} and {cross_track_weight}"
             )
         self.n_sectors = n_sectors
         self.offsets = point_spacing * np.arange(1, n_points + 1)
         self.lookahead_scale = lookahead_scale
+        self.cross_track_scale = cross_track_scale
+        self.cross_track_weight = cross_track_weight
         self.randomize = randomize
         self._rng: np.random.Generator | None = None  # draws world and trace when randomizing
         self.worlds = tuple(worlds)
         self.traces = tuple(traces)
-        size = 2 * n_sectors + 2 * n_points + 2
+        size = 2 * n_sectors + 2 * n_points + 4
         self.observation_space = gym.spaces.Box(-1.0, 1.0, (size,), np.float32)
         self.last_action = np.zeros(2, np.float32)
         self._arc = 0.0
+        self._trace: Any = None
+        self._tangents = np.zeros(0)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -91,6 +104,8 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
+        dt = self.env.unwrapped.config.control_dt
+        reward -= self.cross_track_weight * abs(info["cross_track_error"]) * dt
         self.last_action = np.clip(np.asarray(action, np.float32), -1.0, 1.0)
         return self.observe(observation, info), reward, terminated, truncated, info
 
@@ -103,13 +118,22 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         ]
         pose = np.asarray(info["pose"], np.float64)
         trace = self.env.unwrapped.trace
-        self._arc = trace.project(pose[:2], near=self._arc).arc_position
+        projection = trace.project(pose[:2], near=self._arc)
+        self._arc = projection.arc_position
         ahead = np.array([trace.point_at(self._arc + d) for d in self.offsets])
         local = se2.transform_points(se2.inverse(pose), ahead) / self.lookahead_scale
+        if trace is not self._trace:  # a new episode's trace: unwrap its headings once
+            self._trace, self._tangents = trace, np.unwrap(trace.headings)
+        tangent = np.interp(self._arc, trace.arc, self._tangents)
+        errors = [
+            projection.cross_track_error / self.cross_track_scale,
+            float(se2.wrap_angle(pose[2] - tangent)) / np.pi,
+        ]
         return np.concatenate(
             [
                 np.concatenate(sectors) / max_range,
                 np.clip(local.ravel(), -1.0, 1.0),
+                np.clip(errors, -1.0, 1.0),
                 self.last_action,
             ]
         ).astype(np.float32)

@@ -38,6 +38,7 @@ def test_trace_points_are_in_the_car_frame() -> None:
     np.testing.assert_allclose(points[:, 0], np.array([0.5, 1.0, 1.5, 2.0]) / 3.0, atol=1e-3)
     np.testing.assert_allclose(points[:, 1], 0.0, atol=1e-3)
     assert np.all(observation[:72] > 0) and np.all(observation[:72] <= 1)
+    np.testing.assert_allclose(observation[80:82], 0.0, atol=1e-3)  # on the line, aligned
 
 
 def test_randomized_episodes_are_reproducible_from_the_seed() -> None:
