@@ -1,6 +1,6 @@
 """Train the PPO trace-following driver.
 
-    python -m agents.train --timesteps 400000 --seed 0 --out agents/models/ppo_driver.zip
+    python -m agents.train --seed 0 --out agents/models/ppo_driver.zip
 
 Hyperparameters come from ``agents/ppo_driver.yaml`` (rl-zoo3 layout); ``--timesteps`` and
 ``--n-envs`` override it. Every episode draws its world (the built-in ones and ``random``) and
