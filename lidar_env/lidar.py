@@ -304,6 +304,46 @@ def _cast_rays_kernel(
     return out
 
 
+@njit(cache=True, fastmath=False)
+def _scan_kernel(
+    circles: NDArray[np.float64],
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
+    sensor_poses: NDArray[np.float64],
+    beams: tuple,
+    max_range: float,
+    below_max: float,
+    noise_std: float,
+    gaussians: NDArray[np.float64],
+    dropout_prob: float,
+    uniforms: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """The exact ranges of :func:`_cast_rays_kernel` turned into float32 readings in one pass.
+
+    A hit gets ``noise_std * gaussians[k, j]`` added (only when ``gaussians`` is not empty) and
+    is clipped to ``[0, below_max]``; then a beam with ``uniforms[k, j] < dropout_prob`` (only
+    when ``uniforms`` is not empty) reads ``max_range``. Returns a new ``(K, n)`` array.
+    """
+    ranges = _cast_rays_kernel(
+        circles, segments, first_polygon_edge, grid, sensor_poses, beams, max_range
+    )
+    noisy = gaussians.size > 0
+    dropping = uniforms.size > 0
+    out = np.empty(ranges.shape, dtype=np.float32)
+    for k in range(ranges.shape[0]):
+        for j in range(ranges.shape[1]):
+            r = ranges[k, j]
+            if r < max_range:
+                if noisy:
+                    r += noise_std * gaussians[k, j]
+                r = min(max(r, 0.0), below_max)
+            if dropping and uniforms[k, j] < dropout_prob:
+                r = max_range
+            out[k, j] = r
+    return out
+
+
 @lru_cache(maxsize=16)
 def _beam_geometry(angle_bytes: bytes) -> tuple:
     """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
@@ -320,6 +360,23 @@ def _beam_geometry(angle_bytes: bytes) -> tuple:
 
 
 Geometry = World | tuple[ArrayLike, ArrayLike]
+
+#: Stands in for the random draws of a Lidar without noise or dropout (the kernel skips them).
+#: Writeable like real draws, so the kernel compiles once for every combination; being empty,
+#: it cannot be written to.
+_NO_DRAWS = np.empty((0, 0))
+
+
+def _as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
+    """``sensor_poses`` as a contiguous float64 ``(K, 3)`` array (a single pose becomes K = 1)."""
+    poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
+    if poses.ndim == 1:
+        poses = poses[None, :]
+    if poses.ndim != 2 or poses.shape[1] != 3:
+        raise ValueError(
+            f"sensor_poses: expected finite (K, 3) poses (x, y, heading), got shape {poses.shape}"
+        )
+    return poses
 
 
 def _as_world(world_or_arrays: Geometry) -> tuple[World, int]:
@@ -363,13 +420,7 @@ def cast_rays(
         array([[ 4., 10.]])
     """
     world, first_polygon_edge = _as_world(world_or_arrays)
-    poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
-    if poses.ndim == 1:
-        poses = poses[None, :]
-    if poses.ndim != 2 or poses.shape[1] != 3:
-        raise ValueError(
-            f"sensor_poses: expected finite (K, 3) poses (x, y, heading), got shape {poses.shape}"
-        )
+    poses = _as_poses(sensor_poses)
     angles = np.asarray(beam_angles, dtype=np.float64)
     if angles.ndim != 1:
         raise ValueError(
@@ -416,6 +467,9 @@ class Lidar:
                 f"dropout_prob: expected a probability in [0, 1], got {self.dropout_prob}"
             )
         object.__setattr__(self, "n_beams", int(self.n_beams))
+        # plain floats, so the compiled kernel sees one signature whatever numbers were given
+        for name in ("max_range", "noise_std", "dropout_prob"):
+            object.__setattr__(self, name, float(getattr(self, name)))
 
     @cached_property
     def beam_angles(self) -> NDArray[np.float64]:
@@ -424,6 +478,16 @@ class Lidar:
         angles.flags.writeable = False
         return angles
 
+    @cached_property
+    def _beams(self) -> tuple:
+        """The kernel's beam geometry (see :func:`_beam_geometry`), looked up once."""
+        return _beam_geometry(self.beam_angles.tobytes())
+
+    @cached_property
+    def _below_max(self) -> float:
+        """The largest float32 below ``max_range``: a hit must never round up to "no return"."""
+        return float(np.nextafter(np.float32(self.max_range), np.float32(0.0)))
+
     def scan(
         self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator
     ) -> NDArray[np.float32]:
@@ -431,21 +495,22 @@ class Lidar:
 
         Exact ranges, then (only if ``noise_std > 0``) Gaussian noise on the hits, clipped to
         ``[0, max_range)``, then (only if ``dropout_prob > 0``) dropouts set to ``max_range``.
-        Random numbers are drawn for every beam in that fixed order, so the stream consumed
-        depends only on the shape; a noiseless Lidar consumes none.
+        Random numbers are drawn for every beam in that fixed order (all ``K x n`` standard
+        normals, then all ``K x n`` uniforms), so the stream consumed depends only on the shape;
+        a noiseless Lidar consumes none. Every call returns a new array.
         """
-        ranges = cast_rays(world, sensor_poses, self.beam_angles, self.max_range)
-        hit = ranges < self.max_range
-        # The largest float32 below max_range: a hit must never round up to "no return".
-        below_max = float(np.nextafter(np.float32(self.max_range), np.float32(0.0)))
-        if self.noise_std > 0:
-            noise = _check_rng(rng).normal(0.0, self.noise_std, size=ranges.shape)
-            ranges = np.where(hit, ranges + noise, ranges)
-        ranges = np.where(hit, np.clip(ranges, 0.0, below_max), ranges)
-        if self.dropout_prob > 0:
-            dropped = _check_rng(rng).random(ranges.shape) < self.dropout_prob
-            ranges = np.where(dropped, self.max_range, ranges)
-        return ranges.astype(np.float32)
+        world, first_polygon_edge = _as_world(world)
+        poses = _as_poses(sensor_poses)
+        shape = (poses.shape[0], self.n_beams)
+        # Drawn by numpy from the caller's generator (numba would take it only at a cost of
+        # several microseconds per call), then applied in the same compiled pass as the cast.
+        gaussians = _check_rng(rng).standard_normal(shape) if self.noise_std > 0 else _NO_DRAWS
+        uniforms = _check_rng(rng).random(shape) if self.dropout_prob > 0 else _NO_DRAWS
+        return _scan_kernel(
+            world.circles, world.segments, first_polygon_edge, world.grid, poses, self._beams,
+            self.max_range, self._below_max, self.noise_std, gaussians, self.dropout_prob,
+            uniforms,
+        )
 
 
 def _check_rng(rng: object) -> np.random.Generator:

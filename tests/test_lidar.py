@@ -307,6 +307,75 @@ def test_lidar_dropout_rate() -> None:
     np.testing.assert_allclose(scan[hits][~dropped], exact[hits][~dropped], atol=1e-5)
 
 
+def documented_scan(lidar: Lidar, world: World, poses: np.ndarray, rng: np.random.Generator):
+    """Oracle: :meth:`Lidar.scan`'s documented pipeline written out in numpy, step by step."""
+    ranges = cast_rays(world, poses, lidar.beam_angles, lidar.max_range)
+    hit = ranges < lidar.max_range
+    if lidar.noise_std > 0:
+        ranges = np.where(hit, ranges + rng.normal(0.0, lidar.noise_std, ranges.shape), ranges)
+    largest_float32_hit = float(np.nextafter(np.float32(lidar.max_range), np.float32(0.0)))
+    ranges = np.where(hit, np.clip(ranges, 0.0, largest_float32_hit), ranges)
+    if lidar.dropout_prob > 0:
+        ranges = np.where(rng.random(ranges.shape) < lidar.dropout_prob, lidar.max_range, ranges)
+    return ranges.astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    ("noise_std", "dropout_prob"), [(0.0, 0.0), (0.05, 0.0), (0.0, 0.3), (0.5, 0.3)]
+)
+def test_lidar_scan_is_the_documented_pipeline_bit_for_bit(noise_std, dropout_prob) -> None:
+    """The fused kernel draws the same numbers in the same order as the numpy pipeline; a
+    noise of 0.5 m also drives hits near a wall below 0 and near max_range above it."""
+    world = random_world(np.random.default_rng(7))
+    poses = random_free_poses(world, np.random.default_rng(8), 30, margin=0.01)
+    lidar = Lidar(n_beams=360, max_range=6.0, noise_std=noise_std, dropout_prob=dropout_prob)
+    rng, oracle_rng = np.random.default_rng(9), np.random.default_rng(9)
+    scan = lidar.scan(world, poses, rng)
+    expected = documented_scan(lidar, world, poses, oracle_rng)
+    assert scan.dtype == np.float32 and scan.shape == (30, 360)
+    np.testing.assert_array_equal(scan, expected)
+    assert rng.bit_generator.state == oracle_rng.bit_generator.state, "same numbers consumed"
+
+
+def test_lidar_scan_returns_a_new_array_every_call() -> None:
+    world = World(circles=[[3.0, 0.0, 1.0]])
+    lidar = Lidar(n_beams=8, noise_std=0.1)
+    rng = np.random.default_rng(0)
+    first = lidar.scan(world, np.zeros(3), rng)
+    kept = first.copy()
+    second = lidar.scan(world, np.zeros(3), rng)
+    assert not np.shares_memory(first, second)
+    np.testing.assert_array_equal(first, kept)
+
+
+def test_env_observations_kept_across_steps_are_not_overwritten() -> None:
+    """Users (estimators, replay buffers) keep observations: a later step must not change them."""
+    gym = pytest.importorskip("gymnasium")
+    import lidar_env  # noqa: F401 - registers DualLidar-v0
+
+    env = gym.make("DualLidar-v0", world="closed_to_open")
+    observation, _ = env.reset(seed=0)
+    kept = [observation]
+    copies = [{key: scan.copy() for key, scan in observation.items()}]
+    for _ in range(3):
+        observation, *_ = env.step(np.array([1.0, 0.5], dtype=np.float32))
+        kept.append(observation)
+        copies.append({key: scan.copy() for key, scan in observation.items()})
+    for observation, copy in zip(kept, copies, strict=True):
+        for key in ("lidar_1", "lidar_2"):
+            np.testing.assert_array_equal(observation[key], copy[key])
+    assert not np.array_equal(kept[0]["lidar_1"], kept[-1]["lidar_1"]), "the car moved"
+
+
+def test_lidar_integer_parameters_scan_like_floats() -> None:
+    world = World(circles=[[3.0, 0.0, 1.0]])
+    as_int = Lidar(n_beams=16, max_range=10, noise_std=0, dropout_prob=0)
+    assert isinstance(as_int.max_range, float) and as_int == Lidar(n_beams=16, max_range=10.0)
+    np.testing.assert_array_equal(
+        as_int.scan(world, np.zeros(3), None), Lidar(16, 10.0).scan(world, np.zeros(3), None)
+    )
+
+
 @pytest.mark.parametrize(
     ("params", "message"),
     [
