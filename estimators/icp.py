@@ -91,8 +91,9 @@ class PointToLineReference:
     With ``normals`` (M, 2) given, a query point's line passes through its nearest reference
     point along that point's normal (rows of ``valid_normals`` false fall back to the line
     through the two nearest points). Without, the line runs through the two nearest reference
-    points (Censi's PL-ICP); when those two lie further than ``max_distance`` apart the pair is
-    point-to-point (the normal points from the reference point to the query point).
+    points (Censi's PL-ICP); when the second lies beyond the pairing distance, or a stored normal
+    is not valid, the pair is point-to-point (the normal points from the reference point to
+    the query point).
     """
 
     def __init__(
@@ -119,26 +120,32 @@ class PointToLineReference:
     ) -> Correspondences:
         """Pairs for the points ``(M, 2)`` whose nearest reference point is within
         ``max_distance`` [m]."""
-        distances, nearest = self.tree.query(world_points, k=2, distance_upper_bound=max_distance)
-        index = np.flatnonzero(np.isfinite(distances[:, 0]))
-        first = self.points[nearest[index, 0]]
-        has_second = np.isfinite(distances[index, 1])
-        second_index = np.where(has_second, nearest[index, 1], nearest[index, 0])
-        along = self.points[second_index] - first
-        normals = np.column_stack([-along[:, 1], along[:, 0]])
-        length = np.hypot(normals[:, 0], normals[:, 1])
-        segment = has_second & (length > 1e-9)
         if self.normals is not None:
-            use_stored = self.valid_normals[nearest[index, 0]]
-            normals[use_stored] = self.normals[nearest[index[use_stored], 0]]
-            length[use_stored] = 1.0
-            segment = segment | use_stored
+            # Stored normals need only the nearest neighbour: half the k-d tree work.
+            distances, nearest = self.tree.query(world_points, distance_upper_bound=max_distance)
+            index = np.flatnonzero(np.isfinite(distances))
+            nearest = nearest[index]
+            normals = self.normals[nearest].copy()
+            has_line = self.valid_normals[nearest]
+        else:
+            distances, neighbours = self.tree.query(
+                world_points, k=2, distance_upper_bound=max_distance
+            )
+            index = np.flatnonzero(np.isfinite(distances[:, 0]))
+            nearest = neighbours[index, 0]
+            has_line = np.isfinite(distances[index, 1])
+            along = self.points[np.where(has_line, neighbours[index, 1], nearest)] - self.points[
+                nearest
+            ]
+            length = np.maximum(np.hypot(along[:, 0], along[:, 1]), 1e-12)
+            has_line &= length > 1e-9
+            normals = np.column_stack([-along[:, 1], along[:, 0]]) / length[:, None]
+        first = self.points[nearest]
         # No line: point-to-point, linearised along the current offset.
-        offset = world_points[index] - first
-        offset_length = np.hypot(offset[:, 0], offset[:, 1])
-        normals[~segment] = offset[~segment]
-        length[~segment] = np.maximum(offset_length[~segment], 1e-12)
-        return Correspondences(index, first, normals / length[:, None])
+        offset = world_points[index[~has_line]] - first[~has_line]
+        offset_length = np.maximum(np.hypot(offset[:, 0], offset[:, 1]), 1e-12)
+        normals[~has_line] = offset / offset_length[:, None]
+        return Correspondences(index, first, normals)
 
 
 @dataclass(frozen=True)

@@ -8,8 +8,10 @@ what removes most of scan-to-scan ICP's error (compare KISS-ICP, Vizzo et al. 20
 al. 2016, Cartographer's local SLAM).
 
 The initial guess and a weak prior come from a constant-velocity model of the estimator's own
-last increment (never odometry), counted per scan rather than per second: logged timestamps
-jitter (``intel.clf`` has 631 stamps out of order), while scanners run at a fixed rate. Where
+last increment (never odometry). Scans arrive irregularly (ACES: 0.08-0.35 s apart), so the
+velocity is per second, but logged timestamps also glitch (``intel.clf`` has 631 stamps out
+of order), so a time step outside [0.2, 5] x the running median step is clipped to that range
+and a non-positive one replaced by the median. Where
 the scan constrains the pose (almost everywhere) the data dominate; along a featureless
 corridor the prior holds the motion. When the match is poor (few points explained) a
 correlative search over headings and translations on a likelihood field of the map
@@ -54,6 +56,8 @@ class LocalMapOdometry(Estimator):
             older ones carry drift and mostly surfaces out of view).
         voxel_size: map thinning (0.05 m: a few times the range noise, finer than walls'
             curvature).
+        scan_voxel_size: thinning of each scan (0.02 m, about the range noise: only
+            near-duplicate returns of dense 360-beam scans of near walls merge).
         loss, loss_scale: robust loss and its scale (Cauchy, 0.1 m: a few range-noise sigmas).
         max_correspondence_distance: pairing gate (0.5 m: a constant-velocity guess is within
             a few cm at 10 Hz; half a metre tolerates a sudden stop or start).
@@ -71,6 +75,7 @@ class LocalMapOdometry(Estimator):
     keyframe_angle: float = np.radians(10.0)
     n_keyframes: int = 10
     voxel_size: float = 0.05
+    scan_voxel_size: float = 0.02
     loss: str = "cauchy"
     loss_scale: float = 0.1
     max_correspondence_distance: float = 0.5
@@ -85,7 +90,8 @@ class LocalMapOdometry(Estimator):
 
     def __post_init__(self) -> None:
         for name in (
-            "keyframe_distance", "keyframe_angle", "voxel_size", "prior_sigma_translation",
+            "keyframe_distance", "keyframe_angle", "voxel_size", "scan_voxel_size",
+            "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
             "search_angular_window",
         ):
@@ -117,12 +123,15 @@ class LocalMapOdometry(Estimator):
         )
         self._reference: PointToLineReference | None = None
         self._field: LikelihoodField | None = None
-        self._increment = np.zeros(3)  # last car-frame motion per scan [m, m, rad]
+        self._velocity = np.zeros(3)  # car frame [m/s, m/s, rad/s]
+        self._last_time = 0.0
+        self._time_steps: deque[float] = deque(maxlen=21)
         self.fallbacks = 0
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         assert self.setup is not None
-        return scans_to_car_points(scans, self.setup, self.min_range)
+        points = scans_to_car_points(scans, self.setup, self.min_range)
+        return voxel_downsample(points, self.scan_voxel_size) if len(points) else points
 
     def _add_keyframe(self, pose: NDArray[np.float64], points: NDArray[np.float64]) -> None:
         self._keyframes.append((pose.copy(), transform_points(pose, points)))
@@ -138,7 +147,19 @@ class LocalMapOdometry(Estimator):
         self._field = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
+        self._last_time = t
         self._add_keyframe(self._initial_pose, self._points(scans))
+
+    def _time_step(self, t: float) -> float:
+        """The time since the last scan [s], guarded against glitching timestamps."""
+        dt = t - self._last_time
+        self._last_time = t
+        if np.isfinite(dt) and dt > 0:
+            self._time_steps.append(dt)
+        if not self._time_steps:
+            return 1.0  # no valid step yet: count in scans
+        typical = float(np.median(self._time_steps))
+        return float(np.clip(dt, 0.2 * typical, 5.0 * typical)) if dt > 0 else typical
 
     def _fallback(self, points: NDArray[np.float64], guess: NDArray[np.float64]) -> MatchResult:
         assert self._reference is not None
@@ -150,7 +171,8 @@ class LocalMapOdometry(Estimator):
         return register(self._reference, points, start, self.params)
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
-        guess = compose(self.pose, self._increment)
+        dt = self._time_step(t)
+        guess = compose(self.pose, self._velocity * dt)
         points = self._points(scans)
         if self._reference is None or len(points) < 3:
             if len(points) >= 2:
@@ -165,7 +187,7 @@ class LocalMapOdometry(Estimator):
             if retry.quality > result.quality:
                 result = retry
         pose = result.pose
-        self._increment = relative(self.pose, pose)
+        self._velocity = relative(self.pose, pose) / dt
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
         if (

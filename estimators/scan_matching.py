@@ -67,7 +67,10 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[
     if voxel_size <= 0:
         raise ValueError(f"voxel_size: expected a positive size [m], got {voxel_size}")
     cells = np.floor(points / voxel_size).astype(np.int64)
-    _, first = np.unique(cells, axis=0, return_index=True)
+    # One integer key per cell (a 1-D unique is far faster than np.unique(axis=0)); cells
+    # within +-2^31 voxels of the origin never collide.
+    keys = (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)
+    _, first = np.unique(keys, return_index=True)
     return points[np.sort(first)]
 
 
