@@ -1,4 +1,5 @@
-"""Trace seeds (the paper's "strict, right-turn, zigzag" paths) and the traces built from them.
+"""Trace seeds (the paper's "strict, right-turn, zigzag" paths, plus two that revisit places,
+for loop closure: the closed ``loop`` and ``out_and_back``) and the traces built from them.
 
 A *seed* is a shape: a list of pieces of constant curvature, given a total length [m] and a
 bend scale (how large its turns are). A :class:`Trace` is that shape laid down from a start pose
@@ -267,8 +268,10 @@ def project_onto_polyline(
             if hi < 0.0 or lo > length:
                 continue
             d2, s, side = _closest_on_segments(points, arc, px, py, lo, hi)
-            if d2 < best_d2:
-                best_d2, best_s, best_side = d2, s + shift + lap, side
+            s += shift + lap
+            # a window over half a lap sees a point on two laps: keep the lap nearest ``near``
+            if d2 < best_d2 or (d2 == best_d2 and abs(s - near) < abs(best_s - near)):
+                best_d2, best_s, best_side = d2, s, side
     distance = math.sqrt(best_d2)
     return best_s, distance if best_side >= 0.0 else -distance
 

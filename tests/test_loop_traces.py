@@ -98,6 +98,9 @@ def test_projection_near_the_seam_looks_both_ways_and_stays_in_its_window():
     # across the seam the window still holds: a point half a lap away is not reached
     far = trace.project(_left_of(trace, length / 2, 0.0), near=0.0, window=2.0)
     assert -2.0 - WAYPOINT_SPACING <= far.arc_position <= 2.0 + WAYPOINT_SPACING
+    # a window wider than the loop sees every point on two laps: the lap nearest ``near`` wins
+    wide = trace.project(_left_of(trace, 1.0, 0.1), near=3 * length - 2.0, window=10 * length)
+    assert wide.arc_position == pytest.approx(3 * length + 1.0, abs=1e-6)
     # the windowed answer is the global one, shifted by whole laps, when it lies in the window
     rng = np.random.default_rng(4)
     for arc in rng.uniform(-length, 2 * length, size=30):
