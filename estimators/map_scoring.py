@@ -352,7 +352,7 @@ def save_map_figure(
     image in the grid layout (row 0 = largest y) drawn over ``bounds`` (xmin, ymin, xmax, ymax)
     [m]: uint8 with 255 = obstacle (``world.to_image``) or probabilities in [0, 1]. Dark =
     occupied, white = free, grey = unknown. ``trajectories`` (name -> (N, 3) or (N, 2) [m]) are
-    drawn on every panel. Needs matplotlib (the ``plots`` extra).
+    drawn on every panel (legend on the first). Needs matplotlib (the ``plots`` extra).
 
     Example (the true map next to the maps built at true and at estimated poses)::
 
@@ -371,20 +371,25 @@ def save_map_figure(
     if not panels:
         raise ValueError("panels: expected at least one map to draw, got none")
     images = {name: _panel_image(panel, bounds) for name, panel in panels.items()}
-    aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())
-    figure, axes = plt.subplots(1, len(images), figsize=(5.0 * len(images), 5.0 * aspect + 0.8),
-                                squeeze=False)
-    for axis, (name, (image, extent)) in zip(axes[0], images.items(), strict=True):
+    aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())  # height / width
+    n_cols = min(len(images), max(1, round(math.sqrt(len(images) / aspect))))  # near square
+    n_rows = math.ceil(len(images) / n_cols)
+    figure, axes = plt.subplots(n_rows, n_cols, squeeze=False,
+                                figsize=(4.5 * n_cols, 4.5 * aspect * n_rows + 0.8))
+    for axis in axes.flat[len(images):]:
+        axis.set_visible(False)
+    drawn = zip(axes.flat[: len(images)], images.items(), strict=True)
+    for index, (axis, (name, (image, extent))) in enumerate(drawn):
         axis.imshow(image, cmap="gray_r", vmin=0.0, vmax=1.0, extent=extent, origin="upper",
                     interpolation="nearest")
         for label, trajectory in (trajectories or {}).items():
             points = np.asarray(trajectory, dtype=np.float64)
             axis.plot(points[:, 0], points[:, 1], linewidth=1.0, label=label)
-        if trajectories:
+        if trajectories and index == 0:
             axis.legend(loc="upper right", fontsize="small")
         axis.set_xlim(extent[0], extent[1])  # a trajectory that strays keeps the map in view
         axis.set_ylim(extent[2], extent[3])
-        axis.set_title(name)
+        axis.set_title(name, fontsize="medium")
         axis.set_xlabel("x [m]")
         axis.set_ylabel("y [m]")
     if title:
