@@ -99,7 +99,7 @@ def _loop(length: float, bend: float) -> list[Piece]:
     """A closed counter-clockwise circuit: a rectangle with quarter-circle corners.
 
     It starts (and ends) in the middle of a long side, so the seam lies on a straight. Corners
-    never take more than half the length (short loops get tighter corners, not no straights).
+    never take more than half the length (short loops get tighter corners, keeping straights).
     """
     radius = min(LOOP_CORNER_RADIUS * bend, length / (4.0 * math.pi))
     short = (length - 2.0 * math.pi * radius) / (2.0 * (1.0 + LOOP_ASPECT))
@@ -119,9 +119,10 @@ def _out_and_back(length: float, bend: float) -> list[Piece]:
 
     The turn-around is a bulb of three arcs of one radius ``R``: right by ``a``, left by
     ``pi + 2 a``, right by ``a``; it shifts the path ``R (4 cos a - 2)`` to the left, which sets
-    ``a`` for the wanted offset (a plain U-turn would need ``R`` = offset / 2, too tight to see
-    much of the turn). The trace ends beside its start, facing back. The turn-around shrinks
-    (radius and offset together) so that it takes at most half the length.
+    ``a`` for the wanted offset. A plain U-turn between lanes 2 m apart would need a 1 m radius,
+    near the car's tightest turn at cruise speed; the bulb keeps the gentle radius of the other
+    seeds. The trace ends beside its start, facing back. The turn-around shrinks (radius and
+    offset together) so that it takes at most half the length.
     """
     angle = math.acos((OUT_AND_BACK_OFFSET / OUT_AND_BACK_RADIUS + 2.0) / 4.0)
     turn_at_scale_1 = OUT_AND_BACK_RADIUS * (math.pi + 4.0 * angle)
