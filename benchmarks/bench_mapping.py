@@ -1,7 +1,7 @@
 """Occupancy mapping: update time per step, and map scores with true (or estimated) poses.
 
-Run: ``python benchmarks/bench_mapping.py [--estimators pc lidar_odometry] [--figures DIR]``
-(about 15 s without estimators).
+Run: ``python benchmarks/bench_mapping.py [--estimators pc lidar_odometry] [--figures DIR]
+[--aces]`` (about 15 s without estimators).
 
 1. Speed: the map update of one step (both 360-beam scans, 5 cm cells over the whole
    40 m x 40 m ``open_cylinders`` world) on the scans of a scripted drive, against a plain
@@ -12,6 +12,8 @@ Run: ``python benchmarks/bench_mapping.py [--estimators pc lidar_odometry] [--fi
    occupied cells at one-cell tolerance (target IoU >= 0.9), and the tracked cylinders against
    ``world.circles`` (target recall >= 95 %, error <= 5 cm). With ``--estimators`` the same
    scores follow for the map built at each estimator's poses.
+3. With ``--aces --figures DIR``: the maps of the real ACES log (Radish) at each estimator's
+   poses next to the map at the SLAM poses of ``aces-corrected`` (pseudo truth), as a PNG.
 """
 
 from __future__ import annotations
@@ -32,7 +34,13 @@ import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
 from estimators.map_scoring import evaluate_run_map, map_truth, save_map_figure  # noqa: E402
-from estimators.occupancy import OccupancyGrid, logit, sensor_poses  # noqa: E402
+from estimators.occupancy import (  # noqa: E402
+    OccupancyGrid,
+    bounds_around,
+    from_estimator_run,
+    logit,
+    sensor_poses,
+)
 
 WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 RESOLUTION = 0.05  # [m]
@@ -106,7 +114,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="env reset seed (range noise)")
     parser.add_argument("--figures", type=Path, default=None,
                         help="save the true world next to each map as DIR/maps_<world>.png")
+    parser.add_argument("--aces", action="store_true",
+                        help="with --figures: also map the real ACES log at the --estimators' "
+                             "poses next to its SLAM (pseudo truth) map, DIR/maps_aces.png")
     args = parser.parse_args()
+    if args.aces and args.figures is None:
+        parser.error("--aces needs --figures DIR")
 
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"{os.cpu_count()} cpus, python {platform.python_version()}, numba {numba.__version__}, "
@@ -162,6 +175,36 @@ def main() -> None:
             path = save_map_figure(args.figures / f"maps_{world}.png", panels, true_map.bounds,
                                    trajectories, title=f"{world}, {RESOLUTION} m cells")
             print(f"  -> {path}")
+
+    if args.aces:
+        print(f"  -> {map_aces(args.estimators, args.figures / 'maps_aces.png')}")
+
+
+def map_aces(estimators: list[str], path: Path) -> Path:
+    """Maps of the whole ACES log at 0.1 m: at the SLAM poses of ``aces-corrected`` (pseudo
+    truth, its keyframes only) and at each estimator's poses, each in its own first-pose frame."""
+    from estimators.carmen import load_log
+    from estimators.real_log import run_on_log, setup_from_log
+    from lidar_env.se2 import relative
+
+    radish = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+    if not radish.is_dir():
+        raise FileNotFoundError(f"expected the Radish logs in {radish}")
+    panels = {}
+    for name, log_file in [("SLAM (aces-corrected)", "aces-corrected.log.gz"),
+                           *((name, "aces.clf.bz2") for name in estimators)]:
+        log = load_log(radish / log_file)
+        setup = setup_from_log(log)
+        if log_file == "aces.clf.bz2":
+            start = time.perf_counter()
+            poses = run_on_log(make(name), log).poses
+            print(f"  aces {name}: {len(poses)} scans in {time.perf_counter() - start:.0f} s")
+        else:
+            poses = relative(log.logged_poses()[0], log.logged_poses())
+        observations = [{setup.keys[0]: scan.ranges} for scan in log.scans]
+        panels[name] = from_estimator_run(poses, observations, setup, resolution=0.1,
+                                          bounds=bounds_around(poses[:, :2], 8.0))
+    return save_map_figure(path, panels, title="ACES (Radish), whole log, 0.1 m cells")
 
 
 if __name__ == "__main__":
