@@ -372,7 +372,7 @@ def save_map_figure(
         raise ValueError("panels: expected at least one map to draw, got none")
     images = {name: _panel_image(panel, bounds) for name, panel in panels.items()}
     aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())  # height / width
-    n_cols = min(len(images), max(1, round(math.sqrt(len(images) / aspect))))  # near square
+    n_cols = min(len(images), math.ceil(math.sqrt(len(images) / aspect)))  # near square
     n_rows = math.ceil(len(images) / n_cols)
     figure, axes = plt.subplots(n_rows, n_cols, squeeze=False,
                                 figsize=(4.5 * n_cols, 4.5 * aspect * n_rows + 0.8))
