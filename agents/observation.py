@@ -124,7 +124,8 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         local = se2.transform_points(se2.inverse(pose), ahead) / self.lookahead_scale
         if trace is not self._trace:  # a new episode's trace: unwrap its headings once
             self._trace, self._tangents = trace, np.unwrap(trace.headings)
-        tangent = np.interp(self._arc, trace.arc, self._tangents)
+        arc = self._arc % trace.length if trace.closed else self._arc  # laps wrap around
+        tangent = np.interp(arc, trace.arc, self._tangents)
         errors = [
             projection.cross_track_error / self.cross_track_scale,
             float(se2.wrap_angle(pose[2] - tangent)) / np.pi,

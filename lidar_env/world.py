@@ -69,8 +69,10 @@ def _build_grid(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> 
         return PrimitiveGrid(0.0, 0.0, 1.0, 1, 1, empty, empty[:0], empty, empty[:0])
     x0, y0 = lo.min(axis=0)
     width, height = np.maximum(hi.max(axis=0) - (x0, y0), 1e-9)
+    # A thin extent (one straight wall) must not shrink the area, and with it the cell, to zero.
+    area = max(width * height, (max(width, height) / 16.0) ** 2)
     cell = max(
-        float(np.sqrt(width * height * _PRIMITIVES_PER_CELL / len(lo))),
+        float(np.sqrt(area * _PRIMITIVES_PER_CELL / len(lo))),
         max(width, height) / _MAX_CELLS_PER_AXIS,
     )
     nx, ny = int(np.ceil(width / cell)) + 1, int(np.ceil(height / cell)) + 1
