@@ -224,7 +224,9 @@ def rank_table(groups: Sequence[Group], scenarios: dict[str, list[Scenario]],
     for spec in specs:
         mine = [records[(s, spec.name)] for group in groups for s in scenarios[group.name]
                 if (s, spec.name) in records]
-        row: dict[str, Any] = {"estimator": spec.name, "scenarios": len(mine)}
+        total = sum(len(scenarios[group.name]) for group in groups)
+        row: dict[str, Any] = {"estimator": spec.name, "scenarios": len(mine),
+                               "scenarios_run": total}
         for key, _, _ in METRIC_COLUMNS:
             row[key] = _mean([r.metrics.get(key, math.nan) for r in mine])
         for group in groups:
@@ -261,7 +263,10 @@ def leaderboard_markdown(rows: Sequence[dict[str, Any]], groups: Sequence[Group]
         header.append(f"{real_name} rel. error [m]")
     body = []
     for rank, row in enumerate(rows, 1):
-        cells = [str(rank), row["estimator"]]
+        name = row["estimator"]
+        if row["scenarios"] < row["scenarios_run"]:  # means over fewer scenarios: say so
+            name += f" (scored on {row['scenarios']} of {row['scenarios_run']})"
+        cells = [str(rank), name]
         cells += [_fmt(row[key], 1 if key.endswith("percent") else 3) for key, _, _ in
                   METRIC_COLUMNS]
         cells += [f"{_fmt(row[f'{g.name} accuracy_percent'], 1)} / "
