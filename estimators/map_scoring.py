@@ -222,6 +222,45 @@ def score_cylinders(
     )
 
 
+def return_agreement(
+    grid: OccupancyGrid,
+    trajectory: ArrayLike,
+    observations: Sequence[Mapping[str, ArrayLike]],
+    setup: SensorSetup,
+    tolerance_cells: int = 1,
+) -> float:
+    """Share of the returns of ``observations``, placed at the car poses ``trajectory`` (N, 3),
+    that fall within ``tolerance_cells`` of an occupied cell of ``grid``: a map score that
+    needs no ground truth (for real logs).
+
+    Give it the map built from the same scans and poses (:func:`from_estimator_run`): every
+    return then marked its own cell occupied, and it only disagrees where other scans cleared
+    that cell, which consistent poses do not do. Returns outside the grid disagree."""
+    trajectory = np.asarray(trajectory, dtype=np.float64)
+    if len(observations) != len(trajectory):
+        raise ValueError(f"observations: expected one per trajectory row ({len(trajectory)}), "
+                         f"got {len(observations)}")
+    points = []
+    for observation, step_poses in zip(observations, sensor_poses(trajectory, setup),
+                                       strict=True):
+        scans = setup.check_observation(observation)
+        for key, (x, y, heading) in zip(setup.keys, step_poses, strict=True):
+            hit = scans[key] < setup.max_range
+            angles = heading + setup.beam_angles[hit]
+            points.append(np.column_stack([x + scans[key][hit] * np.cos(angles),
+                                           y + scans[key][hit] * np.sin(angles)]))
+    points = np.vstack(points) if points else np.zeros((0, 2))
+    if len(points) == 0:
+        return math.nan
+    near = _dilate(grid.occupied(), tolerance_cells)
+    cells = np.floor(grid.to_grid_coordinates(points)).astype(np.int64)
+    rows, cols = grid.shape
+    inside = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (cells[:, 1] < rows)
+    agree = np.zeros(len(points), dtype=bool)
+    agree[inside] = near[cells[inside, 1], cells[inside, 0]]
+    return float(agree.mean())
+
+
 @dataclass(frozen=True)
 class MapTruth:
     """What a map of one run is scored against, computed once per true run.

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,14 +12,22 @@ from estimators.map_scoring import (
     evaluate_run_map,
     map_truth,
     observable_cylinders,
+    return_agreement,
     save_map_figure,
     score_cylinders,
     score_occupancy,
     visible_cells,
 )
-from estimators.occupancy import OccupancyGrid, occupancy_to_rgb
+from estimators.occupancy import (
+    OccupancyGrid,
+    bounds_around,
+    from_estimator_run,
+    occupancy_to_rgb,
+)
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World
+
+RADISH = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
 
 
 def hand_built_pair() -> tuple[np.ndarray, np.ndarray]:
@@ -122,6 +132,14 @@ def test_true_pose_run_maps_the_world_and_finds_its_cylinders(tmp_path):
     shifted = trajectory + [0.3, 0.0, 0.0]
     worse = evaluate_run_map(truth, shifted, observations, setup)
     assert worse.map_scores.iou < result.map_scores.iou - 0.3
+    # returns agree with the map of consistent poses, even rigidly shifted ones, not with a
+    # map whose heading drifts by 5 degrees over the run
+    consistent = return_agreement(result.grid, trajectory, observations, setup)
+    assert consistent >= 0.95
+    assert return_agreement(worse.grid, shifted, observations, setup) >= 0.95
+    drifted = trajectory + np.column_stack([np.zeros((60, 2)), np.linspace(0, 0.087, 60)])
+    drifted_grid = from_estimator_run(drifted, observations, setup, bounds=world.bounds)
+    assert return_agreement(drifted_grid, drifted, observations, setup) < consistent - 0.1
     figure = save_map_figure(tmp_path / "maps.png",
                              {"true": world.to_image(0.05), "true poses": result.grid},
                              world.bounds, trajectories={"truth": trajectory})
@@ -170,3 +188,27 @@ def test_true_pose_maps_of_the_built_in_worlds_reach_the_issue_targets(world_nam
     if result.cylinder_scores is not None:
         assert result.cylinder_scores.recall >= 0.95
         assert result.cylinder_scores.max_error <= 0.05
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not (RADISH / "aces-corrected.log.gz").exists(),
+                    reason=f"needs the Radish ACES log at {RADISH / 'aces-corrected.log.gz'}")
+def test_real_aces_returns_agree_with_the_map_of_slam_poses_and_not_with_drifted_ones():
+    from estimators.carmen import load_log
+    from estimators.real_log import setup_from_log
+
+    log = load_log(RADISH / "aces-corrected.log.gz")
+    setup = setup_from_log(log)  # one 180-beam SICK, returns up to 50 m
+    observations = [{"lidar_1": scan.ranges} for scan in log.scans]
+    slam = log.logged_poses()
+    drifted = slam.copy()
+    drifted[:, 2] += np.linspace(0.0, np.radians(10.0), len(slam))  # 10 degrees over the log
+
+    def agreement(poses: np.ndarray) -> float:
+        grid = from_estimator_run(poses, observations, setup, resolution=0.1,
+                                  bounds=bounds_around(poses[:, :2], 10.0))
+        return return_agreement(grid, poses, observations, setup)
+
+    consistent = agreement(slam)
+    assert consistent >= 0.9
+    assert agreement(drifted) < consistent - 0.2
