@@ -13,7 +13,8 @@ Run: ``python benchmarks/bench_mapping.py [--estimators pc lidar_odometry] [--fi
    ``world.circles`` (target recall >= 95 %, error <= 5 cm). With ``--estimators`` the same
    scores follow for the map built at each estimator's poses.
 3. With ``--aces --figures DIR``: the maps of the real ACES log (Radish) at each estimator's
-   poses next to the map at the SLAM poses of ``aces-corrected`` (pseudo truth), as a PNG.
+   poses next to the map at the SLAM poses of ``aces-corrected`` (pseudo truth), as a PNG, with
+   each map's return agreement (``estimators.map_scoring.return_agreement``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,12 @@ import numpy as np  # noqa: E402
 import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
-from estimators.map_scoring import evaluate_run_map, map_truth, save_map_figure  # noqa: E402
+from estimators.map_scoring import (  # noqa: E402
+    evaluate_run_map,
+    map_truth,
+    return_agreement,
+    save_map_figure,
+)
 from estimators.occupancy import (  # noqa: E402
     OccupancyGrid,
     bounds_around,
@@ -202,8 +208,11 @@ def map_aces(estimators: list[str], path: Path) -> Path:
         else:
             poses = relative(log.logged_poses()[0], log.logged_poses())
         observations = [{setup.keys[0]: scan.ranges} for scan in log.scans]
-        panels[name] = from_estimator_run(poses, observations, setup, resolution=0.1,
-                                          bounds=bounds_around(poses[:, :2], 8.0))
+        grid = from_estimator_run(poses, observations, setup, resolution=0.1,
+                                  bounds=bounds_around(poses[:, :2], 8.0))
+        agreement = return_agreement(grid, poses, observations, setup)
+        print(f"  aces {name}: return agreement {agreement:.3f} at one-cell tolerance")
+        panels[f"{name} (agreement {agreement:.2f})"] = grid
     return save_map_figure(path, panels, title="ACES (Radish), whole log, 0.1 m cells")
 
 

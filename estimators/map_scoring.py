@@ -20,6 +20,10 @@ Cylinders (:func:`score_cylinders`): detected circles are matched one-to-one to 
 ``match_distance`` discarded); recall counts only *observable* true cylinders
 (:func:`observable_cylinders`: at least ``min_points`` returns on it in one true scan), and the
 position error is the centre distance of the matched pairs.
+
+Without ground truth (real logs), :func:`return_agreement` scores how consistent a map is with
+the poses it was built from: the share of returns that land on its occupied cells. It cannot
+see a rigid offset of the whole run, only poses that disagree with each other.
 """
 
 from __future__ import annotations
