@@ -34,10 +34,20 @@ def names() -> list[str]:
     return sorted(_ENTRIES)
 
 
-def make(name: str, **params: Any) -> Estimator:
-    """A fresh estimator registered as ``name``, with ``params`` over its defaults."""
+def _check_name(name: str) -> None:
     if name not in _ENTRIES:
         raise KeyError(f"unknown estimator {name!r}: expected one of {', '.join(names())}")
+
+
+def defaults(name: str) -> dict[str, Any]:
+    """The keyword parameters ``make(name)`` uses when none are given."""
+    _check_name(name)
+    return dict(_ENTRIES[name][1])
+
+
+def make(name: str, **params: Any) -> Estimator:
+    """A fresh estimator registered as ``name``, with ``params`` over its defaults."""
+    _check_name(name)
     target, defaults = _ENTRIES[name]
     module_name, class_name = target.split(":")
     cls = getattr(importlib.import_module(module_name), class_name)

@@ -43,7 +43,7 @@ from estimators.database import (
     package_version,
 )
 from estimators.recording import record, replay, score
-from estimators.registry import _ENTRIES, names
+from estimators.registry import defaults, names
 
 
 class FutureLike(Protocol):
@@ -68,7 +68,7 @@ class EstimatorSpec:
     params: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.name not in _ENTRIES:
+        if self.name not in names():
             raise ValueError(
                 f"unknown estimator {self.name!r}: expected one of {', '.join(names())}"
             )
@@ -76,7 +76,7 @@ class EstimatorSpec:
     @property
     def resolved_params(self) -> dict[str, Any]:
         """Every parameter: registry defaults overridden by ``params`` (what gets recorded)."""
-        return {**_ENTRIES[self.name][1], **dict(self.params)}
+        return {**defaults(self.name), **dict(self.params)}
 
 
 @dataclass(frozen=True)

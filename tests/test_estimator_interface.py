@@ -62,3 +62,14 @@ def test_update_before_reset_and_bad_setup() -> None:
 def test_unknown_estimator_lists_valid_names() -> None:
     with pytest.raises(KeyError, match="expected one of"):
         estimators.make("no_such_estimator")
+
+
+def test_registry_defaults_are_what_make_uses() -> None:
+    for name in estimators.names():
+        params = estimators.registry.defaults(name)
+        assert isinstance(params, dict)
+    params = estimators.registry.defaults("pc")
+    params["lidar"] = 99  # a copy: the registry is not changed through it
+    assert estimators.registry.defaults("pc") != params
+    with pytest.raises(KeyError, match="expected one of"):
+        estimators.registry.defaults("nope")
