@@ -20,7 +20,7 @@ _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
     "pc_rot": ("estimators.rotation_pc:RotationPhaseCorrelation", {}),
     "pc_rot_icp": (
         "estimators.rotation_pc:RotationPhaseCorrelation",
-        {"icp_iterations": 5, "image_size": 200},
+        {"icp_iterations": 3, "image_size": 200},
     ),
     "pc_fusion": ("estimators.fusion:FusionEstimator", {}),
     "icp": ("estimators.icp:ICPEstimator", {}),
