@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
@@ -24,3 +25,18 @@ class Driver(Protocol):
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> NDArray[np.float32]:
         """The action for this step."""
+
+
+#: driver name -> "module:Class"; imported on first use (the SB3 driver needs torch).
+DRIVERS: dict[str, str] = {
+    "scripted": "agents.scripted:PurePursuitDriver",
+    "sb3": "agents.sb3_driver:SB3Driver",
+}
+
+
+def make_driver(name: str) -> Driver:
+    """A fresh driver by name: ``scripted`` (pure pursuit) or ``sb3`` (the shipped PPO policy)."""
+    if name not in DRIVERS:
+        raise ValueError(f"unknown driver {name!r}: expected one of {', '.join(sorted(DRIVERS))}")
+    module_name, class_name = DRIVERS[name].split(":")
+    return getattr(importlib.import_module(module_name), class_name)()

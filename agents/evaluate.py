@@ -18,8 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from agents.driver import Driver
-from agents.scripted import PurePursuitDriver
+from agents.driver import DRIVERS, Driver, make_driver
 
 BUILT_IN_WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 TRACE_SEEDS = ("straight", "right_turn", "zigzag")
@@ -34,17 +33,6 @@ class DrivingScore:
     cross_track_error: float  # [m] mean |cross-track error| over all steps
     time_to_finish: float  # [s] mean over successful episodes (nan if none)
     collisions: int
-
-
-def make_driver(name: str) -> Driver:
-    """``scripted`` (pure pursuit) or ``sb3`` (the shipped PPO policy)."""
-    if name == "scripted":
-        return PurePursuitDriver()
-    if name == "sb3":
-        from agents.sb3_driver import SB3Driver
-
-        return SB3Driver()
-    raise ValueError(f"unknown driver {name!r}: expected one of scripted, sb3")
 
 
 def drive_episode(env: gym.Env, driver: Driver, seed: int) -> tuple[bool, float, float, bool]:
@@ -80,7 +68,7 @@ def evaluate(
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--drivers", nargs="+", default=["scripted", "sb3"])
+    parser.add_argument("--drivers", nargs="+", default=list(DRIVERS), choices=list(DRIVERS))
     parser.add_argument("--worlds", nargs="+", default=[*BUILT_IN_WORLDS, "random"])
     parser.add_argument("--traces", nargs="+", default=list(TRACE_SEEDS))
     parser.add_argument("--episodes", type=int, default=50)

@@ -189,7 +189,7 @@ class Scenario:
     trace: str
     seed: int
     config: Mapping[str, Any] = field(default_factory=dict)
-    driver: str = "pure_pursuit"
+    driver: str = "scripted"
     kind: str = "sim"
 
     def __hash__(self) -> int:  # config is a dict: hash its canonical JSON instead

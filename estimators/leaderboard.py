@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.driver import DRIVERS
 from estimators.database import (
     DatabaseError,
     ExperimentDatabase,
@@ -131,6 +132,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="trace seeds, crossed with --worlds (default: the paper's pairs)")
     parser.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS),
                         help="env seeds per scenario (default: %(default)s)")
+    parser.add_argument("--driver", choices=sorted(DRIVERS), default="scripted",
+                        help="who drives the recorded scenarios (default: %(default)s)")
     parser.add_argument("--estimators", nargs="+", metavar="NAME",
                         help="estimators to rank (default: every registered one)")
     parser.add_argument("--noise", type=float, default=DEFAULT_NOISE,
@@ -456,7 +459,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
          specs: list[EstimatorSpec], start: float) -> int:
     config = {"range_noise_std": args.noise}
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config) for seed in args.seeds]
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config, args.driver)
+                          for seed in args.seeds]
                  for g in groups}
     logs = []
     if not args.no_real:

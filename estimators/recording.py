@@ -14,7 +14,6 @@ metrics equal those of online scoring with :class:`estimators.scoring.ScoreEstim
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -22,24 +21,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.driver import make_driver
 from estimators.base import SensorSetup
 from estimators.database import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
 
-#: driver name -> "module:Class"; the class has ``reset(env)`` and ``act(obs, info) -> action``.
-DRIVERS: dict[str, str] = {
-    "pure_pursuit": "agents.scripted:PurePursuitDriver",
-}
-
 ENV_ID = "DualLidar-v0"
-
-
-def make_driver(name: str) -> Any:
-    """A fresh driver registered as ``name`` (ValueError listing the valid names)."""
-    if name not in DRIVERS:
-        raise ValueError(f"unknown driver {name!r}: expected one of {', '.join(sorted(DRIVERS))}")
-    module_name, class_name = DRIVERS[name].split(":")
-    return getattr(importlib.import_module(module_name), class_name)()
 
 
 def make_env(scenario: Scenario) -> Any:

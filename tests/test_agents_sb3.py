@@ -8,7 +8,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lidar_env  # noqa: F401
-from agents.evaluate import drive_episode, make_driver
+from agents.driver import make_driver
+from agents.evaluate import drive_episode
 from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL, SB3Driver
 
@@ -82,3 +83,16 @@ def test_shipped_model_completes_each_trace_seed(trace: str) -> None:
     success, cross_track, _, collided = drive_episode(env, SB3Driver(), seed=0)
     assert success and not collided
     assert cross_track < 0.3
+
+
+@pytest.mark.skipif(not SHIPPED_MODEL.is_file(), reason="no shipped model")
+@pytest.mark.parametrize("driver", ["scripted", "sb3"])
+def test_the_recorder_takes_either_driver(driver: str) -> None:
+    from estimators.database import Scenario
+    from estimators.recording import record
+
+    scenario = Scenario("hallway", "zigzag", 0, {"max_episode_time": 4.0}, driver)
+    dataset = record(scenario)
+    assert len(dataset.times) == 41  # the initial observation + 4 s at 10 Hz
+    travelled = np.hypot(*np.diff(dataset.poses[:, :2], axis=0).T).sum()
+    assert travelled > 3.0  # both drivers drive off along the trace at about 1 m/s or more

@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from agents.driver import make_driver
 from agents.scripted import PurePursuitDriver
 from estimators.database import ExperimentDatabase, Scenario
 from estimators.recording import (
-    make_driver,
     make_env,
     record,
     replay,
