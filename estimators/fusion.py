@@ -74,13 +74,17 @@ def _edge_index(edges: Sequence[SensorEdge]) -> NDArray[np.int64]:
     ).reshape(-1, 4)
 
 
-def _rotation_transpose(angle: FloatArray) -> FloatArray:
-    """``(M, 2, 2)`` matrices ``R(angle)ᵀ``."""
+def _rotate(angle: FloatArray, vectors: FloatArray) -> FloatArray:
+    """``R(angle) v`` for each row ``v`` of ``vectors`` (M, 2)."""
     c, s = np.cos(angle), np.sin(angle)
-    return np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], -2)
+    return np.column_stack(
+        [c * vectors[:, 0] - s * vectors[:, 1], s * vectors[:, 0] + c * vectors[:, 1]]
+    )
 
 
-_PERP = np.array([[0.0, -1.0], [1.0, 0.0]])  # d/dθ R(θ) = R(θ) J
+def _perpendicular(vectors: FloatArray) -> FloatArray:
+    """``J v`` with ``J = [[0, -1], [1, 0]]`` (so that d/dθ R(θ) = R(θ) J)."""
+    return np.column_stack([-vectors[:, 1], vectors[:, 0]])
 
 
 def optimize_poses(
@@ -141,34 +145,36 @@ def optimize_poses(
 
     # r_t = R(φ)ᵀ (t_b + R(θ_b) m_j - t_a - R(θ_a) m_i) - R(z_θ)ᵀ z_t with φ = θ_a + m_iθ + z_θ,
     # r_θ = θ_b + m_jθ - θ_a - m_iθ - z_θ: the translation and heading of z⁻¹ ⊕ h.
-    measured_offset = np.einsum("mij,mj->mi", _rotation_transpose(measured[:, 2]), measured[:, :2])
+    measured_offset = _rotate(-measured[:, 2], measured[:, :2])
     heading_offset = src_mount[:, 2] - dst_mount[:, 2] + measured[:, 2]
 
     def edge_terms(x: FloatArray) -> tuple[FloatArray, ...]:
         full = unpack(x)
         a, b = full[index[:, 0]], full[index[:, 2]]
-        rt_phi = _rotation_transpose(a[:, 2] + src_mount[:, 2] + measured[:, 2])
-        lever_a = np.einsum("mij,mj->mi", _rotation_transpose(-a[:, 2]), src_mount[:, :2])
-        lever_b = np.einsum("mij,mj->mi", _rotation_transpose(-b[:, 2]), dst_mount[:, :2])
+        phi = a[:, 2] + src_mount[:, 2] + measured[:, 2]
+        lever_a = _rotate(a[:, 2], src_mount[:, :2])
+        lever_b = _rotate(b[:, 2], dst_mount[:, :2])
         gap = b[:, :2] + lever_b - a[:, :2] - lever_a
-        return a, b, rt_phi, lever_a, lever_b, gap
+        return a, b, phi, lever_a, lever_b, gap
 
     def residuals(x: FloatArray) -> FloatArray:
-        a, b, rt_phi, _, _, gap = edge_terms(x)
-        translation = np.einsum("mij,mj->mi", rt_phi, gap) - measured_offset
+        a, b, phi, _, _, gap = edge_terms(x)
+        translation = _rotate(-phi, gap) - measured_offset
         heading = wrap_angle(b[:, 2] - a[:, 2] - heading_offset)
         return (np.column_stack([translation, heading]) * scale).ravel()
 
     def jacobian(x: FloatArray) -> FloatArray:
-        _, _, rt_phi, lever_a, lever_b, gap = edge_terms(x)
-        d_theta_b = np.einsum("mij,mj->mi", rt_phi, lever_b @ _PERP.T)
-        d_theta_a = -np.einsum("mij,mj->mi", rt_phi, (gap + lever_a) @ _PERP.T)
+        _, _, phi, lever_a, lever_b, gap = edge_terms(x)
+        c, s = np.cos(phi), np.sin(phi)
+        d_translation = np.stack([np.column_stack([c, -s]), np.column_stack([s, c])], axis=-1)
+        d_theta_b = _rotate(-phi, _perpendicular(lever_b))
+        d_theta_a = -_rotate(-phi, _perpendicular(gap + lever_a))
         jac = np.zeros((len(edges), 3, 3 * len(free)))
         for node, sign, d_theta in ((index[:, 0], -1.0, d_theta_a), (index[:, 2], 1.0, d_theta_b)):
             rows = np.nonzero(column[node] >= 0)[0]
             cols = 3 * column[node[rows]]
             for offset in (0, 1):
-                jac[rows, :2, cols + offset] = sign * rt_phi[rows, :, offset]
+                jac[rows, :2, cols + offset] = sign * d_translation[rows, :, offset]
             jac[rows, :2, cols + 2] = d_theta[rows]
             jac[rows, 2, cols + 2] = sign
         return (jac * scale[:, :, None]).reshape(3 * len(edges), -1)
