@@ -370,9 +370,10 @@ def test_env_observations_kept_across_steps_are_not_overwritten() -> None:
 def test_lidar_integer_parameters_scan_like_floats() -> None:
     world = World(circles=[[3.0, 0.0, 1.0]])
     as_int = Lidar(n_beams=16, max_range=10, noise_std=0, dropout_prob=0)
+    rng = np.random.default_rng(0)
     assert isinstance(as_int.max_range, float) and as_int == Lidar(n_beams=16, max_range=10.0)
     np.testing.assert_array_equal(
-        as_int.scan(world, np.zeros(3), None), Lidar(16, 10.0).scan(world, np.zeros(3), None)
+        as_int.scan(world, np.zeros(3), rng), Lidar(16, 10.0).scan(world, np.zeros(3), rng)
     )
 
 
