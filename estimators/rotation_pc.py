@@ -69,6 +69,9 @@ PRIOR_INFORMATION = (0.01 / PRIOR_SIGMA) ** 2
 #: open: the spurious information of normals tilted by noise (a few hundredths of a radian
 #: on 1 cm noise) is a share of about their tilt squared, well under 2 %.
 DEGENERACY_RATIO = 0.02
+#: A refinement has converged when its step is below 10 micrometres and 1 microradian, far
+#: under the millimetre a 1 cm noisy scan supports.
+STEP_TOLERANCE = (1e-5, 1e-6)
 #: Two refinements whose inlier shares differ by less than this are equally good fits (a
 #: featureless corridor fits anywhere along it); the one nearer the prior then wins.
 QUALITY_TOLERANCE = 0.02
@@ -208,7 +211,7 @@ def refine_on_curves(
                 step[:2] += open_direction * (open_direction @ miss)
         pose = pose + step
         pose[2] = float(wrap_angle(pose[2]))
-        if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+        if np.hypot(step[0], step[1]) < STEP_TOLERANCE[0] and abs(step[2]) < STEP_TOLERANCE[1]:
             break
     return pose, float(quality)
 
