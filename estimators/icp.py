@@ -61,12 +61,30 @@ def gauss_newton_step(
     weights: NDArray[np.float64],
     prior_information: NDArray[np.float64] | None = None,
     prior_offset: NDArray[np.float64] | None = None,
+    min_information: float = 0.0,
 ) -> NDArray[np.float64]:
     """Pose increment (3,) minimising ``sum w (r + J d)^2 + (d - e)^T L (d - e)`` over ``d``,
-    with ``L = diag(prior_information)`` and ``e = prior_offset`` (prior pose minus current)."""
+    with ``L = diag(prior_information)`` and ``e = prior_offset`` (prior pose minus current).
+
+    With ``min_information`` > 0 and a prior, directions in which the data carry less
+    information than that many fully weighted points facing that way (a corridor's axis) are
+    left to the prior alone (Zhang, Kaess and Singh, "On degeneracy of optimization-based
+    state estimation problems", ICRA 2016): the data's weak pull there comes from noisy
+    normals and the nearest-neighbour bias towards "no motion", not from evidence. Rotation
+    is scaled by the points' RMS lever arm to compare it with translation.
+    """
     weighted = jacobian * weights[:, None]
     hessian = weighted.T @ jacobian
     gradient = -weighted.T @ residuals
+    if min_information > 0 and prior_information is not None:
+        lever = np.sqrt(np.mean(jacobian[:, 2] ** 2)) or 1.0
+        scale = np.array([1.0, 1.0, lever])
+        values, vectors = np.linalg.eigh(hessian / np.outer(scale, scale))
+        kept = vectors[:, values >= min_information]
+        projection = kept @ kept.T
+        hessian = np.outer(scale, scale) * (projection @ (hessian / np.outer(scale, scale))
+                                            @ projection)
+        gradient = scale * (projection @ (gradient / scale))
     if prior_information is not None:
         hessian = hessian + np.diag(prior_information)
         gradient = gradient + prior_information * prior_offset
@@ -120,26 +138,40 @@ class PointToLineReference:
     ) -> Correspondences:
         """Pairs for the points ``(M, 2)`` whose nearest reference point is within
         ``max_distance`` [m]."""
-        if self.normals is not None:
-            # Stored normals need only the nearest neighbour: half the k-d tree work.
-            distances, nearest = self.tree.query(world_points, distance_upper_bound=max_distance)
-            index = np.flatnonzero(np.isfinite(distances))
-            nearest = nearest[index]
-            normals = self.normals[nearest].copy()
-            has_line = self.valid_normals[nearest]
-        else:
-            distances, neighbours = self.tree.query(
-                world_points, k=2, distance_upper_bound=max_distance
-            )
-            index = np.flatnonzero(np.isfinite(distances[:, 0]))
-            nearest = neighbours[index, 0]
-            has_line = np.isfinite(distances[index, 1])
-            along = self.points[np.where(has_line, neighbours[index, 1], nearest)] - self.points[
-                nearest
-            ]
-            length = np.maximum(np.hypot(along[:, 0], along[:, 1]), 1e-12)
-            has_line &= length > 1e-9
-            normals = np.column_stack([-along[:, 1], along[:, 0]]) / length[:, None]
+        if self.normals is None:
+            return self._censi_pairs(world_points, np.arange(len(world_points)), max_distance)
+        # Stored normals need only the nearest neighbour: half the k-d tree work.
+        distances, nearest = self.tree.query(world_points, distance_upper_bound=max_distance)
+        index = np.flatnonzero(np.isfinite(distances))
+        nearest = nearest[index]
+        stored = self.valid_normals[nearest]
+        pairs = Correspondences(index[stored], self.points[nearest[stored]],
+                                self.normals[nearest[stored]])
+        if np.all(stored):
+            return pairs
+        censi = self._censi_pairs(world_points, index[~stored], max_distance)
+        return Correspondences(
+            np.concatenate([pairs.index, censi.index]),
+            np.concatenate([pairs.anchors, censi.anchors]),
+            np.concatenate([pairs.normals, censi.normals]),
+        )
+
+    def _censi_pairs(
+        self, world_points: NDArray[np.float64], candidates: NDArray[np.intp], max_distance: float
+    ) -> Correspondences:
+        """Lines through the two nearest reference points of ``world_points[candidates]``."""
+        distances, neighbours = self.tree.query(
+            world_points[candidates], k=2, distance_upper_bound=max_distance
+        )
+        found = np.isfinite(distances[:, 0])
+        index, neighbours = candidates[found], neighbours[found]
+        nearest = neighbours[:, 0]
+        has_line = np.isfinite(distances[found, 1])
+        second = np.where(has_line, neighbours[:, 1], nearest)
+        along = self.points[second] - self.points[nearest]
+        length = np.hypot(along[:, 0], along[:, 1])
+        has_line &= length > 1e-9
+        normals = np.column_stack([-along[:, 1], along[:, 0]]) / np.maximum(length, 1e-12)[:, None]
         first = self.points[nearest]
         # No line: point-to-point, linearised along the current offset.
         offset = world_points[index[~has_line]] - first[~has_line]
@@ -170,6 +202,7 @@ class ICPParams:
     inlier_distance: float = 0.1
     tolerance_translation: float = 1e-4
     tolerance_rotation: float = 1e-5
+    min_information: float = 0.0
 
     def __post_init__(self) -> None:
         if self.max_iterations < 1:
@@ -239,7 +272,9 @@ def register(
         if information is not None and prior is not None:
             offset = prior - pose
             offset[2] = wrap_angle(offset[2])
-        step = gauss_newton_step(jacobian, residuals[keep], weights, information, offset)
+        step = gauss_newton_step(
+            jacobian, residuals[keep], weights, information, offset, params.min_information
+        )
         pose = pose + step
         pose[2] = wrap_angle(pose[2])
         if (

@@ -62,9 +62,14 @@ class LocalMapOdometry(Estimator):
         max_correspondence_distance: pairing gate (0.5 m: a constant-velocity guess is within
             a few cm at 10 Hz; half a metre tolerates a sudden stop or start).
         prior_sigma_translation, prior_sigma_rotation: per-scan deviation from constant velocity
-            the prior allows (0.1 m, 0.1 rad: robots change speed that much per scan only when
-            braking hard). The prior is weighed against points with ``noise_sigma``
-            (0.02 m), so it only decides directions the scan leaves free.
+            the prior allows (0.03 m: braking or accelerating at ~1 m/s^2 shifts a robot by
+            0.5 a dt^2 = 0.02 m over a 0.2 s scan interval; 0.1 rad: a sharp change of turn
+            rate). The prior is weighed against points with ``noise_sigma`` (0.02 m), so it
+            is worth about one point and only decides directions the scan leaves free.
+        min_information: directions the scan pins down with less information than this many
+            points squarely facing that way follow the motion prior alone (2: a corridor's
+            axis, seen only through the noise of the wall normals; one small object in view
+            already gives more; see :func:`estimators.icp.gauss_newton_step`).
         min_quality: share of points explained below which the correlative search runs (0.5).
         search_linear_window, search_angular_window: its window around the guess (0.5 m,
             30 deg).
@@ -80,9 +85,10 @@ class LocalMapOdometry(Estimator):
     loss_scale: float = 0.1
     max_correspondence_distance: float = 0.5
     max_iterations: int = 20
-    prior_sigma_translation: float = 0.1
+    prior_sigma_translation: float = 0.03
     prior_sigma_rotation: float = 0.1
     noise_sigma: float = 0.02
+    min_information: float = 2.0
     min_quality: float = 0.5
     search_linear_window: float = 0.5
     search_angular_window: float = np.radians(30.0)
@@ -107,6 +113,7 @@ class LocalMapOdometry(Estimator):
             loss=self.loss,
             loss_scale=self.loss_scale,
             trim_ratio=1.0,
+            min_information=self.min_information,
         )
         # Prior information in the units of the point residuals (cost scaled by noise_sigma^2).
         self._prior_information = np.array(

@@ -96,6 +96,22 @@ def test_prior_holds_the_unconstrained_direction():
     assert step[0] == pytest.approx(0.3, abs=1e-6)  # the prior alone sets x
 
 
+def test_degenerate_direction_is_left_to_the_prior():
+    # A wall whose noisy normals tilt +-0.05 rad: the data "see" x only through that noise and
+    # would pull x to -0.2 m; with min_information the prior's +0.3 m decides x.
+    anchors = np.column_stack([np.linspace(-3, 3, 50), np.ones(50)])
+    sign = np.where(np.arange(50) % 2, 1.0, -1.0)
+    normals = np.column_stack([0.05 * sign, np.ones(50)])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    jacobian = point_to_line_jacobian(anchors, np.zeros(2), normals)
+    prior = (np.full(3, 1e-2), np.array([0.3, 0.0, 0.0]))
+    free = gauss_newton_step(jacobian, 0.01 * sign, np.ones(50), *prior)
+    guarded = gauss_newton_step(jacobian, 0.01 * sign, np.ones(50), *prior, min_information=2.0)
+    assert free[0] < 0.0
+    assert guarded[0] == pytest.approx(0.3, abs=1e-4)
+    assert abs(guarded[1]) < 1e-6
+
+
 @pytest.mark.parametrize("offset", [(0.2, -0.1, np.radians(6.0)), (-0.3, 0.15, np.radians(-10.0))])
 def test_match_scans_recovers_the_pose_between_two_views(offset):
     rng = np.random.default_rng(7)
