@@ -33,6 +33,7 @@ from estimators.rotation_pc import (
     ScanMatcher,
     constant_velocity,
     pose_difference,
+    require_sensor_frame,
 )
 from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
@@ -274,6 +275,7 @@ class FusionEstimator(Estimator):
 
     def _reset_state(self) -> None:
         assert self.setup is not None
+        require_sensor_frame(self.setup, type(self).__name__)
         self._matcher = ScanMatcher(
             self.setup.max_range, self.image_size, self.resolution, self.icp_iterations
         )

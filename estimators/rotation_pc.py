@@ -413,6 +413,17 @@ def _full_turn(*angle_sets: FloatArray) -> bool:
     return True
 
 
+def require_sensor_frame(setup: SensorSetup, estimator: str) -> None:
+    """Raise unless the scans are in their sensors' own frames, which these estimators need:
+    they estimate the heading change from the scans' rotation, and each sensor's pose is the
+    car's pose composed with its mount."""
+    if setup.world_aligned:
+        raise ValueError(
+            f"{estimator}: expected sensor-frame scans (scan_frame='sensor'), got world-aligned "
+            "scans; the paper's estimators (pc, pc_pg) take those"
+        )
+
+
 def constant_velocity(last_motion: FloatArray, last_dt: float, dt: float) -> FloatArray:
     """The motion (3,) over ``dt`` [s] at the velocity of ``last_motion`` over ``last_dt`` [s]
     (a prediction from the estimator's own increments, never from odometry)."""
@@ -441,6 +452,7 @@ class RotationPhaseCorrelation(Estimator):
 
     def _reset_state(self) -> None:
         setup = self._checked_setup()
+        require_sensor_frame(setup, type(self).__name__)
         self._matcher = ScanMatcher(
             setup.max_range, self.image_size, self.resolution, self.icp_iterations
         )

@@ -102,7 +102,6 @@ def drive(world: str, trace: str, steps: int, seed: int = 0):
     return SensorSetup.from_env(env), frames
 
 
-@pytest.mark.slow
 def test_pc_rot_icp_tracks_a_driven_turn_better_than_the_paper() -> None:
     setup, frames = drive("open_cylinders", "right_turn", 150)  # through the turn
     truth = np.array([pose for _, _, pose in frames])
@@ -165,3 +164,10 @@ def test_unknown_lidar_index_is_a_readable_error() -> None:
 def test_curve_reference_needs_three_returns() -> None:
     with pytest.raises(ValueError, match="at least 3 returns"):
         CurveReference(np.full(360, 10.0), ANGLES, 10.0)
+
+
+@pytest.mark.parametrize("name", ["pc_rot", "pc_rot_icp", "pc_fusion"])
+def test_world_aligned_scans_are_refused_with_a_readable_error(name) -> None:
+    setup = SensorSetup(MOUNTS, ANGLES, 10.0, world_aligned=True)
+    with pytest.raises(ValueError, match="expected sensor-frame scans"):
+        estimators.make(name).reset(setup)
