@@ -13,7 +13,8 @@ the heading must be found first. Two independent measurements are provided:
   ambiguity; it needs beams spread evenly over a full turn.
 
 :func:`heading_change` combines them: the precise spectrum angle, with its pi ambiguity resolved
-by the profile (or, for partial fields of view, by assuming the smaller turn).
+by a predicted turn when one is known, else by the profile, else (partial fields of view) by
+assuming the smaller turn.
 
 Angles are radians, counter-clockwise positive. A *heading change* is the turn of the sensor
 from scan ``a`` to scan ``b``; the scene then appears turned by minus that angle in scan ``b``.
