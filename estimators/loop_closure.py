@@ -71,7 +71,10 @@ class LoopClosureParams:
         angular_step: heading step (1 deg: a point 6 m away moves one 0.1 m field width).
         angular_window: heading window around the graph's guess (20 deg: the rotation drift a
             good front end accumulates over a loop of a few hundred metres).
-        voxel_size: query points are thinned to this grid before the search (0.1 m).
+        voxel_size, search_range: the search scores the query points within 20 m of its
+            origin thinned to a 0.2 m grid (its cost is linear in the points; beyond 20 m a
+            1-deg beam spacing leaves gaps wider than the field, and ICP refines with all
+            points anyway).
         min_quality: share of query points within ``inlier_distance`` of the old map after ICP
             (0.6: an honest revisit sees mostly the same walls; new clutter or open doors
             take the rest).
@@ -92,7 +95,8 @@ class LoopClosureParams:
     coarse_factor: int = 2
     angular_step: float = np.radians(1.0)
     angular_window: float = np.radians(20.0)
-    voxel_size: float = 0.1
+    voxel_size: float = 0.2
+    search_range: float = 20.0
     min_quality: float = 0.6
     inlier_distance: float = 0.1
     min_score: float = 0.4
@@ -103,7 +107,7 @@ class LoopClosureParams:
 
     def __post_init__(self) -> None:
         for name in ("resolution", "sigma", "angular_step", "voxel_size", "inlier_distance",
-                     "point_sigma", "ambiguity_distance", "effective_points"):
+                     "point_sigma", "ambiguity_distance", "effective_points", "search_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
         if self.angular_window < 0 or self.coarse_factor < 0:
@@ -297,7 +301,8 @@ def verify_loop(
     if len(query) < 10:
         return LoopVerification(False, f"too few query points ({len(query)} < 10)", guess,
                                 nothing, 0.0, 0.0, 0.0)
-    thinned = voxel_downsample(query, params.voxel_size)
+    near = query[np.hypot(query[:, 0], query[:, 1]) <= params.search_range]
+    thinned = voxel_downsample(near if len(near) >= 10 else query, params.voxel_size)
     start, _, runner_up = correlative_match(place, thinned, guess, linear_window, params)
     icp = ICPParams(max_correspondence_distance=3 * params.inlier_distance,
                     inlier_distance=params.inlier_distance)
