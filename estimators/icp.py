@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from estimators.base import Estimator
-from estimators.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
+from estimators.scan_matching import DEFAULT_MIN_RANGE, estimate_normals, scans_to_car_points
 from lidar_env.se2 import compose, transform_points, wrap_angle
 
 #: Robust losses by name: weight of a residual r at scale c (IRLS weights).
@@ -132,6 +132,16 @@ class PointToLineReference:
             if valid_normals is not None or normals is None
             else np.ones(len(self.points), bool)
         )
+
+    @classmethod
+    def with_estimated_normals(cls, points: ArrayLike) -> PointToLineReference:
+        """Reference whose normals come from each point's neighbours
+        (:func:`estimators.scan_matching.estimate_normals`), sharing one k-d tree."""
+        reference = cls(points)
+        reference.normals, reference.valid_normals = estimate_normals(
+            reference.points, reference.tree
+        )
+        return reference
 
     def correspond(
         self, world_points: NDArray[np.float64], max_distance: float

@@ -35,7 +35,6 @@ from estimators.scan_matching import (
     DEFAULT_MIN_RANGE,
     LikelihoodField,
     correlative_search,
-    estimate_normals,
     scans_to_car_points,
     voxel_downsample,
 )
@@ -74,6 +73,8 @@ class LocalMapOdometry(Estimator):
         search_linear_window, search_angular_window: its window around the guess (0.5 m,
             30 deg).
         min_range: readings below this [m] are "no return".
+
+    After a run, ``fallbacks`` counts the correlative searches that were needed.
     """
 
     keyframe_distance: float = 0.25
@@ -148,9 +149,7 @@ class LocalMapOdometry(Estimator):
         if len(merged) < 2:
             self._reference = None
             return
-        reference = PointToLineReference(merged)
-        normals, valid = estimate_normals(merged, reference.tree)
-        self._reference = PointToLineReference(merged, normals, valid)
+        self._reference = PointToLineReference.with_estimated_normals(merged)
         self._field = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
