@@ -21,6 +21,7 @@ trajectory, every scan re-anchored on its keyframe's final pose after a last opt
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -28,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
+from estimators.g2o import write_g2o
 from estimators.loop_closure import (
     LoopClosureParams,
     LoopVerification,
@@ -393,6 +395,51 @@ class GraphSlam(Estimator):
         turn = wrap_angle(from_after[:, 2] - from_before[:, 2])
         smoothed[:, 2] = wrap_angle(from_before[:, 2] + share * turn)
         return smoothed
+
+    def corrected_map(self) -> NDArray[np.float64]:
+        """``(M, 2)`` every keyframe's points in the world frame at its optimised pose [m]."""
+        if self._dirty:
+            self.optimize()
+        poses = self.graph.poses
+        return np.concatenate([transform_points(pose, k.points)
+                               for pose, k in zip(poses, self.keyframes, strict=True)])
+
+    def save_g2o(self, path: str | os.PathLike[str]) -> None:
+        """Write the keyframe graph (optimised poses, odometry and loop edges) as g2o."""
+        if self._dirty:
+            self.optimize()
+        write_g2o(self.graph, path)
+
+    def render(self, path: str | os.PathLike[str], truth: NDArray[np.float64] | None = None,
+               ) -> None:
+        """Save a picture of the corrected map (grey points), the front end's path (dotted),
+        the smoothed path, odometry edges and loop edges (red), and ``truth`` (N, 3) poses
+        if given. Needs matplotlib (``pip install duallidar[plots]``)."""
+        try:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+        except ImportError as err:
+            raise ImportError("render needs matplotlib: pip install duallidar[plots]") from err
+        points, poses, edges = self.corrected_map(), self.graph.poses, self.graph.edges
+        fig, ax = plt.subplots(figsize=(8, 8))
+        ax.scatter(points[:, 0], points[:, 1], s=0.2, c="0.6", linewidths=0)
+        odometry, smoothed = self.odometry_trajectory, self.trajectory
+        ax.plot(odometry[:, 0], odometry[:, 1], ":", lw=0.8, c="tab:orange", label="front end")
+        ax.plot(smoothed[:, 0], smoothed[:, 1], lw=0.8, c="tab:blue", label="slam")
+        if truth is not None:
+            ax.plot(truth[:, 0], truth[:, 1], lw=0.8, c="k", label="truth")
+        for (i, j), loop in zip(edges, self.graph.is_loop, strict=True):
+            if loop:
+                ax.plot(poses[[i, j], 0], poses[[i, j], 1], c="tab:red", lw=0.6)
+        ax.plot([], [], c="tab:red", label=f"loop edges ({self.n_loops})")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.legend(loc="best", fontsize=8)
+        fig.savefig(path, dpi=150, bbox_inches="tight")
+        plt.close(fig)
 
     @property
     def odometry_trajectory(self) -> NDArray[np.float64]:

@@ -3,10 +3,13 @@ the registered pipeline runs end to end on ray-cast scans."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from estimators import SensorSetup, make
+from estimators.g2o import read_g2o
 from estimators.scan_matching import scan_to_points
 from estimators.slam import GraphSlam
 from lidar_env.lidar import cast_rays
@@ -87,7 +90,7 @@ def test_injected_false_loop_does_not_destroy_the_map() -> None:
     assert np.hypot(*(corrupted[-1, :2] - truth[-1, :2])) < 0.05
 
 
-def test_registered_pipeline_runs_on_scans_and_reports_online_poses() -> None:
+def test_registered_pipeline_runs_on_scans_and_reports_online_poses(tmp_path: Path) -> None:
     truth = loop_poses(120)[:60]
     slam = make("slam")
     assert isinstance(slam, GraphSlam)
@@ -98,6 +101,12 @@ def test_registered_pipeline_runs_on_scans_and_reports_online_poses() -> None:
     assert np.hypot(*(online[-1][:2] - truth[-1, :2])) < 0.1
     assert slam.trajectory.shape == (60, 3)
     assert len(slam.keyframes) >= 10
+    slam.save_g2o(tmp_path / "graph.g2o")
+    graph = read_g2o(tmp_path / "graph.g2o")
+    np.testing.assert_allclose(graph.poses, slam.graph.poses)
+    assert graph.n_edges == slam.graph.n_edges
+    slam.render(tmp_path / "map.png", truth)
+    assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_bad_settings_are_named() -> None:
