@@ -56,7 +56,6 @@ def replay(slam: GraphSlam, truth: np.ndarray, odometry: np.ndarray, seed: int) 
         slam.add_scan(scan_to_points(ranges, ANGLES, MAX_RANGE), odom)
 
 
-@pytest.mark.slow
 def test_loop_closure_removes_the_drift_of_the_odometry() -> None:
     truth = loop_poses()
     odometry = drifting_odometry(truth)
@@ -74,7 +73,6 @@ def test_loop_closure_removes_the_drift_of_the_odometry() -> None:
     assert np.all(np.abs(wrap_angle(smoothed[:, 2] - truth[:, 2])) < np.radians(1.0))
 
 
-@pytest.mark.slow
 def test_injected_false_loop_does_not_destroy_the_map() -> None:
     truth = loop_poses()
     slam = GraphSlam(min_loop_separation=8.0)
