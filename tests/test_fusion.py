@@ -140,10 +140,10 @@ def drive_in_room(steps: int, motion: np.ndarray, n_lidars: int = 2):
     return SensorSetup(mounts, default_beam_angles(360), 10.0), observations, poses
 
 
-@pytest.mark.parametrize("n_lidars", [2, 1])
-def test_fusion_estimator_follows_a_curve_to_millimetres_per_step(n_lidars) -> None:
+@pytest.mark.parametrize(("n_lidars", "window"), [(2, 2), (1, 2), (2, 4)])
+def test_fusion_estimator_follows_a_curve_to_millimetres_per_step(n_lidars, window) -> None:
     setup, observations, truth = drive_in_room(40, np.array([0.1, 0.0, 0.04]), n_lidars)
-    estimator = estimators.make("pc_fusion")
+    estimator = estimators.make("pc_fusion", window=window)
     estimator.reset(setup, truth[0])
     for k, observation in enumerate(observations):
         estimator.update(observation, 0.1 * k)
