@@ -98,32 +98,30 @@ def relations_from_trajectory(
 def match_times(
     times: ArrayLike, queries: ArrayLike, tolerance: float = 1e-3
 ) -> NDArray[np.intp]:
-    """Index into sorted ``times`` of each query time, within ``tolerance`` [s]; error if any
-    query has no sample that close."""
+    """Index into ``times`` of the sample nearest each query time, within ``tolerance`` [s];
+    error if any query has no sample that close. ``times`` need not be sorted (logged
+    timestamps can glitch backwards)."""
     times = np.asarray(times, dtype=np.float64)
     queries = np.asarray(queries, dtype=np.float64)
     if len(times) == 0:
         raise ValueError("times: expected at least one timestamp, got none")
-    if np.any(np.diff(times) < 0):
-        raise ValueError("times: expected timestamps sorted in increasing order")
-    right = np.clip(np.searchsorted(times, queries), 1, len(times) - 1) if len(times) > 1 else None
-    if right is None:
-        nearest = np.zeros(len(queries), dtype=np.intp)
-    else:
-        left = right - 1
-        nearest = np.where(
-            np.abs(times[left] - queries) <= np.abs(times[right] - queries), left, right
-        )
-    gap = np.abs(times[nearest] - queries)
+    order = np.argsort(times, kind="stable")
+    ordered = times[order]
+    right = np.clip(np.searchsorted(ordered, queries), 0, len(times) - 1)
+    left = np.maximum(right - 1, 0)
+    nearest = np.where(
+        np.abs(ordered[left] - queries) <= np.abs(ordered[right] - queries), left, right
+    )
+    gap = np.abs(ordered[nearest] - queries)
     missing = np.flatnonzero(gap > tolerance)
     if len(missing):
         q = queries[missing[0]]
         raise ValueError(
             f"{len(missing)} relation time(s) have no scan within {tolerance} s, e.g. t={q:.6f} "
-            f"(nearest scan at {times[nearest[missing[0]]]:.6f}); expected every relation time "
-            "to be a scan time"
+            f"(nearest scan at {ordered[nearest[missing[0]]]:.6f}); expected every relation "
+            "time to be a scan time"
         )
-    return nearest
+    return order[nearest]
 
 
 @dataclass(frozen=True)

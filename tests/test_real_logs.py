@@ -67,6 +67,6 @@ def test_intel_pseudo_truth_lines_up_with_the_log():
     relations = pseudo_truth_relations(corrected)
     assert set(relations) == {"consecutive", "1 s", "5 s"}
     assert np.all(relations["5 s"].t2 - relations["5 s"].t1 >= 5.0)
-    times = np.sort(load_log(DATA / "intel.clf.bz2").scan_times("logger"))
+    times = load_log(DATA / "intel.clf.bz2").scan_times("logger")
     # Every SLAM keyframe is one of the log's scans (its stamps are rounded to 6 digits).
     match_times(times, relations["consecutive"].t1, tolerance=0.01)
