@@ -185,6 +185,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._space_world: World | None = None
         self._renderer: Any = None
         self._trajectories: dict[str, NDArray[np.float64]] = {}
+        self._render_map: Any = None
         self._last_scans: NDArray[np.float32] | None = None
         self._time = 0.0
         self._arc = 0.0
@@ -219,6 +220,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._time = 0.0
         self._arc = 0.0
         self._trajectories = {}
+        self._render_map = None
         observation = self._observe()
         info = self._info(*self._progress(), collision=False)
         if self.render_mode == "human":
@@ -364,6 +366,19 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             checked[str(name)] = array[:, :2].copy()
         self._trajectories = checked
 
+    def set_render_map(self, grid: Any) -> None:
+        """An :class:`estimators.occupancy.OccupancyGrid` to draw under the trajectories, or
+        ``None`` for none. The env builds no map itself: a user (or the scoring wrapper) builds
+        one from the scans at its estimated poses. The grid is kept by reference, so cells
+        integrated into it later show in the next frame. Cleared at every reset.
+        """
+        from estimators.occupancy import OccupancyGrid
+
+        if grid is not None and not isinstance(grid, OccupancyGrid):
+            raise TypeError(f"render map: expected an estimators.occupancy.OccupancyGrid or None, "
+                            f"got {type(grid).__name__}")
+        self._render_map = grid
+
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:
             gym.logger.warn(
@@ -389,6 +404,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             world_aligned=self._world_aligned,
             trace=self.trace.waypoints if self.trace is not None else None,
             trajectories=self._trajectories,
+            occupancy=self._render_map,
         )
         if self.render_mode == "rgb_array":
             return frame

@@ -1,8 +1,12 @@
 """Top-down pictures of a ``DualLidar-v0`` episode, drawn with numpy alone.
 
 ``rgb_array`` frames need no window and no pygame; the ``human`` window imports pygame only
-when first shown. Pixel convention (as :meth:`lidar_env.world.World.to_image`): row 0 is the
-top of the world (max y), column 0 its left edge (min x).
+when first shown. Pixel convention (exactly :meth:`lidar_env.world.World.to_image`'s and
+:class:`estimators.occupancy.OccupancyGrid`'s): ``H, W = ceil(extent / resolution)`` pixels
+anchored at ``(xmin, ymin)``; pixel ``(row, col)`` covers ``x`` in ``xmin + [col, col + 1) * res``
+and ``y`` in ``ymin + [H - 1 - row, H - row) * res``, so row 0 is the top (its upper edge may
+reach past ``ymax`` by less than a pixel) and column 0 the left edge. Anchoring at ``ymin`` keeps
+the world raster, the points drawn on it and an occupancy-map overlay on the same pixels.
 """
 
 from __future__ import annotations
@@ -12,13 +16,16 @@ import os
 import struct
 import zlib
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium.error import DependencyNotInstalled
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.world import World
+
+if TYPE_CHECKING:
+    from estimators.occupancy import OccupancyGrid
 
 #: Longest image side [pixels] by default: sharp enough to see 0.1 m on a 40 m world.
 DEFAULT_MAX_SIZE = 640
@@ -27,6 +34,8 @@ FREE = np.array([250, 250, 250], dtype=np.uint8)
 OBSTACLE = np.array([40, 40, 40], dtype=np.uint8)
 TRACE_COLOUR = np.array([120, 160, 255], dtype=np.uint8)
 CAR_COLOUR = np.array([220, 30, 30], dtype=np.uint8)
+#: Opacity of an occupancy-map overlay over the world raster (the world stays visible through it).
+MAP_ALPHA = 0.6
 LIDAR_COLOURS = (np.array([255, 140, 0], dtype=np.uint8), np.array([0, 170, 80], dtype=np.uint8))
 #: Colours cycled through for the trajectories handed in (blue, purple, brown, teal, olive).
 TRAJECTORY_COLOURS = tuple(
@@ -62,10 +71,31 @@ class Renderer:
     def to_pixels(self, points: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """(rows, cols) of world points (N, 2) [m]; may fall outside the image."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        xmin, _, _, ymax = self.world.bounds
+        xmin, ymin, _, _ = self.world.bounds
         cols = np.floor((p[:, 0] - xmin) / self.resolution).astype(np.int64)
-        rows = np.floor((ymax - p[:, 1]) / self.resolution).astype(np.int64)
+        rows = np.floor(self.shape[0] - (p[:, 1] - ymin) / self.resolution).astype(np.int64)
         return rows, cols
+
+    def pixel_centres(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:
+        """World ``(x, y)`` [m] of the centres of pixels ``rows``, ``cols`` (same shapes),
+        stacked on a last axis: the inverse of :meth:`to_pixels`."""
+        xmin, ymin, _, _ = self.world.bounds
+        x = xmin + (np.asarray(cols, dtype=np.float64) + 0.5) * self.resolution
+        y = ymin + (self.shape[0] - np.asarray(rows, dtype=np.float64) - 0.5) * self.resolution
+        return np.stack(np.broadcast_arrays(x, y), axis=-1)
+
+    def overlay_map(self, frame: NDArray[np.uint8], grid: OccupancyGrid) -> None:
+        """Blend the occupancy map ``grid`` (its own bounds and cell size) over ``frame`` with
+        opacity :data:`MAP_ALPHA`: occupied cells dark, free cells light; cells the map never
+        observed (probability 0.5, grey 128) leave the frame as it is."""
+        from estimators.occupancy import occupancy_to_rgb
+
+        picture = occupancy_to_rgb(grid, self.world.bounds, self.resolution)
+        if picture.shape != frame.shape:  # cannot happen for one bounds and resolution
+            raise ValueError(f"map picture {picture.shape} and frame {frame.shape} differ")
+        observed = picture[..., 0] != 128
+        blended = (1.0 - MAP_ALPHA) * frame[observed] + MAP_ALPHA * picture[observed]
+        frame[observed] = np.round(blended).astype(np.uint8)
 
     def _paint(
         self, frame: NDArray[np.uint8], points: ArrayLike, colour: NDArray, size: int
@@ -104,9 +134,8 @@ class Renderer:
         cols = np.arange(max(c0, 0), min(c1 + 1, width))
         if len(rows) == 0 or len(cols) == 0:
             return
-        xmin, _, _, ymax = self.world.bounds
-        px = xmin + (cols[None, :] + 0.5) * self.resolution - x
-        py = ymax - (rows[:, None] + 0.5) * self.resolution - y
+        centres = self.pixel_centres(rows[:, None], cols[None, :])
+        px, py = centres[..., 0] - x, centres[..., 1] - y
         c, s = math.cos(heading), math.sin(heading)
         along, across = c * px + s * py, -s * px + c * py
         inside = (np.abs(along) <= half_length) & (np.abs(across) <= half_width)
@@ -126,6 +155,7 @@ class Renderer:
         world_aligned: bool = False,
         trace: ArrayLike | None = None,
         trajectories: Mapping[str, ArrayLike] | None = None,
+        occupancy: OccupancyGrid | None = None,
     ) -> NDArray[np.uint8]:
         """One ``(H, W, 3)`` uint8 frame.
 
@@ -139,8 +169,12 @@ class Renderer:
                 ``world_aligned``).
             trace: ``(M, 2)`` waypoints [m] to draw under everything else.
             trajectories: ``{name: (N, 2 or 3) poses [m]}``, each in its own colour.
+            occupancy: an occupancy map to blend over the world, under everything else
+                (:meth:`overlay_map`).
         """
         frame = self.background.copy()
+        if occupancy is not None:
+            self.overlay_map(frame, occupancy)
         if trace is not None:
             self._polyline(frame, trace, TRACE_COLOUR, 2)
         for i, path in enumerate((trajectories or {}).values()):

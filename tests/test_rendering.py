@@ -12,6 +12,7 @@ from lidar_env.env import DualLidarEnv
 from lidar_env.rendering import (
     CAR_COLOUR,
     LIDAR_COLOURS,
+    MAP_ALPHA,
     OBSTACLE,
     TRACE_COLOUR,
     TRAJECTORY_COLOURS,
@@ -77,3 +78,69 @@ def test_png_writer_round_trips_through_an_independent_reader(tmp_path):
     assert np.all(back[20:, 53:] == 255)
     with pytest.raises(ValueError, match=r"image: expected \(H, W, 3\) uint8, got \(4, 4\)"):
         write_png(tmp_path / "y.png", np.zeros((4, 4), dtype=np.uint8))
+
+
+def test_pixels_follow_the_world_image_convention_on_a_non_square_world():
+    """Pixel (r, c) of the frame is pixel (r, c) of ``world.to_image``, whose cell centres
+    :class:`OccupancyGrid` documents independently; hallway's height is no whole number of
+    pixels, so anchoring rows at ymax instead of ymin would shift every row."""
+    from estimators.occupancy import OccupancyGrid
+
+    env = gym.make("DualLidar-v0", world="hallway", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.render()
+    renderer = env.unwrapped._renderer
+    world = env.unwrapped.world
+    height = world.bounds[3] - world.bounds[1]
+    assert height / renderer.resolution % 1 > 0.1  # the case that tells the anchors apart
+    centres = OccupancyGrid(world.bounds, renderer.resolution).cell_centres()
+    assert centres.shape[:2] == renderer.shape
+    expected_rows, expected_cols = np.indices(renderer.shape).reshape(2, -1)
+    for dx, dy in ((0, 0), (0.45, 0.45), (-0.45, -0.45), (0.45, -0.45)):  # anywhere in the cell
+        shift = renderer.resolution * np.array([dx, dy])
+        rows, cols = renderer.to_pixels(centres.reshape(-1, 2) + shift)
+        np.testing.assert_array_equal(rows, expected_rows)
+        np.testing.assert_array_equal(cols, expected_cols)
+    rows, cols = expected_rows, expected_cols
+    np.testing.assert_allclose(renderer.pixel_centres(rows, cols), centres.reshape(-1, 2))
+
+
+def test_a_map_from_true_poses_overlays_the_world_obstacles(no_pygame):
+    from scipy import ndimage
+
+    from estimators import SensorSetup
+    from estimators.occupancy import OccupancyGrid
+
+    env = gym.make("DualLidar-v0", world="closed_to_open", render_mode="rgb_array")
+    observation, info = env.reset(seed=0)
+    env.render()
+    renderer = env.unwrapped._renderer
+    setup = SensorSetup.from_env(env)
+    grid = OccupancyGrid(env.unwrapped.world.bounds, 0.05)
+    env.unwrapped.set_render_map(grid)
+    for _ in range(30):
+        grid.integrate_observation(observation, info["pose"], setup)
+        observation, *_, info = env.step(np.array([1.0, 0.2], dtype=np.float32))
+    framed = env.render()  # the grid was filled after it was handed over
+    env.unwrapped.set_render_map(None)
+    plain = env.render()
+    world_only = renderer.background
+    overlaid = world_only.copy()
+    renderer.overlay_map(overlaid, grid)
+    untouched = np.all(plain == world_only, axis=-1)  # no car, hit or trace painted there
+    np.testing.assert_array_equal(framed[untouched], overlaid[untouched])
+
+    obstacles = np.all(world_only == OBSTACLE, axis=-1)
+    changed = np.any(overlaid != world_only, axis=-1)
+    # undo the blend: the map's own grey level, 255 (1 - p), where it observed something
+    map_grey = (overlaid[..., 0] - (1.0 - MAP_ALPHA) * world_only[..., 0]) / MAP_ALPHA
+    occupied = changed & (map_grey < 100)
+    free = changed & (map_grey > 156)
+    assert occupied.sum() > 200 and free.sum() > 10 * occupied.sum()
+    near_obstacle = ndimage.binary_dilation(obstacles, iterations=1)
+    assert (occupied & near_obstacle).sum() / occupied.sum() > 0.95
+    assert (free & obstacles).sum() / free.sum() < 0.01
+    assert np.any(framed != plain)
+    with pytest.raises(TypeError, match="render map: expected an estimators.occupancy."
+                                        "OccupancyGrid or None, got ndarray"):
+        env.unwrapped.set_render_map(np.zeros((4, 4)))
