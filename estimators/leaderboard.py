@@ -6,11 +6,16 @@ every estimator (:mod:`estimators.runner`), scores it (:mod:`estimators.metrics`
 
 * ``leaderboard.md`` / ``leaderboard.csv``: estimators ranked by mean ATE over all simulated
   scenarios (eq. 11 ignores direction, so it cannot rank alone), with eq.-11 accuracy, heading
-  RMSE, drift, ms/step, one column per scenario group and the real-log relation error;
+  RMSE, drift, ms/step, the scores of the map the estimator's poses yield (occupied-cell IoU,
+  precision and recall at 10 cm cells and one cell of tolerance; cylinder recall and centre
+  error where the world has cylinders; :func:`estimators.recording.score_map`), one column per
+  scenario group and the real-log relation error;
 * ``results.csv``: one row per estimator and scenario;
 * ``table1.md`` / ``table1.csv``: the paper's Table I, our figures beside the printed ones;
 * ``fig8_lidar_image.png`` (an eq.-5 Lidar image) and ``fig8_traces.png`` (per group, the true
   trace and every estimator's trace over the world map);
+* ``maps.png``: the true map next to the occupancy maps built at the poses of the best-ranked
+  estimator and of the paper's (``pc_pg``), in the first group with cylinders;
 * ``failures.txt`` when an estimator raised (the others still run).
 
 Re-running with the same database skips everything already stored.
@@ -43,6 +48,7 @@ from estimators.database import (
 )
 from estimators.registry import names
 from estimators.runner import (
+    STAGES,
     EstimatorSpec,
     RealLog,
     RunInterrupted,
@@ -106,9 +112,17 @@ METRIC_COLUMNS: tuple[tuple[str, str, bool], ...] = (
     ("heading_rmse_deg", "heading RMSE [deg]", True),
     ("drift_percent", "drift [%]", True),
     ("ms_per_step", "ms/step", True),
+    ("map_iou", "map IoU", False),
+    ("map_precision", "map precision", False),
+    ("map_recall", "map recall", False),
+    ("cylinder_recall", "cylinder recall", False),
+    ("cylinder_error_m", "cylinder error [m]", True),
 )
 RANK_KEYS: dict[str, str] = {"ate": "ate_rmse_m", "accuracy": "accuracy_percent",
-                             "heading": "heading_rmse_deg", "drift": "drift_percent"}
+                             "heading": "heading_rmse_deg", "drift": "drift_percent",
+                             "map": "map_iou"}
+#: The paper's estimator, whose map ``maps.png`` shows next to the best one's.
+PAPER_ESTIMATOR = "pc_pg"
 REAL_METRIC = "relations_all_translation_m"
 DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
 #: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
@@ -391,6 +405,54 @@ def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
     return paths
 
 
+def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
+                    scenarios: dict[str, list[Scenario]],
+                    records: dict[tuple[Scenario, str], TraceRecord],
+                    ranked: Sequence[str], out: Path) -> list[Path]:
+    """``maps.png``: the true map of the first group whose world has cylinders (else the first
+    group), first seed, next to the occupancy maps built from its scans at the poses of the
+    best-ranked estimator (first of ``ranked`` that ran there) and of :data:`PAPER_ESTIMATOR`,
+    as scored (:data:`estimators.recording.MAP_RESOLUTION`). Returns the PNG paths."""
+    from estimators.map_scoring import save_map_figure
+    from estimators.occupancy import from_estimator_run
+    from estimators.recording import MAP_RESOLUTION, world_from_geometry
+
+    candidates = [(g, scenarios[g.name][0]) for g in groups if scenarios[g.name]]
+    candidates = [(g, s) for g, s in candidates if db.has_sensor_dataset(s)]
+    if not candidates:
+        return []
+
+    def has_cylinders(scenario: Scenario) -> bool:
+        world = db.load_sensor_dataset(scenario).world
+        return bool(world) and len(world["circles"]) > 0
+
+    group, scenario = next((c for c in candidates if has_cylinders(c[1])), candidates[0])
+    dataset = db.load_sensor_dataset(scenario)
+    if not dataset.world:
+        return []
+    ran = [name for name in ranked if (scenario, name) in records]
+    shown = list(dict.fromkeys(ran[:1] + [n for n in ran if n == PAPER_ESTIMATOR]))
+    if not shown:
+        return []
+    world = world_from_geometry(dataset.world)
+    observations = list(dataset.observations())
+    by_id = {r.trace_id: r for r in db.traces(scenario)}
+    panels: dict[str, Any] = {"true map": world.to_image(MAP_RESOLUTION)}
+    trajectories = {"truth": dataset.poses}
+    for name in shown:
+        record = records[(scenario, name)]
+        poses = by_id[record.trace_id].trace.poses
+        role = "paper" if name == PAPER_ESTIMATOR else "best"
+        iou = record.metrics.get("map_iou", math.nan)
+        panels[f"{role}: {name} (IoU {_fmt(iou)})"] = from_estimator_run(
+            poses, observations, dataset.setup, MAP_RESOLUTION, bounds=world.bounds)
+        trajectories[name] = poses
+    path = save_map_figure(out / "maps.png", panels, world.bounds, trajectories,
+                           title=f"{group.name}, seed {scenario.seed}: occupancy maps, "
+                                 f"{100 * MAP_RESOLUTION:.0f} cm cells")
+    return [path]
+
+
 def _executor(args: argparse.Namespace) -> Any:
     """A Dask client when ``--scheduler`` is given, else a local process pool (``None`` for
     one worker: run in this process)."""
@@ -489,6 +551,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         elif executor is not None:
             executor.close()  # a Dask client: disconnect, the cluster stays up
 
+    reporting = time.perf_counter()
     records = _current(db.traces(poses=False), specs, package_version())
     real = logs[0].scenario if logs else None
     rows = rank_table(groups, scenarios, specs, records, real, RANK_KEYS[args.rank_by])
@@ -517,6 +580,8 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         print("note: Table I skipped: the run holds none of the paper's world/trace pairs")
     try:
         written += draw_figure_8(db, groups, scenarios, records, specs, out)
+        written += draw_map_figure(db, groups, scenarios, records,
+                                   [row["estimator"] for row in rows], out)
     except ImportError as error:
         print(f"note: Fig. 8 skipped ({error}); install the plots extra: "
               "pip install 'duallidar[plots]'")
@@ -530,6 +595,13 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         print(f"note: {len(failures)} estimator runs failed: {', '.join(sorted(failures))}")
     done = sum(s.recorded for s in summaries), sum(s.traces for s in summaries)
     skipped = sum(s.skipped for s in summaries)
+    stages = {}
+    for summary in summaries:
+        for stage, seconds in summary.stage_seconds.items():
+            stages[stage] = stages.get(stage, 0.0) + seconds
+    print("worker time: " + ", ".join(f"{stage} {stages[stage]:.1f} s" for stage in STAGES
+                                       if stage in stages)
+          + f"; tables and figures {time.perf_counter() - reporting:.1f} s")
     print(f"leaderboard: {len(specs)} estimators x {len(every)} scenarios"
           f"{' + ' + str(len(logs)) + ' real log' if logs else ''} in "
           f"{time.perf_counter() - start:.1f} s ({done[0]} recorded, {done[1]} traces new, "

@@ -9,6 +9,12 @@ the ground truth from ``info``; :func:`replay` runs one estimator over the store
 Replay sees exactly what an online run sees (the reset observation, then one observation per
 ``env.step`` up to and including the last one), as float32 scans bit-for-bit, so replayed
 metrics equal those of online scoring with :class:`estimators.scoring.ScoreEstimator`.
+
+:func:`score_map` adds the scores of the obstacle map an estimator's poses yield
+(:mod:`estimators.map_scoring`): the occupancy grid built from every scan at the estimated poses
+against the true world at :data:`MAP_RESOLUTION` and one cell of tolerance, and in worlds with
+cylinders the tracked cylinders against the true ones. What the maps are scored against
+(:func:`map_reference`) depends only on the scenario, so it is computed once per scenario.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +32,21 @@ from estimators.base import SensorSetup
 from estimators.database import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
 
+if TYPE_CHECKING:
+    from estimators.map_scoring import MapTruth
+
 ENV_ID = "DualLidar-v0"
+#: Cell side [m] of the scored maps: 10 cm, about the size of the smallest obstacle detail that
+#: matters for driving and twice the cost-cheaper side of the 5 cm benchmark grid (each beam
+#: crosses half as many cells), so mapping every scan stays a few ms per step next to the
+#: estimators. Scores are at a tolerance of one cell (10 cm).
+MAP_RESOLUTION = 0.10
+MAP_TOLERANCE_CELLS = 1
+#: Scans between two obstacle-detection steps: every 10th scan (1 Hz at the default 10 Hz).
+#: Per-scan detection costs tens of ms in a cylinder world, more than most estimators; a static
+#: cylinder stays in view for metres of travel, so 1 Hz still sees each one many times, and
+#: only cylinders observable in those scans count for recall.
+OBSTACLE_STRIDE = 10
 
 
 def make_env(scenario: Scenario) -> Any:
@@ -147,3 +167,60 @@ def score(trace: TraceDataset, truth: NDArray[np.float64]) -> dict[str, float]:
     result = metrics_dict(evaluate(trace.poses, truth))
     result["ms_per_step"] = trace.ms_per_step
     return result
+
+
+def map_reference(dataset: SensorDataset, resolution: float = MAP_RESOLUTION,
+                  obstacle_stride: int = OBSTACLE_STRIDE) -> MapTruth | None:
+    """What every estimator's map of ``dataset`` is scored against (once per scenario): the
+    true world's image and visible cells along the true poses, and the cylinders observable in
+    the scans the detector gets (every ``obstacle_stride``-th). ``None`` when the dataset holds
+    no world geometry (nothing to score against)."""
+    from estimators.map_scoring import map_truth, observable_cylinders
+    from estimators.obstacles import DetectorParams
+    from estimators.occupancy import sensor_poses
+
+    if not dataset.world:
+        return None
+    world = world_from_geometry(dataset.world)
+    truth = map_truth(world, dataset.poses, dataset.setup, resolution)
+    if len(truth.circles) == 0:
+        return truth
+    detected_at = sensor_poses(dataset.poses[::obstacle_stride], dataset.setup).reshape(-1, 3)
+    observable = observable_cylinders(world, detected_at, dataset.setup.beam_angles,
+                                      dataset.setup.max_range,
+                                      DetectorParams().min_circle_points)
+    return dataclasses.replace(truth, observable=observable)
+
+
+def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDataset,
+              obstacle_stride: int = OBSTACLE_STRIDE) -> dict[str, float]:
+    """The map metrics of car poses ``poses`` (N, 3) on ``dataset`` against ``reference``
+    (:func:`map_reference` with the same ``obstacle_stride``).
+
+    ``map_precision``, ``map_recall``, ``map_iou``: occupied cells of the grid built from every
+    scan at ``poses``, at :data:`MAP_TOLERANCE_CELLS` over the visible true cells; in worlds
+    with cylinders ``cylinder_recall`` (share of the observable ones found),
+    ``cylinder_precision`` and ``cylinder_error_m`` (mean centre error [m] of the matched ones)
+    of the cylinders tracked over every ``obstacle_stride``-th scan."""
+    from estimators.map_scoring import score_cylinders, score_occupancy, track_obstacles
+    from estimators.occupancy import from_estimator_run
+
+    if isinstance(obstacle_stride, bool) or not isinstance(obstacle_stride, int) \
+            or obstacle_stride < 1:
+        raise ValueError(f"obstacle_stride: expected an integer >= 1, got {obstacle_stride!r}")
+    observations = list(dataset.observations())
+    grid = from_estimator_run(poses, observations, dataset.setup, reference.resolution,
+                              bounds=reference.bounds)
+    cells = score_occupancy(grid.occupied(), reference.image, MAP_TOLERANCE_CELLS,
+                            reference.visible)
+    metrics = {"map_precision": cells.precision, "map_recall": cells.recall,
+               "map_iou": cells.iou}
+    if len(reference.circles):
+        tracker = track_obstacles(poses[::obstacle_stride], observations[::obstacle_stride],
+                                  dataset.setup)
+        cylinders = score_cylinders(tracker.cylinders(), reference.circles,
+                                    observable=reference.observable)
+        metrics.update({"cylinder_recall": cylinders.recall,
+                        "cylinder_precision": cylinders.precision,
+                        "cylinder_error_m": cylinders.mean_error})
+    return metrics

@@ -42,7 +42,7 @@ from estimators.database import (
     TraceDataset,
     package_version,
 )
-from estimators.recording import record, replay, score
+from estimators.recording import map_reference, record, replay, score, score_map
 from estimators.registry import defaults, names
 
 
@@ -91,14 +91,26 @@ class ScenarioTask:
 
 @dataclass
 class ScenarioOutcome:
-    """What a worker returns; ``failures`` maps a stage (``record`` or an estimator name) to
-    the error it raised, so one broken estimator does not stop the run."""
+    """What a worker returns; ``failures`` maps a stage (``record``, ``map reference`` or an
+    estimator name) to the error it raised, so one broken estimator does not stop the run;
+    ``seconds`` is the worker's wall time [s] per kind of work (:data:`STAGES`)."""
 
     scenario: Scenario
     dataset: SensorDataset | None
     recorded: bool
     traces: list[tuple[TraceDataset, dict[str, float]]] = field(default_factory=list)
     failures: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def timed(self, stage: str, started: float) -> None:
+        """Add the time since ``started`` (``time.perf_counter()``) to ``stage``."""
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - started
+
+
+#: Kinds of worker time reported in :attr:`RunSummary.seconds`: simulating scenarios, running
+#: the estimators (their ``update`` calls and setup), the per-scenario map reference and the
+#: per-trace map scores.
+STAGES = ("record", "estimators", "map reference", "map scores")
 
 
 @dataclass
@@ -110,24 +122,45 @@ class RunSummary:
     recorded: int = 0
     traces: int = 0
     failures: dict[str, str] = field(default_factory=dict)
-    seconds: float = 0.0
+    seconds: float = 0.0  # wall time of the call
+    stage_seconds: dict[str, float] = field(default_factory=dict)  # worker time per stage
 
 
 def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
-    """Record (if needed) and replay one scenario; runs in a worker, touches no database."""
+    """Record (if needed) and replay one scenario, scoring each trace and the map its poses
+    yield (the map reference is computed once here, for all estimators); runs in a worker,
+    touches no database."""
     dataset, recorded = task.dataset, False
     outcome = ScenarioOutcome(task.scenario, None, False)
     if dataset is None:
+        started = time.perf_counter()
         try:
             dataset, recorded = record(task.scenario), True
         except Exception:  # reported per stage; the rest of the run goes on
             outcome.failures["record"] = traceback.format_exc(limit=-6)
             return outcome
+        finally:
+            outcome.timed("record", started)
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
+    reference = None
+    if task.estimators:
+        started = time.perf_counter()
+        try:
+            reference = map_reference(dataset)
+        except Exception:  # the trajectories are still scored, without map metrics
+            outcome.failures["map reference"] = traceback.format_exc(limit=-6)
+        outcome.timed("map reference", started)
     for spec in task.estimators:
+        started = time.perf_counter()
         try:
             trace = replay(dataset, spec.name, spec.params, resolved_params=spec.resolved_params)
-            outcome.traces.append((trace, score(trace, dataset.poses)))
+            metrics = score(trace, dataset.poses)
+            outcome.timed("estimators", started)
+            if reference is not None:
+                started = time.perf_counter()
+                metrics.update(score_map(reference, trace.poses, dataset))
+                outcome.timed("map scores", started)
+            outcome.traces.append((trace, metrics))
         except Exception:  # a broken estimator must not sink the others
             outcome.failures[spec.name] = traceback.format_exc(limit=-6)
     return outcome
@@ -172,6 +205,7 @@ def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
 
     log, spec = task.log, task.estimator
     outcome = ScenarioOutcome(log.scenario, None, False)
+    started = time.perf_counter()
     try:
         carmen = _load_log(log.log_path)
         run = run_on_log(make(spec.name, **dict(spec.params)), carmen, limit=log.scans)
@@ -188,6 +222,7 @@ def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
         outcome.traces.append((trace, metrics))
     except Exception:  # e.g. an estimator that needs two Lidars: reported, not fatal
         outcome.failures[spec.name] = traceback.format_exc(limit=-6)
+    outcome.timed("estimators", started)
     return outcome
 
 
@@ -212,6 +247,8 @@ def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummar
             summary.traces += 1
     for stage, error in outcome.failures.items():
         summary.failures[f"{outcome.scenario.label}: {stage}"] = error
+    for stage, seconds in outcome.seconds.items():
+        summary.stage_seconds[stage] = summary.stage_seconds.get(stage, 0.0) + seconds
 
 
 def _first_done(pending: set[Any]) -> set[Any]:
