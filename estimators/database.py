@@ -44,7 +44,7 @@ import json
 import os
 import sqlite3
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -583,31 +583,50 @@ class ExperimentDatabase:
         Returns the new trace id, or ``None`` when the same estimator, params and version were
         already stored for this scenario (nothing is written then).
         """
+        return self.save_traces(scenario, [(trace, metrics)])[0]
+
+    def save_traces(self, scenario: Scenario,
+                    traces: Sequence[tuple[TraceDataset, Mapping[str, float]]]
+                    ) -> list[int | None]:
+        """Store several traces of one scenario, each with its poses and metrics, in one
+        transaction (one commit, one disk sync, for all the estimators of a scenario).
+
+        Returns the new trace ids in order, ``None`` for each trace already stored (same
+        estimator, params and version), which is left as it is.
+        """
+        ids: list[int | None] = []
         with self._transaction() as conn:
             scenario_id = self._ensure_scenario(scenario)
-            cursor = conn.execute(
-                "INSERT OR IGNORE INTO traces (scenario_id, estimator, params, package_version, "
-                "n_steps, ms_per_step, created_at) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (scenario_id, trace.estimator, trace.params_json, trace.package_version,
-                 len(trace.times), trace.ms_per_step, _now()),
-            )
-            if not cursor.rowcount:
-                return None
-            trace_id = int(cursor.lastrowid)  # type: ignore[arg-type]
-            conn.executemany(
-                "INSERT INTO trace_poses (trace_id, step, time, x, y, heading, ms) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (
-                    (trace_id, step, float(trace.times[step]), *map(float, trace.poses[step]),
-                     float(trace.step_ms[step]))
-                    for step in range(len(trace.times))
-                ),
-            )
-            conn.executemany(
-                "INSERT INTO results (trace_id, metric, value) VALUES (?, ?, ?)",
-                ((trace_id, name, None if value is None else float(value))
-                 for name, value in metrics.items()),
-            )
+            for trace, metrics in traces:
+                ids.append(self._insert_trace(conn, scenario_id, trace, metrics))
+        return ids
+
+    @staticmethod
+    def _insert_trace(conn: sqlite3.Connection, scenario_id: int, trace: TraceDataset,
+                      metrics: Mapping[str, float]) -> int | None:
+        cursor = conn.execute(
+            "INSERT OR IGNORE INTO traces (scenario_id, estimator, params, package_version, "
+            "n_steps, ms_per_step, created_at) VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (scenario_id, trace.estimator, trace.params_json, trace.package_version,
+             len(trace.times), trace.ms_per_step, _now()),
+        )
+        if not cursor.rowcount:
+            return None
+        trace_id = int(cursor.lastrowid)  # type: ignore[arg-type]
+        conn.executemany(
+            "INSERT INTO trace_poses (trace_id, step, time, x, y, heading, ms) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (
+                (trace_id, step, float(trace.times[step]), *map(float, trace.poses[step]),
+                 float(trace.step_ms[step]))
+                for step in range(len(trace.times))
+            ),
+        )
+        conn.executemany(
+            "INSERT INTO results (trace_id, metric, value) VALUES (?, ?, ?)",
+            ((trace_id, name, None if value is None else float(value))
+             for name, value in metrics.items()),
+        )
         return trace_id
 
     def traces(self, scenario: Scenario | None = None, *,

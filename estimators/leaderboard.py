@@ -52,9 +52,7 @@ from estimators.runner import (
     EstimatorSpec,
     RealLog,
     RunInterrupted,
-    RunSummary,
-    run_real_logs,
-    run_scenarios,
+    run_matrix,
 )
 
 
@@ -533,15 +531,12 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
         else:
             print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
     executor = _executor(args)
-    summaries: list[RunSummary] = []
     try:
         every = [s for group in groups for s in scenarios[group.name]]
         with _progress(len(every) + len(logs) * len(specs), "scenarios",
                        not args.no_progress) as bar:
-            summaries.append(run_scenarios(db, every, specs, executor,
-                                           on_done=lambda _: bar.update()))
-            summaries.append(run_real_logs(db, logs, specs, executor,
-                                           on_done=lambda _: bar.update()))
+            summary = run_matrix(db, every, logs, specs, executor,
+                                 on_done=lambda _: bar.update())
     except RunInterrupted as error:
         print(f"error: {error}", file=sys.stderr)
         return 1
@@ -587,18 +582,15 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
               "pip install 'duallidar[plots]'")
     if args.tum:
         written.append(export_tum_files(db, records, out / "tum"))
-    failures = {k: v for summary in summaries for k, v in summary.failures.items()}
+    failures = summary.failures
     if failures:
         (out / "failures.txt").write_text(
             "".join(f"== {stage}\n{error}\n" for stage, error in failures.items()))
         written.append(out / "failures.txt")
         print(f"note: {len(failures)} estimator runs failed: {', '.join(sorted(failures))}")
-    done = sum(s.recorded for s in summaries), sum(s.traces for s in summaries)
-    skipped = sum(s.skipped for s in summaries)
-    stages = {}
-    for summary in summaries:
-        for stage, seconds in summary.stage_seconds.items():
-            stages[stage] = stages.get(stage, 0.0) + seconds
+    done = summary.recorded, summary.traces
+    skipped = summary.skipped
+    stages = summary.stage_seconds
     print("worker time: " + ", ".join(f"{stage} {stages[stage]:.1f} s" for stage in STAGES
                                        if stage in stages)
           + f"; tables and figures {time.perf_counter() - reporting:.1f} s")

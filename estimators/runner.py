@@ -242,9 +242,9 @@ def _pending_task(db: ExperimentDatabase, scenario: Scenario,
 def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummary) -> None:
     if outcome.dataset is not None and db.save_sensor_dataset(outcome.scenario, outcome.dataset):
         summary.recorded += 1
-    for trace, metrics in outcome.traces:
-        if db.save_trace(outcome.scenario, trace, metrics) is not None:
-            summary.traces += 1
+    if outcome.traces:  # one transaction for all the scenario's traces
+        new = db.save_traces(outcome.scenario, outcome.traces)
+        summary.traces += sum(trace_id is not None for trace_id in new)
     for stage, error in outcome.failures.items():
         summary.failures[f"{outcome.scenario.label}: {stage}"] = error
     for stage, seconds in outcome.seconds.items():
@@ -263,6 +263,41 @@ def _first_done(pending: set[Any]) -> set[Any]:
         time.sleep(0.01)
 
 
+def _scenario_tasks(db: ExperimentDatabase, scenarios: Iterable[Scenario],
+                    estimators: Sequence[EstimatorSpec], summary: RunSummary,
+                    on_done: Callable[[Scenario], None] | None) -> list[ScenarioTask]:
+    """The pending scenario tasks; complete scenarios are counted as skipped."""
+    todo = []
+    for scenario in scenarios:
+        summary.scenarios += 1
+        task = _pending_task(db, scenario, estimators)
+        if task is None:
+            summary.skipped += 1
+            if on_done is not None:
+                on_done(scenario)
+        else:
+            todo.append(task)
+    return todo
+
+
+def _real_log_tasks(db: ExperimentDatabase, logs: Iterable[RealLog],
+                    estimators: Sequence[EstimatorSpec], summary: RunSummary,
+                    on_done: Callable[[Scenario], None] | None) -> list[RealLogTask]:
+    """The pending (log, estimator) tasks; stored traces are counted as skipped."""
+    version = package_version()
+    todo = []
+    for log in logs:
+        for spec in estimators:
+            summary.scenarios += 1
+            if db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
+                summary.skipped += 1
+                if on_done is not None:
+                    on_done(log.scenario)
+            else:
+                todo.append(RealLogTask(log, spec))
+    return todo
+
+
 def run_scenarios(
     db: ExperimentDatabase,
     scenarios: Iterable[Scenario],
@@ -279,18 +314,8 @@ def run_scenarios(
     each scenario is settled (e.g. to advance a progress bar). Raises :class:`RunInterrupted`
     when the executor breaks (a killed worker); everything committed before stays.
     """
-    summary = RunSummary()
-    todo = []
-    for scenario in scenarios:
-        summary.scenarios += 1
-        task = _pending_task(db, scenario, estimators)
-        if task is None:
-            summary.skipped += 1
-            if on_done is not None:
-                on_done(scenario)
-        else:
-            todo.append(task)
-    return _execute(db, run_scenario_task, todo, executor, summary, max_in_flight, on_done)
+    return run_matrix(db, scenarios, (), estimators, executor, max_in_flight=max_in_flight,
+                      on_done=on_done)
 
 
 def run_real_logs(
@@ -307,42 +332,58 @@ def run_real_logs(
     One task per (log, estimator), since a log is one long sequence; tasks, commits and
     failures behave as in :func:`run_scenarios`.
     """
+    return run_matrix(db, (), logs, estimators, executor, max_in_flight=max_in_flight,
+                      on_done=on_done)
+
+
+def run_matrix(
+    db: ExperimentDatabase,
+    scenarios: Iterable[Scenario],
+    logs: Iterable[RealLog],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """:func:`run_scenarios` and :func:`run_real_logs` through one queue: the short real-log
+    tasks go last, so they fill the workers that finish their scenarios first instead of
+    waiting for the slowest scenario."""
     summary = RunSummary()
-    version = package_version()
-    todo = []
-    for log in logs:
-        for spec in estimators:
-            summary.scenarios += 1
-            if db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
-                summary.skipped += 1
-                if on_done is not None:
-                    on_done(log.scenario)
-            else:
-                todo.append(RealLogTask(log, spec))
-    return _execute(db, run_real_log_task, todo, executor, summary, max_in_flight, on_done)
+    todo: list[ScenarioTask | RealLogTask] = []
+    todo += _scenario_tasks(db, scenarios, estimators, summary, on_done)
+    todo += _real_log_tasks(db, logs, estimators, summary, on_done)
+    return _execute(db, todo, executor, summary, max_in_flight, on_done)
 
 
-def _execute(db: ExperimentDatabase, function: Callable[[Any], ScenarioOutcome],
-             todo: Sequence[Any], executor: ExecutorLike | None, summary: RunSummary,
-             max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> RunSummary:
-    """Run ``function`` over ``todo`` (here or on ``executor``), committing each outcome."""
+def run_task(task: ScenarioTask | RealLogTask) -> ScenarioOutcome:
+    """Run one task of either kind (what is sent to the executor)."""
+    if isinstance(task, RealLogTask):
+        return run_real_log_task(task)
+    return run_scenario_task(task)
+
+
+def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
+             executor: ExecutorLike | None, summary: RunSummary, max_in_flight: int,
+             on_done: Callable[[Scenario], None] | None) -> RunSummary:
+    """Run ``todo`` (here or on ``executor``), committing each outcome."""
     if max_in_flight < 1:
         raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
     start = time.perf_counter()
     if executor is None:
         for task in todo:
-            outcome = function(task)
+            outcome = run_task(task)
             _commit(db, outcome, summary)
             if on_done is not None:
                 on_done(outcome.scenario)
     else:
-        _run_on(executor, function, todo, db, summary, max_in_flight, on_done)
+        _run_on(executor, todo, db, summary, max_in_flight, on_done)
     summary.seconds = time.perf_counter() - start
     return summary
 
 
-def _run_on(executor: ExecutorLike, function: Callable[[Any], ScenarioOutcome],
-            todo: Sequence[Any], db: ExperimentDatabase, summary: RunSummary,
+def _run_on(executor: ExecutorLike, todo: Sequence[ScenarioTask | RealLogTask],
+            db: ExperimentDatabase, summary: RunSummary,
             max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> None:
     queue = list(reversed(todo))
     pending: set[Any] = set()
@@ -352,7 +393,7 @@ def _run_on(executor: ExecutorLike, function: Callable[[Any], ScenarioOutcome],
         # the tasks catch their own errors: whatever is raised here is the executor's
         try:
             while queue and len(pending) < max_in_flight:
-                pending.add(executor.submit(function, queue[-1]))
+                pending.add(executor.submit(run_task, queue[-1]))
                 queue.pop()
             done = _first_done(pending)
         except Exception as error:

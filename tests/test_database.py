@@ -118,6 +118,23 @@ def test_a_failing_write_leaves_no_partial_trace(filled_db: Path) -> None:
         assert not db.has_trace(other, "pc", {"size": 400})
 
 
+def test_a_scenario_batch_commits_together_and_skips_stored_traces(filled_db: Path) -> None:
+    rng = np.random.default_rng(6)
+    stored, new = synthetic_trace(rng), synthetic_trace(rng)
+    new = TraceDataset("icp", {}, new.times, new.poses, new.step_ms)
+    broken = TraceDataset("slam", {}, new.times, new.poses, new.step_ms)
+    with ExperimentDatabase(filled_db) as db:
+        before = db.counts()
+        with pytest.raises(ValueError):  # the last trace fails: the whole batch is rolled back
+            db.save_traces(SCENARIO, [(new, {"ate_m": 0.1}), (broken, {"ate_m": "nan?"})])
+        assert db.counts() == before
+        ids = db.save_traces(SCENARIO, [(stored, {"ate_m": 9.0}), (new, {"ate_m": 0.1})])
+        assert ids[0] is None and isinstance(ids[1], int)  # "pc" was stored: left as it was
+        metrics = {r.trace.estimator: r.metrics["ate_m"] for r in db.traces(poses=False)}
+        assert metrics == {"pc": 0.5, "icp": 0.1}
+        assert db.counts()["trace_poses"] == before["trace_poses"] + len(new.times)
+
+
 def test_unknown_scenario_is_a_readable_key_error(filled_db: Path) -> None:
     with ExperimentDatabase(filled_db) as db, pytest.raises(KeyError, match="open_cylinders"):
         db.load_sensor_dataset(Scenario("open_cylinders", "straight", 0))

@@ -30,7 +30,7 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
     for name in ("leaderboard.md", "leaderboard.csv", "results.csv", "table1.md", "table1.csv",
                  "experiments.sqlite"):
         assert (out / name).stat().st_size > 0, name
-    for name in ("fig8_lidar_image.png", "fig8_traces.png"):
+    for name in ("fig8_lidar_image.png", "fig8_traces.png", "maps.png"):
         image = pytest.importorskip("matplotlib.image").imread(out / name)
         assert image.ndim == 3 and min(image.shape[:2]) > 100 and image.std() > 0, name
 
@@ -43,6 +43,14 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
     zero = next(r for r in results if r["estimator"] == "zero")
     assert float(zero["accuracy_percent"]) == 0.0  # no motion: eq. 11 = 100 %
     assert "| 1 | " + board[0]["estimator"] in printed
+    # map scores: stored per trace, averaged into the ranked table, shown as columns
+    for row in results:
+        for metric in ("map_iou", "map_precision", "map_recall", "cylinder_recall"):
+            assert 0.0 <= float(row[metric]) <= 1.0, (row["estimator"], metric)
+    assert {r["estimator"]: r["map_iou"] for r in board} == {
+        r["estimator"]: r["map_iou"] for r in results}
+    assert "map IoU | map precision | map recall | cylinder recall | cylinder error [m]" in printed
+    assert "worker time: record " in printed and "map scores" in printed
     assert f"files in {out}/" in printed and "1 recorded, 2 traces new" in printed
     table_i = read_csv(out / "table1.csv")
     assert [float(r["paper_accuracy_percent"]) for r in table_i] == [
@@ -63,6 +71,10 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
     assert truth.num_poses == estimate.num_poses > 100
     np.testing.assert_allclose(estimate.positions_xyz, estimate.positions_xyz[:1].repeat(
         estimate.num_poses, axis=0))  # "zero" never moves
+
+    assert leaderboard.main([*TINY, "--no-real", "--rank-by", "map", "--out", str(out)]) == 0
+    ious = [float(r["map_iou"]) for r in read_csv(out / "leaderboard.csv")]
+    assert len(ious) == 2 and ious == sorted(ious, reverse=True)
 
 
 def test_missing_real_data_is_a_printed_note(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -131,3 +143,4 @@ def test_a_database_of_another_program_is_refused(tmp_path: Path,
     assert leaderboard.main([*TINY, "--db", str(bogus), "--out", str(tmp_path / "o")]) == 2
     assert "not an SQLite database" in capsys.readouterr().err
     assert bogus.read_text() == "not a database"
+

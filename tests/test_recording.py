@@ -13,9 +13,11 @@ from agents.scripted import PurePursuitDriver
 from estimators.database import ExperimentDatabase, Scenario
 from estimators.recording import (
     make_env,
+    map_reference,
     record,
     replay,
     score,
+    score_map,
     world_from_geometry,
 )
 from estimators.scoring import ScoreEstimator
@@ -92,3 +94,23 @@ def test_bad_names_are_readable_errors() -> None:
         make_env(Scenario("aces", "log", 0, kind="real"))
     with pytest.raises(ValueError, match="unknown world 'moon'"):
         record(Scenario("moon", "zigzag", 0))
+
+
+def test_map_scores_see_true_poses_and_a_shifted_run(stored: Path) -> None:
+    """At the true poses the map matches the world; shifted 0.5 m (5 cells, beyond the one-cell
+    tolerance), its cells and cylinders miss: the scores rank maps, they are not constants."""
+    with ExperimentDatabase(stored) as db:
+        dataset = db.load_sensor_dataset(SCENARIO)
+    reference = map_reference(dataset)
+    assert reference is not None and reference.resolution == 0.1
+    assert reference.observable.sum() >= 5  # cylinders seen in the scans the detector gets
+    true = score_map(reference, dataset.poses, dataset)
+    assert set(true) == {"map_precision", "map_recall", "map_iou", "cylinder_recall",
+                         "cylinder_precision", "cylinder_error_m"}
+    assert true["map_precision"] > 0.95 and true["map_iou"] > 0.85
+    assert true["cylinder_recall"] >= 0.9 and true["cylinder_error_m"] < 0.03
+    shifted = score_map(reference, dataset.poses + [0.5, 0.0, 0.0], dataset)
+    assert shifted["map_iou"] < 0.3 and shifted["map_precision"] < 0.3
+    assert shifted["cylinder_error_m"] > 0.3 or shifted["cylinder_recall"] < 0.5
+    with pytest.raises(ValueError, match="obstacle_stride: expected an integer >= 1, got 0"):
+        score_map(reference, dataset.poses, dataset, obstacle_stride=0)

@@ -101,3 +101,26 @@ def test_unknown_estimator_and_bad_window_are_readable_errors(tmp_path: Path) ->
         ValueError, match="max_in_flight: expected an integer >= 1, got 0"
     ):
         run_scenarios(db, SCENARIOS[:1], ESTIMATORS, max_in_flight=0)
+
+
+def test_the_map_reference_is_computed_once_per_scenario(monkeypatch: pytest.MonkeyPatch,
+                                                        tmp_path: Path) -> None:
+    from estimators import runner
+
+    calls = []
+
+    def counted(dataset):  # noqa: ANN001, ANN202 - a spy around the real function
+        calls.append(len(dataset))
+        return real(dataset)
+
+    real = runner.map_reference
+    monkeypatch.setattr(runner, "map_reference", counted)
+    with ExperimentDatabase(tmp_path / "db.sqlite") as db:
+        summary = run_scenarios(db, SCENARIOS[:1], ESTIMATORS)
+        records = db.traces(poses=False)
+    assert calls == [41] and summary.traces == 2
+    assert set(summary.stage_seconds) == {"record", "estimators", "map reference", "map scores"}
+    for record in records:  # every trace got map scores, the zero estimator's worse
+        assert {"map_iou", "cylinder_recall", "cylinder_error_m"} <= set(record.metrics)
+    iou = {r.trace.estimator: r.metrics["map_iou"] for r in records}
+    assert 0 <= iou["zero"] < iou["pc"] <= 1
