@@ -64,7 +64,8 @@ def bench_aces(limit: int | None, params: dict[str, Any]) -> None:
 
 def bench_intel(limit: int | None, params: dict[str, Any]) -> None:
     log = load_log(DATA / "intel.clf.bz2")
-    reference = pseudo_truth_relations(load_log(DATA / "intel-corrected.log.gz"), (None, 5.0))
+    windows = (None, 5.0, 60.0, 300.0)  # [s]: local accuracy, then drift over long spans
+    reference = pseudo_truth_relations(load_log(DATA / "intel-corrected.log.gz"), windows)
     slam = make("slam", **params)
     assert isinstance(slam, GraphSlam)
     run = run_on_log(slam, log, clock="logger", limit=limit)
