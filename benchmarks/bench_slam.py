@@ -10,6 +10,7 @@
     python benchmarks/bench_slam.py                    # everything (~5 min on one core)
     python benchmarks/bench_slam.py --parts aces sim   # a subset
     python benchmarks/bench_slam.py --limit 2000       # first 2000 scans of each log
+    python benchmarks/bench_slam.py --parts aces sim --render docs/   # + map pictures
 
 Published ACES figures (mean translational error, all relations): scan matching 0.173 m,
 graph mapping 0.044 m, Cartographer 0.0375 m / 0.373 deg.
@@ -45,7 +46,7 @@ def _runs(slam: GraphSlam, run: LogRun) -> dict[str, LogRun]:
     }
 
 
-def bench_aces(limit: int | None, params: dict[str, Any]) -> None:
+def bench_aces(limit: int | None, params: dict[str, Any], render: Path | None) -> None:
     log = load_log(DATA / "aces.clf.bz2")
     relations = load_relations(DATA / "aces.relations")
     slam = make("slam", **params)
@@ -60,6 +61,9 @@ def bench_aces(limit: int | None, params: dict[str, Any]) -> None:
     print(f"  slam: {1e3 * run.seconds_per_scan:.2f} ms/scan, {run.realtime_factor:.1f}x real "
           f"time (front end included); {len(slam.keyframes)} keyframes, {slam.n_loops} loop "
           f"edges kept, {len(slam.dropped_loops)} dropped, {len(slam.loop_attempts)} verified")
+    if render is not None:
+        slam.render(render / "slam_aces.png")
+        slam.save_g2o(render / "slam_aces.g2o")
 
 
 def bench_intel(limit: int | None, params: dict[str, Any]) -> None:
@@ -86,7 +90,7 @@ def _ate(estimate: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((estimate[:, :2] - truth[:, :2]) ** 2, axis=1))))
 
 
-def bench_sim(params: dict[str, Any], seed: int) -> None:
+def bench_sim(params: dict[str, Any], seed: int, render: Path | None) -> None:
     import gymnasium as gym
 
     import lidar_env  # noqa: F401  (registers DualLidar-v0)
@@ -124,6 +128,8 @@ def bench_sim(params: dict[str, Any], seed: int) -> None:
               f"end error front end {end_fe:.3f} m, slam {end_slam:.3f} m; ATE {ate_fe:.3f} -> "
               f"{ate_slam:.3f} m ({ate_fe / max(ate_slam, 1e-9):.1f}x); {slam.n_loops} loops; "
               f"{1e3 * seconds / len(truth_arr):.1f} ms/step")
+        if render is not None:
+            slam.render(render / f"slam_{world}_loop.png", truth_arr)
         env.close()
 
 
@@ -134,6 +140,8 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None, help="first N scans of each log")
     parser.add_argument("--frontend", default="lidar_odometry")
     parser.add_argument("--seed", type=int, default=0, help="simulation reset seed")
+    parser.add_argument("--render", type=Path, default=None,
+                        help="folder for map pictures (and the ACES graph as g2o)")
     args = parser.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
           f"python {platform.python_version()}")
@@ -141,11 +149,11 @@ def main() -> None:
     if {"aces", "intel"} & set(args.parts) and not DATA.is_dir():
         raise SystemExit(f"real logs not found: expected them in {DATA}")
     if "aces" in args.parts:
-        bench_aces(args.limit, params)
+        bench_aces(args.limit, params, args.render)
     if "intel" in args.parts:
         bench_intel(args.limit, params)
     if "sim" in args.parts:
-        bench_sim(params, args.seed)
+        bench_sim(params, args.seed, args.render)
 
 
 if __name__ == "__main__":
