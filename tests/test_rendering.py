@@ -144,3 +144,31 @@ def test_a_map_from_true_poses_overlays_the_world_obstacles(no_pygame):
     with pytest.raises(TypeError, match="render map: expected an estimators.occupancy."
                                         "OccupancyGrid or None, got ndarray"):
         env.unwrapped.set_render_map(np.zeros((4, 4)))
+
+
+def test_the_scoring_wrapper_builds_shows_and_scores_the_map_online(no_pygame):
+    from agents.scripted import PurePursuitDriver
+    from estimators import ScoreEstimator
+
+    scores = {}
+    for estimator in ("pc_fusion", "zero"):
+        env = ScoreEstimator(gym.make("DualLidar-v0", world="open_cylinders", render_mode=
+                                      "rgb_array", config={"max_episode_time": 4.0}),
+                             estimator, map_resolution=0.1)
+        driver = PurePursuitDriver()
+        observation, info = env.reset(seed=0)
+        driver.reset(env)
+        assert env.unwrapped._render_map is env.grid  # what render() overlays
+        done = False
+        while not done:
+            observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
+            done = terminated or truncated
+        assert env.grid.occupied().sum() > 50
+        shown = env.render()
+        env.unwrapped.set_render_map(None)
+        assert np.count_nonzero(np.any(shown != env.render(), axis=-1)) > 1000
+        scores[estimator] = info["estimator"]
+    assert scores["pc_fusion"]["map_iou"] > 0.8 and scores["pc_fusion"]["map_precision"] > 0.9
+    assert scores["zero"]["map_iou"] < 0.5 * scores["pc_fusion"]["map_iou"]
+    with pytest.raises(ValueError, match="map_resolution: expected a positive cell side"):
+        ScoreEstimator(gym.make("DualLidar-v0"), "zero", map_resolution=0.0)
