@@ -388,8 +388,16 @@ class GraphSlam(Estimator):
         after = np.minimum(before + 1, len(self.keyframes) - 1)
         from_before = compose(poses[before], relative(keyframe_odometry[before], odometry))
         from_after = compose(poses[after], relative(keyframe_odometry[after], odometry))
-        driven = np.hypot(*(odometry[:, :2] - keyframe_odometry[before, :2]).T)
-        spacing = np.hypot(*(keyframe_odometry[after, :2] - keyframe_odometry[before, :2]).T)
+        # Progress counts turning too (a keyframe_angle turn weighs a keyframe_distance), so
+        # turning on the spot blends as smoothly as driving.
+        weight = self.keyframe_distance / self.keyframe_angle
+
+        def progress(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.hypot(*(b[:, :2] - a[:, :2]).T) + weight * np.abs(wrap_angle(b[:, 2]
+                                                                                  - a[:, 2]))
+
+        driven = progress(keyframe_odometry[before], odometry)
+        spacing = progress(keyframe_odometry[before], keyframe_odometry[after])
         share = np.where(spacing > 0, np.clip(driven / np.maximum(spacing, 1e-12), 0, 1), 0.0)
         smoothed = from_before + share[:, None] * (from_after - from_before)
         turn = wrap_angle(from_after[:, 2] - from_before[:, 2])
