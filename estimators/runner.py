@@ -101,6 +101,7 @@ class ScenarioOutcome:
     traces: list[tuple[TraceDataset, dict[str, float]]] = field(default_factory=list)
     failures: dict[str, str] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
+    cpu_seconds: float = 0.0  # CPU time of the worker process on the whole task [s]
 
     def timed(self, stage: str, started: float) -> None:
         """Add the time since ``started`` (``time.perf_counter()``) to ``stage``."""
@@ -124,12 +125,14 @@ class RunSummary:
     failures: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0  # wall time of the call
     stage_seconds: dict[str, float] = field(default_factory=dict)  # worker time per stage
+    cpu_seconds: float = 0.0  # workers' CPU time over all tasks: the run's work, whatever load
 
 
 def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
     """Record (if needed) and replay one scenario, scoring each trace and the map its poses
-    yield (the map reference is computed once here, for all estimators); runs in a worker,
-    touches no database."""
+    yield (the map reference, and the scores of the map at the true poses, stored with every
+    trace as ``<metric>_true_poses``, are computed once here for all estimators); runs in a
+    worker, touches no database."""
     dataset, recorded = task.dataset, False
     outcome = ScenarioOutcome(task.scenario, None, False)
     if dataset is None:
@@ -142,11 +145,14 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         finally:
             outcome.timed("record", started)
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
-    reference = None
+    reference, ceiling = None, {}
     if task.estimators:
         started = time.perf_counter()
         try:
             reference = map_reference(dataset)
+            if reference is not None:  # the mapper's own score, at the true poses
+                ceiling = {f"{name}_true_poses": value for name, value in
+                           score_map(reference, dataset.poses, dataset).items()}
         except Exception:  # the trajectories are still scored, without map metrics
             outcome.failures["map reference"] = traceback.format_exc(limit=-6)
         outcome.timed("map reference", started)
@@ -158,7 +164,7 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             outcome.timed("estimators", started)
             if reference is not None:
                 started = time.perf_counter()
-                metrics.update(score_map(reference, trace.poses, dataset))
+                metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
                 outcome.timed("map scores", started)
             outcome.traces.append((trace, metrics))
         except Exception:  # a broken estimator must not sink the others
@@ -249,6 +255,7 @@ def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummar
         summary.failures[f"{outcome.scenario.label}: {stage}"] = error
     for stage, seconds in outcome.seconds.items():
         summary.stage_seconds[stage] = summary.stage_seconds.get(stage, 0.0) + seconds
+    summary.cpu_seconds += outcome.cpu_seconds
 
 
 def _first_done(pending: set[Any]) -> set[Any]:
@@ -357,10 +364,14 @@ def run_matrix(
 
 
 def run_task(task: ScenarioTask | RealLogTask) -> ScenarioOutcome:
-    """Run one task of either kind (what is sent to the executor)."""
+    """Run one task of either kind (what is sent to the executor), noting its CPU time."""
+    started = time.process_time()
     if isinstance(task, RealLogTask):
-        return run_real_log_task(task)
-    return run_scenario_task(task)
+        outcome = run_real_log_task(task)
+    else:
+        outcome = run_scenario_task(task)
+    outcome.cpu_seconds = time.process_time() - started
+    return outcome
 
 
 def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],

@@ -51,6 +51,9 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
         r["estimator"]: r["map_iou"] for r in results}
     assert "map IoU | map precision | map recall | cylinder recall | cylinder error [m]" in printed
     assert "worker time: record " in printed and "map scores" in printed
+    ceiling = printed.split("Maps at the true poses (the mapper's ceiling): map IoU ")[1]
+    assert float(ceiling.split(",")[0]) > 0.8
+    assert float(zero["map_iou"]) < float(zero["map_iou_true_poses"])
     assert f"files in {out}/" in printed and "1 recorded, 2 traces new" in printed
     table_i = read_csv(out / "table1.csv")
     assert [float(r["paper_accuracy_percent"]) for r in table_i] == [
