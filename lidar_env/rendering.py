@@ -90,9 +90,8 @@ class Renderer:
         observed (probability 0.5, grey 128) leave the frame as it is."""
         from estimators.occupancy import occupancy_to_rgb
 
+        # same bounds and pixel size as World.to_image: the picture has the frame's shape
         picture = occupancy_to_rgb(grid, self.world.bounds, self.resolution)
-        if picture.shape != frame.shape:  # cannot happen for one bounds and resolution
-            raise ValueError(f"map picture {picture.shape} and frame {frame.shape} differ")
         observed = picture[..., 0] != 128
         blended = (1.0 - MAP_ALPHA) * frame[observed] + MAP_ALPHA * picture[observed]
         frame[observed] = np.round(blended).astype(np.uint8)
