@@ -19,6 +19,14 @@ every estimator (:mod:`estimators.runner`), scores it (:mod:`estimators.metrics`
 * ``failures.txt`` when an estimator raised (the others still run).
 
 Re-running with the same database skips everything already stored.
+
+Cost grows as scenarios x steps x estimators. The default matrix (4 groups x 2 seeds, the
+paper's full traces: 2,844 steps, plus the first 1,000 ACES scans) costs, in CPU time, about
+20 ms per step for all ten estimators together (``pc_fusion`` 5 ms, the rest 0-2.7 ms), 3 ms
+per step for the map scores of all ten (0.3 ms each: the grid from every scan, the obstacle
+tracker on every 10th) and 1 s for the per-scenario map truths: about 90 CPU-seconds in all,
+so about 45 s on two free cores. The summary line prints the workers' time per stage and
+their CPU time, so a slow run can be told apart from a busy machine.
 """
 
 from __future__ import annotations
