@@ -161,14 +161,19 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         try:
             trace = replay(dataset, spec.name, spec.params, resolved_params=spec.resolved_params)
             metrics = score(trace, dataset.poses)
-            outcome.timed("estimators", started)
-            if reference is not None:
-                started = time.perf_counter()
-                metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
-                outcome.timed("map scores", started)
-            outcome.traces.append((trace, metrics))
         except Exception:  # a broken estimator must not sink the others
             outcome.failures[spec.name] = traceback.format_exc(limit=-6)
+            continue
+        finally:
+            outcome.timed("estimators", started)
+        if reference is not None:
+            started = time.perf_counter()
+            try:
+                metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
+            except Exception:  # e.g. poses far outside the world: the trace is kept unmapped
+                outcome.failures[f"{spec.name} map"] = traceback.format_exc(limit=-6)
+            outcome.timed("map scores", started)
+        outcome.traces.append((trace, metrics))
     return outcome
 
 

@@ -124,3 +124,25 @@ def test_the_map_reference_is_computed_once_per_scenario(monkeypatch: pytest.Mon
         assert {"map_iou", "cylinder_recall", "cylinder_error_m"} <= set(record.metrics)
     iou = {r.trace.estimator: r.metrics["map_iou"] for r in records}
     assert 0 <= iou["zero"] < iou["pc"] <= 1
+
+
+def test_a_failing_map_score_keeps_the_trace(monkeypatch: pytest.MonkeyPatch,
+                                             tmp_path: Path) -> None:
+    from estimators import runner
+
+    real = runner.score_map
+
+    def fails_for_zero(reference, poses, dataset):  # noqa: ANN001, ANN202 - a faulty mapper
+        if not np.any(np.diff(poses, axis=0)):
+            raise FloatingPointError("no motion")
+        return real(reference, poses, dataset)
+
+    monkeypatch.setattr(runner, "score_map", fails_for_zero)
+    with ExperimentDatabase(tmp_path / "db.sqlite") as db:
+        summary = run_scenarios(db, SCENARIOS[:1], ESTIMATORS)
+        metrics = {r.trace.estimator: r.metrics for r in db.traces(poses=False)}
+    assert summary.traces == 2 and list(summary.failures) == [
+        f"{SCENARIOS[0].label}: zero map"]
+    assert "FloatingPointError: no motion" in summary.failures[f"{SCENARIOS[0].label}: zero map"]
+    assert "map_iou" not in metrics["zero"] and "ate_rmse_m" in metrics["zero"]
+    assert "map_iou" in metrics["pc"]
