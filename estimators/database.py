@@ -40,6 +40,7 @@ with a specific error before anything is written to it.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import sqlite3
@@ -48,6 +49,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -59,6 +61,8 @@ from estimators.base import LIDAR_KEYS, SensorSetup
 
 #: The schema this module reads and writes (see the module docstring).
 SCHEMA_VERSION = 1
+#: The packages whose code makes a trace (hashed into :func:`package_version`).
+SOURCE_PACKAGES = ("agents", "estimators", "lidar_env")
 
 _SQLITE_HEADER = b"SQLite format 3\x00"
 
@@ -154,11 +158,30 @@ class DatabaseLocationError(DatabaseError):
 
 
 def package_version() -> str:
-    """The installed duallidar version, recorded with every dataset and trace."""
+    """The installed duallidar version and a digest of its source, e.g. ``0.1.0+src.1a2b3c4d5e6f``,
+    recorded with every dataset and trace.
+
+    The digest is why: an editable install keeps its version number while the code changes, and
+    a stored trace must not stand in for an estimator that has changed since (a re-run then
+    replays the stored sensor datasets through the new code)."""
     try:
-        return metadata.version("duallidar")
+        version = metadata.version("duallidar")
     except metadata.PackageNotFoundError:
-        return "0+unknown"
+        version = "0+unknown"
+    return f"{version}+src.{source_digest(Path(__file__).resolve().parents[1])}"
+
+
+@lru_cache(maxsize=4)
+def source_digest(root: Path, packages: tuple[str, ...] = SOURCE_PACKAGES) -> str:
+    """SHA-256 (first 12 hex digits) of the paths and contents of the ``*.py`` files of
+    ``packages`` under ``root``, read once per process (worker processes forked later inherit
+    it, so one run has one version)."""
+    digest = hashlib.sha256()
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 def canonical_json(value: Any) -> str:

@@ -274,3 +274,18 @@ def test_tum_export_is_read_back_by_evo(filled_db: Path, tmp_path: Path) -> None
                     for w, _, _, z in trajectory.orientations_quat_wxyz])
     np.testing.assert_allclose(np.angle(np.exp(1j * (yaw - record.trace.poses[:, 2]))), 0,
                                atol=1e-8)
+
+
+def test_the_recorded_version_follows_the_source_code(tmp_path: Path) -> None:
+    from estimators.database import package_version, source_digest
+
+    assert "+src." in package_version() and package_version() == package_version()
+    (tmp_path / "pkg" / "sub").mkdir(parents=True)
+    module = tmp_path / "pkg" / "sub" / "a.py"
+    module.write_text("x = 1\n")
+    before = source_digest(tmp_path, ("pkg",))
+    source_digest.cache_clear()
+    assert source_digest(tmp_path, ("pkg",)) == before  # same code, same version
+    module.write_text("x = 2\n")
+    source_digest.cache_clear()
+    assert source_digest(tmp_path, ("pkg",)) != before  # an edited estimator is new code
