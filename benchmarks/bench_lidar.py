@@ -13,7 +13,6 @@ their results are checked to agree.
 from __future__ import annotations
 
 import argparse
-import math
 import platform
 import time
 
@@ -21,7 +20,7 @@ import numba
 import numpy as np
 import pymunk
 
-from lidar_env.lidar import Lidar, cast_rays
+from lidar_env.lidar import Lidar, cast_rays, pymunk_cast_rays
 from lidar_env.se2 import compose
 from lidar_env.world import World
 
@@ -71,20 +70,6 @@ def free_sensor_poses(world: World, rng: np.random.Generator, count: int) -> np.
     return sensors[clear][:count]
 
 
-def pymunk_scan(space: pymunk.Space, sensors: np.ndarray, angles: np.ndarray, max_range: float):
-    """The reference: one ``segment_query_first`` per beam."""
-    every_shape = pymunk.ShapeFilter()
-    out = np.full((len(sensors), len(angles)), max_range)
-    for k, (x, y, heading) in enumerate(sensors):
-        for j, angle in enumerate(angles):
-            direction = heading + angle
-            end = (x + max_range * math.cos(direction), y + max_range * math.sin(direction))
-            hit = space.segment_query_first((x, y), end, 0.0, every_shape)
-            if hit is not None:
-                out[k, j] = hit.alpha * max_range
-    return out
-
-
 def machine() -> str:
     """CPU model (from /proc/cpuinfo where available), OS and library versions."""
     cpu = platform.processor() or platform.machine()
@@ -124,7 +109,7 @@ def bench_world(world: World, sensors: np.ndarray, lidar: Lidar) -> None:
     space = world.build_space()
     reference_poses = sensors[: max(1, len(sensors) // 10)]
     wall, cpu = time.perf_counter(), time.process_time()
-    reference = [pymunk_scan(space, pair, angles, max_range) for pair in reference_poses]
+    reference = [pymunk_cast_rays(space, pair, angles, max_range) for pair in reference_poses]
     pymunk_wall = (time.perf_counter() - wall) / len(reference_poses) * 1e6
     pymunk_cpu = (time.process_time() - cpu) / len(reference_poses) * 1e6
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -436,6 +437,30 @@ def cast_rays(
     return _cast_rays_kernel(
         world.circles, world.segments, first_polygon_edge, world.grid, poses, beams, max_range
     )
+
+
+def pymunk_cast_rays(
+    space: Any, sensor_poses: ArrayLike, beam_angles: ArrayLike, max_range: float
+) -> NDArray[np.float64]:
+    """The slow reference for :func:`cast_rays`: one pymunk ``segment_query_first`` per beam.
+
+    ``space`` is a ``pymunk.Space`` (e.g. ``World.build_space()``); arguments and result are as
+    in :func:`cast_rays`. Tests use it as the independent oracle, benchmarks as the baseline.
+    """
+    import pymunk
+
+    every_shape = pymunk.ShapeFilter()
+    poses = _as_poses(sensor_poses)
+    angles = np.asarray(beam_angles, dtype=np.float64)
+    out = np.full((len(poses), len(angles)), float(max_range))
+    for k, (x, y, heading) in enumerate(poses):
+        for j, angle in enumerate(angles):
+            direction = heading + angle
+            end = (x + max_range * math.cos(direction), y + max_range * math.sin(direction))
+            hit = space.segment_query_first((x, y), end, 0.0, every_shape)
+            if hit is not None:
+                out[k, j] = hit.alpha * max_range
+    return out
 
 
 @dataclass(frozen=True)

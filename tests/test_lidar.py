@@ -5,10 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pymunk
 import pytest
 
-from lidar_env.lidar import Lidar, cast_rays
+from lidar_env.lidar import Lidar, cast_rays, pymunk_cast_rays
 from lidar_env.world import World
 
 MAX_RANGE = 10.0
@@ -17,17 +16,7 @@ BEAMS = 2.0 * np.pi * np.arange(360) / 360
 
 def pymunk_ranges(world: World, poses: np.ndarray, angles: np.ndarray, max_range: float):
     """Oracle: one ``segment_query_first`` per beam against ``world.build_space()``."""
-    space = world.build_space()
-    every_shape = pymunk.ShapeFilter()
-    out = np.full((len(poses), len(angles)), max_range)
-    for k, (x, y, heading) in enumerate(poses):
-        for j, angle in enumerate(angles):
-            direction = heading + angle
-            end = (x + max_range * math.cos(direction), y + max_range * math.sin(direction))
-            hit = space.segment_query_first((x, y), end, 0.0, every_shape)
-            if hit is not None:
-                out[k, j] = hit.alpha * max_range
-    return out
+    return pymunk_cast_rays(world.build_space(), poses, angles, max_range)
 
 
 def random_free_poses(world: World, rng: np.random.Generator, count: int, margin: float = 0.05):
