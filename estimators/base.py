@@ -10,7 +10,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -105,6 +105,8 @@ class Estimator(ABC):
     :meth:`_start` (first scans) and :meth:`_step` (every later scans, returning the new pose).
     """
 
+    #: Lidars the estimator needs; a pipeline skips it (no failure) on a setup with fewer.
+    min_lidars: ClassVar[int] = 1
     setup: SensorSetup | None = field(default=None, init=False, repr=False)
     _poses: list[NDArray[np.float64]] = field(default_factory=list, init=False, repr=False)
     _times: list[float] = field(default_factory=list, init=False, repr=False)

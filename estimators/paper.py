@@ -20,6 +20,7 @@ its Lidar does, because its heading is held constant.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -120,6 +121,10 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
 
     lidar: int = 0
 
+    @property
+    def min_lidars(self) -> int:  # type: ignore[override]  # the offset Lidar needs both
+        return self.lidar + 1
+
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.lidar not in (0, 1):
@@ -153,6 +158,8 @@ class PoseGraphCorrelationOdometry(_ImageCorrelationEstimator):
     main -> offset mount offset, in those axes, is the same at every scan because the heading
     is held constant (so eq. 10's error vector is zero here; see ``pose_graph_correlation``).
     """
+
+    min_lidars: ClassVar[int] = 2
 
     def _reset_state(self) -> None:
         super()._reset_state()
