@@ -224,8 +224,11 @@ class Scenario:
 
     @property
     def label(self) -> str:
-        """Short human-readable name, e.g. ``hallway/zigzag/s0``."""
-        return f"{self.world}/{self.trace}/s{self.seed}"
+        """Short human-readable name, e.g. ``hallway/zigzag/s0``; scans in another frame than
+        the sensor's (the paper's world-aligned ones) add it: ``hallway/zigzag/s0/world``."""
+        label = f"{self.world}/{self.trace}/s{self.seed}"
+        frame = self.config.get("scan_frame", "sensor")
+        return label if frame == "sensor" else f"{label}/{frame}"
 
 
 @dataclass(frozen=True)

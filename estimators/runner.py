@@ -43,7 +43,7 @@ from estimators.database import (
     package_version,
 )
 from estimators.recording import map_reference, record, replay, score, score_map
-from estimators.registry import defaults, names
+from estimators.registry import defaults, make, names
 
 
 class FutureLike(Protocol):
@@ -78,15 +78,36 @@ class EstimatorSpec:
         """Every parameter: registry defaults overridden by ``params`` (what gets recorded)."""
         return {**defaults(self.name), **dict(self.params)}
 
+    @property
+    def min_lidars(self) -> int:
+        """Lidars the estimator needs (:attr:`estimators.base.Estimator.min_lidars`)."""
+        return make(self.name, **dict(self.params)).min_lidars
+
+    def not_applicable(self, n_lidars: int) -> str | None:
+        """Why the estimator cannot run on data from ``n_lidars`` Lidars, or ``None`` if it can:
+        decided before any work, so such a pair is neither run nor a failure."""
+        needed = self.min_lidars
+        return f"needs {needed} Lidars" if needed > n_lidars else None
+
 
 @dataclass(frozen=True)
 class ScenarioTask:
-    """What a worker gets: the scenario, its stored dataset (``None``: record it) and the
-    estimators still to run on it."""
+    """What a worker gets: the scenario, its stored dataset (``None``: record it), the
+    estimators still to run on it and whether their maps are scored."""
 
     scenario: Scenario
     estimators: tuple[EstimatorSpec, ...]
     dataset: SensorDataset | None = None
+    score_maps: bool = True
+
+
+@dataclass(frozen=True)
+class SideRun:
+    """Scenarios replayed through some estimators only, their maps not scored: e.g. Table I's
+    world-aligned recordings, which only the paper's translation-only estimators need."""
+
+    scenarios: tuple[Scenario, ...]
+    estimators: tuple[EstimatorSpec, ...]
 
 
 @dataclass
@@ -123,6 +144,8 @@ class RunSummary:
     recorded: int = 0
     traces: int = 0
     failures: dict[str, str] = field(default_factory=dict)
+    #: "<scenario>: <estimator>" -> why it was not run (e.g. "needs 2 Lidars"); not failures
+    not_applicable: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0  # wall time of the call
     stage_seconds: dict[str, float] = field(default_factory=dict)  # worker time per stage
     cpu_seconds: float = 0.0  # workers' CPU time over all tasks: the run's work, whatever load
@@ -146,7 +169,7 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             outcome.timed("record", started)
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
     reference, ceiling = None, {}
-    if task.estimators:
+    if task.estimators and task.score_maps:
         started = time.perf_counter()
         try:
             reference = map_reference(dataset)
@@ -186,6 +209,12 @@ class RealLog:
     log_path: str
     relations_path: str
     scans: int | None = None
+
+    @property
+    def n_lidars(self) -> int:
+        """Lidars the estimators see: one, the front laser
+        (:func:`estimators.real_log.run_on_log`)."""
+        return 1
 
     @property
     def scenario(self) -> Scenario:
@@ -231,14 +260,15 @@ def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
         step_ms = np.full(len(run.times), 1e3 * run.seconds_per_scan)
         trace = TraceDataset(spec.name, spec.resolved_params, run.times, run.poses, step_ms)
         outcome.traces.append((trace, metrics))
-    except Exception:  # e.g. an estimator that needs two Lidars: reported, not fatal
+    except Exception:  # a broken estimator: reported, not fatal
         outcome.failures[spec.name] = traceback.format_exc(limit=-6)
     outcome.timed("estimators", started)
     return outcome
 
 
 def _pending_task(db: ExperimentDatabase, scenario: Scenario,
-                  estimators: Sequence[EstimatorSpec]) -> ScenarioTask | None:
+                  estimators: Sequence[EstimatorSpec],
+                  score_maps: bool = True) -> ScenarioTask | None:
     """The task still to do for ``scenario``, or ``None`` when everything is stored."""
     version = package_version()
     missing = tuple(spec for spec in estimators
@@ -247,7 +277,7 @@ def _pending_task(db: ExperimentDatabase, scenario: Scenario,
     if has_dataset and not missing:
         return None
     dataset = db.load_sensor_dataset(scenario) if has_dataset and missing else None
-    return ScenarioTask(scenario, missing, dataset)
+    return ScenarioTask(scenario, missing, dataset, score_maps)
 
 
 def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummary) -> None:
@@ -277,12 +307,13 @@ def _first_done(pending: set[Any]) -> set[Any]:
 
 def _scenario_tasks(db: ExperimentDatabase, scenarios: Iterable[Scenario],
                     estimators: Sequence[EstimatorSpec], summary: RunSummary,
-                    on_done: Callable[[Scenario], None] | None) -> list[ScenarioTask]:
+                    on_done: Callable[[Scenario], None] | None,
+                    score_maps: bool = True) -> list[ScenarioTask]:
     """The pending scenario tasks; complete scenarios are counted as skipped."""
     todo = []
     for scenario in scenarios:
         summary.scenarios += 1
-        task = _pending_task(db, scenario, estimators)
+        task = _pending_task(db, scenario, estimators, score_maps)
         if task is None:
             summary.skipped += 1
             if on_done is not None:
@@ -295,18 +326,23 @@ def _scenario_tasks(db: ExperimentDatabase, scenarios: Iterable[Scenario],
 def _real_log_tasks(db: ExperimentDatabase, logs: Iterable[RealLog],
                     estimators: Sequence[EstimatorSpec], summary: RunSummary,
                     on_done: Callable[[Scenario], None] | None) -> list[RealLogTask]:
-    """The pending (log, estimator) tasks; stored traces are counted as skipped."""
+    """The pending (log, estimator) tasks; stored traces are counted as skipped, estimators
+    that need more Lidars than the log has as not applicable (never run, never failed)."""
     version = package_version()
     todo = []
     for log in logs:
         for spec in estimators:
             summary.scenarios += 1
-            if db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
+            reason = spec.not_applicable(log.n_lidars)
+            if reason is not None:
+                summary.not_applicable[f"{log.scenario.label}: {spec.name}"] = reason
+            elif db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
                 summary.skipped += 1
-                if on_done is not None:
-                    on_done(log.scenario)
             else:
                 todo.append(RealLogTask(log, spec))
+                continue
+            if on_done is not None:
+                on_done(log.scenario)
     return todo
 
 
@@ -355,15 +391,20 @@ def run_matrix(
     estimators: Sequence[EstimatorSpec],
     executor: ExecutorLike | None = None,
     *,
+    side_runs: Iterable[SideRun] = (),
     max_in_flight: int = 8,
     on_done: Callable[[Scenario], None] | None = None,
 ) -> RunSummary:
-    """:func:`run_scenarios` and :func:`run_real_logs` through one queue: the short real-log
+    """:func:`run_scenarios`, then each of ``side_runs`` (its scenarios through its own
+    estimators, no map scores), then :func:`run_real_logs`, through one queue: the short
     tasks go last, so they fill the workers that finish their scenarios first instead of
     waiting for the slowest scenario."""
     summary = RunSummary()
     todo: list[ScenarioTask | RealLogTask] = []
     todo += _scenario_tasks(db, scenarios, estimators, summary, on_done)
+    for side in side_runs:
+        todo += _scenario_tasks(db, side.scenarios, side.estimators, summary, on_done,
+                                score_maps=False)
     todo += _real_log_tasks(db, logs, estimators, summary, on_done)
     return _execute(db, todo, executor, summary, max_in_flight, on_done)
 

@@ -13,7 +13,15 @@ import numpy as np
 import pytest
 
 from estimators.database import ExperimentDatabase, Scenario
-from estimators.runner import EstimatorSpec, RunInterrupted, run_scenarios
+from estimators.runner import (
+    EstimatorSpec,
+    RealLog,
+    RunInterrupted,
+    SideRun,
+    run_matrix,
+    run_real_logs,
+    run_scenarios,
+)
 
 # Short episodes (4 s of driving, 41 observations) keep the test quick.
 SHORT = {"range_noise_std": 0.01, "max_episode_time": 4.0}
@@ -146,3 +154,42 @@ def test_a_failing_map_score_keeps_the_trace(monkeypatch: pytest.MonkeyPatch,
     assert "FloatingPointError: no motion" in summary.failures[f"{SCENARIOS[0].label}: zero map"]
     assert "map_iou" not in metrics["zero"] and "ate_rmse_m" in metrics["zero"]
     assert "map_iou" in metrics["pc"]
+
+
+def test_a_side_run_replays_its_own_scenarios_through_its_own_estimators(
+    tmp_path: Path,
+) -> None:
+    main = SCENARIOS[0]
+    world_aligned = Scenario(main.world, main.trace, main.seed,
+                             {**main.config, "scan_frame": "world"})
+    side = SideRun((world_aligned,), (EstimatorSpec("pc"),))
+    with ExperimentDatabase(tmp_path / "db.sqlite") as db:
+        summary = run_matrix(db, [main], (), ESTIMATORS, side_runs=[side])
+        assert (summary.recorded, summary.traces, summary.failures) == (2, 3, {})
+        assert db.load_sensor_dataset(world_aligned).setup.world_aligned
+        assert not db.load_sensor_dataset(main).setup.world_aligned
+        metrics = {(r.scenario, r.trace.estimator): r.metrics for r in db.traces(poses=False)}
+        again = run_matrix(db, [main], (), ESTIMATORS, side_runs=[side])
+    assert sorted(name for scenario, name in metrics if scenario == world_aligned) == ["pc"]
+    assert "map_iou" not in metrics[(world_aligned, "pc")]  # side runs are not mapped
+    assert "map_iou" in metrics[(main, "pc")]
+    assert world_aligned.label == f"{main.label}/world"
+    assert (again.skipped, again.recorded, again.traces) == (2, 0, 0)
+
+
+def test_estimators_that_need_more_lidars_than_a_log_has_are_neither_run_nor_failed(
+    tmp_path: Path,
+) -> None:
+    # The log's files do not exist: any estimator that is attempted fails, which is how this
+    # test tells "not run" from "run".
+    log = RealLog("aces", str(tmp_path / "none.clf"), str(tmp_path / "none.relations"))
+    specs = [EstimatorSpec("pc_offset"), EstimatorSpec("pc_pg"), EstimatorSpec("pc")]
+    settled: list[Scenario] = []
+    with ExperimentDatabase(tmp_path / "db.sqlite") as db:
+        summary = run_real_logs(db, [log], specs, on_done=settled.append)
+    assert summary.not_applicable == {"aces/log/s0: pc_offset": "needs 2 Lidars",
+                                      "aces/log/s0: pc_pg": "needs 2 Lidars"}
+    assert list(summary.failures) == ["aces/log/s0: pc"]
+    assert settled == [log.scenario] * 3  # a progress bar still reaches its end
+    assert EstimatorSpec("pc_offset").not_applicable(2) is None
+    assert EstimatorSpec("pc", {"lidar": 1}).not_applicable(1) == "needs 2 Lidars"
