@@ -21,6 +21,11 @@ committed as it arrives, one transaction per dataset and per trace, so killing t
 worker) loses only the scenarios still in flight; a re-run skips everything already stored.
 At most ``max_in_flight`` tasks are submitted at once, which bounds the memory held by
 datasets travelling to and from workers.
+
+A :class:`SideRun` replays extra scenarios through a subset of the estimators in the same
+queue (Table I's world-aligned recordings). An estimator that needs more Lidars than a real
+log has (:attr:`estimators.base.Estimator.min_lidars`) is decided against before any work: it
+is listed in :attr:`RunSummary.not_applicable`, never run, never a failure, never retried.
 """
 
 from __future__ import annotations

@@ -246,7 +246,7 @@ def test_two_lidar_estimators_show_na_on_a_one_lidar_log_and_are_no_failures(
 
 def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators() -> None:
     groups = leaderboard.build_groups(None, None)
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, {"range_noise_std": 0.01})
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, {"range_noise_std": 0.01}, "sb3")
                           for seed in (0, 1)] for g in groups}
     runs = leaderboard.table_one_scenarios(groups, scenarios, [EstimatorSpec("pc_pg")])
     cases = {(c.world, c.trace) for c in leaderboard.TABLE_I}
@@ -256,6 +256,7 @@ def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators()
         assert [s.seed for s in world] == [s.seed for s in sensor] == [0, 1]
         assert all(dict(w.config) == {**s.config, "scan_frame": "world"}
                    for w, s in zip(world, sensor, strict=True))
+        assert {s.driver for s in world} == {"scripted"}  # no policy sees rotated scans
     assert leaderboard.table_one_scenarios(groups, scenarios,
                                            [EstimatorSpec("icp")])["world"] == {}
 
