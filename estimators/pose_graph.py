@@ -241,6 +241,47 @@ def edge_chi2(
     return np.einsum("ei,eij,ej->e", r, information, r)
 
 
+def chain_covariance(poses: ArrayLike, covariances: ArrayLike, correlated: bool = False
+                     ) -> NDArray[np.float64]:
+    """``(3, 3)`` first-order covariance of the last pose of a chain relative to its first.
+
+    ``poses`` (n+1, 3) are the chain's node poses (world frame), ``covariances`` (n, 3, 3)
+    those of the n edges ``k -> k+1``, each in the residual coordinates of this module (the
+    frame of the edge's end node ``k+1``). The result is in the same coordinates for the
+    whole chain (the frame of its last node): the covariance of the residual a direct edge
+    from the first node to the last would have, before any other edge constrains it. An
+    edge's heading error swings every later pose about the edge's end node:
+    ``J_k = [[R(theta_k+1), perp(p_n - p_k+1)], [0, 1]]`` in world coordinates.
+
+    ``correlated=False`` takes the edges' errors as independent. ``correlated=True`` returns
+    ``n`` times that sum, an upper bound for any correlation between them (``Cov(sum x_k) <=
+    n sum Cov(x_k)``, Cauchy-Schwarz), reached when they all err the same way, as a front
+    end biased along a stretch of corridor does: the standard deviation then grows linearly
+    with the chain's length instead of with its square root.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    covariances = np.asarray(covariances, dtype=np.float64)
+    if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) < 1:
+        raise ValueError(f"chain poses: expected shape (n+1 >= 1, 3), got {poses.shape}")
+    if covariances.shape != (len(poses) - 1, 3, 3):
+        raise ValueError(f"chain covariances: expected shape ({len(poses) - 1}, 3, 3) for "
+                         f"{len(poses)} poses, got {covariances.shape}")
+    ends = poses[1:]
+    lever = poses[-1, :2] - ends[:, :2]
+    c, s = np.cos(ends[:, 2]), np.sin(ends[:, 2])
+    jacobian = np.zeros((len(ends), 3, 3))
+    jacobian[:, 0, 0], jacobian[:, 0, 1], jacobian[:, 0, 2] = c, -s, -lever[:, 1]
+    jacobian[:, 1, 0], jacobian[:, 1, 1], jacobian[:, 1, 2] = s, c, lever[:, 0]
+    jacobian[:, 2, 2] = 1.0
+    world = np.einsum("kij,kjl,kml->im", jacobian, covariances, jacobian)
+    if correlated:
+        world *= len(ends)
+    to_local = np.eye(3)
+    c_n, s_n = np.cos(poses[-1, 2]), np.sin(poses[-1, 2])
+    to_local[:2, :2] = [[c_n, s_n], [-s_n, c_n]]
+    return to_local @ world @ to_local.T
+
+
 def robust_rho(
     s: NDArray[np.float64], loss: str, scale: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -40,7 +40,7 @@ from estimators.loop_closure import (
     range_histogram,
     verify_loop,
 )
-from estimators.pose_graph import PoseGraph, optimize
+from estimators.pose_graph import PoseGraph, chain_covariance, optimize
 from estimators.registry import make
 from estimators.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from lidar_env.se2 import compose, inverse, relative, transform_points, wrap_angle
@@ -83,6 +83,13 @@ class GraphSlam(Estimator):
         submap_neighbours: the old place is the candidate keyframe plus this many keyframes
             on each side (2: ~2 m of travel, enough walls to match a 180-degree scan).
         loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
+        loop_gate: a verified match becomes a loop edge only if it is reachable from the
+            graph's current estimate: its Mahalanobis distance from it, under the covariance
+            of the odometry chain since the old keyframe plus the match's own, is at most
+            this (5, as ``max_loop_sigma``). A look-alike place the odometry cannot have
+            drifted to (the far end of a symmetric corridor, seen turned by 180 degrees
+            after a straight drive) fails it; a true revisit after any drift the odometry
+            edges' model allows passes.
         max_loop_sigma: loop edges whose Mahalanobis error after optimisation exceeds this
             are dropped (5: far outside any honest measurement's spread).
         optimize_every: after a loop closure, optimise again once this many keyframes were
@@ -126,6 +133,7 @@ class GraphSlam(Estimator):
     max_candidates: int = 3
     submap_neighbours: int = 2
     loss_scale: float = 3.0
+    loop_gate: float = 5.0
     max_loop_sigma: float = 5.0
     optimize_every: int = 5
     global_every: int = 4
@@ -146,7 +154,7 @@ class GraphSlam(Estimator):
     def __post_init__(self) -> None:
         for name in ("keyframe_distance", "keyframe_angle", "odometry_sigma",
                      "odometry_sigma_rotation", "loop_radius", "max_search_window",
-                     "loss_scale", "max_loop_sigma"):
+                     "loss_scale", "loop_gate", "max_loop_sigma"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
         for name in ("odometry_drift", "odometry_drift_rotation", "loop_drift",
@@ -172,6 +180,8 @@ class GraphSlam(Estimator):
         self._frontend.reset(self.setup, self._initial_pose)
         self.graph = PoseGraph()
         self.keyframes: list[Keyframe] = []
+        # covariance of the odometry edge into each keyframe (keyframe 0: none)
+        self._odometry_covariance: list[NDArray[np.float64]] = []
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
         self._scan_odometry: list[NDArray[np.float64]] = []
         self._places: dict[tuple[int, int], PlaceMap] = {}
@@ -219,6 +229,7 @@ class GraphSlam(Estimator):
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
         if not self.keyframes:
             self.graph.add_node(odometry)
+            self._odometry_covariance.append(np.zeros((3, 3)))
         else:
             previous = self.keyframes[-1]
             step = relative(previous.odometry, odometry)
@@ -228,6 +239,7 @@ class GraphSlam(Estimator):
                 information = self._matched_information(previous.points, points, step,
                                                         information)
             self.graph.add_edge(index - 1, index, step, information)
+            self._odometry_covariance.append(np.linalg.inv(information))
         self.keyframes.append(keyframe)
         self._since_optimized += 1
         index = len(self.keyframes) - 1
@@ -306,14 +318,44 @@ class GraphSlam(Estimator):
                 break
         return chosen
 
+    def loop_mahalanobis(self, old: int, new: int, pose: NDArray[np.float64],
+                         information: NDArray[np.float64]) -> float:
+        """Mahalanobis distance of a loop measurement (keyframe ``new``'s pose (3,) in keyframe
+        ``old``'s frame, ``information`` (3, 3)) from the graph's current estimate of it, under
+        the odometry chain's covariance from ``old`` to ``new`` plus the measurement's own.
+
+        The chain's edge errors may be correlated (a front end errs the same way all along a
+        featureless stretch), so their covariance is bounded for any correlation
+        (:func:`~estimators.pose_graph.chain_covariance` with ``correlated=True``); and the
+        chain ignores loop edges already in the graph, which only shrink the uncertainty:
+        both err on the side of accepting a true loop after a long, drifting drive."""
+        poses = self.graph.poses
+        chain = chain_covariance(poses[old:new + 1],
+                                 np.array(self._odometry_covariance[old + 1:new + 1]),
+                                 correlated=True)
+        residual = compose(inverse(pose), relative(poses[old], poses[new]))  # the graph residual
+        covariance = chain + np.linalg.inv(information)
+        return float(np.sqrt(residual @ np.linalg.solve(covariance, residual)))
+
+    def _gate(self, old: int, new: int, result: LoopVerification) -> LoopVerification:
+        """``result``, rejected if the graph cannot have drifted to it (``loop_gate``)."""
+        if not result.accepted:
+            return result
+        distance = self.loop_mahalanobis(old, new, result.pose, result.information)
+        if distance <= self.loop_gate:
+            return result
+        return replace(result, accepted=False,
+                       reason=f"unreachable from the graph's estimate: Mahalanobis distance "
+                              f"{distance:.1f} > loop_gate {self.loop_gate}")
+
     def _close_loops(self, index: int) -> bool:
         """Verify the candidates of keyframe ``index``; add the accepted ones as loop edges."""
         added = False
         poses = self.graph.poses
         for old, window in self.loop_candidates(index):
             guess = relative(poses[old], poses[index])
-            result = verify_loop(self._place(old), self.keyframes[index].points, guess, window,
-                                 self.loop_params)
+            result = self._gate(old, index, verify_loop(
+                self._place(old), self.keyframes[index].points, guess, window, self.loop_params))
             self.loop_attempts.append((old, index, result))
             if result.accepted:
                 self.graph.add_edge(old, index, result.pose, result.information, is_loop=True)
@@ -337,8 +379,9 @@ class GraphSlam(Estimator):
         # A few keyframes of the recent path on both sides: more walls, fewer look-alikes.
         query = self._submap(index, self.global_submap_keyframes, 0)
         for k in old[order][distance[order] <= self.max_descriptor_distance]:
-            result = verify_loop(self._place(int(k), self.global_submap_keyframes), query,
-                                 np.zeros(3), self.global_window, self._global_params)
+            result = self._gate(int(k), index, verify_loop(
+                self._place(int(k), self.global_submap_keyframes), query, np.zeros(3),
+                self.global_window, self._global_params))
             self.loop_attempts.append((int(k), index, result))
             if not result.accepted:
                 continue

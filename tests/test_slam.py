@@ -1,5 +1,7 @@
-"""GraphSlam: a drifting odometry loop closes; an injected false loop does not bend the map;
-the registered pipeline runs end to end on ray-cast scans."""
+"""GraphSlam: a drifting odometry loop closes; an injected false loop does not bend the map; a
+look-alike place the odometry cannot have drifted to is refused (a straight drive down a
+symmetric hallway is never worse than the front end); the registered pipeline runs end to end
+on ray-cast scans; the odometry chain's covariance matches Monte Carlo."""
 
 from __future__ import annotations
 
@@ -7,13 +9,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from estimators import SensorSetup, make
+from estimators.database import Scenario
 from estimators.g2o import read_g2o
+from estimators.pose_graph import chain_covariance
+from estimators.recording import record
 from estimators.scan_matching import scan_to_points
 from estimators.slam import GraphSlam
 from lidar_env.lidar import cast_rays
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 MAX_RANGE = 12.0
@@ -114,3 +120,101 @@ def test_bad_settings_are_named() -> None:
         GraphSlam(frontend="slam")
     with pytest.raises(ValueError, match="keyframe_distance: expected a positive value"):
         GraphSlam(keyframe_distance=0.0)
+    with pytest.raises(ValueError, match="loop_gate: expected a positive value, got -1"):
+        GraphSlam(loop_gate=-1.0)
+
+
+def keyframe_truth(slam: GraphSlam, truth: np.ndarray) -> np.ndarray:
+    """``(K, 3)`` true pose of each keyframe (the first scan hanging from it)."""
+    first = np.searchsorted(np.array(slam._scan_keyframe), np.arange(len(slam.keyframes)))
+    return truth[first]
+
+
+def test_a_place_the_odometry_cannot_have_drifted_to_is_refused() -> None:
+    truth = loop_poses()
+    slam = GraphSlam(min_loop_separation=8.0)
+    replay(slam, truth, drifting_odometry(truth), seed=3)
+    poses = keyframe_truth(slam, truth)
+    far = int(np.argmax(np.hypot(*(poses[:, :2] - poses[0, :2]).T)))
+    information = np.diag([1e4, 1e4, 1e4])  # as confident as a scan match
+    true_loop = relative(poses[0], poses[-1])
+    assert slam.loop_mahalanobis(0, len(poses) - 1, true_loop, information) < slam.loop_gate
+    # a look-alike: the old place seen turned around, or where the car was half a loop ago
+    turned = compose(true_loop, np.array([0.0, 0.0, np.pi]))
+    assert slam.loop_mahalanobis(0, len(poses) - 1, turned, information) > slam.loop_gate
+    assert slam.loop_mahalanobis(0, far, np.zeros(3), information) > slam.loop_gate
+
+
+def ate(estimate: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((estimate[:, :2] - truth[:, :2]) ** 2, axis=1))))
+
+
+def run_slam_on_scenario(world: str, trace: str) -> tuple[GraphSlam, np.ndarray]:
+    """``slam`` (default parameters) over one recorded leaderboard scenario (seed 0, 1 cm
+    range noise); returns it and the true poses."""
+    dataset = record(Scenario(world, trace, 0, {"range_noise_std": 0.01}))
+    slam = make("slam")
+    assert isinstance(slam, GraphSlam)
+    slam.reset(dataset.setup, dataset.poses[0])
+    for t, observation in zip(dataset.times, dataset.observations(), strict=True):
+        slam.update(observation, float(t))
+    return slam, dataset.poses
+
+
+def test_straight_hallway_drive_accepts_no_loop_and_keeps_the_front_end_accuracy() -> None:
+    # The hallway looks the same from its far end turned around: correlative matches over all
+    # headings find that look-alike, which a straight drive can never reach.
+    slam, truth = run_slam_on_scenario("hallway", "straight")
+    look_alikes = [r for _, _, r in slam.loop_attempts if "unreachable" in r.reason]
+    assert look_alikes  # the scans did fool the matcher: the test is worth running
+    assert slam.n_loops == 0
+    assert ate(slam.trajectory, truth) <= ate(slam.odometry_trajectory, truth) + 0.02
+    headings = wrap_angle(slam.trajectory[:, 2] - truth[:, 2])
+    assert np.degrees(np.sqrt(np.mean(headings**2))) < 1.0
+
+
+@pytest.mark.parametrize("world, trace", [("hallway", "zigzag"), ("closed_to_open", "zigzag"),
+                                          ("open_cylinders", "right_turn")])
+def test_slam_is_never_worse_than_its_front_end(world: str, trace: str) -> None:
+    slam, truth = run_slam_on_scenario(world, trace)
+    assert ate(slam.trajectory, truth) <= ate(slam.odometry_trajectory, truth) + 0.02
+
+
+def straight_chain(n: int) -> np.ndarray:
+    """``(n+1, 3)`` poses 0.5 m apart along a gentle left curve (3 deg per edge)."""
+    step = np.array([0.5, 0.0, np.radians(3.0)])
+    poses = [np.zeros(3)]
+    for _ in range(n):
+        poses.append(compose(poses[-1], step))
+    return np.array(poses)
+
+
+def test_chain_covariance_matches_monte_carlo() -> None:
+    n, samples = 20, 20000
+    poses = straight_chain(n)
+    steps = relative(poses[:-1], poses[1:])
+    covariance = np.diag([0.02, 0.01, np.radians(0.5)]) ** 2
+    rng = np.random.default_rng(4)
+
+    def end_residuals(noise: np.ndarray) -> np.ndarray:
+        """Residuals (samples, 3) of the chain's end against its nominal end, in the
+        pose-graph convention: each edge measured as ``step ⊕ noise``."""
+        end = np.tile(poses[0], (samples, 1))
+        for k in range(n):
+            end = compose(end, compose(steps[k], noise[:, k]))
+        return compose(inverse(relative(poses[0], poses[-1])), relative(poses[0], end))
+
+    independent = rng.multivariate_normal(np.zeros(3), covariance, size=(samples, n))
+    predicted = chain_covariance(poses, np.tile(covariance, (n, 1, 1)))
+    np.testing.assert_allclose(np.cov(end_residuals(independent).T), predicted,
+                               rtol=0.1, atol=1e-6)
+    # Every edge erring the same way: far beyond the independent model, within the bound
+    # (reached along the heading, which every edge moves alike; 5 % for sampling error).
+    shared = np.repeat(rng.multivariate_normal(np.zeros(3), covariance, samples)[:, None],
+                       n, axis=1)
+    empirical = np.cov(end_residuals(shared).T)
+    bound = chain_covariance(poses, np.tile(covariance, (n, 1, 1)), correlated=True)
+    assert scipy.linalg.eigh(empirical, bound, eigvals_only=True).max() < 1.05
+    assert np.trace(empirical) > 5 * np.trace(predicted)
+    with pytest.raises(ValueError, match=r"chain covariances: expected shape \(20, 3, 3\)"):
+        chain_covariance(poses, np.tile(covariance, (n - 1, 1, 1)))
