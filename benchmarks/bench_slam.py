@@ -46,6 +46,11 @@ def _runs(slam: GraphSlam, run: LogRun) -> dict[str, LogRun]:
     }
 
 
+def _unreachable(slam: GraphSlam) -> int:
+    """Verified matches refused by the reachability gate (``loop_gate``)."""
+    return sum("unreachable" in result.reason for _, _, result in slam.loop_attempts)
+
+
 def bench_aces(limit: int | None, params: dict[str, Any], render: Path | None) -> None:
     log = load_log(DATA / "aces.clf.bz2")
     relations = load_relations(DATA / "aces.relations")
@@ -60,7 +65,8 @@ def bench_aces(limit: int | None, params: dict[str, Any], render: Path | None) -
         print(f"  {'':28s} all:   {scores['all']}")
     print(f"  slam: {1e3 * run.seconds_per_scan:.2f} ms/scan, {run.realtime_factor:.1f}x real "
           f"time (front end included); {len(slam.keyframes)} keyframes, {slam.n_loops} loop "
-          f"edges kept, {len(slam.dropped_loops)} dropped, {len(slam.loop_attempts)} verified")
+          f"edges kept, {len(slam.dropped_loops)} dropped, {len(slam.loop_attempts)} verified, "
+          f"{_unreachable(slam)} matches refused as unreachable from the graph's estimate")
     if render is not None:
         slam.render(render / "slam_aces.png")
         slam.save_g2o(render / "slam_aces.g2o")
@@ -126,7 +132,8 @@ def bench_sim(params: dict[str, Any], seed: int, render: Path | None) -> None:
         ate_fe, ate_slam = _ate(odometry, truth_arr), _ate(smoothed, truth_arr)
         print(f"  {world:15s} {len(truth_arr):4d} steps, progress {info['progress']:.2f}: "
               f"end error front end {end_fe:.3f} m, slam {end_slam:.3f} m; ATE {ate_fe:.3f} -> "
-              f"{ate_slam:.3f} m ({ate_fe / max(ate_slam, 1e-9):.1f}x); {slam.n_loops} loops; "
+              f"{ate_slam:.3f} m ({ate_fe / max(ate_slam, 1e-9):.1f}x); {slam.n_loops} loops, "
+              f"{_unreachable(slam)} unreachable refused; "
               f"{1e3 * seconds / len(truth_arr):.1f} ms/step")
         if render is not None:
             slam.render(render / f"slam_{world}_loop.png", truth_arr)

@@ -9,10 +9,13 @@ for old keyframes it may revisit: those at least ``min_loop_separation`` of path
 and within the pose uncertainty (``loop_radius`` plus ``loop_drift`` of the path since then)
 of its current estimate, ranked by place descriptor; each candidate is verified by a
 correlative scan match plus ICP against the old keyframe and its neighbours
-(:func:`estimators.loop_closure.verify_loop`) and, if accepted, becomes a loop edge. After new
-loop edges the graph is optimised (Levenberg–Marquardt, a Cauchy kernel on loop edges); loop
-edges it still cannot reconcile (Mahalanobis error above ``max_loop_sigma``) are dropped and
-the graph optimised again: a false loop must not bend the map.
+(:func:`estimators.loop_closure.verify_loop`) and, if accepted and reachable from the graph's
+estimate (within ``loop_gate`` Mahalanobis distance under the odometry chain's covariance since
+the old keyframe: a symmetric corridor's far end seen turned around passes every scan test but
+not this one), becomes a loop edge. After new loop edges the graph is optimised
+(Levenberg–Marquardt, a Cauchy kernel on loop edges); loop edges it still cannot reconcile
+(Mahalanobis error above ``max_loop_sigma``) are dropped and the graph optimised again: a
+false loop must not bend the map.
 
 Poses: ``update`` returns the online estimate (the latest keyframe's pose as optimised so
 far, plus the front end's motion since it); :attr:`GraphSlam.trajectory` returns the smoothed
