@@ -32,10 +32,12 @@ def load_hyperparameters(path: Path = HYPERPARAMETERS) -> dict[str, Any]:
     return entry
 
 
-def make_training_env(config: dict[str, Any] | None = None) -> gym.Env:
+def make_training_env(
+    config: dict[str, Any] | None = None, wrapper: dict[str, Any] | None = None
+) -> gym.Env:
     """One randomised, wrapped ``DualLidar-v0`` as the policy sees it."""
     env = gym.make("DualLidar-v0", config=config or {})
-    return TraceFollowingObservation(env, randomize=True)
+    return TraceFollowingObservation(env, randomize=True, **(wrapper or {}))
 
 
 def train(
@@ -46,6 +48,7 @@ def train(
     tensorboard: Path | None = None,
     eval_episodes: int = 12,
     torch_threads: int = 1,
+    hyperparameters: Path = HYPERPARAMETERS,
 ) -> Path:
     """Train PPO and save the best evaluated model to ``out`` (a .zip); return its path."""
     import torch
@@ -55,16 +58,17 @@ def train(
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(torch_threads)  # small MLP: more threads only add contention
-    params = load_hyperparameters()
+    params = load_hyperparameters(hyperparameters)
     total = int(timesteps or params.pop("n_timesteps"))
     params.pop("n_timesteps", None)
     env_config = params.pop("env_kwargs", {})
+    wrapper_kwargs = params.pop("wrapper_kwargs", {})
     normalize = params.pop("normalize", False)
     n_envs = int(n_envs or params.pop("n_envs"))
     params.pop("n_envs", None)
     policy = params.pop("policy")
 
-    env_kwargs = {"config": env_config}
+    env_kwargs = {"config": env_config, "wrapper": wrapper_kwargs}
     vec_env = make_vec_env(make_training_env, n_envs, seed=seed, env_kwargs=env_kwargs)
     eval_env = make_vec_env(make_training_env, 1, seed=seed + 10_000, env_kwargs=env_kwargs)
     if normalize:
@@ -104,8 +108,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=SHIPPED_MODEL)
     parser.add_argument("--tensorboard", type=Path, default=None, help="TensorBoard log dir")
+    parser.add_argument("--hyperparameters", type=Path, default=HYPERPARAMETERS,
+                        help="rl-zoo3-style YAML (default: %(default)s)")
     args = parser.parse_args(argv)
-    train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard)
+    train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
+          hyperparameters=args.hyperparameters)
 
 
 if __name__ == "__main__":
