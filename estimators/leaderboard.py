@@ -15,7 +15,8 @@ every estimator (:mod:`estimators.runner`), scores it (:mod:`estimators.metrics`
   two columns: *world-aligned* scans, the paper's own setting (its phase correlation estimates
   translation only, and its simulation hands it scans in world axes, so rotations never enter
   its images: the group scenarios are recorded a second time with ``scan_frame="world"`` and
-  replayed through the paper's three estimators only, outside the ranking), and the
+  replayed through the paper's three estimators only, those of them ``--estimators`` selects,
+  always driven by the scripted driver, outside the ranking), and the
   leaderboard's *sensor-frame* scans, where the paper's method cannot see the car turn;
 * ``fig8_lidar_image.png`` (an eq.-5 Lidar image) and ``fig8_traces.png`` (per group, the true
   trace and every estimator's trace over the world map);
