@@ -124,6 +124,26 @@ def test_bad_settings_are_named() -> None:
         GraphSlam(loop_gate=-1.0)
 
 
+def test_a_turn_the_front_end_missed_is_found_by_matching_the_keyframes() -> None:
+    truth = loop_poses()
+    steps = relative(truth[:-1], truth[1:])
+    steps[100, 2] -= np.radians(60.0)  # the front end loses a fast turn at one scan
+    odometry = [truth[0]]
+    for step in steps:
+        odometry.append(compose(odometry[-1], step))
+    odometry = np.array(odometry)
+    errors = {}
+    for check in (True, False):
+        slam = GraphSlam(min_loop_separation=8.0, check_steps=check)
+        replay(slam, truth, odometry, seed=4)
+        errors[check] = np.abs(wrap_angle(slam.trajectory[:, 2] - truth[:, 2]))
+        if check:
+            assert len(slam.step_checks) >= 1
+            assert np.hypot(*(slam.trajectory[-1, :2] - truth[-1, :2])) < 0.05
+    assert errors[False].max() > np.radians(10.0)  # the test is worth running
+    assert errors[True].max() < np.radians(1.0)
+
+
 def keyframe_truth(slam: GraphSlam, truth: np.ndarray, odometry: np.ndarray) -> np.ndarray:
     """``(K, 3)`` true pose of each keyframe: that of the scan whose odometry it kept."""
     return np.array([truth[np.flatnonzero((odometry == k.odometry).all(axis=1))[0]]
