@@ -448,6 +448,10 @@ class RotationPhaseCorrelation(Estimator):
     _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
     _previous: PreparedScan | None = field(default=None, init=False, repr=False)
     _last_motion: FloatArray | None = field(default=None, init=False, repr=False)
+
+    @property
+    def min_lidars(self) -> int:  # type: ignore[override]  # the offset Lidar needs both
+        return self.lidar + 1
     _last_dt: float = field(default=0.0, init=False, repr=False)
 
     def _reset_state(self) -> None:

@@ -171,3 +171,10 @@ def test_world_aligned_scans_are_refused_with_a_readable_error(name) -> None:
     setup = SensorSetup(MOUNTS, ANGLES, 10.0, world_aligned=True)
     with pytest.raises(ValueError, match="expected sensor-frame scans"):
         estimators.make(name).reset(setup)
+
+
+def test_the_offset_lidar_variant_declares_it_needs_two_lidars() -> None:
+    import estimators
+
+    assert estimators.make("pc_rot").min_lidars == 1
+    assert estimators.make("pc_rot", lidar=1).min_lidars == 2
