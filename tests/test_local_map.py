@@ -87,6 +87,31 @@ def test_correlative_search_finds_a_pose_far_from_the_guess():
     assert score > 0.8
 
 
+def test_a_turn_beyond_the_motion_model_and_search_window_is_found():
+    # One 360-beam Lidar at the car's origin: turning the car in place by k degrees rolls its
+    # scan by k beams, so the true headings are known exactly. An 80-degree turn between two
+    # scans (a fast turn or dropped scans) lies far outside the 30-degree search window around
+    # the constant-velocity guess (0 here); the scan after it, standing still again, lies 80
+    # degrees from the new guess (ACES, 613 s: a 78-degree turn over a 3 s gap was lost).
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight")
+    observation, _ = env.reset(seed=3)
+    env_setup = SensorSetup.from_env(env)
+    setup = SensorSetup(np.zeros((1, 3)), env_setup.beam_angles, env_setup.max_range)
+    ranges = observation["lidar_1"].astype(np.float64)
+    turn = 80
+    headings = [0, 0, 0, turn, turn, turn]
+    estimator = LocalMapOdometry()
+    estimator.reset(setup, np.zeros(3))
+    for t, heading in enumerate(headings):
+        estimator.update({"lidar_1": np.roll(ranges, -heading)}, 0.1 * t)
+    trajectory = estimator.trajectory
+    np.testing.assert_allclose(
+        np.degrees(trajectory[:, 2]), headings, atol=1.0, err_msg="headings [deg]"
+    )
+    assert np.max(np.hypot(trajectory[:, 0], trajectory[:, 1])) < 0.05
+    assert estimator.fallbacks >= 1
+
+
 def test_voxel_downsample_keeps_one_point_per_cell():
     points = np.array([[0.01, 0.01], [0.02, 0.03], [0.2, 0.0], [-0.01, 0.0]])
     np.testing.assert_array_equal(voxel_downsample(points, 0.1), points[[0, 2, 3]])
