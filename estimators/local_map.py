@@ -14,7 +14,7 @@ equal ones; a per-second model fed those diverges: 0.52 m vs 0.029 m per relatio
 first 3000 scans). ``use_timestamps=True`` scales the increment by the time step instead
 (for sources with clean clocks and dropped scans), with steps outside [0.5, 2] x the running
 median clipped and non-positive ones replaced by the median (ACES: 0.0374 m / 0.379 deg per
-local relation vs 0.0372 m / 0.366 deg per scan; Intel's first 3000 scans: 0.032 m vs
+local relation vs 0.0372 m / 0.345 deg per scan; Intel's first 3000 scans: 0.032 m vs
 0.029 m). Where
 the scan constrains the pose (almost everywhere) the data dominate; along a featureless
 corridor the prior holds the motion. When the match is poor (few points explained) a
