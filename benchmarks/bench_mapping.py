@@ -25,6 +25,8 @@ import platform
 import time
 from pathlib import Path
 
+from estimators.real_log import SHARED_DATA
+
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # the target is for one core
 
 import gymnasium as gym  # noqa: E402
@@ -193,7 +195,7 @@ def map_aces(estimators: list[str], path: Path) -> Path:
     from estimators.real_log import run_on_log, setup_from_log
     from lidar_env.se2 import relative
 
-    radish = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+    radish = SHARED_DATA / "radish"
     if not radish.is_dir():
         raise FileNotFoundError(f"expected the Radish logs in {radish}")
     panels = {}

@@ -14,15 +14,15 @@ from __future__ import annotations
 import argparse
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from estimators.g2o import read_g2o
 from estimators.pose_graph import PoseGraph, _WhitenedProblem, optimize
+from estimators.real_log import SHARED_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "g2o"
+DATA = SHARED_DATA / "g2o"
 #: file -> (GTSAM 4.3 LM optimum, GTSAM time [s] where SOURCE.md / the issue gives one)
 GTSAM = {
     "intel": (22.5021, 0.05),

@@ -13,14 +13,19 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-from pathlib import Path
 
 from estimators import make
 from estimators.carmen import load_log
-from estimators.real_log import LogRun, pseudo_truth_relations, run_on_log, score_relations
+from estimators.real_log import (
+    SHARED_DATA,
+    LogRun,
+    pseudo_truth_relations,
+    run_on_log,
+    score_relations,
+)
 from estimators.relations import load_relations, relation_errors
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 REFERENCE = "icp"
 #: Published mean translational errors, ACES, all relations (SOURCE.md in the data folder).
 PUBLISHED_ACES = (

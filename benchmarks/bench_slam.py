@@ -29,11 +29,17 @@ import numpy as np
 
 from estimators import make
 from estimators.carmen import load_log
-from estimators.real_log import LogRun, pseudo_truth_relations, run_on_log, score_relations
+from estimators.real_log import (
+    SHARED_DATA,
+    LogRun,
+    pseudo_truth_relations,
+    run_on_log,
+    score_relations,
+)
 from estimators.relations import load_relations, relation_errors
 from estimators.slam import GraphSlam
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 WORLDS = ("open_cylinders", "hallway", "closed_to_open", "random")
 
 

@@ -65,6 +65,7 @@ from estimators.database import (
     canonical_json,
     package_version,
 )
+from estimators.real_log import SHARED_DATA
 from estimators.registry import names
 from estimators.runner import (
     STAGES,
@@ -149,7 +150,7 @@ RANK_KEYS: dict[str, str] = {"ate": "ate_rmse_m", "accuracy": "accuracy_percent"
 #: The paper's estimator, whose map ``maps.png`` shows next to the best one's.
 PAPER_ESTIMATOR = "pc_pg"
 REAL_METRIC = "relations_all_translation_m"
-DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA_DIR = SHARED_DATA / "radish"
 #: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
 #: few hundred ground-truth relations while keeping the default run within a minute.
 DEFAULT_REAL_SCANS = 1000

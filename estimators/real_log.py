@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +22,10 @@ from estimators.relations import (
     relation_errors,
     relations_from_trajectory,
 )
+
+#: Where the project's shared data sets live: ``../shared/data`` beside the repository (real
+#: logs in ``radish/``, pose-graph benchmarks in ``g2o/``); never copied into the project.
+SHARED_DATA: Path = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
 def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetup:

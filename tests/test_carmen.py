@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from estimators.carmen import CarmenFormatError, flaser_beam_angles, load_log
+from estimators.real_log import SHARED_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 
 FLASER = "FLASER 4 1.0 2.0 3.0 4.5 0.1 0.2 0.3 1.1 1.2 1.3 100.5 host 0.5"
 ROBOTLASER = (

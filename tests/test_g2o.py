@@ -9,9 +9,10 @@ import pytest
 
 from estimators.g2o import G2oFormatError, read_g2o, write_g2o
 from estimators.pose_graph import PoseGraph
+from estimators.real_log import SHARED_DATA
 from lidar_env.se2 import compose
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "g2o"
+DATA = SHARED_DATA / "g2o"
 EDGE_INFO = "10 1 0 20 0 30"
 
 

@@ -13,10 +13,11 @@ from estimators import leaderboard
 from estimators.base import SensorSetup
 from estimators.carmen import flaser_beam_angles
 from estimators.database import Scenario, TraceDataset, TraceRecord
+from estimators.real_log import SHARED_DATA
 from estimators.registry import make, names
 from estimators.runner import EstimatorSpec
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 TINY = ["--worlds", "open_cylinders", "--traces", "right_turn", "--seeds", "3",
         "--estimators", "zero", "pc", "--workers", "1", "--no-progress"]
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -24,10 +22,11 @@ from estimators.occupancy import (
     from_estimator_run,
     occupancy_to_rgb,
 )
+from estimators.real_log import SHARED_DATA
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World
 
-RADISH = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+RADISH = SHARED_DATA / "radish"
 
 
 def hand_built_pair() -> tuple[np.ndarray, np.ndarray]:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -14,9 +12,10 @@ from estimators.pose_graph import (
     _WhitenedProblem,
     optimize,
 )
+from estimators.real_log import SHARED_DATA
 from lidar_env.se2 import compose, relative, wrap_angle
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "g2o"
+DATA = SHARED_DATA / "g2o"
 INFO = np.diag([100.0, 100.0, 400.0])
 
 

@@ -4,17 +4,22 @@ the first scans of ACES, and Intel's pseudo ground truth lined up with its scans
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from estimators import make
 from estimators.carmen import load_log
-from estimators.real_log import pseudo_truth_relations, run_on_log, score_relations, setup_from_log
+from estimators.real_log import (
+    SHARED_DATA,
+    pseudo_truth_relations,
+    run_on_log,
+    score_relations,
+    setup_from_log,
+)
 from estimators.relations import load_relations, match_times
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 pytestmark = [
     pytest.mark.realdata,
     pytest.mark.skipif(not DATA.is_dir(), reason=f"real logs absent: expected them in {DATA}"),

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from estimators.carmen import load_log
+from estimators.real_log import SHARED_DATA
 from estimators.relations import (
     Relations,
     load_relations,
@@ -17,7 +18,7 @@ from estimators.relations import (
 )
 from lidar_env.se2 import compose, relative
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "radish"
+DATA = SHARED_DATA / "radish"
 
 
 def _trajectory(n: int = 20) -> tuple[np.ndarray, np.ndarray]:
