@@ -8,15 +8,21 @@ by cell with ``world.to_image(res)`` of the same bounds.
 
 Every beam is traced exactly through the cells it crosses (Amanatides & Woo, "A fast voxel
 traversal algorithm", Eurographics 1987): the cells it crosses up to ``free_margin`` before the
-return get a "miss", the cell of the return a "hit", and the cells in between are left alone
+return whose centre it passes within ``clear_radius`` (half a cell: through the cell's inscribed
+circle) get a "miss", the cell of the return a "hit", and the cells in between are left alone
 (the obstacle band ``alpha / 2`` of the inverse range sensor model of Thrun, Burgard & Fox,
 "Probabilistic Robotics", table 9.2: a surface met obliquely, or crossing a cell boundary, also
 reaches into the cell before the return, which would otherwise be cleared by every grazing
-beam). A beam that reads ``max_range`` or more marks free space up to ``max_range`` and nothing
-occupied. One call of :meth:`OccupancyGrid.integrate` is one observation: each cell
-changes at most once per call, and a hit in a cell outranks a miss from another beam of the
-same call, so dense near-field cells are not driven to "free" by hundreds of beams at once and a
-thin wall grazed by one beam and hit by another stays occupied.
+beam). A beam that only clips a cell's corner says little about the cell (the truth, like
+``world.to_image``, is whether its centre is inside an obstacle) and would clear the rim cells
+of a round obstacle, which the beams that pass it tangentially clip from every side: with
+every crossed cell cleared, 29 % of the cells the noiseless beams hit in ``open_cylinders`` at
+5 cm ended free, and the map's recall of the cylinders' faces was 0.95 at 5 cm and 0.88 at
+10 cm instead of 0.98 and 0.94. A beam that reads ``max_range`` or more marks free space up to
+``max_range`` and nothing occupied. One call of :meth:`OccupancyGrid.integrate` is one
+observation: each cell changes at most once per call, and a hit in a cell outranks a miss from
+another beam of the same call, so dense near-field cells are not driven to "free" by hundreds
+of beams at once and a thin wall grazed by one beam and hit by another stays occupied.
 
 The log-odds increments and clamps default to OctoMap's (Hornung et al., "OctoMap", Autonomous
 Robots 2013): p(hit) 0.7, p(miss) 0.4, probabilities clamped to [0.12, 0.97], so a cell needs
@@ -81,6 +87,7 @@ def _trace_scans(
     ranges: NDArray[np.float64],
     max_range: float,
     free_margin: float,
+    clear_radius: float,
     miss: float,
     hit: float,
     low: float,
@@ -90,7 +97,8 @@ def _trace_scans(
     ``origins`` (K, 2) (column, row) [cells] at world ``headings`` (K,) [rad]: a miss in each
     cell a beam crosses up to ``free_margin`` [cells] before its return (or up to ``max_range``
     [cells]), a hit in the cell of each return. ``marks`` remembers per cell what this ``call``
-    (>= 1) did: ``2 call`` = updated, ``2 call + 1`` = holds a return, not yet updated."""
+    (>= 1) did: ``2 call`` = updated, ``2 call + 1`` = holds a return, not yet updated. A miss
+    goes only to the cells whose centre lies within ``clear_radius`` [cells] of the beam."""
     n_rows, n_cols = log_odds.shape
     n_scans, n_beams = ranges.shape
     done, pending = 2 * call, 2 * call + 1
@@ -139,16 +147,20 @@ def _trace_scans(
             n_col_steps, n_row_steps = abs(end_col - col), abs(end_row - row)
             index = row * n_cols + col
             row_stride = step_row * n_cols
+            ux, uy = dir_col[k, j], dir_row[k, j]
             for _ in range(n_col_steps + n_row_steps + 1):
-                if flat_marks[index] < done:
+                if flat_marks[index] < done and abs(
+                        ux * (row + 0.5 - y0) - uy * (col + 0.5 - x0)) <= clear_radius:
                     flat_marks[index] = done
                     flat_odds[index] = max(flat_odds[index] + miss, low)
                 if (next_col < next_row and n_col_steps > 0) or n_row_steps == 0:
                     index += step_col
+                    col += step_col
                     next_col += delta_col
                     n_col_steps -= 1
                 else:
                     index += row_stride
+                    row += step_row
                     next_row += delta_row
                     n_row_steps -= 1
     for k in range(n_scans):
@@ -178,6 +190,9 @@ class OccupancyGrid:
         free_margin: [m] length before each return that is not marked free (module doc);
             default one cell, the smallest band that holds a surface crossing the boundary of
             the return's cell.
+        clear_radius: [cells] a beam marks free only the cells whose centre it passes within
+            this distance of (module doc); 0.5 = through the inscribed circle, >= 0.71 = every
+            cell it crosses.
         log_odds: ``(rows, cols)`` float64 cell log-odds, 0 = unknown.
     """
 
@@ -188,6 +203,7 @@ class OccupancyGrid:
     p_min: float = 0.12
     p_max: float = 0.97
     free_margin: float | None = None
+    clear_radius: float = 0.5
     log_odds: NDArray[np.float64] = field(init=False, repr=False)
     _marks: NDArray[np.int32] = field(init=False, repr=False)
     _n_updates: int = field(default=0, init=False, repr=False)
@@ -217,6 +233,9 @@ class OccupancyGrid:
             self.free_margin = self.resolution
         if not (math.isfinite(self.free_margin) and self.free_margin >= 0):
             raise ValueError(f"free_margin: expected a distance >= 0 [m], got {self.free_margin!r}")
+        if not (math.isfinite(self.clear_radius) and self.clear_radius >= 0):
+            raise ValueError(f"clear_radius: expected a distance >= 0 [cells], "
+                             f"got {self.clear_radius!r}")
         shape = self.shape
         if shape[0] * shape[1] > 200_000_000:
             raise ValueError(f"grid of {shape} cells is too large: coarsen the resolution "
@@ -285,7 +304,7 @@ class OccupancyGrid:
         _trace_scans(
             self.log_odds, self._marks, self._n_updates, self.to_grid_coordinates(poses[:, :2]),
             np.ascontiguousarray(poses[:, 2]), angles, ranges / self.resolution,
-            max_range / self.resolution, self.free_margin / self.resolution,
+            max_range / self.resolution, self.free_margin / self.resolution, self.clear_radius,
             logit(self.p_miss), logit(self.p_hit), logit(self.p_min), logit(self.p_max),
         )
 

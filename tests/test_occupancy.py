@@ -21,8 +21,10 @@ def cells_where(mask: np.ndarray) -> set[tuple[int, int]]:
     return {(int(r), int(c)) for r, c in zip(*np.nonzero(mask), strict=True)}
 
 
-def crossed_cells(grid: OccupancyGrid, start: np.ndarray, end: np.ndarray) -> set[tuple[int, int]]:
-    """Oracle (slab test): the cells (row, col) in which the segment spends a positive length."""
+def crossed_cells(grid: OccupancyGrid, start: np.ndarray, end: np.ndarray,
+                  clear_radius: float = np.inf) -> set[tuple[int, int]]:
+    """Oracle (slab test): the cells (row, col) in which the segment spends a positive length
+    and whose centre is within ``clear_radius`` [cells] of its line."""
     (c0, r0), (c1, r1) = grid.to_grid_coordinates(np.array([start, end]))
     rows, cols = np.meshgrid(np.arange(grid.shape[0]), np.arange(grid.shape[1]), indexing="ij")
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -34,7 +36,9 @@ def crossed_cells(grid: OccupancyGrid, start: np.ndarray, end: np.ndarray) -> se
         tr = np.where((rows <= r0) & (r0 < rows + 1), [[[-np.inf]], [[np.inf]]], np.nan)
     enter = np.maximum(np.maximum(tc[0], tr[0]), 0.0)
     leave = np.minimum(np.minimum(tc[1], tr[1]), 1.0)
-    return cells_where(leave > enter)
+    along = np.array([c1 - c0, r1 - r0]) / np.hypot(c1 - c0, r1 - r0)
+    centre_distance = np.abs(along[0] * (rows + 0.5 - r0) - along[1] * (cols + 0.5 - c0))
+    return cells_where((leave > enter) & (centre_distance <= clear_radius))
 
 
 def test_square_room_marks_exactly_the_wall_cells_and_the_free_cells_between():
@@ -51,10 +55,11 @@ def test_square_room_marks_exactly_the_wall_cells_and_the_free_cells_between():
     assert np.allclose(grid.log_odds[grid.free()], MISS)  # the shared start cell only once
 
 
+@pytest.mark.parametrize("clear_radius", [0.5, 1.0])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_each_beam_frees_exactly_the_cells_it_crosses_and_hits_its_end_cell(seed):
+def test_each_beam_frees_exactly_the_cells_it_crosses_and_hits_its_end_cell(seed, clear_radius):
     rng = np.random.default_rng(seed)
-    grid = OccupancyGrid((-3.0, -2.0, 4.0, 5.0), resolution=0.1)
+    grid = OccupancyGrid((-3.0, -2.0, 4.0, 5.0), resolution=0.1, clear_radius=clear_radius)
     for _ in range(20):
         grid.log_odds[:] = 0.0
         pose = np.array([*rng.uniform([-3, -2], [4, 5]), rng.uniform(-np.pi, np.pi)])
@@ -64,12 +69,25 @@ def test_each_beam_frees_exactly_the_cells_it_crosses_and_hits_its_end_cell(seed
         # the last free_margin (one cell) before a return is left alone, as the surface may
         # reach into it
         free_end = pose[:2] + max(length - grid.resolution, 0.0) * (end - pose[:2]) / length
-        crossed = crossed_cells(grid, pose[:2], free_end)
+        crossed = crossed_cells(grid, pose[:2], free_end, clear_radius)
         end_col, end_row = np.floor(grid.to_grid_coordinates(end)[0]).astype(int)
         inside = 0 <= end_row < grid.shape[0] and 0 <= end_col < grid.shape[1]
         hit = {(int(end_row), int(end_col))} if inside else set()
         assert cells_where(grid.occupied()) == hit
         assert cells_where(grid.free()) == crossed - hit
+
+
+def test_a_beam_clipping_a_cell_corner_leaves_it_unknown():
+    # line y = x - 0.1 clips the corner x in [1, 1.1] of the cell x, y in [1, 2] x [0, 1]
+    # (row 2, col 1), 0.64 cells from its centre: by default it is not cleared (the rim cell of
+    # a round obstacle that tangential beams clip), with clear_radius >= 0.71 it is
+    for clear_radius, cleared in ((0.5, False), (0.75, True)):
+        grid = OccupancyGrid((0.0, 0.0, 3.0, 3.0), resolution=1.0, clear_radius=clear_radius)
+        grid.integrate([3.0], [np.pi / 4], [0.5, 0.4, 0.0], max_range=3.0)
+        assert grid.free()[2, 1] == cleared
+        assert grid.free()[2, 0] and grid.free()[1, 1]  # the cells it runs through
+    with pytest.raises(ValueError, match="clear_radius: expected a distance >= 0"):
+        OccupancyGrid((0.0, 0.0, 1.0, 1.0), clear_radius=-1.0)
 
 
 def test_max_range_beams_only_free_space_up_to_max_range():
