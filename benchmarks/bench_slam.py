@@ -4,11 +4,16 @@
   same run (``slam.odometry_trajectory`` is the front end's own output), with the real-time
   factor of the whole pipeline on one core.
 * Intel: relations from ``intel-corrected.log.gz`` (PSEUDO ground truth: another SLAM's poses).
-* Simulation: ``DualLidar-v0`` ``loop`` trace in every built-in world, driven by the scripted
-  pure-pursuit driver: end-point error and ATE of the front end and of ``slam``.
+* Simulation: ``DualLidar-v0`` ``loop`` and ``out_and_back`` traces in every built-in world,
+  seeds 0 and 1, driven by the scripted pure-pursuit driver: end-point error and ATE of the
+  front end and of ``slam``, the ATE floor the front end's motion between keyframes leaves,
+  how many of the keyframes that revisit a place got a loop edge, and (``--closure-draws``)
+  the ATE ratio the same graph reaches on average with exact loop edges if the front end's
+  keyframe steps erred independently: what loop closure can do on that drive at best.
 
     python benchmarks/bench_slam.py                    # everything (~5 min on one core)
     python benchmarks/bench_slam.py --parts aces sim   # a subset
+    python benchmarks/bench_slam.py --parts sim --traces loop --seeds 0 --closure-draws 100
     python benchmarks/bench_slam.py --limit 2000       # first 2000 scans of each log
     python benchmarks/bench_slam.py --parts aces sim --render docs/   # + map pictures
 
@@ -29,6 +34,7 @@ import numpy as np
 
 from estimators import make
 from estimators.carmen import load_log
+from estimators.pose_graph import PoseGraph, optimize
 from estimators.real_log import (
     SHARED_DATA,
     LogRun,
@@ -38,6 +44,7 @@ from estimators.real_log import (
 )
 from estimators.relations import load_relations, relation_errors
 from estimators.slam import GraphSlam
+from lidar_env.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"
 WORLDS = ("open_cylinders", "hallway", "closed_to_open", "random")
@@ -102,48 +109,114 @@ def _ate(estimate: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((estimate[:, :2] - truth[:, :2]) ** 2, axis=1))))
 
 
-def bench_sim(params: dict[str, Any], seed: int, render: Path | None) -> None:
+def _revisiting(slam: GraphSlam, keyframe_truth: np.ndarray) -> np.ndarray:
+    """Keyframes that revisit a place: at their true poses (K, 3) an older keyframe is a loop
+    candidate by ``slam``'s own rule (``min_loop_separation`` of path back, within
+    ``loop_radius + loop_drift * path``, at most ``max_search_window``)."""
+    path = np.array([k.path_length for k in slam.keyframes])
+    revisiting = []
+    for k in range(len(path)):
+        behind = path[k] - path[:k]
+        radius = np.minimum(slam.loop_radius + slam.loop_drift * behind, slam.max_search_window)
+        distance = np.hypot(*(keyframe_truth[:k, :2] - keyframe_truth[k, :2]).T)
+        if np.any((behind >= slam.min_loop_separation) & (distance <= radius)):
+            revisiting.append(k)
+    return np.array(revisiting, dtype=np.int64)
+
+
+def exact_loop_ratio(graph: PoseGraph, keyframe_truth: np.ndarray, draws: int,
+                         rng: np.random.Generator) -> tuple[float, float]:
+    """What this graph's loop closures can do for a front end whose keyframe steps err
+    independently: the graph's odometry edges are redrawn as the true steps (from
+    ``keyframe_truth`` (K, 3)) with Gaussian noise of the covariance their measured errors
+    have, its loop edges made exact, and the graph optimised with that covariance (the best
+    linear estimator).
+
+    Returns the front end's mean ATE over the mean optimised ATE (the expected ratio) and the
+    share of draws whose own ratio is at least 3 (the issue's target)."""
+    loops = graph.is_loop
+    steps = [relative(keyframe_truth[i], keyframe_truth[j]) for i, j in graph.edges]
+    errors = np.array([relative(step, z) for step, z, loop
+                       in zip(steps, graph.measurements, loops, strict=True) if not loop])
+    covariance = np.cov(errors.T)
+    information, factor = np.linalg.inv(covariance), np.linalg.cholesky(covariance)
+    exact = np.diag([1e3, 1e3, 1e4]) ** 2  # loop edges good to 1 mm / 0.1 mrad
+    front_end, closed = np.zeros(draws), np.zeros(draws)
+    for draw in range(draws):
+        noisy = PoseGraph()
+        noisy.add_node(keyframe_truth[0])
+        for (i, j), step, loop in zip(graph.edges, steps, loops, strict=True):
+            if loop:
+                noisy.add_edge(i, j, step, exact, is_loop=True)
+            else:  # odometry edges chain the keyframes in order: j = i + 1
+                measured = compose(step, factor @ rng.standard_normal(3))
+                noisy.add_node(compose(noisy.poses[i], measured))
+                noisy.add_edge(i, j, measured, information)
+        front_end[draw] = _ate(noisy.poses, keyframe_truth)
+        closed[draw] = _ate(optimize(noisy, max_iterations=50).poses, keyframe_truth)
+    return float(front_end.mean() / closed.mean()), float(np.mean(front_end >= 3 * closed))
+
+
+def bench_sim(params: dict[str, Any], traces: list[str], seeds: list[int], draws: int,
+              render: Path | None) -> None:
     import gymnasium as gym
 
     import lidar_env  # noqa: F401  (registers DualLidar-v0)
     from agents.scripted import PurePursuitDriver
     from estimators import SensorSetup
 
-    print("Simulation, trace 'loop', scripted driver; targets: end-point error <= 0.05 m, "
-          "ATE >= 3x lower than the front end alone")
-    for world in WORLDS:
-        try:
-            env = gym.make("DualLidar-v0", world=world, trace="loop")
-            obs, info = env.reset(seed=seed)
-        except (KeyError, ValueError) as err:
-            print(f"  {world:15s} no 'loop' trace available: {err}")
-            continue
-        driver = PurePursuitDriver()
-        driver.reset(env)
-        slam = make("slam", **params)
-        assert isinstance(slam, GraphSlam)
-        slam.reset(SensorSetup.from_env(env), info["pose"])
-        truth, start = [], time.perf_counter()
-        done = False
-        while not done:
-            slam.update(obs, info["time"])
-            truth.append(info["pose"])
-            obs, _, terminated, truncated, info = env.step(driver.act(obs, info))
-            done = terminated or truncated
-        seconds = time.perf_counter() - start
-        truth_arr = np.array(truth)
-        smoothed, odometry = slam.trajectory, slam.odometry_trajectory
-        end_fe = float(np.hypot(*(odometry[-1, :2] - truth_arr[-1, :2])))
-        end_slam = float(np.hypot(*(smoothed[-1, :2] - truth_arr[-1, :2])))
-        ate_fe, ate_slam = _ate(odometry, truth_arr), _ate(smoothed, truth_arr)
-        print(f"  {world:15s} {len(truth_arr):4d} steps, progress {info['progress']:.2f}: "
-              f"end error front end {end_fe:.3f} m, slam {end_slam:.3f} m; ATE {ate_fe:.3f} -> "
-              f"{ate_slam:.3f} m ({ate_fe / max(ate_slam, 1e-9):.1f}x); {slam.n_loops} loops, "
-              f"{_unreachable(slam)} unreachable refused; "
-              f"{1e3 * seconds / len(truth_arr):.1f} ms/step")
-        if render is not None:
-            slam.render(render / f"slam_{world}_loop.png", truth_arr)
-        env.close()
+    print(f"Simulation, traces {', '.join(traces)}, seeds {', '.join(map(str, seeds))}, "
+          "scripted driver; targets: end-point error <= 0.05 m, ATE >= 3x lower than the front "
+          "end alone. 'floor': ATE with every keyframe at its true pose and the front end's "
+          "motion between keyframes (what no keyframe correction removes); revisiting keyframes: "
+          "those with a candidate by slam's own rule at their true poses; CPU ms/step")
+    if draws:
+        print(f"  'exact loops': expected ATE ratio of this graph with exact loop edges, "
+              f"optimised, if the front end's keyframe steps erred independently ({draws} "
+              "draws), and the share of draws reaching 3x")
+    rng = np.random.default_rng(0)
+    for trace in traces:
+        for seed in seeds:
+            for world in WORLDS:
+                env = gym.make("DualLidar-v0", world=world, trace=trace)
+                obs, info = env.reset(seed=seed)
+                driver = PurePursuitDriver()
+                driver.reset(env)
+                slam = make("slam", **params)
+                assert isinstance(slam, GraphSlam)
+                slam.reset(SensorSetup.from_env(env), info["pose"])
+                truth, start = [], time.process_time()
+                done = False
+                while not done:
+                    slam.update(obs, info["time"])
+                    truth.append(info["pose"])
+                    obs, _, terminated, truncated, info = env.step(driver.act(obs, info))
+                    done = terminated or truncated
+                smoothed = slam.trajectory
+                seconds = time.process_time() - start
+                truth_arr = np.array(truth)
+                odometry = slam.odometry_trajectory
+                keyframe_truth = truth_arr[slam.keyframe_scans]
+                floor = _ate(slam.anchored_trajectory(keyframe_truth), truth_arr)
+                end_fe = float(np.hypot(*(odometry[-1, :2] - truth_arr[-1, :2])))
+                end_slam = float(np.hypot(*(smoothed[-1, :2] - truth_arr[-1, :2])))
+                ate_fe, ate_slam = _ate(odometry, truth_arr), _ate(smoothed, truth_arr)
+                revisiting = _revisiting(slam, keyframe_truth)
+                looped = len(np.intersect1d(slam.graph.edges[slam.graph.is_loop, 1], revisiting))
+                revisits = len(revisiting)
+                line = (f"  {trace:12s} s{seed} {world:15s} {len(truth_arr):4d} steps: end "
+                        f"error {1e3 * end_fe:6.1f} -> {1e3 * end_slam:4.1f} mm; ATE "
+                        f"{1e3 * ate_fe:6.1f} -> {1e3 * ate_slam:5.1f} mm "
+                        f"({ate_fe / max(ate_slam, 1e-9):4.1f}x), floor {1e3 * floor:4.1f} mm; "
+                        f"{slam.n_loops} loop edges on {looped} of {revisits} revisiting "
+                        f"keyframes; {1e3 * seconds / len(truth_arr):.1f} ms/step")
+                if draws and slam.n_loops:
+                    ratio, reach = exact_loop_ratio(slam.graph, keyframe_truth, draws, rng)
+                    line += f"; exact loops {ratio:.1f}x, {100 * reach:.0f} % >= 3x"
+                print(line)
+                if render is not None:
+                    slam.render(render / f"slam_{world}_{trace}_s{seed}.png", truth_arr)
+                env.close()
 
 
 def main() -> None:
@@ -152,7 +225,12 @@ def main() -> None:
                         choices=["aces", "intel", "sim"])
     parser.add_argument("--limit", type=int, default=None, help="first N scans of each log")
     parser.add_argument("--frontend", default="lidar_odometry")
-    parser.add_argument("--seed", type=int, default=0, help="simulation reset seed")
+    parser.add_argument("--traces", nargs="+", default=["loop", "out_and_back"],
+                        choices=["loop", "out_and_back"], help="simulated drives")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1],
+                        help="simulation reset seeds")
+    parser.add_argument("--closure-draws", type=int, default=0,
+                        help="draws of the exact-loop bound per simulated run (0: off)")
     parser.add_argument("--render", type=Path, default=None,
                         help="folder for map pictures (and the ACES graph as g2o)")
     args = parser.parse_args()
@@ -166,7 +244,7 @@ def main() -> None:
     if "intel" in args.parts:
         bench_intel(args.limit, params)
     if "sim" in args.parts:
-        bench_sim(params, args.seed, args.render)
+        bench_sim(params, args.traces, args.seeds, args.closure_draws, args.render)
 
 
 if __name__ == "__main__":

@@ -196,6 +196,7 @@ class GraphSlam(Estimator):
         # covariance of the odometry edge into each keyframe (keyframe 0: none)
         self._odometry_covariance: list[NDArray[np.float64]] = []
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
+        self._keyframe_scan: list[int] = []  # scan index each keyframe was taken from
         self._scan_odometry: list[NDArray[np.float64]] = []
         self._places: dict[tuple[int, int], PlaceMap] = {}
         self._dirty = False
@@ -247,6 +248,7 @@ class GraphSlam(Estimator):
     def _add_keyframe(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
                       path_length: float) -> None:
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
+        self._keyframe_scan.append(len(self._scan_keyframe))
         if not self.keyframes:
             self.graph.add_node(odometry)
             self._odometry_covariance.append(np.zeros((3, 3)))
@@ -477,24 +479,39 @@ class GraphSlam(Estimator):
     # ------------------------------------------------------------------ results
     @property
     def trajectory(self) -> NDArray[np.float64]:
-        """``(N, 3)`` smoothed car poses, one per observation.
-
-        A scan between keyframes ``k`` and ``k + 1`` is placed on each of their optimised
-        poses by the front end's motion relative to it, and the two placements are blended by
-        the share of the way driven from ``k`` to ``k + 1``: the loop correction then changes
-        smoothly along the path instead of jumping at keyframes (which would add error to
-        the short relations)."""
+        """``(N, 3)`` smoothed car poses, one per observation: every scan re-anchored on its
+        keyframes' optimised poses (:meth:`anchored_trajectory`)."""
         if not self._scan_keyframe:
             return np.zeros((0, 3))
         if self._dirty:
             self.optimize()
-        odometry = np.array(self._scan_odometry)
-        keyframe_odometry = np.array([k.odometry for k in self.keyframes])
-        poses = self.graph.poses
-        before = np.array(self._scan_keyframe)
+        return self.anchored_trajectory(self.graph.poses)
+
+    @property
+    def keyframe_scans(self) -> NDArray[np.int64]:
+        """``(K,)`` index of the observation each keyframe was taken from."""
+        return np.array(self._keyframe_scan, dtype=np.int64)
+
+    def anchored_trajectory(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(N, 3)`` car poses of every scan placed on the given keyframe poses (K, 3).
+
+        A scan between keyframes ``k`` and ``k + 1`` is placed on each of their poses by the
+        front end's motion relative to it, and the two placements are blended by the share of
+        the way driven from ``k`` to ``k + 1``: a loop correction then changes smoothly along
+        the path instead of jumping at keyframes (which would add error to the short
+        relations). Given the true keyframe poses it shows the error the front end's motion
+        between keyframes leaves, which no correction of the keyframes can remove."""
+        keyframe_poses = np.asarray(keyframe_poses, dtype=np.float64)
+        if keyframe_poses.shape != (len(self.keyframes), 3):
+            raise ValueError(f"keyframe_poses: expected shape ({len(self.keyframes)}, 3), got "
+                             f"{keyframe_poses.shape}")
+        odometry = np.array(self._scan_odometry).reshape(-1, 3)
+        keyframe_odometry = np.array([k.odometry for k in self.keyframes]).reshape(-1, 3)
+        before = np.array(self._scan_keyframe, dtype=np.int64)
         after = np.minimum(before + 1, len(self.keyframes) - 1)
-        from_before = compose(poses[before], relative(keyframe_odometry[before], odometry))
-        from_after = compose(poses[after], relative(keyframe_odometry[after], odometry))
+        from_before = compose(keyframe_poses[before],
+                              relative(keyframe_odometry[before], odometry))
+        from_after = compose(keyframe_poses[after], relative(keyframe_odometry[after], odometry))
         # Progress counts turning too (a keyframe_angle turn weighs a keyframe_distance), so
         # turning on the spot blends as smoothly as driving.
         weight = self.keyframe_distance / self.keyframe_angle

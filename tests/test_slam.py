@@ -1,7 +1,8 @@
 """GraphSlam: a drifting odometry loop closes; an injected false loop does not bend the map; a
 look-alike place the odometry cannot have drifted to is refused (a straight drive down a
-symmetric hallway is never worse than the front end); the registered pipeline runs end to end
-on ray-cast scans; the odometry chain's covariance matches Monte Carlo."""
+symmetric hallway is never worse than the front end); a corridor driven out and back gets loop
+edges all along the way back, and a false loop along it is dropped; the registered pipeline
+runs end to end on ray-cast scans; the odometry chain's covariance matches Monte Carlo."""
 
 from __future__ import annotations
 
@@ -199,6 +200,37 @@ def test_straight_hallway_drive_accepts_no_loop_and_keeps_the_front_end_accuracy
 def test_slam_is_never_worse_than_its_front_end(world: str, trace: str) -> None:
     slam, truth = run_slam_on_scenario(world, trace)
     assert ate(slam.trajectory, truth) <= ate(slam.odometry_trajectory, truth) + 0.02
+
+
+def test_a_corridor_driven_out_and_back_is_closed_all_along_the_way_back() -> None:
+    slam, truth = run_slam_on_scenario("hallway", "out_and_back")
+    front_end = ate(slam.odometry_trajectory, truth)
+    assert front_end > 0.05  # the front end drifts along the corridor: the test is worth running
+    # Loop edges from every stretch of the way back, not only from its end: the return lane
+    # (2 m beside the outward one) revisits the whole corridor. The way back is the last ~35 %
+    # of the path (a 12 m turn-around between two 14 m straights).
+    looped = np.unique(slam.graph.edges[slam.graph.is_loop, 1])
+    path = np.array([k.path_length for k in slam.keyframes])
+    assert len(looped) >= 10
+    assert path[looped].max() - path[looped].min() > 0.25 * path[-1]
+    honest = slam.trajectory
+    assert ate(honest, truth) < front_end / 3
+    assert np.hypot(*(honest[-1, :2] - truth[-1, :2])) < 0.05
+    # The smoothed trajectory is the scans re-anchored on the optimised keyframes; on the true
+    # keyframes it keeps only the front end's error between keyframes.
+    np.testing.assert_allclose(slam.anchored_trajectory(slam.graph.poses), honest)
+    assert ate(slam.anchored_trajectory(truth[slam.keyframe_scans]), truth) < ate(honest, truth)
+    with pytest.raises(ValueError, match=r"keyframe_poses: expected shape \(\d+, 3\)"):
+        slam.anchored_trajectory(slam.graph.poses[1:])
+    # A corridor's look-alike: the last keyframe claimed 1.5 m further along the corridor than
+    # where it revisits, as confidently as a scan match.
+    old, new = (int(k) for k in slam.graph.edges[np.flatnonzero(slam.graph.is_loop)[-1]])
+    wrong = compose(slam.graph.measurements[np.flatnonzero(slam.graph.is_loop)[-1]],
+                    np.array([1.5, 0.0, 0.0]))
+    slam.add_loop_closure(old, new, wrong, np.diag([1e4, 1e4, 1e4]))
+    corrupted = slam.trajectory
+    assert (old, new) in slam.dropped_loops
+    np.testing.assert_allclose(corrupted[:, :2], honest[:, :2], atol=0.02)
 
 
 def straight_chain(n: int) -> np.ndarray:
