@@ -134,12 +134,12 @@ class PointToLineReference:
         )
 
     @classmethod
-    def with_estimated_normals(cls, points: ArrayLike) -> PointToLineReference:
-        """Reference whose normals come from each point's neighbours
+    def with_estimated_normals(cls, points: ArrayLike, k: int = 5) -> PointToLineReference:
+        """Reference whose normals come from each point's ``k`` nearest neighbours
         (:func:`estimators.scan_matching.estimate_normals`), sharing one k-d tree."""
         reference = cls(points)
         reference.normals, reference.valid_normals = estimate_normals(
-            reference.points, reference.tree
+            reference.points, reference.tree, k
         )
         return reference
 

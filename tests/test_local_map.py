@@ -17,8 +17,9 @@ from estimators.scan_matching import (
     scans_to_car_points,
     voxel_downsample,
 )
+from lidar_env.lidar import Lidar
 from lidar_env.se2 import compose, relative, transform_points
-from lidar_env.world import segment_distances
+from lidar_env.world import World, segment_distances
 
 
 def _distance_to_world(world, points: np.ndarray) -> np.ndarray:
@@ -112,6 +113,37 @@ def test_a_turn_beyond_the_motion_model_and_search_window_is_found():
     assert estimator.fallbacks >= 1
 
 
+def _corridor_end_error(estimator: LocalMapOdometry, seed: int = 0) -> np.ndarray:
+    """Drive ``estimator`` 15 m down a 5 m wide, 40 m long corridor at 0.1 m per scan (one
+    360-beam Lidar, 10 m range, 1 cm noise) and return its final pose error (3,) [m, rad].
+    Once the start wall falls out of range (x > ~10 m) nothing in view fixes the motion along
+    the corridor: the estimate must coast on the motion model."""
+    corners = np.array([(0.0, -2.5), (40.0, -2.5), (40.0, 2.5), (0.0, 2.5)])
+    world = World(segments=np.hstack([corners, np.roll(corners, -1, axis=0)]))
+    lidar = Lidar(noise_std=0.01)
+    rng = np.random.default_rng(seed)
+    truth = np.column_stack([1.0 + 0.1 * np.arange(151), np.zeros(151), np.zeros(151)])
+    estimator.reset(SensorSetup(np.zeros((1, 3)), lidar.beam_angles, lidar.max_range), truth[0])
+    for k, pose in enumerate(truth):
+        ranges = lidar.scan(world, pose[None], rng)[0].astype(np.float64)
+        estimator.update({"lidar_1": ranges}, 0.1 * k)
+    return relative(truth[-1], estimator.pose)
+
+
+def test_a_featureless_corridor_is_crossed_at_the_speed_seen_before_it():
+    # The along-axis error after ~5 m of featureless corridor (x = 10..16 m) is what the
+    # motion model brings into it. Noisy wall normals must not pass for information along the
+    # axis (with 5-neighbour normals the map drags the car: it stalls by metres), and the
+    # speed carried in is averaged over several increments rather than taken from the last.
+    error = _corridor_end_error(LocalMapOdometry())
+    assert abs(error[0]) < 0.08
+    assert abs(error[1]) < 0.01 and abs(error[2]) < np.radians(0.1)
+    single_increment = _corridor_end_error(LocalMapOdometry(velocity_window=1))
+    assert abs(single_increment[0]) > 2 * abs(error[0])
+    noisy_normals = _corridor_end_error(LocalMapOdometry(normal_neighbours=5))
+    assert abs(noisy_normals[0]) > 1.0
+
+
 def test_voxel_downsample_keeps_one_point_per_cell():
     points = np.array([[0.01, 0.01], [0.02, 0.03], [0.2, 0.0], [-0.01, 0.0]])
     np.testing.assert_array_equal(voxel_downsample(points, 0.1), points[[0, 2, 3]])
@@ -124,6 +156,10 @@ def test_bad_parameters_are_named():
         LocalMapOdometry(keyframe_distance=0.0)
     with pytest.raises(ValueError, match="n_keyframes: expected >= 1"):
         LocalMapOdometry(n_keyframes=0)
+    with pytest.raises(ValueError, match="normal_neighbours: expected >= 3"):
+        LocalMapOdometry(normal_neighbours=2)
+    with pytest.raises(ValueError, match="velocity_window: expected >= 1"):
+        LocalMapOdometry(velocity_window=0)
     with pytest.raises(ValueError, match="min_quality: expected a share"):
         LocalMapOdometry(min_quality=1.5)
     with pytest.raises(ValueError, match="unknown loss 'l1'"):
