@@ -86,13 +86,16 @@ class Group:
     trace: str
 
 
-#: The paper's three groups (Fig. 7) plus the straight seed. The straight run goes through the
-#: hallway: motion along a corridor is the classic hard case for scan matching.
+#: The paper's three groups (Fig. 7) plus the straight seed and a drive that revisits a place.
+#: The straight run goes through the hallway: motion along a corridor is the classic hard case
+#: for scan matching. The out-and-back drive goes down that corridor and back along it, 2 m to
+#: the left: the one default drive where loop closure (``slam``) can correct a front end.
 DEFAULT_GROUPS: tuple[Group, ...] = (
     Group("G1 open+right_turn", "open_cylinders", "right_turn"),
     Group("G2 hallway+zigzag", "hallway", "zigzag"),
     Group("G3 closed-to-open+zigzag", "closed_to_open", "zigzag"),
     Group("hallway+straight", "hallway", "straight"),
+    Group("hallway+out_and_back", "hallway", "out_and_back"),
 )
 #: A few seeds per group: each seed draws new range noise (and a new world for "random").
 DEFAULT_SEEDS: tuple[int, ...] = (0, 1)

@@ -251,7 +251,7 @@ def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators()
                           for seed in (0, 1)] for g in groups}
     runs = leaderboard.table_one_scenarios(groups, scenarios, [EstimatorSpec("pc_pg")])
     cases = {(c.world, c.trace) for c in leaderboard.TABLE_I}
-    assert set(runs["sensor"]) == set(runs["world"]) == cases  # not the straight seed
+    assert set(runs["sensor"]) == set(runs["world"]) == cases  # not straight nor out_and_back
     for pair, sensor in runs["sensor"].items():
         world = runs["world"][pair]
         assert [s.seed for s in world] == [s.seed for s in sensor] == [0, 1]
