@@ -80,6 +80,52 @@ def test_a_small_box_seen_from_all_around_is_not_taken_for_a_cylinder():
     assert len(tracker.cylinders()) == 0
 
 
+def test_a_cylinder_touching_a_wall_is_cut_out_of_the_wall_cluster():
+    # a 0.3 m cylinder against the wall y = 2, seen from 51 places in front of it: its arc and
+    # the wall form one cluster from most of them (the contact side joins without a range jump)
+    world = World(circles=[[4.0, 1.7, 0.3]], segments=[[-5.0, 2.0, 12.0, 2.0]])
+    rng = np.random.default_rng(0)
+    found = merged = 0
+    for x in np.linspace(0.0, 8.0, 17):
+        for y in (-2.0, 0.0, 1.0):
+            pose = np.array([x, y, 0.3])
+            ranges = noisy_scan(world, pose, rng)
+            obstacles = detect_obstacles(ranges, ANGLES, pose, MAX_RANGE)
+            centres = np.array([o.circle.centre for o in obstacles if o.circle is not None])
+            found += len(centres) > 0 and np.min(np.hypot(*(centres - [4.0, 1.7]).T)) < 0.05
+            for extended in (o for o in obstacles if o.circle is None):
+                assert np.all(np.abs(extended.points[:, 1] - 2.0) < 0.05)  # wall, not arc
+            on_wall = np.abs(pose[1] + ranges * np.sin(pose[2] + ANGLES) - 2.0) < 0.03
+            merged += any(on_wall[c].any() and not on_wall[c].all()
+                          for c in split_scan(ranges, ANGLES, MAX_RANGE, DetectorParams()))
+    assert merged >= 40  # the scene does test the cut: without it 10 of 51 were found
+    assert found >= 48
+
+
+def test_cylinders_against_corridor_walls_are_tracked_and_corners_are_not():
+    # cylinders touching the walls of a 4 m corridor that ends in a room: a drive past them and
+    # through the corridor's mouth, whose two convex corners must not become cylinders
+    cylinders = np.array([[4.0, 1.7, 0.3], [7.0, -1.6, 0.4], [10.0, 1.8, 0.2]])
+    world = World(circles=cylinders, segments=[
+        [-5.0, 2.0, 12.0, 2.0], [-5.0, -2.0, 12.0, -2.0], [12.0, 2.0, 12.0, 6.0],
+        [12.0, -2.0, 12.0, -6.0]])
+    rng = np.random.default_rng(5)
+    tracker = ObstacleTracker()
+    for k in range(160):
+        car = np.array([-1.0 + 0.1 * k, 0.1 * np.sin(k / 7.0), 0.02])
+        detections = []
+        for dx in (0.25, -0.25):
+            pose = car + [dx, 0.0, 0.0]
+            detections += detect_obstacles(noisy_scan(world, pose, rng), ANGLES, pose, MAX_RANGE)
+        tracker.update(detections)
+    found = tracker.cylinders()
+    assert len(found) == len(cylinders)
+    for cx, cy, r in cylinders:
+        error = np.hypot(found[:, 0] - cx, found[:, 1] - cy)
+        assert np.min(error) < 0.04
+        assert found[int(np.argmin(error)), 2] == pytest.approx(r, abs=0.04)
+
+
 def test_clusters_split_at_range_jumps_and_join_across_zero_radians():
     ranges = np.full(360, MAX_RANGE)
     ranges[[357, 358, 359, 0, 1, 2]] = 2.0  # an arc of radius 2 m seen across 0 rad
