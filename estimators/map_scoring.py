@@ -8,15 +8,16 @@ i.e. a ``(2t+1) x (2t+1)`` square dilation with :func:`scipy.ndimage.binary_dila
 * IoU = ``1 / (1/precision + 1/recall - 1)``, which is exactly ``|A ∩ B| / |A ∪ B|`` when
   ``t = 0`` and extends it to a tolerance without counting a cell pair twice.
 
-The evaluated true cells are the *visible* ones (:func:`visible_cells`): the true occupied cells
-that a beam of the run hit, i.e. that hold the noiseless return of one of the Lidars' beams cast
+The true occupied cells (:func:`true_occupancy`) are the cells that hold some obstacle: those of
+``world.to_image`` (centre inside a circle or polygon, or crossed by a wall) plus the rim cells
+that a circle or a polygon's edge reaches into, so every return of a noiseless beam lies in a
+true cell. The evaluated ones are the *visible* ones (:func:`visible_cells`): the true cells that
+a beam of the run hit, i.e. that hold the noiseless return of one of the Lidars' beams cast
 exactly against the world geometry (:func:`lidar_env.lidar.cast_rays`) from the true sensor
 poses. A cell that no beam reached cannot be mapped by any mapper, whatever its quality: rays
 cast in every direction from the same positions (the previous definition) counted 7 % more
 true cells in ``open_cylinders`` at 5 cm (1642 vs 1537), parts of the cylinders' faces that
-fall between the 1-degree beams, and capped the mapper's recall there at 0.94. A
-hit that falls in a free cell because the image rasterised the surface to the other side (a
-cylinder's rim cell whose centre lies outside the disc) marks the true cells next to it.
+fall between the 1-degree beams, and capped the mapper's recall there at 0.94.
 
 Cylinders (:func:`score_cylinders`): detected circles are matched one-to-one to the true
 ``world.circles`` (Hungarian assignment on centre distance, pairs farther than
@@ -125,23 +126,81 @@ def score_occupancy(
     return MapScores(precision, recall, iou, int(tolerance_cells), n_map, n_truth)
 
 
-def visible_cells(
+def _cell_window(
+    grid: OccupancyGrid, low: NDArray[np.float64], high: NDArray[np.float64]
+) -> tuple[slice, slice, NDArray[np.float64], NDArray[np.float64]] | None:
+    """The cells of ``grid`` whose squares meet the box ``low``-``high`` (x, y) [m]: their row and
+    column slices and the ``(x0, x1)`` and ``(y0, y1)`` [m] edges of those columns and rows
+    (broadcastable to the window); ``None`` if the box misses the grid."""
+    rows, cols = grid.shape
+    xmin, ymin, _, _ = grid.bounds
+    res = grid.resolution
+    col0 = max(int(math.floor((low[0] - xmin) / res)) - 1, 0)
+    col1 = min(int(math.floor((high[0] - xmin) / res)) + 2, cols)
+    # row r covers y in ymin + [rows - 1 - r, rows - r) * res
+    row0 = max(rows - 1 - int(math.floor((high[1] - ymin) / res)) - 1, 0)
+    row1 = min(rows - int(math.floor((low[1] - ymin) / res)) + 1, rows)
+    if col0 >= col1 or row0 >= row1:
+        return None
+    x = xmin + np.arange(col0, col1 + 1) * res
+    y = ymin + (rows - np.arange(row0, row1 + 1)) * res  # top edge of each row, then the last
+    xs = np.stack([x[:-1], x[1:]])[:, None, :]  # (2, 1, window cols)
+    ys = np.stack([y[1:], y[:-1]])[:, :, None]  # (2, window rows, 1): bottom, top
+    return slice(row0, row1), slice(col0, col1), xs, ys
+
+
+def true_occupancy(world: Any, grid: OccupancyGrid) -> NDArray[np.bool_]:
+    """``(rows, cols)`` the cells of ``grid`` (over ``world.bounds``) that hold some obstacle:
+    those of ``world.to_image`` (centre inside a circle or a polygon, or crossed by a wall) and
+    every cell a circle or a polygon's edge reaches into.
+
+    This is what an occupancy grid's cell means (the cell contains an obstacle), and it holds
+    every return of a noiseless beam, which lies on an obstacle's boundary. The image alone
+    leaves out the rim cells of a disc or a polygon whose centre lies outside it: the cells
+    where the Lidar's returns land on a curved face, which the map then had to be forgiven for
+    marking (at one-cell tolerance) while the true cells one further in were never hit."""
+    true = truth_mask(world.to_image(grid.resolution))
+    if true.shape != grid.shape:
+        raise ValueError(f"grid {grid.shape} and world image {true.shape}: expected the same "
+                         f"shape; build the grid over world.bounds {world.bounds}")
+    slack = 1e-9 * grid.resolution  # a return on a cell's edge belongs to both cells
+    for cx, cy, r in np.asarray(world.circles, dtype=np.float64).reshape(-1, 3):
+        window = _cell_window(grid, np.array([cx - r, cy - r]), np.array([cx + r, cy + r]))
+        if window is None:
+            continue
+        rows, cols, xs, ys = window
+        dx = np.maximum(np.maximum(xs[0] - cx, cx - xs[1]), 0.0)  # centre to the nearest cell
+        dy = np.maximum(np.maximum(ys[0] - cy, cy - ys[1]), 0.0)  # point, per axis
+        true[rows, cols] |= np.hypot(dx, dy) < r + slack
+    for x1, y1, x2, y2 in np.asarray(world.segments, dtype=np.float64).reshape(-1, 4):
+        window = _cell_window(grid, np.array([min(x1, x2), min(y1, y2)]),
+                              np.array([max(x1, x2), max(y1, y2)]))
+        if window is None:
+            continue
+        rows, cols, xs, ys = window
+        # separating axes of a segment and a square: x, y (its bounding box) and its normal
+        inside_box = ((xs[1] >= min(x1, x2) - slack) & (xs[0] <= max(x1, x2) + slack)
+                      & (ys[1] >= min(y1, y2) - slack) & (ys[0] <= max(y1, y2) + slack))
+        side = [(x2 - x1) * (y - y1) - (y2 - y1) * (x - x1) for x in xs for y in ys]
+        length = math.hypot(x2 - x1, y2 - y1)
+        crossed = (np.minimum.reduce(side) <= slack * length) & (
+            np.maximum.reduce(side) >= -slack * length)
+        true[rows, cols] |= inside_box & crossed
+    return true
+
+
+def beam_hit_cells(
     world: Any,
     sensor_poses: ArrayLike,
     beam_angles: ArrayLike,
     grid: OccupancyGrid,
     max_range: float,
 ) -> NDArray[np.bool_]:
-    """``(rows, cols)`` true occupied cells of ``world.to_image(grid.resolution)`` that a beam
-    of the run hit (module doc): the noiseless returns of beams ``beam_angles`` (n,) [rad] from
-    the world ``sensor_poses`` (N, 3) within ``max_range`` [m], on ``grid``'s cells (its bounds
-    must be ``world.bounds``)."""
+    """``(rows, cols)`` cells of ``grid`` that hold the noiseless return of a beam
+    ``beam_angles`` (n,) [rad] from one of the world ``sensor_poses`` (N, 3) within
+    ``max_range`` [m]."""
     from lidar_env.lidar import cast_rays
 
-    true = truth_mask(world.to_image(grid.resolution))
-    if true.shape != grid.shape:
-        raise ValueError(f"grid {grid.shape} and world image {true.shape}: expected the same "
-                         f"shape; build the grid over world.bounds {world.bounds}")
     poses = np.asarray(sensor_poses, dtype=np.float64).reshape(-1, 3)
     angles = np.asarray(beam_angles, dtype=np.float64)
     ranges = cast_rays(world, poses, angles, max_range)
@@ -154,7 +213,20 @@ def visible_cells(
     inside = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (cells[:, 1] < rows)
     hit_cells = np.zeros(grid.shape, dtype=bool)
     hit_cells[cells[inside, 1], cells[inside, 0]] = True
-    return true & (hit_cells | _dilate(hit_cells & ~true, 1))
+    return hit_cells
+
+
+def visible_cells(
+    world: Any,
+    sensor_poses: ArrayLike,
+    beam_angles: ArrayLike,
+    grid: OccupancyGrid,
+    max_range: float,
+) -> NDArray[np.bool_]:
+    """``(rows, cols)`` cells of :func:`true_occupancy` that a beam of the run hit (module doc,
+    :func:`beam_hit_cells`), on ``grid``'s cells (its bounds must be ``world.bounds``)."""
+    return true_occupancy(world, grid) & beam_hit_cells(world, sensor_poses, beam_angles, grid,
+                                                        max_range)
 
 
 def observable_cylinders(
@@ -266,7 +338,7 @@ class MapTruth:
     """What a map of one run is scored against, computed once per true run.
 
     Attributes:
-        image: ``(rows, cols)`` uint8 ``world.to_image(resolution)``, 255 = obstacle.
+        image: ``(rows, cols)`` uint8 :func:`true_occupancy` of the world, 255 = obstacle.
         visible: ``(rows, cols)`` the true occupied cells some beam could have hit.
         circles: ``(N, 3)`` true cylinders ``cx, cy, r`` [m].
         observable: ``(N,)`` cylinders with enough returns in one true scan.
@@ -297,12 +369,14 @@ def map_truth(
         raise ValueError(f"true_trajectory: expected shape (N, 3), got {true_trajectory.shape}")
     true_poses = sensor_poses(true_trajectory, setup).reshape(-1, 3)
     grid = OccupancyGrid(world.bounds, resolution)
+    true = true_occupancy(world, grid)
     circles = np.asarray(world.circles, dtype=np.float64).reshape(-1, 3)
     observable = observable_cylinders(world, true_poses, setup.beam_angles, setup.max_range,
                                       min_circle_points)
     return MapTruth(
-        image=world.to_image(resolution),
-        visible=visible_cells(world, true_poses, setup.beam_angles, grid, setup.max_range),
+        image=np.where(true, np.uint8(255), np.uint8(0)),
+        visible=true & beam_hit_cells(world, true_poses, setup.beam_angles, grid,
+                                      setup.max_range),
         circles=circles,
         observable=observable,
         bounds=grid.bounds,

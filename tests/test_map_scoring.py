@@ -14,6 +14,7 @@ from estimators.map_scoring import (
     save_map_figure,
     score_cylinders,
     score_occupancy,
+    true_occupancy,
     visible_cells,
 )
 from estimators.occupancy import (
@@ -72,6 +73,31 @@ def test_empty_map_scores_nan_precision_and_zero_iou():
     _, truth = hand_built_pair()
     scores = score_occupancy(np.zeros((10, 10), bool), truth)
     assert np.isnan(scores.precision) and scores.recall == 0.0 and scores.iou == 0.0
+
+
+def test_true_occupancy_holds_every_boundary_point_and_nothing_far_from_one():
+    world = World(circles=[[1.03, 0.97, 0.4]], segments=[[2.0, -1.0, 3.3, 1.17]],
+                  polygons=[[[-1.5, -1.2], [-0.4, -0.9], [-1.1, 0.6]]], bounds=(-2, -2, 4, 2))
+    grid = OccupancyGrid(world.bounds, 0.1)
+    true = true_occupancy(world, grid)
+    image = world.to_image(0.1) > 0
+    assert np.all(true >= image)
+    # oracle 1: dense points on every circle and segment fall in true cells
+    t = np.linspace(0.0, 1.0, 20001)
+    cx, cy, r = world.circles[0]
+    boundary = [np.column_stack([cx + r * np.cos(2 * np.pi * t), cy + r * np.sin(2 * np.pi * t)])]
+    boundary += [np.outer(1 - t, seg[:2]) + np.outer(t, seg[2:]) for seg in world.segments]
+    cells = np.floor(grid.to_grid_coordinates(np.vstack(boundary))).astype(int)
+    assert true[cells[:, 1], cells[:, 0]].all()
+    # oracle 2: each added cell's square meets a boundary: its centre is within half a
+    # diagonal of one
+    centres = grid.cell_centres()[true & ~image]
+    to_circle = np.abs(np.hypot(centres[:, 0] - cx, centres[:, 1] - cy) - r)
+    points = np.vstack(boundary[1:])
+    to_segment = np.min(np.hypot(*(centres[:, None] - points[None]).T), axis=0)
+    assert np.all(np.minimum(to_circle, to_segment) <= 0.1 / np.sqrt(2) + 1e-3)
+    # the rim: cells whose centre is outside the disc but which the disc reaches into
+    assert np.sum(true & ~image) > 20
 
 
 def test_visible_cells_are_the_near_faces_seen_from_the_sensor():
