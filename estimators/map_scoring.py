@@ -339,7 +339,7 @@ class MapTruth:
 
     Attributes:
         image: ``(rows, cols)`` uint8 :func:`true_occupancy` of the world, 255 = obstacle.
-        visible: ``(rows, cols)`` the true occupied cells some beam could have hit.
+        visible: ``(rows, cols)`` the true occupied cells a noiseless beam of the run hit.
         circles: ``(N, 3)`` true cylinders ``cx, cy, r`` [m].
         observable: ``(N,)`` cylinders with enough returns in one true scan.
         bounds: ``world.bounds`` [m], over which maps are built.
@@ -419,8 +419,8 @@ def evaluate_run_map(
 ) -> RunMapEvaluation:
     """Map and track obstacles from ``observations`` at the car poses ``estimated_trajectory``
     (N, 3), and score both against ``truth`` (:func:`map_truth` of the same run): occupied cells
-    at ``tolerance_cells`` over the visible cells, and cylinders (round tracks with at least 3
-    hits) against the observable true ones."""
+    at ``tolerance_cells`` over the visible cells, and cylinders
+    (:meth:`~estimators.obstacles.ObstacleTracker.cylinders`) against the observable true ones."""
     grid = from_estimator_run(estimated_trajectory, observations, setup, truth.resolution,
                               bounds=truth.bounds)
     map_scores = score_occupancy(grid.occupied(), truth.image, tolerance_cells, truth.visible)
