@@ -25,7 +25,12 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from estimators.base import Estimator
-from estimators.scan_matching import DEFAULT_MIN_RANGE, estimate_normals, scans_to_car_points
+from estimators.scan_matching import (
+    DEFAULT_MIN_RANGE,
+    estimate_normals,
+    fit_local_curves,
+    scans_to_car_points,
+)
 from lidar_env.se2 import compose, transform_points, wrap_angle
 
 #: Robust losses by name: weight of a residual r at scale c (IRLS weights).
@@ -107,7 +112,8 @@ class PointToLineReference:
     """Reference points (world or any fixed frame) with a k-d tree, paired point-to-line.
 
     With ``normals`` (M, 2) given, a query point's line passes through its nearest reference
-    point along that point's normal (rows of ``valid_normals`` false fall back to the line
+    point (or that point's ``anchors`` row, a denoised position of it) along that point's
+    normal (rows of ``valid_normals`` false fall back to the line
     through the two nearest points). Without, the line runs through the two nearest reference
     points (Censi's PL-ICP); when the second lies beyond the pairing distance, or a stored normal
     is not valid, the pair is point-to-point (the normal points from the reference point to
@@ -119,6 +125,7 @@ class PointToLineReference:
         points: ArrayLike,
         normals: NDArray[np.float64] | None = None,
         valid_normals: NDArray[np.bool_] | None = None,
+        anchors: NDArray[np.float64] | None = None,
     ) -> None:
         self.points = np.asarray(points, dtype=np.float64)
         if self.points.ndim != 2 or self.points.shape[1] != 2 or len(self.points) < 2:
@@ -132,15 +139,32 @@ class PointToLineReference:
             if valid_normals is not None or normals is None
             else np.ones(len(self.points), bool)
         )
+        self.anchors = self.points if anchors is None else np.asarray(anchors, dtype=np.float64)
+        if self.anchors.shape != self.points.shape:
+            raise ValueError(
+                f"anchors: expected the points' shape {self.points.shape}, got "
+                f"{self.anchors.shape}"
+            )
 
     @classmethod
-    def with_estimated_normals(cls, points: ArrayLike, k: int = 5) -> PointToLineReference:
+    def with_estimated_normals(
+        cls, points: ArrayLike, k: int = 5, denoise: bool = False
+    ) -> PointToLineReference:
         """Reference whose normals come from each point's ``k`` nearest neighbours
-        (:func:`estimators.scan_matching.estimate_normals`), sharing one k-d tree."""
+        (:func:`estimators.scan_matching.estimate_normals`), sharing one k-d tree. With
+        ``denoise``, lines pass through each point moved onto the curve fitted through its
+        neighbours, with that curve's normal
+        (:func:`estimators.scan_matching.fit_local_curves`): pairs then carry the
+        reference's range noise averaged over ``k`` readings rather than one reading's."""
         reference = cls(points)
-        reference.normals, reference.valid_normals = estimate_normals(
-            reference.points, reference.tree, k
-        )
+        if denoise:
+            reference.normals, reference.valid_normals, reference.anchors = fit_local_curves(
+                reference.points, reference.tree, k
+            )
+        else:
+            reference.normals, reference.valid_normals = estimate_normals(
+                reference.points, reference.tree, k
+            )
         return reference
 
     def correspond(
@@ -155,7 +179,7 @@ class PointToLineReference:
         index = np.flatnonzero(np.isfinite(distances))
         nearest = nearest[index]
         stored = self.valid_normals[nearest]
-        pairs = Correspondences(index[stored], self.points[nearest[stored]],
+        pairs = Correspondences(index[stored], self.anchors[nearest[stored]],
                                 self.normals[nearest[stored]])
         if np.all(stored):
             return pairs

@@ -2,10 +2,12 @@
 
 Each scan is registered by robust point-to-line ICP (:func:`estimators.icp.register`) onto a
 local map: the points of the last few keyframes, merged in the world frame, thinned on a
-voxel grid, with a normal per point from its neighbours. Matching against several keyframes
+voxel grid, each moved onto the curve fitted through its neighbours, with that curve's normal
+(:func:`estimators.scan_matching.fit_local_curves`). Matching against several keyframes
 rather than the previous scan averages out range noise and keeps more wall in view, which is
 what removes most of scan-to-scan ICP's error (compare KISS-ICP, Vizzo et al. 2023; Hess et
-al. 2016, Cartographer's local SLAM).
+al. 2016, Cartographer's local SLAM); pairing on the fitted curve rather than on the one
+reading that happened to land first in a voxel averages the map's own noise too.
 
 The initial guess and a weak prior come from a constant-velocity model of the estimator's own
 recent increments (never odometry): the translation averaged over the last few, the rotation
@@ -91,9 +93,12 @@ class LocalMapOdometry(Estimator):
         min_range: readings below this [m] are "no return".
         use_timestamps: constant velocity per second rather than per scan (False; see above).
         normal_neighbours: map points a normal is fitted through (9: ~0.4 m of wall at the
-            0.05 m voxels, so a normal's direction noise is well under a degree at 1-3 cm range
+            0.05 m voxels, so a normal's direction noise is a few degrees at 1-3 cm range
             noise; corners and small objects fail the line test and pair point-to-line
             through their two nearest points instead).
+        denoise_map: pair on each map point moved onto the parabola through its neighbours
+            rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
+            cylinder's points are not pulled ~3 cm inwards).
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -121,6 +126,7 @@ class LocalMapOdometry(Estimator):
     use_timestamps: bool = False
     normal_neighbours: int = 9
     velocity_window: int = 5
+    denoise_map: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -182,7 +188,7 @@ class LocalMapOdometry(Estimator):
             self._reference = None
             return
         self._reference = PointToLineReference.with_estimated_normals(
-            merged, self.normal_neighbours
+            merged, self.normal_neighbours, self.denoise_map
         )
         self._field = None
 

@@ -11,6 +11,7 @@ the result is one point set, as if from a single sensor at the car's origin.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -74,12 +75,20 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[
     return points[np.sort(first)]
 
 
-def estimate_normals(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
-    (principal axis of their covariance), and which points have a reliable one: at least 3
-    neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob)."""
+class _Neighbourhoods(NamedTuple):
+    """Each point's ``k`` nearest neighbours within a radius and the line fitted through them."""
+
+    neighbours: NDArray[np.float64]  # (M, k, 2); missing ones repeat the point itself
+    weights: NDArray[np.float64]  # (M, k): 1 for a neighbour found, 0 for a missing one
+    count: NDArray[np.float64]  # (M,) neighbours found
+    mean: NDArray[np.float64]  # (M, 2) their centroid
+    normals: NDArray[np.float64]  # (M, 2) unit normal of their principal axis
+    valid: NDArray[np.bool_]  # (M,) a line: >= 3 neighbours, clearly elongated spread
+
+
+def _fit_lines(
+    points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float
+) -> _Neighbourhoods:
     k = min(k, len(points))
     distances, index = tree.query(points, k=k, distance_upper_bound=max_radius)
     distances = distances.reshape(len(points), k)
@@ -101,7 +110,53 @@ def estimate_normals(
     small = 0.5 * (sxx + syy - spread)
     large = 0.5 * (sxx + syy + spread)
     valid = (count >= 3) & (small < 0.1 * large)
-    return normals, valid
+    return _Neighbourhoods(neighbours, weights, count, mean, normals, valid)
+
+
+def estimate_normals(
+    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
+    (principal axis of their covariance), and which points have a reliable one: at least 3
+    neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob)."""
+    fit = _fit_lines(points, tree, k, max_radius)
+    return fit.normals, fit.valid
+
+
+def fit_local_curves(
+    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """Denoised surface points: normals ``(M, 2)``, which are reliable (as
+    :func:`estimate_normals`), and anchors ``(M, 2)``.
+
+    Where the ``k`` neighbours (within ``max_radius`` [m]) form a line and number at least 5,
+    a parabola ``t = a + b s + c s^2`` is fitted to them in that line's frame (``s`` along,
+    ``t`` across); the anchor is the point moved onto it and the normal is the parabola's at
+    that point. The anchor then carries the range noise of ``k`` readings averaged rather
+    than one reading's, and, unlike a projection onto the straight line, is not pulled
+    towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
+    0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
+    """
+    fit = _fit_lines(points, tree, k, max_radius)
+    tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
+    offsets = fit.neighbours - fit.mean[:, None, :]
+    along = np.einsum("ijk,ik->ij", offsets, tangents)
+    across = np.einsum("ijk,ik->ij", offsets, fit.normals)
+    basis = np.stack([np.ones_like(along), along, along**2], axis=-1) * fit.weights[..., None]
+    curved = fit.valid & (fit.count >= 5)
+    coefficients = np.zeros((len(points), 3))
+    if np.any(curved):
+        gram = np.einsum("ijk,ijl->ikl", basis[curved], basis[curved])
+        moment = np.einsum("ijk,ij->ik", basis[curved], across[curved])
+        coefficients[curved] = np.linalg.solve(gram, moment[..., None])[..., 0]
+    a, b, c = coefficients.T
+    s = np.einsum("ij,ij->i", points - fit.mean, tangents)
+    on_curve = fit.mean + s[:, None] * tangents + (a + b * s + c * s**2)[:, None] * fit.normals
+    curve_normals = fit.normals - (b + 2.0 * c * s)[:, None] * tangents
+    curve_normals /= np.linalg.norm(curve_normals, axis=1)[:, None]
+    anchors = np.where(curved[:, None], on_curve, points)
+    normals = np.where(curved[:, None], curve_normals, fit.normals)
+    return normals, fit.valid, anchors
 
 
 class LikelihoodField:
