@@ -48,6 +48,7 @@ from estimators.base import SensorSetup
 from estimators.occupancy import sensor_poses
 from lidar_env.se2 import transform_points
 
+_CUT_FACTOR = 1
 # columns of the per-cluster statistics of _cluster_statistics
 _CX, _CY, _AXIS, _LENGTH, _WIDTH, _SPREAD, _FIT_X, _FIT_Y, _FIT_R, _FIT_RMS, _CORNER_RMS = range(11)
 
@@ -473,7 +474,7 @@ def _cut_out_arcs(
                 continue
             arc = _trim_against_lines(points, begins[k], begins[k] + begin, begins[k] + end,
                                       ends[k], params.min_points, tolerance)
-            if arc[1] - arc[0] >= params.min_circle_points:
+            if arc[1] - arc[0] >= _CUT_FACTOR * params.min_circle_points:
                 cuts[k] = arc
         if cuts:  # keep only the arcs that pass the full roundness test
             arcs = np.array(list(cuts.values()), dtype=np.int64).reshape(-1, 2)
@@ -570,7 +571,8 @@ class Track:
         id: stable identifier, unique within its tracker.
         position: ``(2,)`` world position [m]: the circle centre of a round track, else the
             latest centroid.
-        circle: joint circle fit of all round detections, or ``None``.
+        circle: joint circle fit of all round detections, or ``None`` (updated every step, for
+            association; :meth:`consensus_circle` is the one to report).
         points: ``(m, 2)`` world returns [m] of the latest step it was detected in.
         hits: detections joined so far.
         round_hits, circle_tests: detections found round, and tested for roundness.
@@ -589,6 +591,9 @@ class Track:
     circle_tests: int = 0
     _normal: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)), repr=False)
     _rhs: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), repr=False)
+    # per round detection: its Kåsa normal equations about _origin, its own centre and rms
+    _round: list[tuple[NDArray[np.float64], NDArray[np.float64], float, float, float]] = field(
+        default_factory=list, repr=False)
 
     def reach(self) -> tuple[NDArray[np.float64], float]:
         """Centre (2,) [m] and radius [m] of a circle holding :attr:`points`: their mean and
@@ -613,6 +618,8 @@ class Track:
             return
         self.round_hits += 1
         normal, rhs = _kasa_moments(obstacle.points, self._origin)
+        self._round.append((normal, rhs, obstacle.circle.cx, obstacle.circle.cy,
+                            obstacle.circle.rms))
         self._normal += normal
         self._rhs += rhs
         cx, cy, radius, rms = _kasa_circle(self._normal, self._rhs, obstacle.points,
@@ -620,6 +627,24 @@ class Track:
         if not math.isnan(radius):
             self.circle = CircleFit(cx, cy, radius, rms)
             self.position = self.circle.centre
+
+    def consensus_circle(self) -> CircleFit | None:
+        """The joint Kåsa fit of the round detections whose own centre lies within three
+        median distances of the median centre (about 3.5 sigma of a Gaussian scatter, whose
+        median distance is 1.18 sigma), or ``None`` if none was round. A few short arcs that
+        a circle fitted by chance (5 returns of a cylinder and of the wall behind it) would
+        otherwise pull the centre by decimetres. ``rms`` is the median of the kept detections'."""
+        if not self._round:
+            return None
+        centres = np.array([(cx, cy) for _, _, cx, cy, _ in self._round])
+        distances = np.hypot(*(centres - np.median(centres, axis=0)).T)
+        keep = distances <= 3.0 * np.median(distances)
+        kept = [d for d, k in zip(self._round, keep, strict=True) if k]
+        cx, cy, radius_squared = _solve_kasa(sum(d[0] for d in kept), sum(d[1] for d in kept))
+        if not radius_squared > 0.0:
+            return None
+        return CircleFit(cx + self._origin[0], cy + self._origin[1], math.sqrt(radius_squared),
+                         float(np.median([d[4] for d in kept])))
 
 
 @dataclass
@@ -701,7 +726,8 @@ class ObstacleTracker:
         return self.tracks[best] if np.isfinite(distances[best]) else None
 
     def cylinders(self, min_hits: int = 3, min_round_share: float = 0.5) -> NDArray[np.float64]:
-        """``(M, 3)`` rows ``cx, cy, r`` [m] of the round tracks detected at least ``min_hits``
+        """``(M, 3)`` rows ``cx, cy, r`` [m] (:meth:`Track.consensus_circle`) of the round
+        tracks detected at least ``min_hits``
         times (one detection may be a coincidence of noise) and found round in at least
         ``min_round_share`` of their roundness tests (the majority of the views that could tell).
         A cylinder is round in most of them, also one touching a wall, whose arc the detector
@@ -712,10 +738,10 @@ class ObstacleTracker:
             raise ValueError(
                 f"min_round_share: expected a share in [0, 1], got {min_round_share!r}"
             )
-        rows = [
-            (t.circle.cx, t.circle.cy, t.circle.radius)
-            for t in self.tracks
+        circles = [
+            t.consensus_circle() for t in self.tracks
             if t.circle is not None and t.hits >= min_hits
             and t.round_hits >= min_round_share * t.circle_tests
         ]
+        rows = [(c.cx, c.cy, c.radius) for c in circles if c is not None]
         return np.array(rows, dtype=np.float64).reshape(-1, 3)

@@ -8,6 +8,7 @@ import pytest
 from estimators.base import default_beam_angles
 from estimators.obstacles import (
     DetectorParams,
+    Obstacle,
     ObstacleTracker,
     detect_obstacles,
     fit_circle,
@@ -124,6 +125,29 @@ def test_cylinders_against_corridor_walls_are_tracked_and_corners_are_not():
         error = np.hypot(found[:, 0] - cx, found[:, 1] - cy)
         assert np.min(error) < 0.04
         assert found[int(np.argmin(error)), 2] == pytest.approx(r, abs=0.04)
+
+
+def test_a_few_chance_arcs_do_not_move_a_tracked_cylinder():
+    # 12 short arcs of the cylinder (1, 1, 0.3) seen from one side, and 3 longer arcs of a
+    # circle fitted by chance, 25 cm off: the reported circle is the consensus of the 12; the
+    # every-step joint fit is pulled away
+    rng = np.random.default_rng(7)
+
+    def arc(cx, cy, r, start, n):
+        angles = start + np.linspace(0.0, 0.8, n)
+        points = np.column_stack([cx + r * np.cos(angles), cy + r * np.sin(angles)])
+        points += rng.normal(0.0, 0.002, points.shape)
+        return Obstacle(points, np.arange(n), points.mean(axis=0), np.array([0.3, 0.05]), 0.0,
+                        fit_circle(points), True, 0.2)
+
+    tracker = ObstacleTracker()
+    detections = [arc(1.0, 1.0, 0.3, a, 6) for a in np.linspace(2.2, 3.6, 12)]
+    detections[3:3] = [arc(1.25, 1.0, 0.5, a, 20) for a in (2.8, 2.9, 3.0)]
+    for detection in detections:
+        assert tracker.update([detection]) == [0]
+    ((cx, cy, r),) = tracker.cylinders()
+    assert np.hypot(cx - 1.0, cy - 1.0) < 0.01 and r == pytest.approx(0.3, abs=0.01)
+    assert np.hypot(*(tracker.tracks[0].circle.centre - [1.0, 1.0])) > 0.02
 
 
 def test_clusters_split_at_range_jumps_and_join_across_zero_radians():
