@@ -19,6 +19,7 @@ over a sliding window of keyframes.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -28,11 +29,13 @@ from scipy.optimize import least_squares
 
 from estimators.base import Estimator
 from estimators.rotation_pc import (
+    PRIOR_INFORMATION,
     PRIOR_SIGMA,
     PreparedScan,
     ScanMatcher,
-    constant_velocity,
-    pose_difference,
+    motion_from_sensor_match,
+    prediction_information,
+    refinement_starts,
     require_sensor_frame,
 )
 from lidar_env.se2 import compose, inverse, relative, wrap_angle
@@ -253,12 +256,13 @@ class FusionEstimator(Estimator):
     sigma_translation: float = 0.01
     sigma_heading: float = 0.005
     robust_scale: float = 3.0
+    velocity_window: float = 1.0
     _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
     _keyframes: list[_Keyframe] = field(default_factory=list, init=False, repr=False)
     _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
     _n_keyframes: int = field(default=0, init=False, repr=False)
-    _motion: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
-    _last_dt: float = field(default=0.0, init=False, repr=False)
+    _velocity: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
+    _recent: deque[tuple[FloatArray, float]] = field(default_factory=deque, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.icp_iterations, bool) or not (
@@ -270,6 +274,10 @@ class FusionEstimator(Estimator):
             )
         if isinstance(self.window, bool) or not (isinstance(self.window, int) and self.window >= 1):
             raise ValueError(f"window: expected an integer >= 1 keyframes, got {self.window!r}")
+        if not self.velocity_window > 0:
+            raise ValueError(
+                f"velocity_window: expected a positive duration [s], got {self.velocity_window!r}"
+            )
         if not (self.keyframe_distance > 0 and self.keyframe_turn > 0):
             raise ValueError(
                 "keyframe_distance [m] and keyframe_turn [rad]: expected positive numbers, got "
@@ -285,8 +293,8 @@ class FusionEstimator(Estimator):
         self._keyframes = []
         self._edges = []
         self._n_keyframes = 0
-        self._motion = np.zeros(3)
-        self._last_dt = 0.0
+        self._velocity = np.zeros(3)
+        self._recent = deque()
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
@@ -310,41 +318,37 @@ class FusionEstimator(Estimator):
         keyframe: _Keyframe,
         scans: tuple[PreparedScan, ...],
         motion_guess: FloatArray,
-        correlate: bool,
+        seed: FloatArray | None = None,
+        prior_information: FloatArray = PRIOR_INFORMATION,
     ) -> list[SensorEdge]:
-        """The four (or, with one Lidar, one) matches of ``scans`` against ``keyframe``; nodes
-        0 (keyframe) and 1 (scans). ``motion_guess``: predicted car motion between them, which
-        each match gets as its prior ``mount_i⁻¹ ⊕ guess ⊕ mount_j``.
+        """The matches of ``scans`` against ``keyframe`` (nodes 0 and 1) by refinement.
+        ``motion_guess``: predicted car motion between them, which each match gets as its prior
+        ``mount_i⁻¹ ⊕ guess ⊕ mount_j`` (held about the car's centre, with
+        ``prior_information``, see :func:`estimators.rotation_pc.refine_on_curves`).
 
-        ``correlate``: the main Lidar's pair runs the full rotation-aware phase correlation and
-        the other pairs are refined from the car motion it implies (the correlation's FFTs are
-        the dearest part of a match; one finds the basin for all); otherwise every pair is
-        refined from ``motion_guess``, and only the same-sensor pairs are matched (these are the
-        extra edges to older keyframes, where the cross pairs would add cost, not coverage).
-        A refinement also starts from the prior where that
-        disagrees with its first start (see :meth:`ScanMatcher.refine`).
+        ``seed``: the car motion the main Lidar's phase correlation found (the correlation's
+        FFTs are the dearest part of a match; one finds the basin for all); then all four
+        same- and cross-sensor pairs are refined from it. Without, every pair starts from the
+        guess and only the same-sensor pairs are matched (these are the extra edges to older
+        keyframes, where the cross pairs would add cost, not coverage). A refinement also
+        starts from the prior where that disagrees with its first start.
         """
         assert self._matcher is not None and self.setup is not None
         mounts = self.setup.mounts
         sensors = range(len(scans))
-        correlated = None
-        seed = motion_guess
-        if correlate:
-            prior = relative(mounts[0], compose(motion_guess, mounts[0]))
-            correlated = self._matcher.match(keyframe.scans[0], scans[0], prior)
-            seed = compose(compose(mounts[0], correlated.pose), inverse(mounts[0]))
+        start_motion = motion_guess if seed is None else seed
         edges = []
-        pairs = [(i, j) for i in sensors for j in sensors if correlate or i == j]
-        for i, j in pairs:
-            if correlated is not None and i == j == 0:
-                match = correlated
-            else:
-                prior = relative(mounts[i], compose(motion_guess, mounts[j]))
-                start = relative(mounts[i], compose(seed, mounts[j]))
-                starts = [start]
-                if np.any(np.abs(pose_difference(start, prior)) > PRIOR_SIGMA):
-                    starts.append(prior)
-                match = self._matcher.refine(keyframe.scans[i], scans[j], starts, prior)
+        for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
+            prior = relative(mounts[i], compose(motion_guess, mounts[j]))
+            start = relative(mounts[i], compose(start_motion, mounts[j]))
+            match = self._matcher.refine(
+                keyframe.scans[i],
+                scans[j],
+                refinement_starts(start, prior),
+                prior,
+                inverse(mounts[j])[:2],
+                prior_information,
+            )
             edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
         return edges
 
@@ -361,9 +365,22 @@ class FusionEstimator(Estimator):
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
-        predicted = compose(self.pose, constant_velocity(self._motion, self._last_dt, dt))
-        guess = relative(latest.pose, predicted)
-        edges = self._match_all(latest, current, guess, correlate=True)
+        step = self._velocity * dt
+        guess = relative(latest.pose, compose(self.pose, step))
+        correlated = self._matcher.correlate(
+            latest.scans[0], current[0], relative(mounts[0], compose(guess, mounts[0]))
+        )
+        seed = motion_from_sensor_match(mounts[0], correlated.pose)
+        # A constant twist moves the car along the chord of its turn: with the turn the
+        # correlation measured (far better than the mean rate's), the predicted translation
+        # turns by half the difference. Where the scans leave the translation open (a
+        # corridor), this keeps a weaving car's speed instead of bending its path.
+        turn = float(wrap_angle(latest.pose[2] + seed[2] - self.pose[2]))
+        if abs(wrap_angle(turn - step[2])) < PRIOR_SIGMA[2]:
+            step = np.append(_rotate(np.array([0.5 * (turn - step[2])]), step[None, :2])[0], turn)
+            guess = relative(latest.pose, compose(self.pose, step))
+        information = prediction_information(dt) if dt > 0 else PRIOR_INFORMATION
+        edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
         start = compose(compose(mounts[0], edges[0].pose), inverse(mounts[0]))
         from_latest = fuse_car_motion(mounts, edges, start, **self._weights())
@@ -373,8 +390,25 @@ class FusionEstimator(Estimator):
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
             pose = self._insert_keyframe(current, pose, edges)
-        self._motion, self._last_dt = relative(self.pose, pose), dt
+        self._update_velocity(relative(self.pose, pose), dt)
         return pose
+
+    def _update_velocity(self, motion: FloatArray, dt: float) -> None:
+        """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of
+        the last ``velocity_window`` [s].
+
+        The prediction it makes decides what the scans leave open (a featureless corridor's
+        axis): from one step, the match noise of that step (~1 mm at 1 cm range noise, i.e.
+        1 cm/s at 10 Hz) would be carried through the whole corridor; the window's mean carries
+        that of its two ends over its length. Steps inside such a corridor take their open
+        component from the prediction, so they keep the velocity the scans last measured.
+        """
+        self._recent.append((motion, dt))
+        span = sum(step_dt for _, step_dt in self._recent)
+        while len(self._recent) > 1 and span - self._recent[0][1] >= self.velocity_window:
+            span -= self._recent.popleft()[1]
+        if span > 0:
+            self._velocity = sum(step for step, _ in self._recent) / span
 
     def _insert_keyframe(
         self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge]
@@ -389,9 +423,7 @@ class FusionEstimator(Estimator):
         for offset, keyframe in enumerate(self._keyframes[:-1]):
             guess = relative(keyframe.pose, pose)
             ids = (first + offset, new_id)
-            self._edges.extend(
-                (*ids, e) for e in self._match_all(keyframe, scans, guess, correlate=False)
-            )
+            self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
         self._add_keyframe(_Keyframe(pose, scans))
         first = self._n_keyframes - len(self._keyframes)
         if len(self._keyframes) > 1:

@@ -64,7 +64,14 @@ INLIER_DISTANCE = 0.1
 #: changes its step by ``a dt^2`` = 5 cm at 5 m/s^2 and 10 Hz). Hundreds of returns outweigh
 #: it wherever they constrain the pose.
 PRIOR_SIGMA = np.array([0.05, 0.05, 0.05])
-PRIOR_INFORMATION = (0.01 / PRIOR_SIGMA) ** 2
+RANGE_NOISE = 0.01
+PRIOR_INFORMATION = (RANGE_NOISE / PRIOR_SIGMA) ** 2
+#: A constant-velocity prediction over a scan interval ``dt`` misses the car's position by
+#: about ``PREDICTION_ACCELERATION dt^2`` [m] (an indoor robot's brisk 0.5 m/s^2: 5 mm at 10 Hz,
+#: 2 cm at 5 Hz), never trusted to better than ``MIN_PREDICTION_SIGMA`` [m] (a match's own
+#: precision) nor worse than ``PRIOR_SIGMA``; see :func:`prediction_information`.
+PREDICTION_ACCELERATION = 0.5
+MIN_PREDICTION_SIGMA = 1e-3
 #: A translation direction with less information than this share of the best direction's is
 #: open: the spurious information of normals tilted by noise (a few hundredths of a radian
 #: on 1 cm noise) is a share of about their tilt squared, well under 2 %.
@@ -105,21 +112,29 @@ class CurveReference:
         n_beams = len(ranges)
         # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
         # adjacent beams less than MAX_SURFACE_GAP apart.
-        offsets = np.arange(-SURFACE_HALF_WINDOW, SURFACE_HALF_WINDOW + 1)
-        linked = ((np.roll(hit, -1) - hit) % n_beams == 1) & (
-            np.hypot(*(np.roll(self.points, -1, axis=0) - self.points).T) < MAX_SURFACE_GAP
+        half = SURFACE_HALF_WINDOW
+        offsets = np.arange(-half, half + 1)
+        following = np.append(np.arange(1, count), 0)
+        linked = ((hit[following] - hit) % n_beams == 1) & (
+            np.hypot(*(self.points[following] - self.points).T) < MAX_SURFACE_GAP
         )
         if not _full_turn(beam_angles):
             linked[-1] = False  # the last beam does not neighbour the first
-        valid = np.ones((count, len(offsets)), dtype=bool)
-        for column, offset in enumerate(offsets):
-            for step in range(min(offset, 0), max(offset, 0)):
-                valid[:, column] &= np.roll(linked, -step)
-        neighbours = np.stack([np.roll(self.points, -o, axis=0) for o in offsets], axis=1)
+        rows = np.arange(count)
+        # links[:, h + s] joins neighbours s and s + 1 (s = -h..h-1); neighbour o < 0 is on the
+        # surface when every link from it up to the return holds, o > 0 likewise.
+        links = linked[(rows[:, None] + np.arange(-half, half)) % count]
+        valid = np.hstack(
+            [
+                np.cumprod(links[:, half - 1 :: -1], axis=1)[:, ::-1],
+                np.ones((count, 1), dtype=bool),
+                np.cumprod(links[:, half:], axis=1),
+            ]
+        ).astype(bool)
+        neighbours = self.points[(rows[:, None] + offsets) % count]
         # Local frame: along the chord between the outermost neighbours on the same surface.
         first = np.argmax(valid, axis=1)
         last = len(offsets) - 1 - np.argmax(valid[:, ::-1], axis=1)
-        rows = np.arange(count)
         chord = neighbours[rows, last] - neighbours[rows, first]
         length = np.hypot(*chord.T)
         self.pointlike = length < 1e-9
@@ -174,21 +189,30 @@ def refine_on_curves(
     initial: FloatArray,
     iterations: int,
     prior: FloatArray | None = None,
+    pivot: FloatArray | None = None,
+    prior_information: FloatArray = PRIOR_INFORMATION,
 ) -> tuple[FloatArray, float]:
     """Point-to-curve ICP of ``points`` (M, 2, query sensor frame) onto ``reference`` from the
     pose ``initial`` (3,) for at most ``iterations`` (>= 1); returns the pose and the share of
     points within ``INLIER_DISTANCE`` of the reference surface (the match's confidence). The
     Gauss-Newton step and robust weights are :mod:`estimators.icp`'s.
 
-    ``prior`` (3,): a predicted pose, added with the weak information ``PRIOR_INFORMATION``.
+    ``prior`` (3,): a predicted pose, added with ``prior_information`` (3,) (relative to one
+    return's; by default the weak ``PRIOR_INFORMATION``).
     Where the scans leave a translation direction open (a featureless corridor) their
     information along it is not zero but noise (normals fitted to noisy walls tilt by a few
     hundredths of a radian), and that noise would outweigh any weak prior; so a direction
     whose information is below ``DEGENERACY_RATIO`` of the best direction's takes the prior's
     value outright (solution remapping, Zhang, Kaess & Singh, ICRA 2016).
+
+    ``pivot`` (2,) [m, query sensor frame]: the point whose position the prior's translation
+    predicts (default the sensor itself). A motion prediction is one of the car, whose heading
+    is the least certain part of it: about the car's centre, a heading error of the prediction
+    does not shift the predicted position, whereas at a sensor mounted ``l`` away it shifts it
+    by ``l`` times the error -- which the open direction of a corridor would then take over.
     """
     pose = np.asarray(initial, dtype=np.float64).copy()
-    information = None if prior is None else PRIOR_INFORMATION
+    pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
     quality = 0.0
     for _ in range(iterations):
         moved = transform_points(pose, points)
@@ -200,20 +224,38 @@ def refine_on_curves(
         quality = np.count_nonzero(np.abs(residuals) < INLIER_DISTANCE) / len(points)
         jacobian = point_to_line_jacobian(moved[index], pose[:2], normals)
         weights = robust_weights(residuals, "cauchy", LOSS_SCALE)
-        offset = None
-        if prior is not None:
-            offset = pose_difference(prior, pose)
-        step = gauss_newton_step(jacobian, residuals, weights, information, offset)
-        if prior is not None:
+        if prior is None:
+            step = gauss_newton_step(jacobian, residuals, weights)
+        else:
+            # The prior enters as three more residual rows, on the pivot's position and the
+            # heading: r + J d = (pivot moved by pose + d) - (pivot moved by prior), linearised.
+            lever = _rotate(pose[2], pivot)
+            prior_jacobian = np.array([[1.0, 0.0, -lever[1]], [0.0, 1.0, lever[0]], [0, 0, 1]])
+            prior_residuals = -pose_difference(
+                np.append(prior[:2] + _rotate(prior[2], pivot), prior[2]),
+                np.append(pose[:2] + lever, pose[2]),
+            )
+            step = gauss_newton_step(
+                np.vstack([jacobian, prior_jacobian]),
+                np.concatenate([residuals, prior_residuals]),
+                np.concatenate([weights, prior_information]),
+            )
             open_direction = _degenerate_translation(jacobian, weights)
             if open_direction is not None:
-                miss = prior[:2] - pose[:2] - step[:2]
-                step[:2] += open_direction * (open_direction @ miss)
+                predicted = prior[:2] + _rotate(prior[2], pivot)
+                moved_pivot = pose[:2] + step[:2] + _rotate(pose[2] + step[2], pivot)
+                step[:2] += open_direction * (open_direction @ (predicted - moved_pivot))
         pose = pose + step
         pose[2] = float(wrap_angle(pose[2]))
         if np.hypot(step[0], step[1]) < STEP_TOLERANCE[0] and abs(step[2]) < STEP_TOLERANCE[1]:
             break
     return pose, float(quality)
+
+
+def _rotate(angle: float, vector: FloatArray) -> FloatArray:
+    """``R(angle) v`` for one vector ``v`` (2,)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
 
 
 def _degenerate_translation(jacobian: FloatArray, weights: FloatArray) -> FloatArray | None:
@@ -334,21 +376,20 @@ class ScanMatcher:
             grid,
         )
 
-    def match(
+    def correlate(
         self, earlier: PreparedScan, later: PreparedScan, prior: ArrayLike | None = None
     ) -> ScanMatch:
-        """Pose of the ``later`` scan's sensor in the ``earlier`` scan's sensor frame.
+        """The rotation-aware phase correlation alone: pose of the ``later`` scan's sensor in
+        the ``earlier`` scan's sensor frame, good to about a pixel and a log-polar bin.
 
-        ``prior``: a predicted pose (3,) (e.g. from the estimator's own recent motion). Its
-        heading chooses between the two pi-apart spectrum candidates (without it the range
-        profiles choose for full-turn scans, else the smaller turn wins), and the refinement
-        uses it as a weak prior (see :func:`refine_on_curves`).
+        ``prior``: a predicted pose (3,); its heading chooses between the two pi-apart spectrum
+        candidates (without it the range profiles choose for full-turn scans, else the smaller
+        turn wins).
         """
-        prior = None if prior is None else np.asarray(prior, dtype=np.float64)
         profiles = None
         if prior is None and _full_turn(earlier.beam_angles, later.beam_angles):
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
-        hint = None if prior is None else float(prior[2])
+        hint = None if prior is None else float(np.asarray(prior, dtype=np.float64)[2])
         rotation = heading_change(earlier.polar, later.polar, hint, profiles)
         turned = image_spectrum(later.image(rotation.angle))
         correlation = phase_correlate(earlier.spectrum, turned)
@@ -357,12 +398,32 @@ class ScanMatcher:
         pose = np.array([translation[0], translation[1], rotation.angle])
         # Peak-to-runner-up ratio r >= 1 maps to 1 - 1/r: 0 when ambiguous, -> 1 when unique.
         confidence = rotation.confidence * (1.0 - 1.0 / max(correlation.confidence, 1.0))
+        return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+
+    def match(
+        self,
+        earlier: PreparedScan,
+        later: PreparedScan,
+        prior: ArrayLike | None = None,
+        pivot: ArrayLike | None = None,
+        prior_information: FloatArray = PRIOR_INFORMATION,
+    ) -> ScanMatch:
+        """Pose of the ``later`` scan's sensor in the ``earlier`` scan's sensor frame:
+        :meth:`correlate`, then (with ``icp_iterations``) :meth:`refine` from its answer.
+
+        ``prior``: a predicted pose (3,) (e.g. from the estimator's own recent motion). Its
+        heading chooses between the two pi-apart spectrum candidates, and the refinement
+        uses it as a prior (information ``prior_information``) about the point ``pivot`` (2,) of
+        the later sensor's frame (see :func:`refine_on_curves`).
+        """
+        prior = None if prior is None else np.asarray(prior, dtype=np.float64)
+        correlated = self.correlate(earlier, later, prior)
         if earlier.reference is None or len(later.points) < 3:
-            return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
-        starts = [pose]
-        if prior is not None and np.any(np.abs(pose_difference(pose, prior)) > PRIOR_SIGMA):
-            starts.append(prior)  # the correlation disagrees with the motion so far
-        return self.refine(earlier, later, starts, prior)
+            return correlated
+        return self.refine(
+            earlier, later, refinement_starts(correlated.pose, prior), prior, pivot,
+            prior_information,
+        )
 
     def refine(
         self,
@@ -370,15 +431,26 @@ class ScanMatcher:
         later: PreparedScan,
         starts: list[FloatArray],
         prior: FloatArray | None = None,
+        pivot: ArrayLike | None = None,
+        prior_information: FloatArray = PRIOR_INFORMATION,
     ) -> ScanMatch:
         """Point-to-curve refinement (:func:`refine_on_curves`) from each of the ``starts``
         (poses of the later sensor in the earlier one's frame); the best fit wins, and among
-        fits equally good within ``QUALITY_TOLERANCE`` the one nearest ``prior``.
+        fits equally good within ``QUALITY_TOLERANCE`` the one nearest ``prior`` (which holds
+        about ``pivot``).
         Needs a matcher with ``icp_iterations > 0``."""
         if earlier.reference is None:
             raise ValueError("refine: expected a matcher with icp_iterations > 0, got 0")
         refined = [
-            refine_on_curves(earlier.reference, later.points, start, self.icp_iterations, prior)
+            refine_on_curves(
+                earlier.reference,
+                later.points,
+                start,
+                self.icp_iterations,
+                prior,
+                pivot,
+                prior_information,
+            )
             for start in starts
         ]
         best_quality = max(quality for _, quality in refined)
@@ -389,6 +461,29 @@ class ScanMatcher:
             )
         pose, confidence = candidates[0]
         return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+
+
+def prediction_information(dt: float) -> FloatArray:
+    """Information (3,) of a constant-velocity prediction over ``dt`` [s], relative to one
+    return's (as ``PRIOR_INFORMATION``): its position good to ``PREDICTION_ACCELERATION dt^2``
+    (clipped to [``MIN_PREDICTION_SIGMA``, ``PRIOR_SIGMA``]), its heading to ``PRIOR_SIGMA``.
+
+    Where the returns pin the pose down, hundreds of them outweigh it; where they leave a
+    direction nearly open (the exit of a corridor, a hall with a few posts in range), it
+    keeps the step from following the noise of a handful of returns.
+    """
+    if not dt > 0:
+        raise ValueError(f"dt: expected a positive scan interval [s], got {dt}")
+    sigma = np.clip(PREDICTION_ACCELERATION * dt**2, MIN_PREDICTION_SIGMA, PRIOR_SIGMA[0])
+    return (RANGE_NOISE / np.array([sigma, sigma, PRIOR_SIGMA[2]])) ** 2
+
+
+def refinement_starts(start: FloatArray, prior: FloatArray | None) -> list[FloatArray]:
+    """Where to start refinements: ``start``, and also ``prior`` where the two disagree by more
+    than ``PRIOR_SIGMA`` (a correlation fooled by a repetitive scene)."""
+    if prior is not None and np.any(np.abs(pose_difference(start, prior)) > PRIOR_SIGMA):
+        return [start, prior]
+    return [start]
 
 
 def pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
