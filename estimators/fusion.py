@@ -327,11 +327,12 @@ class FusionEstimator(Estimator):
         ``prior_information``, see :func:`estimators.rotation_pc.refine_on_curves`).
 
         ``seed``: the car motion the main Lidar's phase correlation found (the correlation's
-        FFTs are the dearest part of a match; one finds the basin for all); then all four
-        same- and cross-sensor pairs are refined from it. Without, every pair starts from the
-        guess and only the same-sensor pairs are matched (these are the extra edges to older
-        keyframes, where the cross pairs would add cost, not coverage). A refinement also
-        starts from the prior where that disagrees with its first start.
+        FFTs are the dearest part of a match; one finds the basin for all); then the main
+        pair is refined from it, and the other same- and cross-sensor pairs from that.
+        Without, every pair starts from the guess and only the same-sensor pairs are matched
+        (these are the extra edges to older keyframes, where the cross pairs would add cost,
+        not coverage). A refinement also starts from the prior where that disagrees with its
+        first start.
         """
         assert self._matcher is not None and self.setup is not None
         mounts = self.setup.mounts
@@ -350,6 +351,9 @@ class FusionEstimator(Estimator):
                 prior_information,
             )
             edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
+            if seed is not None and i == j == 0:
+                # The main pair, refined, is a closer start for the others than the correlation.
+                start_motion = motion_from_sensor_match(mounts[0], match.pose)
         return edges
 
     def _weights(self) -> dict[str, float]:

@@ -23,11 +23,11 @@ from scan ``a`` to scan ``b``; the scene then appears turned by minus that angle
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from lidar_env.se2 import wrap_angle
 
@@ -87,15 +87,44 @@ def log_polar_spectrum(
     max_radius = 0.45 * min(height, width)
     if not 0 < min_radius < max_radius:
         raise ValueError(f"min_radius: expected a value in (0, {max_radius}), got {min_radius}")
+    window, corners, weights, radii = _log_polar_grid(
+        height, width, n_angles, n_radii, min_radius
+    )
+    magnitude = np.abs(np.fft.fftshift(scipy.fft.rfft2(image * window, workers=1), axes=0))
+    # Bilinear interpolation: the four neighbouring bins of each sample, weighted.
+    samples = np.einsum("kij,kij->ij", magnitude.ravel()[corners], weights)
+    return np.log1p(samples * radii)
+
+
+@cache
+def _log_polar_grid(
+    height: int, width: int, n_angles: int, n_radii: int, min_radius: float
+) -> tuple[NDArray[np.float32], NDArray[np.intp], FloatArray, FloatArray]:
+    """For :func:`log_polar_spectrum`, made once per geometry (they cost as much as the FFT):
+    the Hann window (height, width); for each sample (n_angles, n_radii) the flat indices
+    (4, ...) of its four neighbouring bins in the shifted half-spectrum (height, width // 2 + 1)
+    and their bilinear weights (4, ...); the radii (n_radii,)."""
     # A separable Hann window stops the image border from adding a bright cross to the spectrum.
     window = np.outer(np.hanning(height), np.hanning(width)).astype(np.float32)
-    magnitude = np.abs(np.fft.fftshift(scipy.fft.rfft2(image * window, workers=1), axes=0))
     angles = -0.5 * np.pi + np.pi * np.arange(n_angles) / n_angles
-    radii = np.geomspace(min_radius, max_radius, n_radii)
+    radii = np.geomspace(min_radius, 0.45 * min(height, width), n_radii)
     rows = height // 2 + np.outer(np.sin(angles), radii)
     cols = np.outer(np.cos(angles), radii)
-    samples = ndimage.map_coordinates(magnitude, [rows, cols], order=1, mode="nearest")
-    return np.log1p(samples * radii)
+    n_cols = width // 2 + 1
+    row0, col0 = np.floor(rows).astype(np.intp), np.floor(cols).astype(np.intp)
+    fr, fc = rows - row0, cols - col0
+    corners, weights = [], []
+    for dr, dc, weight in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
+                           (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+        # Clipped like map_coordinates' mode="nearest" (the grid stays inside anyway).
+        r = np.clip(row0 + dr, 0, height - 1)
+        c = np.clip(col0 + dc, 0, n_cols - 1)
+        corners.append(r * n_cols + c)
+        weights.append(weight)
+    grid = (window, np.stack(corners), np.stack(weights), radii)
+    for array in grid:
+        array.flags.writeable = False  # shared by every call
+    return grid
 
 
 def spectrum_rotation(polar_a: FloatArray, polar_b: FloatArray) -> RotationEstimate:

@@ -79,6 +79,10 @@ DEGENERACY_RATIO = 0.02
 #: A refinement has converged when its step is below 10 micrometres and 1 microradian, far
 #: under the millimetre a 1 cm noisy scan supports.
 STEP_TOLERANCE = (1e-5, 1e-6)
+#: A refinement step that moves no point further than this [m] keeps the pairs: a point that
+#: then changes its nearest return sits halfway between two returns of one surface, whose
+#: curves agree there (the k-d tree search is most of an iteration's cost).
+REPAIR_DISTANCE = 0.005
 #: Two refinements whose inlier shares differ by less than this are equally good fits (a
 #: featureless corridor fits anywhere along it); the one nearer the prior then wins.
 QUALITY_TOLERANCE = 0.02
@@ -166,10 +170,22 @@ class CurveReference:
         obliquely that its returns lie far apart) pairs with nothing: point-to-point pairs with
         the same beams of the other scan would pull the match towards no motion.
         """
+        index, k = self.nearest_returns(points)
+        return (index, *self.project(points, index, k))
+
+    def nearest_returns(self, points: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """The indices of the points ``(M, 2)`` that pair (see :meth:`correspond`) and of the
+        returns they pair with."""
         distance, nearest = self.tree.query(points, distance_upper_bound=MAX_PAIR_DISTANCE)
         index = np.flatnonzero(np.isfinite(distance))
         index = index[~self.pointlike[nearest[index]]]
-        k = nearest[index]
+        return index, nearest[index]
+
+    def project(
+        self, points: FloatArray, index: NDArray[np.intp], k: NDArray[np.intp]
+    ) -> tuple[FloatArray, FloatArray]:
+        """The nearest points on the curves of returns ``k`` to ``points[index]``, and the
+        curves' unit normals there."""
         offset = points[index] - self.points[k]
         tangent, normal = self.tangents[k], self.normals[k]
         u = np.einsum("ij,ij->i", offset, tangent)
@@ -180,7 +196,7 @@ class CurveReference:
             + (self.c[k] + self.b[k] * u + self.a[k] * u**2)[:, None] * normal
         )
         normals = (normal - slope[:, None] * tangent) / np.sqrt(1.0 + slope**2)[:, None]
-        return index, anchors, normals
+        return anchors, normals
 
 
 def refine_on_curves(
@@ -214,11 +230,16 @@ def refine_on_curves(
     pose = np.asarray(initial, dtype=np.float64).copy()
     pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
     quality = 0.0
+    reach = float(np.max(np.hypot(points[:, 0], points[:, 1]), initial=0.0))
+    pairs = None
     for _ in range(iterations):
         moved = transform_points(pose, points)
-        index, anchors, normals = reference.correspond(moved)
+        if pairs is None:
+            pairs = reference.nearest_returns(moved)
+        index, k = pairs
         if len(index) < 3:
             break
+        anchors, normals = reference.project(moved, index, k)
         residuals = np.einsum("ij,ij->i", moved[index] - anchors, normals)
         # Scored before the step, which by then is tiny: one correspondence search saved.
         quality = np.count_nonzero(np.abs(residuals) < INLIER_DISTANCE) / len(points)
@@ -249,6 +270,8 @@ def refine_on_curves(
         pose[2] = float(wrap_angle(pose[2]))
         if np.hypot(step[0], step[1]) < STEP_TOLERANCE[0] and abs(step[2]) < STEP_TOLERANCE[1]:
             break
+        if np.hypot(step[0], step[1]) + abs(step[2]) * reach > REPAIR_DISTANCE:
+            pairs = None  # points moved enough to have new nearest returns
     return pose, float(quality)
 
 
@@ -304,15 +327,20 @@ class PreparedScan:
         )
 
     @cached_property
+    def upright_image(self) -> NDArray[np.uint8]:
+        """The scan's eq.-5 image as measured (kept: both spectra below start from it)."""
+        return self.image()
+
+    @cached_property
     def polar(self) -> FloatArray:
         """The image's log-polar magnitude spectrum (:func:`log_polar_spectrum`)."""
         n_angles, n_radii = self.polar_grid
-        return log_polar_spectrum(self.image(), n_angles=n_angles, n_radii=n_radii)
+        return log_polar_spectrum(self.upright_image, n_angles=n_angles, n_radii=n_radii)
 
     @cached_property
     def spectrum(self) -> ImageSpectrum:
         """The image's whitened FFT (:func:`image_spectrum`)."""
-        return image_spectrum(self.image())
+        return image_spectrum(self.upright_image)
 
 
 @dataclass(frozen=True)
