@@ -417,20 +417,24 @@ class FusionEstimator(Estimator):
     def _insert_keyframe(
         self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge]
     ) -> FloatArray:
-        """Make ``scans`` a keyframe, match it to the older ones, re-solve the window; return
-        its solved pose."""
-        mounts = self.setup.mounts if self.setup is not None else None
-        assert mounts is not None
+        """Make ``scans`` a keyframe, match it to the older ones that stay in the window and
+        re-solve the window; return its solved pose."""
+        assert self.setup is not None
         new_id = self._n_keyframes
-        first = new_id - len(self._keyframes)
+        # The oldest keyframe leaves a full window now: matching against it would be wasted.
+        leaving = max(len(self._keyframes) + 1 - self.window, 0)
+        first_staying = new_id - len(self._keyframes) + leaving
         self._edges.extend((new_id - 1, new_id, e) for e in latest_edges)
-        for offset, keyframe in enumerate(self._keyframes[:-1]):
+        older = self._keyframes[leaving:-1]
+        for offset, keyframe in enumerate(older):
             guess = relative(keyframe.pose, pose)
-            ids = (first + offset, new_id)
+            ids = (first_staying + offset, new_id)
             self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
         self._add_keyframe(_Keyframe(pose, scans))
-        first = self._n_keyframes - len(self._keyframes)
-        if len(self._keyframes) > 1:
+        if older:
+            # Without older edges, the window's graph is the four edges just fused: nothing to
+            # re-solve.
+            first = self._n_keyframes - len(self._keyframes)
             graph = [
                 SensorEdge(
                     a - first, e.source_sensor, b - first, e.target_sensor, e.pose, e.confidence
@@ -438,7 +442,7 @@ class FusionEstimator(Estimator):
                 for a, b, e in self._edges
             ]
             start = np.array([k.pose for k in self._keyframes])
-            solved = optimize_poses(start, mounts, graph, n_fixed=1, **self._weights())
+            solved = optimize_poses(start, self.setup.mounts, graph, n_fixed=1, **self._weights())
             for keyframe, solved_pose in zip(self._keyframes, solved, strict=True):
                 keyframe.pose = solved_pose
         return self._keyframes[-1].pose.copy()
