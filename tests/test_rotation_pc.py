@@ -10,7 +10,14 @@ import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup, default_beam_angles
 from estimators.metrics import evaluate
-from estimators.rotation_pc import CurveReference, RotationPhaseCorrelation, ScanMatcher
+from estimators.rotation_pc import (
+    MIN_PREDICTION_SIGMA,
+    PRIOR_INFORMATION,
+    CurveReference,
+    RotationPhaseCorrelation,
+    ScanMatcher,
+    prediction_information,
+)
 from lidar_env.lidar import Lidar
 from lidar_env.se2 import compose, relative, wrap_angle
 from lidar_env.world import World
@@ -178,3 +185,48 @@ def test_the_offset_lidar_variant_declares_it_needs_two_lidars() -> None:
 
     assert estimators.make("pc_rot").min_lidars == 1
     assert estimators.make("pc_rot", lidar=1).min_lidars == 2
+
+
+def corridor_scans(car_before, car_after, mount, rng):
+    """Sensor-frame scans from ``mount`` on a car at two poses in a featureless corridor
+    (walls y = +-2.5 m, ends far beyond the range)."""
+    walls = [[-50, -2.5, 50, -2.5], [-50, 2.5, 50, 2.5]]
+    world = World(np.zeros((0, 3)), walls)
+    return scans_at(world, np.stack([compose(car_before, mount), compose(car_after, mount)]), rng)
+
+
+@pytest.mark.parametrize("heading", [0.5, -0.8])
+def test_corridor_prior_about_the_car_centre_ignores_its_heading_error(heading) -> None:
+    # Along a corridor the scans leave the translation open and the prior decides it. A
+    # prediction of the car's motion is surest of where the car's centre goes: its heading
+    # error (here 0.03 rad) must not move that along the corridor -- but about a sensor 0.4 m
+    # from the centre it moves the sensor by 12 mm.
+    rng = np.random.default_rng(5)
+    mount = np.array([0.4, 0.0, 0.0])
+    car_before = np.array([0.0, 0.3, heading])
+    motion = np.array([0.1, 0.0, 0.05])
+    scans = corridor_scans(car_before, compose(car_before, motion), mount, rng)
+    matcher = ScanMatcher(10.0, image_size=200, icp_iterations=5)
+    earlier, later = (matcher.prepare(scan, ANGLES) for scan in scans)
+    predicted = motion + [0.0, 0.0, 0.03]
+    prior = relative(mount, compose(predicted, mount))
+    car_centre = -mount[:2]  # in the sensor frame (the mount has no heading)
+
+    def along_error(pivot) -> float:
+        match = matcher.refine(earlier, later, [prior], prior, pivot)
+        car_motion = compose(compose(mount, match.pose), [-mount[0], -mount[1], 0.0])
+        world_after = compose(car_before, car_motion)
+        return float(world_after[0] - compose(car_before, motion)[0])
+
+    assert abs(along_error(car_centre)) < 0.002
+    assert abs(along_error(None)) > 0.005  # held about the sensor, the heading error leaks in
+
+
+def test_prediction_information_grows_with_the_scan_rate_within_its_bounds() -> None:
+    information = [prediction_information(dt)[0] for dt in (0.2, 0.1, 0.05)]
+    assert information[1] == pytest.approx(16 * information[0])  # sigma ~ dt^2
+    assert prediction_information(10.0)[0] == pytest.approx(PRIOR_INFORMATION[0])
+    assert prediction_information(1e-3)[0] == pytest.approx((0.01 / MIN_PREDICTION_SIGMA) ** 2)
+    assert prediction_information(0.1)[2] == pytest.approx(PRIOR_INFORMATION[2])
+    with pytest.raises(ValueError, match="dt"):
+        prediction_information(0.0)
