@@ -239,12 +239,22 @@ class FusionEstimator(Estimator):
     or the main pair's solution), from where Gauss-Newton settles in two or three steps;
     ``keyframe_distance`` 0.3 m and ``keyframe_turn`` 0.2 rad keep consecutive
     keyframes sharing nearly all of a 10 m scan; ``window`` 2: each keyframe is solved from the
-    four-node graph against the one before (measured on the Table I scenarios, a third
-    keyframe 0.6 m back adds cost and no accuracy: its scans overlap the latest keyframe's
-    almost entirely); larger windows re-solve more keyframes together; the sigmas and
-    ``robust_scale`` are :func:`optimize_poses`'s.
-    Each match gets the estimator's own last motion at constant velocity as a weak prior
-    (it resolves the rotation's pi ambiguity and featureless corridors; never odometry).
+    four-node graph against the one before (measured on the Table I scenarios, 4 cases x 2
+    seeds: a third keyframe 0.6 m back lowers the mean ATE from 0.014 to 0.011 m but not the
+    step error -- eq.-11 accuracy 99.11 -> 99.08 % -- for 10 % more time: its scans overlap
+    the latest keyframe's almost entirely); larger windows re-solve more keyframes together;
+    the sigmas and ``robust_scale`` are :func:`optimize_poses`'s.
+
+    Motion prediction (never odometry): the car's velocity is the mean of its own steps over
+    the last ``velocity_window`` [s] (1 s: it carries a tenth of one step's match noise at
+    10 Hz); the predicted step turns by the heading change the main pair's correlation
+    measured (a constant twist moves along the chord of its turn), and each match gets it as
+    a prior held about the car's centre with :func:`estimators.rotation_pc.prediction_information`.
+    It resolves the rotation's pi ambiguity, damps the steps' noise where few returns pin the
+    translation down, and is the answer along featureless corridors. Measured on the Table I
+    scenarios (4 cases x seeds 0 and 1, ``benchmarks/bench_synthetic.py``): eq.-11 accuracy
+    98.99-99.22 % (mean 99.11 %), ATE 0.007-0.021 m, drift <= 0.14 %; with the previous
+    one-step prediction about each sensor 98.63-99.05 %, ATE 0.006-0.079 m.
     """
 
     window: int = 2

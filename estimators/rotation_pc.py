@@ -11,8 +11,9 @@ so needs scans that share an orientation. Between sensor-frame scans the pipelin
 3. optionally polishes the pose with a few ICP iterations started from it -- point-to-curve
    (:class:`CurveReference`, :func:`refine_on_curves`) with :mod:`estimators.icp`'s
    Gauss-Newton step -- a correlative-then-refine pipeline as in Olson's and Cartographer's
-   matchers: the correlation finds the basin, ICP its bottom. A weak motion prior from the
-   estimator's own increments holds what the scans leave open (corridors).
+   matchers: the correlation finds the basin, ICP its bottom. A motion prior from the
+   estimator's own increments (:func:`prediction_information`), held about the car's centre
+   rather than the sensor, holds what the scans leave open (corridors).
 
 :class:`ScanMatcher` does one pair of scans (any two sensors); :class:`RotationPhaseCorrelation`
 chains the matches of one Lidar's consecutive scans into car poses.
