@@ -16,9 +16,9 @@ timestamps cannot be trusted (``intel.clf`` has 631 stamps out of order and burs
 equal ones; a per-second model fed those diverges: 0.52 m vs 0.029 m per relation on its
 first 3000 scans). ``use_timestamps=True`` scales the increment by the time step instead
 (for sources with clean clocks and dropped scans), with steps outside [0.5, 2] x the running
-median clipped and non-positive ones replaced by the median (ACES: 0.0374 m / 0.379 deg per
-local relation vs 0.0372 m / 0.345 deg per scan, measured before the averaged velocity;
-Intel's first 3000 scans: 0.032 m vs 0.029 m). Where
+median clipped and non-positive ones replaced by the median (ACES: 0.0339 m / 0.311 deg per
+local relation vs 0.0338 m / 0.324 deg per scan; Intel's first 3000 scans: 0.0288 m vs
+0.0289 m per keyframe pair). Where
 the scan constrains the pose (almost everywhere) the data dominate; along a featureless
 corridor the prior holds the motion, so two things decide the error there: the corridor's axis
 must be recognised as free (wall normals fitted through 9 neighbours rather than 5: the noise
