@@ -42,6 +42,9 @@ from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
+#: Scan intervals the clock's typical jitter is taken over (20 s at 10 Hz).
+CLOCK_HISTORY = 200
+
 
 @dataclass(frozen=True)
 class SensorEdge:
@@ -273,6 +276,9 @@ class FusionEstimator(Estimator):
     _n_keyframes: int = field(default=0, init=False, repr=False)
     _velocity: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
     _recent: deque[tuple[FloatArray, float]] = field(default_factory=deque, init=False, repr=False)
+    _intervals: deque[float] = field(
+        default_factory=lambda: deque(maxlen=CLOCK_HISTORY), init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         if isinstance(self.icp_iterations, bool) or not (
@@ -305,6 +311,7 @@ class FusionEstimator(Estimator):
         self._n_keyframes = 0
         self._velocity = np.zeros(3)
         self._recent = deque()
+        self._intervals = deque(maxlen=CLOCK_HISTORY)
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
@@ -393,7 +400,7 @@ class FusionEstimator(Estimator):
         if abs(wrap_angle(turn - step[2])) < PRIOR_SIGMA[2]:
             step = np.append(_rotate(np.array([0.5 * (turn - step[2])]), step[None, :2])[0], turn)
             guess = relative(latest.pose, compose(self.pose, step))
-        information = prediction_information(dt) if dt > 0 else PRIOR_INFORMATION
+        information = self._prediction_information(dt)
         edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
         start = compose(compose(mounts[0], edges[0].pose), inverse(mounts[0]))
@@ -406,6 +413,21 @@ class FusionEstimator(Estimator):
             pose = self._insert_keyframe(current, pose, edges)
         self._update_velocity(relative(self.pose, pose), dt)
         return pose
+
+    def _prediction_information(self, dt: float) -> FloatArray:
+        """The prediction's information over ``dt`` [s]
+        (:func:`estimators.rotation_pc.prediction_information`), with the clock's jitter the
+        median deviation of the last ``CLOCK_HISTORY`` intervals from their median."""
+        if dt > 0:
+            self._intervals.append(dt)
+        if not dt > 0 or len(self._intervals) < 5:
+            # Until a few intervals are seen, neither the clock nor the velocity is known (and
+            # a clock that does not run forward predicts nothing).
+            return PRIOR_INFORMATION
+        intervals = np.asarray(self._intervals)
+        jitter = float(np.median(np.abs(intervals - np.median(intervals))))
+        speed = float(np.hypot(self._velocity[0], self._velocity[1]))
+        return prediction_information(dt, speed, jitter)
 
     def _update_velocity(self, motion: FloatArray, dt: float) -> None:
         """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of

@@ -492,10 +492,12 @@ class ScanMatcher:
         return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
 
 
-def prediction_information(dt: float) -> FloatArray:
+def prediction_information(dt: float, speed: float = 0.0, jitter: float = 0.0) -> FloatArray:
     """Information (3,) of a constant-velocity prediction over ``dt`` [s], relative to one
     return's (as ``PRIOR_INFORMATION``): its position good to ``PREDICTION_ACCELERATION dt^2``
-    (clipped to [``MIN_PREDICTION_SIGMA``, ``PRIOR_SIGMA``]), its heading to ``PRIOR_SIGMA``.
+    plus ``speed`` [m/s] times the clock's ``jitter`` [s] (a scan stamped early or late has
+    moved further or less than its interval says), clipped to [``MIN_PREDICTION_SIGMA``,
+    ``PRIOR_SIGMA``]; its heading to ``PRIOR_SIGMA``.
 
     Where the returns pin the pose down, hundreds of them outweigh it; where they leave a
     direction nearly open (the exit of a corridor, a hall with a few posts in range), it
@@ -503,7 +505,11 @@ def prediction_information(dt: float) -> FloatArray:
     """
     if not dt > 0:
         raise ValueError(f"dt: expected a positive scan interval [s], got {dt}")
-    sigma = np.clip(PREDICTION_ACCELERATION * dt**2, MIN_PREDICTION_SIGMA, PRIOR_SIGMA[0])
+    if not (speed >= 0 and jitter >= 0):
+        raise ValueError(f"speed and jitter: expected values >= 0, got {speed}, {jitter}")
+    sigma = np.clip(
+        PREDICTION_ACCELERATION * dt**2 + speed * jitter, MIN_PREDICTION_SIGMA, PRIOR_SIGMA[0]
+    )
     return (RANGE_NOISE / np.array([sigma, sigma, PRIOR_SIGMA[2]])) ** 2
 
 
