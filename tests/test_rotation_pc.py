@@ -228,5 +228,10 @@ def test_prediction_information_grows_with_the_scan_rate_within_its_bounds() -> 
     assert prediction_information(10.0)[0] == pytest.approx(PRIOR_INFORMATION[0])
     assert prediction_information(1e-3)[0] == pytest.approx((0.01 / MIN_PREDICTION_SIGMA) ** 2)
     assert prediction_information(0.1)[2] == pytest.approx(PRIOR_INFORMATION[2])
+    # A clock jittering by 5 ms at 1 m/s adds 5 mm: the 10 Hz prediction is half as sure.
+    jittery = prediction_information(0.1, speed=1.0, jitter=0.005)[0]
+    assert jittery == pytest.approx(information[1] / 4)
     with pytest.raises(ValueError, match="dt"):
         prediction_information(0.0)
+    with pytest.raises(ValueError, match="jitter"):
+        prediction_information(0.1, speed=1.0, jitter=-0.01)
