@@ -85,11 +85,10 @@ class LocalMapOdometry(Estimator):
         n_keyframes: keyframes merged into the local map (10, i.e. the last ~2.5 m of travel;
             older ones carry drift and mostly surfaces out of view).
         voxel_size: map thinning (0.05 m: a few times the range noise, finer than walls'
-            curvature). It must stay above ~3 x the range noise, or a wall's points spread
-            over several voxels across it and its normals stop telling a corridor's axis
-            from noise: at 3 cm noise the simulated hallway drifts 0.50 m with 0.05 m voxels
-            and 0.02 m with 0.1 m ones (which cost the 1 cm runs' small cylinders 0.2 % of
-            eq.-11 accuracy, and give ACES 0.0341 m / 0.306 deg per local relation).
+            curvature). At 3 cm range noise a wall's points spread over several voxels
+            across it and its normals' noise starts to pass for information along a
+            corridor's axis: the simulated hallway then drifts 0.2-0.5 m (0.3-0.6 m before
+            this issue's changes), with 0.1-0.12 m voxels anywhere from 0.02 to 0.37 m.
         scan_voxel_size: thinning of each scan (0.02 m, about the range noise: only
             near-duplicate returns of dense 360-beam scans of near walls merge).
         loss, loss_scale: robust loss and its scale (Cauchy, 0.1 m: a few range-noise sigmas).
