@@ -148,22 +148,24 @@ class PointToLineReference:
 
     @classmethod
     def with_estimated_normals(
-        cls, points: ArrayLike, k: int = 5, denoise: bool = False
+        cls, points: ArrayLike, k: int = 5, denoise: bool = False, max_k: int | None = None
     ) -> PointToLineReference:
         """Reference whose normals come from each point's ``k`` nearest neighbours
         (:func:`estimators.scan_matching.estimate_normals`), sharing one k-d tree. With
         ``denoise``, lines pass through each point moved onto the curve fitted through its
         neighbours, with that curve's normal
         (:func:`estimators.scan_matching.fit_local_curves`): pairs then carry the
-        reference's range noise averaged over ``k`` readings rather than one reading's."""
+        reference's range noise averaged over ``k`` readings rather than one reading's. With
+        ``max_k``, neighbourhoods that do not form a line are refitted through up to that
+        many points (noisy walls; see :func:`estimators.scan_matching.estimate_normals`)."""
         reference = cls(points)
         if denoise:
             reference.normals, reference.valid_normals, reference.anchors = fit_local_curves(
-                reference.points, reference.tree, k
+                reference.points, reference.tree, k, max_k=max_k
             )
         else:
             reference.normals, reference.valid_normals = estimate_normals(
-                reference.points, reference.tree, k
+                reference.points, reference.tree, k, max_k=max_k
             )
         return reference
 

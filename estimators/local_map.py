@@ -150,6 +150,7 @@ class LocalMapOdometry(Estimator):
     min_range: float = DEFAULT_MIN_RANGE
     use_timestamps: bool = False
     normal_neighbours: int = 9
+    max_normal_neighbours: int = 36
     velocity_window: int = 5
     denoise_map: bool = True
     prediction_acceleration: float = 0.5
@@ -216,7 +217,7 @@ class LocalMapOdometry(Estimator):
             self._reference = None
             return
         self._reference = PointToLineReference.with_estimated_normals(
-            merged, self.normal_neighbours, self.denoise_map
+            merged, self.normal_neighbours, self.denoise_map, self.max_normal_neighbours
         )
         self._field = None
 

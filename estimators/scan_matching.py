@@ -76,7 +76,7 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[
 
 
 class _Neighbourhoods(NamedTuple):
-    """Each point's ``k`` nearest neighbours within a radius and the line fitted through them."""
+    """Each point's nearest neighbours within a radius and the line fitted through them."""
 
     neighbours: NDArray[np.float64]  # (M, k, 2); missing ones repeat the point itself
     weights: NDArray[np.float64]  # (M, k): 1 for a neighbour found, 0 for a missing one
@@ -86,15 +86,16 @@ class _Neighbourhoods(NamedTuple):
     valid: NDArray[np.bool_]  # (M,) a line: >= 3 neighbours, clearly elongated spread
 
 
-def _fit_lines(
-    points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float
+def _fit_rows(
+    points: NDArray[np.float64], tree: cKDTree, rows: NDArray[np.intp], k: int,
+    max_radius: float,
 ) -> _Neighbourhoods:
-    k = min(k, len(points))
-    distances, index = tree.query(points, k=k, distance_upper_bound=max_radius)
-    distances = distances.reshape(len(points), k)
-    index = index.reshape(len(points), k)
+    """Lines through the ``k`` nearest neighbours (within ``max_radius``) of ``points[rows]``."""
+    distances, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
+    distances = distances.reshape(len(rows), k)
+    index = index.reshape(len(rows), k)
     found = np.isfinite(distances)
-    safe = np.where(found, index, np.arange(len(points))[:, None])
+    safe = np.where(found, index, rows[:, None])
     neighbours = points[safe]
     weights = found.astype(np.float64)
     count = weights.sum(axis=1)
@@ -113,18 +114,62 @@ def _fit_lines(
     return _Neighbourhoods(neighbours, weights, count, mean, normals, valid)
 
 
+def _widened(fit: _Neighbourhoods, k: int) -> _Neighbourhoods:
+    """``fit`` with room for ``k`` neighbours per point (the extra slots weigh nothing)."""
+    extra = k - fit.weights.shape[1]
+    return fit._replace(
+        neighbours=np.concatenate(
+            [fit.neighbours, np.repeat(fit.neighbours[:, :1], extra, axis=1)], axis=1
+        ),
+        weights=np.pad(fit.weights, ((0, 0), (0, extra))),
+    )
+
+
+def _fit_lines(
+    points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float,
+    max_k: int | None = None,
+) -> _Neighbourhoods:
+    """Lines through each point's ``k`` nearest neighbours; where they do not form one, the
+    neighbourhood doubles (up to ``max_k`` points and ``max_radius``) until they do.
+
+    Why grow: the line test compares the spread across the fitted line with the spread along
+    it, and a few neighbours of a noisy wall (range noise comparable to the point spacing)
+    span a band about as wide as it is long, so they fail it; more neighbours span more of
+    the wall while the band stays as wide. A corner or a blob stays one at any size.
+    """
+    fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
+    width = fit.weights.shape[1]
+    limit = min(max_k or k, len(points))
+    while width < limit:
+        # Points whose whole neighbourhood within max_radius is already in the fit can't grow.
+        rows = np.flatnonzero(~fit.valid & (fit.count == width))
+        if len(rows) == 0:
+            break
+        width = min(2 * width, limit)
+        grown = _fit_rows(points, tree, rows, width, max_radius)
+        fit = _widened(fit, width)
+        for name, value in grown._asdict().items():
+            getattr(fit, name)[rows] = value
+    return fit
+
+
 def estimate_normals(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5
+    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5,
+    max_k: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
     (principal axis of their covariance), and which points have a reliable one: at least 3
-    neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob)."""
-    fit = _fit_lines(points, tree, k, max_radius)
+    neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob:
+    the smaller eigenvalue below a tenth of the larger). With ``max_k`` > ``k``, a point whose
+    neighbours fail that test is fitted again through twice as many, up to ``max_k``: what a
+    noisy wall needs (see :func:`_fit_lines`); None keeps ``k``."""
+    fit = _fit_lines(points, tree, k, max_radius, max_k)
     return fit.normals, fit.valid
 
 
 def fit_local_curves(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5
+    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5,
+    max_k: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Denoised surface points: normals ``(M, 2)``, which are reliable (as
     :func:`estimate_normals`), and anchors ``(M, 2)``.
@@ -136,8 +181,9 @@ def fit_local_curves(
     than one reading's, and, unlike a projection onto the straight line, is not pulled
     towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
     0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
+    ``max_k`` grows the neighbourhoods that fail the line test, as in :func:`estimate_normals`.
     """
-    fit = _fit_lines(points, tree, k, max_radius)
+    fit = _fit_lines(points, tree, k, max_radius, max_k)
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
     offsets = fit.neighbours - fit.mean[:, None, :]
     along = np.einsum("ijk,ik->ij", offsets, tangents)
