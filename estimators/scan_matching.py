@@ -83,6 +83,7 @@ class _Neighbourhoods(NamedTuple):
     count: NDArray[np.float64]  # (M,) neighbours found
     mean: NDArray[np.float64]  # (M, 2) their centroid
     normals: NDArray[np.float64]  # (M, 2) unit normal of their principal axis
+    across: NDArray[np.float64]  # (M,) RMS distance [m] of the neighbours from that axis
     valid: NDArray[np.bool_]  # (M,) a line: >= 3 neighbours, clearly elongated spread
 
 
@@ -110,8 +111,12 @@ def _fit_rows(
     spread = np.sqrt((sxx - syy) ** 2 + 4.0 * sxy**2)
     small = 0.5 * (sxx + syy - spread)
     large = 0.5 * (sxx + syy + spread)
-    valid = (count >= 3) & (small < 0.1 * large)
-    return _Neighbourhoods(neighbours, weights, count, mean, normals, valid)
+    across = np.sqrt(np.maximum(small, 0.0) / count)
+    # The point itself must lie within the band (3 sigma of the spread across the line): a
+    # return off a chair leg next to a wall is not a wall point.
+    own = np.abs(np.einsum("ij,ij->i", points[rows] - mean, normals))
+    valid = (count >= 3) & (small < 0.1 * large) & (own <= 3.0 * across + 1e-9)
+    return _Neighbourhoods(neighbours, weights, count, mean, normals, across, valid)
 
 
 def _widened(fit: _Neighbourhoods, k: int) -> _Neighbourhoods:
@@ -135,18 +140,26 @@ def _fit_lines(
     Why grow: the line test compares the spread across the fitted line with the spread along
     it, and a few neighbours of a noisy wall (range noise comparable to the point spacing)
     span a band about as wide as it is long, so they fail it; more neighbours span more of
-    the wall while the band stays as wide. A corner or a blob stays one at any size.
+    the wall while the band stays as wide. A corner or a blob stays one at any size, but a
+    small feature (a door jamb a few cm deep) would be smoothed into the wall around it, and
+    its point-to-line pairs are what pins the motion along a corridor; so a grown line is
+    kept only if its spread across is at most twice the typical one of the first fits (their
+    median, i.e. the walls' range noise): where the sensor is precise, the feature stands out
+    of that noise and stays a feature; where it is as noisy as the feature is deep, it cannot
+    be told from a wall anyway.
     """
     fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
+    noise = 2.0 * float(np.median(fit.across))
     width = fit.weights.shape[1]
     limit = min(max_k or k, len(points))
     while width < limit:
         # Points whose whole neighbourhood within max_radius is already in the fit can't grow.
-        rows = np.flatnonzero(~fit.valid & (fit.count == width))
+        rows = np.flatnonzero(~fit.valid & (fit.count == width) & (fit.across <= noise))
         if len(rows) == 0:
             break
         width = min(2 * width, limit)
         grown = _fit_rows(points, tree, rows, width, max_radius)
+        grown = grown._replace(valid=grown.valid & (grown.across <= noise))
         fit = _widened(fit, width)
         for name, value in grown._asdict().items():
             getattr(fit, name)[rows] = value
