@@ -127,7 +127,9 @@ class GraphSlam(Estimator):
             ACES: 25 of 730 steps checked; the front end's lost 78-degree corner turn at
             540 s, which the loop edges had spread over ~40 m of corridor as an arc (issue
             8), is found; ATE against ``aces-corrected`` 0.85 -> 0.37 m.
-        loop_params: settings of the loop verification (:class:`LoopClosureParams`).
+        loop_params: settings of the loop verification (:class:`LoopClosureParams`); its
+            ``normal_neighbours`` and ``denoise_reference`` also shape the previous keyframe's
+            lines in the step check and the odometry edges' match information.
     """
 
     frontend: str = "lidar_odometry"
@@ -255,8 +257,10 @@ class GraphSlam(Estimator):
         else:
             previous = self.keyframes[-1]
             step = relative(previous.odometry, odometry)
-            reference = (PointToLineReference.with_estimated_normals(previous.points)
-                         if len(previous.points) >= 3 and len(points) >= 3 else None)
+            reference = (PointToLineReference.with_estimated_normals(
+                previous.points, self.loop_params.normal_neighbours,
+                self.loop_params.denoise_reference)
+                if len(previous.points) >= 3 and len(points) >= 3 else None)
             if reference is not None and self.check_steps:
                 step = self._checked_step(reference, previous.points, points, step)
             index = self.graph.add_node(compose(self.graph.poses[-1], step))
