@@ -158,6 +158,34 @@ def test_quality_drops_without_overlap():
     assert match_scans(reference, unrelated).quality < 0.1
 
 
+def test_a_noisy_corridors_axis_is_left_to_the_prior():
+    # Two walls 3 m apart seen with 3 cm noise, a map of five scans' worth thinned to 5 cm;
+    # nothing fixes the motion along them, so the registration must keep the prior's 0.1 m
+    # there. Fitted through 9 neighbours, the map's normals fail the line test and its pairs
+    # fall back to two-nearest-point lines pointing anywhere in the walls' band, whose noise
+    # passes for information along the axis; grown neighbourhoods keep the walls lines.
+    params = ICPParams(max_correspondence_distance=0.5, min_information=2.0)
+    prior = np.array([0.1, 0.0, 0.0])
+    information = np.array([(0.02 / 0.03) ** 2, (0.02 / 0.03) ** 2, (0.02 / 0.1) ** 2])
+
+    def corridor(rng: np.random.Generator, n_points: int) -> np.ndarray:
+        x = rng.uniform(-4.0, 4.0, n_points)
+        return np.column_stack([x, rng.choice([-1.5, 1.5], n_points)
+                                + 0.03 * rng.standard_normal(n_points)])
+
+    errors: dict[int | None, list[float]] = {None: [], 72: []}
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        thinned = voxel_downsample(corridor(rng, 2000), 0.05)
+        query = corridor(rng, 400)
+        for max_k in errors:
+            reference = PointToLineReference.with_estimated_normals(thinned, 9, True, max_k)
+            pose = register(reference, query, prior, params, prior, information).pose
+            errors[max_k].append(abs(pose[0] - prior[0]))
+    assert np.median(errors[72]) < 1e-3
+    assert np.median(errors[None]) > 0.01
+
+
 def test_icp_estimator_follows_a_ray_cast_drive():
     rng = np.random.default_rng(11)
     setup = SensorSetup(np.zeros((1, 3)), ANGLES, 20.0)

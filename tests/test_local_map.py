@@ -114,15 +114,16 @@ def test_a_turn_beyond_the_motion_model_and_search_window_is_found():
 
 
 def _corridor_drive(
-    n_scans: int, rng: np.random.Generator
+    n_scans: int, rng: np.random.Generator, noise: float = 0.01
 ) -> tuple[SensorSetup, np.ndarray, list[dict[str, np.ndarray]]]:
     """Drive down a 5 m wide, 40 m long corridor from x = 1 m at 0.1 m per scan with one
-    360-beam Lidar (10 m range, 1 cm noise): its setup, true poses (n, 3) and scans.
+    360-beam Lidar (10 m range, ``noise`` [m] of range noise): its setup, true poses (n, 3)
+    and scans.
     Once the start wall falls out of range (x > ~10 m) nothing in view fixes the motion along
     the corridor."""
     corners = np.array([(0.0, -2.5), (40.0, -2.5), (40.0, 2.5), (0.0, 2.5)])
     world = World(segments=np.hstack([corners, np.roll(corners, -1, axis=0)]))
-    lidar = Lidar(noise_std=0.01)
+    lidar = Lidar(noise_std=noise)
     truth = np.column_stack([1.0 + 0.1 * np.arange(n_scans), np.zeros((n_scans, 2))])
     scans = [{"lidar_1": lidar.scan(world, pose[None], rng)[0].astype(np.float64)}
              for pose in truth]
@@ -138,9 +139,12 @@ def _replay(estimator: LocalMapOdometry, setup: SensorSetup, start: np.ndarray,
     return estimator.trajectory
 
 
-def _corridor_end_error(estimator: LocalMapOdometry, seed: int = 0) -> np.ndarray:
-    """Final pose error (3,) [m, rad] after 15 m of the corridor at 10 Hz."""
-    setup, truth, scans = _corridor_drive(151, np.random.default_rng(seed))
+def _corridor_end_error(
+    estimator: LocalMapOdometry, seed: int = 0, noise: float = 0.01
+) -> np.ndarray:
+    """Final pose error (3,) [m, rad] after 15 m of the corridor at 10 Hz, ``noise`` [m] of
+    range noise."""
+    setup, truth, scans = _corridor_drive(151, np.random.default_rng(seed), noise)
     trajectory = _replay(estimator, setup, truth[0], scans, 0.1 * np.arange(len(truth)))
     return relative(truth[-1], trajectory[-1])
 
@@ -194,6 +198,8 @@ def test_bad_parameters_are_named():
         LocalMapOdometry(n_keyframes=0)
     with pytest.raises(ValueError, match="normal_neighbours: expected >= 3"):
         LocalMapOdometry(normal_neighbours=2)
+    with pytest.raises(ValueError, match="max_normal_neighbours: expected >= normal_neighbours"):
+        LocalMapOdometry(max_normal_neighbours=5)
     with pytest.raises(ValueError, match="prediction_acceleration: expected a positive value"):
         LocalMapOdometry(prediction_acceleration=-1.0)
     with pytest.raises(ValueError, match="velocity_window: expected >= 1"):

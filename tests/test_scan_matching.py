@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from estimators.scan_matching import estimate_normals, fit_local_curves
+from estimators.scan_matching import estimate_normals, fit_local_curves, voxel_downsample
 
 
 def _noisy(points: np.ndarray, normals: np.ndarray, sigma: float, seed: int) -> np.ndarray:
@@ -59,3 +59,39 @@ def test_corners_are_not_fitted_and_keep_their_raw_points():
     np.testing.assert_array_equal(valid, line_valid)
     np.testing.assert_array_equal(anchors[~valid], corner[~valid])
     assert not valid[0]  # the corner point itself: a blob, not a line
+
+
+def _wall_band(sigma: float, seed: int, recess: float = 0.0) -> np.ndarray:
+    """A 4 m wall (y = 0) seen in many noisy scans (``sigma`` [m] across it) and thinned on
+    5 cm voxels like a local map; between x = 2 and 3 m it is set back by ``recess`` [m]."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 4.0, 3000)
+    y = np.where((x > 2.0) & (x < 3.0), recess, 0.0) + sigma * rng.standard_normal(len(x))
+    return voxel_downsample(np.column_stack([x, y]), 0.05)
+
+
+def test_a_noisy_wall_is_a_line_once_its_neighbourhoods_grow():
+    # At 3 cm noise the thinned wall is a band 3-4 voxels thick: 9 neighbours span about as
+    # much of it across as along, fail the line test, and would be paired on random lines.
+    for seed in range(3):
+        points = _wall_band(0.03, seed)
+        tree = cKDTree(points)
+        inner = (points[:, 0] > 0.5) & (points[:, 0] < 3.5)
+        _, few = estimate_normals(points, tree, k=9)
+        normals, grown = estimate_normals(points, tree, k=9, max_k=72)
+        assert np.mean(few[inner]) < 0.2
+        assert np.mean(grown[inner]) > 0.95
+        tilt = np.degrees(np.arcsin(np.abs(normals[inner & grown, 0])))
+        assert np.percentile(tilt, 95) < 5.0
+
+
+def test_growing_does_not_smooth_a_recess_out_of_a_precise_wall():
+    # A 10 cm recess (a doorway) in a 1 cm noise wall: its edges are what fixes the motion
+    # along the wall, so they must stay "not a line" rather than be averaged into one.
+    points = _wall_band(0.01, seed=0, recess=0.1)
+    tree = cKDTree(points)
+    _, valid = estimate_normals(points, tree, k=9)
+    _, grown = estimate_normals(points, tree, k=9, max_k=72)
+    edges = (np.abs(points[:, 0] - 2.0) < 0.08) | (np.abs(points[:, 0] - 3.0) < 0.08)
+    assert np.mean(valid[edges]) < 0.5
+    np.testing.assert_array_equal(grown[edges], valid[edges])
