@@ -110,7 +110,7 @@ def test_map_scores_see_true_poses_and_a_shifted_run(stored: Path) -> None:
     assert true["map_precision"] > 0.95 and true["map_iou"] > 0.85
     assert true["cylinder_recall"] >= 0.9 and true["cylinder_error_m"] < 0.03
     shifted = score_map(reference, dataset.poses + [0.5, 0.0, 0.0], dataset)
-    assert shifted["map_iou"] < 0.3 and shifted["map_precision"] < 0.3
+    assert shifted["map_iou"] < 0.3 and shifted["map_precision"] < 0.4 * true["map_precision"]
     assert shifted["cylinder_error_m"] > 0.3 or shifted["cylinder_recall"] < 0.5
     with pytest.raises(ValueError, match="obstacle_stride: expected an integer >= 1, got 0"):
         score_map(reference, dataset.poses, dataset, obstacle_stride=0)
