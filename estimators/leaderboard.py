@@ -29,15 +29,14 @@ every estimator (:mod:`estimators.runner`), scores it (:mod:`estimators.metrics`
 
 Re-running with the same database skips everything already stored.
 
-Cost grows as scenarios x steps x estimators. The default matrix (4 groups x 2 seeds, the
-paper's full traces: 2,844 steps, plus the first 1,000 ACES scans) costs, in CPU time, about
-20 ms per step for all ten estimators together (``pc_fusion`` 5 ms, the rest 0-2.7 ms), 3 ms
-per step for the map scores of all ten (0.3 ms each: the grid from every scan, the obstacle
-tracker on every 10th) and 1 s for the per-scenario map truths; Table I's world-aligned copies
-of the six group scenarios add 2,108 steps through the three paper estimators (0.9, 0.9 and
-1.8 ms per step) and their recording: 8.6 CPU-seconds, 4.4 s on two cores. About 95
-CPU-seconds in all, so about 48 s on two free cores. The summary line prints the workers' time
-per stage and their CPU time, so a slow run can be told apart from a busy machine.
+Cost grows as scenarios x steps x estimators. The default matrix (5 groups x 2 seeds, the
+paper's full traces and the hallway out-and-back: 3,638 steps, plus the first 1,000 ACES scans)
+costs, in CPU time, about 20 ms per step for all ten estimators together (``pc_fusion`` 4.8 ms,
+``slam`` 2.9 ms, the rest 0-2.6 ms), about 5 ms per step for the map scores of all ten (the grid
+and the obstacle tracker on every scan) and 3 s for the per-scenario map truths; Table I's
+world-aligned copies of the six group scenarios add 2,108 steps through the three paper
+estimators. About 126 CPU-seconds in all: 66 s on two free cores. The summary line prints the
+workers' time per stage and their CPU time, so a slow run can be told apart from a busy machine.
 """
 
 from __future__ import annotations
@@ -170,7 +169,8 @@ def _parser() -> argparse.ArgumentParser:
                     "reproduce the paper's Table I and draw its Fig. 8.",
     )
     parser.add_argument("--worlds", nargs="+", metavar="WORLD",
-                        help="worlds to run (default: the paper's groups plus the straight seed)")
+                        help="worlds to run (default: the paper's groups plus the straight "
+                        "and out-and-back hallway drives)")
     parser.add_argument("--traces", nargs="+", metavar="TRACE",
                         help="trace seeds, crossed with --worlds (default: the paper's pairs)")
     parser.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS),
