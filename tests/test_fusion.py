@@ -120,6 +120,16 @@ def test_bad_graphs_raise_readable_errors(kwargs, message) -> None:
         optimize_poses(**arguments)
 
 
+def scan_drive(world: World, mounts: np.ndarray, poses: np.ndarray, rng: np.random.Generator):
+    """The setup, noisy (1 cm) 360-beam scans from ``mounts`` at every car pose, and the poses."""
+    lidar = Lidar(noise_std=0.01)
+    observations = [
+        dict(zip(LIDAR_KEYS, lidar.scan(world, compose(pose, mounts), rng), strict=False))
+        for pose in poses
+    ]
+    return SensorSetup(mounts, default_beam_angles(360), 10.0), observations, poses
+
+
 def drive_in_room(steps: int, motion: np.ndarray, n_lidars: int = 2):
     """Noisy scans of a car moving by ``motion`` per scan through a room of cylinders."""
     rng = np.random.default_rng(21)
@@ -131,13 +141,7 @@ def drive_in_room(steps: int, motion: np.ndarray, n_lidars: int = 2):
     poses = [np.array([-1.0, -0.5, 0.3])]
     for _ in range(steps):
         poses.append(compose(poses[-1], motion))
-    poses = np.array(poses)
-    lidar = Lidar(noise_std=0.01)
-    observations = [
-        dict(zip(LIDAR_KEYS, lidar.scan(world, compose(pose, mounts), rng), strict=False))
-        for pose in poses
-    ]
-    return SensorSetup(mounts, default_beam_angles(360), 10.0), observations, poses
+    return scan_drive(world, mounts, np.array(poses), rng)
 
 
 @pytest.mark.parametrize(("n_lidars", "window"), [(2, 2), (1, 2), (2, 4)])
@@ -192,13 +196,7 @@ def drive_through_corridor(weave: float, seed: int):
     poses = [np.array([-2.0, 0.0, 0.0])]
     for k in range(200):
         poses.append(compose(poses[-1], [0.1, 0.0, weave * np.sin(2 * np.pi * k / 20)]))
-    poses = np.array(poses)
-    lidar = Lidar(noise_std=0.01)
-    observations = [
-        dict(zip(LIDAR_KEYS, lidar.scan(world, compose(pose, mounts), rng), strict=False))
-        for pose in poses
-    ]
-    return SensorSetup(mounts, default_beam_angles(360), 10.0), observations, poses
+    return scan_drive(world, mounts, np.array(poses), rng)
 
 
 @pytest.mark.parametrize(("weave", "limit"), [(0.0, 0.08), (0.04, 0.25)])
