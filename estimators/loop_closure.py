@@ -90,8 +90,9 @@ class LoopClosureParams:
             ``lidar_odometry`` front end's map): a line through one raw reading and its 5
             neighbours carries that reading's range noise into the loop edge, and its normal
             tilts by the noise of a few points. Measured (``bench_slam.py --parts sim --seeds
-            0 1 2 3 4``, 40 runs): slam's ATE above its front end's in 10 -> 6 runs, mean
-            gain 1.46x -> 1.64x; ACES unchanged (all relations 0.0343 m / 0.311 deg);
+            0 1 2 3 4``, 40 runs, with the final front end): slam's ATE above its front
+            end's in 9 -> 8 runs, geometric-mean gain 1.46x -> 1.55x, worst 0.45x -> 0.70x;
+            ACES unchanged (all relations 0.0342 -> 0.0340 m);
             +1 ms CPU per place map of 1,800 points.
         point_sigma, effective_points: the ICP Hessian becomes the edge's information
             matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
