@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from estimators.base import Estimator
+from estimators.motion_prior import clock_jitter
 from estimators.rotation_pc import (
     PRIOR_INFORMATION,
     PRIOR_SIGMA,
@@ -429,10 +430,8 @@ class FusionEstimator(Estimator):
             # Until a few intervals are seen, neither the clock nor the velocity is known (and
             # a clock that does not run forward predicts nothing).
             return PRIOR_INFORMATION
-        intervals = np.asarray(self._intervals)
-        jitter = float(np.median(np.abs(intervals - np.median(intervals))))
         speed = float(np.hypot(self._velocity[0], self._velocity[1]))
-        return prediction_information(dt, speed, jitter)
+        return prediction_information(dt, speed, clock_jitter(self._intervals))
 
     def _update_velocity(self, motion: FloatArray, dt: float) -> None:
         """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of

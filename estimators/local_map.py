@@ -64,6 +64,7 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.icp import ICPParams, MatchResult, PointToLineReference, register
+from estimators.motion_prior import clock_jitter, prediction_sigma
 from estimators.scan_matching import (
     DEFAULT_MIN_RANGE,
     LikelihoodField,
@@ -72,10 +73,6 @@ from estimators.scan_matching import (
     voxel_downsample,
 )
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
-
-#: The motion prior's position is never trusted to better than this [m] per scan (about a
-#: registration's own precision at 1 cm range noise), however fast and regular the scans.
-MIN_PREDICTION_SIGMA = 1e-3
 
 
 @dataclass
@@ -265,20 +262,18 @@ class LocalMapOdometry(Estimator):
         residuals. Its position misses by about ``prediction_acceleration * dt^2`` over a
         typical scan interval ``dt`` plus, when the model counts scans, speed times the
         interval's typical jitter (a scan arriving late has moved further); clipped to
-        [``MIN_PREDICTION_SIGMA``, ``prior_sigma_translation``], which also holds until the
-        clock has been seen for a few scans or when it does not run forward."""
+        [``motion_prior.MIN_PREDICTION_SIGMA``, ``prior_sigma_translation``], which also
+        holds until the clock has been seen for a few scans or when it does not run forward."""
         if len(self._intervals) < 5:
             return self._prior_information
-        intervals = np.asarray(self._intervals)
-        typical = float(np.median(intervals))
+        typical = float(np.median(self._intervals))
         if not typical > 0:
             return self._prior_information
-        jitter = float(np.median(np.abs(intervals - typical)))
         speed = np.hypot(self._velocity[0], self._velocity[1])  # [m/s] or [m/scan]
         if not self.use_timestamps:
             speed /= typical
-        sigma = np.clip(self.prediction_acceleration * typical**2 + speed * jitter,
-                        MIN_PREDICTION_SIGMA, self.prior_sigma_translation)
+        sigma = prediction_sigma(typical, speed, clock_jitter(self._intervals),
+                                 self.prediction_acceleration, self.prior_sigma_translation)
         information = self._prior_information.copy()
         information[:2] = (self.noise_sigma / sigma) ** 2
         return information

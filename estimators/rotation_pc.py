@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from estimators.base import Estimator, SensorSetup
 from estimators.icp import gauss_newton_step, point_to_line_jacobian, robust_weights
+from estimators.motion_prior import prediction_sigma
 from estimators.phase_correlation import ImageSpectrum, image_spectrum, phase_correlate
 from estimators.rotation import heading_change, log_polar_spectrum
 from estimators.scan_image import (
@@ -69,10 +70,9 @@ RANGE_NOISE = 0.01
 PRIOR_INFORMATION = (RANGE_NOISE / PRIOR_SIGMA) ** 2
 #: A constant-velocity prediction over a scan interval ``dt`` misses the car's position by
 #: about ``PREDICTION_ACCELERATION dt^2`` [m] (an indoor robot's brisk 0.5 m/s^2: 5 mm at 10 Hz,
-#: 2 cm at 5 Hz), never trusted to better than ``MIN_PREDICTION_SIGMA`` [m] (a match's own
-#: precision) nor worse than ``PRIOR_SIGMA``; see :func:`prediction_information`.
+#: 2 cm at 5 Hz), never trusted to better than ``motion_prior.MIN_PREDICTION_SIGMA`` [m] (a
+#: match's own precision) nor worse than ``PRIOR_SIGMA``; see :func:`prediction_information`.
 PREDICTION_ACCELERATION = 0.5
-MIN_PREDICTION_SIGMA = 1e-3
 #: A translation direction with less information than this share of the best direction's is
 #: open: the spurious information of normals tilted by noise (a few hundredths of a radian
 #: on 1 cm noise) is a share of about their tilt squared, well under 2 %.
@@ -496,8 +496,8 @@ def prediction_information(dt: float, speed: float = 0.0, jitter: float = 0.0) -
     """Information (3,) of a constant-velocity prediction over ``dt`` [s], relative to one
     return's (as ``PRIOR_INFORMATION``): its position good to ``PREDICTION_ACCELERATION dt^2``
     plus ``speed`` [m/s] times the clock's ``jitter`` [s] (a scan stamped early or late has
-    moved further or less than its interval says), clipped to [``MIN_PREDICTION_SIGMA``,
-    ``PRIOR_SIGMA``]; its heading to ``PRIOR_SIGMA``.
+    moved further or less than its interval says), clipped to
+    [``motion_prior.MIN_PREDICTION_SIGMA``, ``PRIOR_SIGMA``]; its heading to ``PRIOR_SIGMA``.
 
     Where the returns pin the pose down, hundreds of them outweigh it; where they leave a
     direction nearly open (the exit of a corridor, a hall with a few posts in range), it
@@ -507,9 +507,7 @@ def prediction_information(dt: float, speed: float = 0.0, jitter: float = 0.0) -
         raise ValueError(f"dt: expected a positive scan interval [s], got {dt}")
     if not (speed >= 0 and jitter >= 0):
         raise ValueError(f"speed and jitter: expected values >= 0, got {speed}, {jitter}")
-    sigma = np.clip(
-        PREDICTION_ACCELERATION * dt**2 + speed * jitter, MIN_PREDICTION_SIGMA, PRIOR_SIGMA[0]
-    )
+    sigma = prediction_sigma(dt, speed, jitter, PREDICTION_ACCELERATION, PRIOR_SIGMA[0])
     return (RANGE_NOISE / np.array([sigma, sigma, PRIOR_SIGMA[2]])) ** 2
 
 

@@ -10,8 +10,8 @@ import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup, default_beam_angles
 from estimators.metrics import evaluate
+from estimators.motion_prior import MIN_PREDICTION_SIGMA
 from estimators.rotation_pc import (
-    MIN_PREDICTION_SIGMA,
     PRIOR_INFORMATION,
     CurveReference,
     RotationPhaseCorrelation,
