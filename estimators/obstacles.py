@@ -48,7 +48,6 @@ from estimators.base import SensorSetup
 from estimators.occupancy import sensor_poses
 from lidar_env.se2 import transform_points
 
-_CUT_FACTOR = 1
 # columns of the per-cluster statistics of _cluster_statistics
 _CX, _CY, _AXIS, _LENGTH, _WIDTH, _SPREAD, _FIT_X, _FIT_Y, _FIT_R, _FIT_RMS, _CORNER_RMS = range(11)
 
@@ -474,7 +473,7 @@ def _cut_out_arcs(
                 continue
             arc = _trim_against_lines(points, begins[k], begins[k] + begin, begins[k] + end,
                                       ends[k], params.min_points, tolerance)
-            if arc[1] - arc[0] >= _CUT_FACTOR * params.min_circle_points:
+            if arc[1] - arc[0] >= params.min_circle_points:
                 cuts[k] = arc
         if cuts:  # keep only the arcs that pass the full roundness test
             arcs = np.array(list(cuts.values()), dtype=np.int64).reshape(-1, 2)
