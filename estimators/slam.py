@@ -198,7 +198,6 @@ class GraphSlam(Estimator):
         # covariance of the odometry edge into each keyframe (keyframe 0: none)
         self._odometry_covariance: list[NDArray[np.float64]] = []
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
-        self._keyframe_scan: list[int] = []  # scan index each keyframe was taken from
         self._scan_odometry: list[NDArray[np.float64]] = []
         self._places: dict[tuple[int, int], PlaceMap] = {}
         self._dirty = False
@@ -250,7 +249,6 @@ class GraphSlam(Estimator):
     def _add_keyframe(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
                       path_length: float) -> None:
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
-        self._keyframe_scan.append(len(self._scan_keyframe))
         if not self.keyframes:
             self.graph.add_node(odometry)
             self._odometry_covariance.append(np.zeros((3, 3)))
@@ -494,7 +492,9 @@ class GraphSlam(Estimator):
     @property
     def keyframe_scans(self) -> NDArray[np.int64]:
         """``(K,)`` index of the observation each keyframe was taken from."""
-        return np.array(self._keyframe_scan, dtype=np.int64)
+        # every keyframe is taken from a scan, the first that hangs from it
+        return np.searchsorted(self._scan_keyframe, np.arange(len(self.keyframes))).astype(
+            np.int64)
 
     def anchored_trajectory(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(N, 3)`` car poses of every scan placed on the given keyframe poses (K, 3).
