@@ -11,11 +11,11 @@ pc_fusion lidar_odometry slam] [--figures DIR] [--aces]`` (about 20 s without es
    (map update, detection, tracking) on one core.
 2. Quality: in every built-in world, driven along the paper's trace by the pure-pursuit
    driver, at each of ``--resolutions``, the map built at the true poses is scored against
-   ``world.to_image`` on the visible occupied cells (those a beam of the run hit) at one-cell
-   tolerance (target IoU >= 0.9), and the tracked cylinders against ``world.circles`` (target
-   recall >= 95 %, error <= 5 cm). With ``--estimators`` the same scores follow for the map
-   built at each estimator's poses, with the gap to the true-pose map (target: IoU within
-   0.05 of it).
+   the cells that hold an obstacle (``estimators.map_scoring.true_occupancy``) on the visible
+   ones (those a beam of the run hit) at one-cell tolerance (target IoU >= 0.9), and the
+   tracked cylinders against ``world.circles`` (target recall >= 95 %, error <= 5 cm). With
+   ``--estimators`` the same scores follow for the map built at each estimator's poses, with
+   the gap to the true-pose map (target: IoU within 0.05 of it).
 3. With ``--aces --figures DIR``: the maps of the real ACES log (Radish) at each estimator's
    poses next to the map at the SLAM poses of ``aces-corrected`` (pseudo truth), as a PNG, with
    each map's return agreement (``estimators.map_scoring.return_agreement``).

@@ -204,14 +204,14 @@ def bench_sim(params: dict[str, Any], traces: list[str], seeds: list[int], draws
                 end_fe = float(np.hypot(*(odometry[-1, :2] - truth_arr[-1, :2])))
                 end_slam = float(np.hypot(*(smoothed[-1, :2] - truth_arr[-1, :2])))
                 ate_fe, ate_slam = _ate(odometry, truth_arr), _ate(smoothed, truth_arr)
-                gains.append(ate_fe / max(ate_slam, 1e-9))
+                gains.append(ate_fe / max(ate_slam, 1e-9))  # front end's ATE / slam's
                 revisiting = _revisiting(slam, keyframe_truth)
                 looped = len(np.intersect1d(slam.graph.edges[slam.graph.is_loop, 1], revisiting))
                 revisits = len(revisiting)
                 line = (f"  {trace:12s} s{seed} {world:15s} {len(truth_arr):4d} steps: end "
                         f"error {1e3 * end_fe:6.1f} -> {1e3 * end_slam:4.1f} mm; ATE "
                         f"{1e3 * ate_fe:6.1f} -> {1e3 * ate_slam:5.1f} mm "
-                        f"({ate_fe / max(ate_slam, 1e-9):4.1f}x), floor {1e3 * floor:4.1f} mm; "
+                        f"({gains[-1]:4.1f}x), floor {1e3 * floor:4.1f} mm; "
                         f"{slam.n_loops} loop edges on {looped} of {revisits} revisiting "
                         f"keyframes; {1e3 * seconds / len(truth_arr):.1f} ms/step")
                 if draws and slam.n_loops:
