@@ -152,6 +152,16 @@ def test_a_denoised_reference_cuts_the_registration_error_of_a_noisy_map():
     assert np.mean(errors[True]) < 0.7 * np.mean(errors[False])
 
 
+def test_pairs_anchor_on_the_given_anchors_along_the_stored_normals():
+    points = np.column_stack([np.linspace(0.0, 1.0, 11), np.zeros(11)])
+    anchors = points + [0.0, 0.01]  # the wall's denoised position, 1 cm above the readings
+    normals = np.tile([0.0, 1.0], (11, 1))
+    reference = PointToLineReference(points, normals, anchors=anchors)
+    pairs = reference.correspond(np.array([[0.31, 0.2], [0.69, -0.1]]), max_distance=0.5)
+    np.testing.assert_array_equal(pairs.anchors, anchors[[3, 7]])
+    np.testing.assert_array_equal(pairs.normals, normals[[3, 7]])
+
+
 def test_quality_drops_without_overlap():
     reference = points_at(np.array([-2.0, 0.5, 0.3]))
     unrelated = np.column_stack([np.linspace(20, 25, 100), np.linspace(-5, 5, 100)])
@@ -213,6 +223,8 @@ def test_bad_input_is_named():
         ICPParams(max_correspondence_distance=-1.0)
     with pytest.raises(ValueError, match=r"reference points: expected shape \(N >= 2, 2\)"):
         PointToLineReference(np.zeros((5, 3)))
+    with pytest.raises(ValueError, match=r"anchors: expected the points' shape \(5, 2\)"):
+        PointToLineReference(np.arange(10.0).reshape(5, 2), anchors=np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"query points: expected shape \(M, 2\)"):
         match_scans(np.zeros((5, 2)) + np.arange(5)[:, None], np.zeros(4))
     with pytest.raises(ValueError, match="initial_guess: expected a pose"):
