@@ -116,6 +116,9 @@ class LocalMapOdometry(Estimator):
         search_linear_window, search_angular_window: its window around the guess (0.5 m,
             30 deg: a sharp change of turn rate); when the match found there is still poor,
             the heading window widens to all headings (rare: 2 of 7374 ACES scans, ~0.6 s each).
+        search_resolution: the search's translation step and likelihood-field cell (0.05 m:
+            it only has to land in ICP's basin, several cm wide; decoupled from
+            ``voxel_size`` because the search's cost grows with the inverse square of it).
         min_range: readings below this [m] are "no return".
         use_timestamps: constant velocity per second rather than per scan (False; see above).
         normal_neighbours: map points a normal is fitted through (9: ~0.4 m of wall at the
@@ -160,6 +163,7 @@ class LocalMapOdometry(Estimator):
     min_quality: float = 0.5
     search_linear_window: float = 0.5
     search_angular_window: float = np.radians(30.0)
+    search_resolution: float = 0.05
     min_range: float = DEFAULT_MIN_RANGE
     use_timestamps: bool = False
     normal_neighbours: int = 9
@@ -173,7 +177,7 @@ class LocalMapOdometry(Estimator):
             "keyframe_distance", "keyframe_angle", "voxel_size", "scan_voxel_size",
             "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
-            "search_angular_window", "prediction_acceleration",
+            "search_angular_window", "search_resolution", "prediction_acceleration",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
@@ -284,7 +288,7 @@ class LocalMapOdometry(Estimator):
         (or a gap in the scans) leaves the true heading outside any window around it."""
         assert self._reference is not None
         if self._field is None:
-            self._field = LikelihoodField(self._reference.points, resolution=self.voxel_size)
+            self._field = LikelihoodField(self._reference.points, resolution=self.search_resolution)
         best: MatchResult | None = None
         for angular_window in (self.search_angular_window, np.pi):
             start, _ = correlative_search(

@@ -202,6 +202,8 @@ def test_bad_parameters_are_named():
         LocalMapOdometry(max_normal_neighbours=5)
     with pytest.raises(ValueError, match="prediction_acceleration: expected a positive value"):
         LocalMapOdometry(prediction_acceleration=-1.0)
+    with pytest.raises(ValueError, match="search_resolution: expected a positive value"):
+        LocalMapOdometry(search_resolution=0.0)
     with pytest.raises(ValueError, match="velocity_window: expected >= 1"):
         LocalMapOdometry(velocity_window=0)
     with pytest.raises(ValueError, match="min_quality: expected a share"):
