@@ -15,6 +15,7 @@
     python benchmarks/bench_slam.py --parts aces sim   # a subset
     python benchmarks/bench_slam.py --parts sim --traces loop --seeds 0 --closure-draws 100
     python benchmarks/bench_slam.py --parts sim --seeds 0 1 2 3 4   # 40 runs: is slam never worse?
+    python benchmarks/bench_slam.py --parts sim --noise 0.03   # a noisier Lidar
     python benchmarks/bench_slam.py --parts aces --set min_overlap_separation=10.0   # loops only
     python benchmarks/bench_slam.py --limit 2000       # first 2000 scans of each log
     python benchmarks/bench_slam.py --parts aces sim --render docs/   # + map pictures
@@ -245,6 +246,8 @@ def main() -> None:
                         choices=["loop", "out_and_back"], help="simulated drives")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1],
                         help="simulation reset seeds")
+    parser.add_argument("--noise", type=float, default=None,
+                        help="simulated range noise [m], 1 sigma (default: the env's 0.01)")
     parser.add_argument("--closure-draws", type=int, default=0,
                         help="draws of the exact-loop bound per simulated run (0: off)")
     parser.add_argument("--render", type=Path, default=None,
@@ -272,7 +275,7 @@ def main() -> None:
     if "intel" in args.parts:
         bench_intel(args.limit, params)
     if "sim" in args.parts:
-        bench_sim(params, args.traces, args.seeds, args.closure_draws, args.render)
+        bench_sim(params, args.traces, args.seeds, args.closure_draws, args.render, args.noise)
 
 
 if __name__ == "__main__":
