@@ -76,15 +76,16 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[
 
 
 class _Neighbourhoods(NamedTuple):
-    """Each point's nearest neighbours within a radius and the line fitted through them."""
+    """Some points' nearest neighbours within a radius and the line fitted through them."""
 
-    neighbours: NDArray[np.float64]  # (M, k, 2); missing ones repeat the point itself
-    weights: NDArray[np.float64]  # (M, k): 1 for a neighbour found, 0 for a missing one
-    count: NDArray[np.float64]  # (M,) neighbours found
-    mean: NDArray[np.float64]  # (M, 2) their centroid
-    normals: NDArray[np.float64]  # (M, 2) unit normal of their principal axis
-    across: NDArray[np.float64]  # (M,) RMS distance [m] of the neighbours from that axis
-    valid: NDArray[np.bool_]  # (M,) a line: >= 3 neighbours, clearly elongated spread
+    rows: NDArray[np.intp]  # (n,) which points these are
+    neighbours: NDArray[np.float64]  # (n, k, 2); missing ones repeat the point itself
+    weights: NDArray[np.float64]  # (n, k): 1 for a neighbour found, 0 for a missing one
+    count: NDArray[np.float64]  # (n,) neighbours found
+    mean: NDArray[np.float64]  # (n, 2) their centroid
+    normals: NDArray[np.float64]  # (n, 2) unit normal of their principal axis
+    across: NDArray[np.float64]  # (n,) RMS distance [m] of the neighbours from that axis
+    valid: NDArray[np.bool_]  # (n,) a line: >= 3 neighbours, clearly elongated spread
 
 
 def _fit_rows(
@@ -116,26 +117,19 @@ def _fit_rows(
     # return off a chair leg next to a wall is not a wall point.
     own = np.abs(np.einsum("ij,ij->i", points[rows] - mean, normals))
     valid = (count >= 3) & (small < 0.1 * large) & (own <= 3.0 * across + 1e-9)
-    return _Neighbourhoods(neighbours, weights, count, mean, normals, across, valid)
-
-
-def _widened(fit: _Neighbourhoods, k: int) -> _Neighbourhoods:
-    """``fit`` with room for ``k`` neighbours per point (the extra slots weigh nothing)."""
-    extra = k - fit.weights.shape[1]
-    return fit._replace(
-        neighbours=np.concatenate(
-            [fit.neighbours, np.repeat(fit.neighbours[:, :1], extra, axis=1)], axis=1
-        ),
-        weights=np.pad(fit.weights, ((0, 0), (0, extra))),
-    )
+    return _Neighbourhoods(rows, neighbours, weights, count, mean, normals, across, valid)
 
 
 def _fit_lines(
     points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float,
     max_k: int | None = None,
-) -> _Neighbourhoods:
+) -> list[_Neighbourhoods]:
     """Lines through each point's ``k`` nearest neighbours; where they do not form one, the
     neighbourhood doubles (up to ``max_k`` points and ``max_radius``) until they do.
+
+    Returns the fits grouped by neighbourhood size, each point in exactly one group: most
+    points keep ``k`` neighbours, and later steps (the parabolas of :func:`fit_local_curves`)
+    then work on ``k``-wide arrays for them rather than on all points padded to the widest.
 
     Why grow: the line test compares the spread across the fitted line with the spread along
     it, and a few neighbours of a noisy wall (range noise comparable to the point spacing)
@@ -150,20 +144,21 @@ def _fit_lines(
     """
     fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
     noise = 2.0 * float(np.median(fit.across))
+    groups = [fit]
     width = fit.weights.shape[1]
     limit = min(max_k or k, len(points))
     while width < limit:
-        # Points whose whole neighbourhood within max_radius is already in the fit can't grow.
-        rows = np.flatnonzero(~fit.valid & (fit.count == width) & (fit.across <= noise))
-        if len(rows) == 0:
+        # Only the widest group can grow: a point with fewer neighbours than its width has
+        # its whole neighbourhood within max_radius in the fit already.
+        widest = groups[-1]
+        grow = ~widest.valid & (widest.count == width) & (widest.across <= noise)
+        if not np.any(grow):
             break
         width = min(2 * width, limit)
-        grown = _fit_rows(points, tree, rows, width, max_radius)
-        grown = grown._replace(valid=grown.valid & (grown.across <= noise))
-        fit = _widened(fit, width)
-        for name, value in grown._asdict().items():
-            getattr(fit, name)[rows] = value
-    return fit
+        grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius)
+        groups[-1] = _Neighbourhoods(*(value[~grow] for value in widest))
+        groups.append(grown._replace(valid=grown.valid & (grown.across <= noise)))
+    return groups
 
 
 def estimate_normals(
@@ -176,27 +171,19 @@ def estimate_normals(
     the smaller eigenvalue below a tenth of the larger). With ``max_k`` > ``k``, a point whose
     neighbours fail that test is fitted again through twice as many, up to ``max_k``: what a
     noisy wall needs (see :func:`_fit_lines`); None keeps ``k``."""
-    fit = _fit_lines(points, tree, k, max_radius, max_k)
-    return fit.normals, fit.valid
+    normals = np.empty((len(points), 2))
+    valid = np.empty(len(points), dtype=bool)
+    for fit in _fit_lines(points, tree, k, max_radius, max_k):
+        normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
+    return normals, valid
 
 
-def fit_local_curves(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5,
-    max_k: int | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
-    """Denoised surface points: normals ``(M, 2)``, which are reliable (as
-    :func:`estimate_normals`), and anchors ``(M, 2)``.
-
-    Where the ``k`` neighbours (within ``max_radius`` [m]) form a line and number at least 5,
-    a parabola ``t = a + b s + c s^2`` is fitted to them in that line's frame (``s`` along,
-    ``t`` across); the anchor is the point moved onto it and the normal is the parabola's at
-    that point. The anchor then carries the range noise of ``k`` readings averaged rather
-    than one reading's, and, unlike a projection onto the straight line, is not pulled
-    towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
-    0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
-    ``max_k`` grows the neighbourhoods that fail the line test, as in :func:`estimate_normals`.
-    """
-    fit = _fit_lines(points, tree, k, max_radius, max_k)
+def _curve_points(
+    points: NDArray[np.float64], fit: _Neighbourhoods
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Normals and anchors ``(n, 2)`` of ``points`` (the fit's rows) moved onto the parabola
+    through their neighbours, where it is fitted (see :func:`fit_local_curves`); elsewhere the
+    line's normals and the raw points."""
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
     offsets = fit.neighbours - fit.mean[:, None, :]
     along = np.einsum("ijk,ik->ij", offsets, tangents)
@@ -215,7 +202,32 @@ def fit_local_curves(
     curve_normals /= np.linalg.norm(curve_normals, axis=1)[:, None]
     anchors = np.where(curved[:, None], on_curve, points)
     normals = np.where(curved[:, None], curve_normals, fit.normals)
-    return normals, fit.valid, anchors
+    return normals, anchors
+
+
+def fit_local_curves(
+    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5,
+    max_k: int | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """Denoised surface points: normals ``(M, 2)``, which are reliable (as
+    :func:`estimate_normals`), and anchors ``(M, 2)``.
+
+    Where the ``k`` neighbours (within ``max_radius`` [m]) form a line and number at least 5,
+    a parabola ``t = a + b s + c s^2`` is fitted to them in that line's frame (``s`` along,
+    ``t`` across); the anchor is the point moved onto it and the normal is the parabola's at
+    that point. The anchor then carries the range noise of ``k`` readings averaged rather
+    than one reading's, and, unlike a projection onto the straight line, is not pulled
+    towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
+    0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
+    ``max_k`` grows the neighbourhoods that fail the line test, as in :func:`estimate_normals`.
+    """
+    normals = np.empty((len(points), 2))
+    valid = np.empty(len(points), dtype=bool)
+    anchors = np.empty((len(points), 2))
+    for fit in _fit_lines(points, tree, k, max_radius, max_k):
+        normals[fit.rows], anchors[fit.rows] = _curve_points(points[fit.rows], fit)
+        valid[fit.rows] = fit.valid
+    return normals, valid, anchors
 
 
 class LikelihoodField:
