@@ -144,6 +144,22 @@ def test_corridor_match_carries_no_information_along_the_corridor() -> None:
     assert abs(result.pose[1]) < 0.01 and abs(result.pose[2]) < np.radians(0.2)
 
 
+def test_a_noisy_place_still_has_wall_lines() -> None:
+    # At 3 cm range noise 9 neighbours of a wall are a blob; grown neighbourhoods find the wall
+    # (without them a third of the wall's points get a line, two thirds of those within 5 deg).
+    rng = np.random.default_rng(5)
+    origin = np.array([3.5, 3.0, 0.0])
+    points = np.concatenate([
+        transform_points(relative(origin, pose), scan_points(pose, rng, noise=0.03))
+        for pose in (np.array([3.0 + 0.25 * i, 3.0, 0.0]) for i in range(5))])
+    reference = PlaceMap(points, LoopClosureParams()).reference
+    on_wall = np.abs(reference.points[:, 1] + origin[1]) < 0.15  # the wall y = 0
+    valid = reference.valid_normals[on_wall]
+    tilt = np.degrees(np.arccos(np.minimum(1.0, np.abs(reference.normals[on_wall, 1]))))
+    assert valid.mean() > 0.8
+    assert np.mean(tilt[valid] < 5.0) > 0.8
+
+
 def test_bad_inputs_are_named() -> None:
     place = PlaceMap(scan_points(np.array([3.0, 3.0, 0.0]), np.random.default_rng(4)),
                      LoopClosureParams())
@@ -157,5 +173,9 @@ def test_bad_inputs_are_named() -> None:
         LoopClosureParams(min_quality=1.5)
     with pytest.raises(ValueError, match="normal_neighbours: expected an integer >= 3"):
         LoopClosureParams(normal_neighbours=2)
+    with pytest.raises(ValueError, match="max_normal_neighbours: expected None or at least"):
+        LoopClosureParams(max_normal_neighbours=5)
+    with pytest.raises(ValueError, match="loss_scale: expected a positive value"):
+        LoopClosureParams(loss_scale=0.0)
     with pytest.raises(ValueError, match=r"reference points: expected shape \(N >= 3, 2\)"):
         PlaceMap(np.zeros((2, 2)), LoopClosureParams())
