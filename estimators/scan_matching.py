@@ -120,6 +120,11 @@ def _fit_rows(
     return _Neighbourhoods(rows, neighbours, weights, count, mean, normals, across, valid)
 
 
+def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
+    """The rows of ``fit`` where ``keep`` (n,) holds."""
+    return _Neighbourhoods(*(value[keep] for value in fit))
+
+
 def _fit_lines(
     points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float,
     max_k: int | None = None,
@@ -156,7 +161,7 @@ def _fit_lines(
             break
         width = min(2 * width, limit)
         grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius)
-        groups[-1] = _Neighbourhoods(*(value[~grow] for value in widest))
+        groups[-1] = _subset(widest, ~grow)
         groups.append(grown._replace(valid=grown.valid & (grown.across <= noise)))
     return groups
 
@@ -181,28 +186,21 @@ def estimate_normals(
 def _curve_points(
     points: NDArray[np.float64], fit: _Neighbourhoods
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Normals and anchors ``(n, 2)`` of ``points`` (the fit's rows) moved onto the parabola
-    through their neighbours, where it is fitted (see :func:`fit_local_curves`); elsewhere the
-    line's normals and the raw points."""
+    """Normals and anchors ``(n, 2)``: ``points`` (the fit's rows) moved onto the parabola
+    through their neighbours in the frame of their line (see :func:`fit_local_curves`)."""
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
     offsets = fit.neighbours - fit.mean[:, None, :]
     along = np.einsum("ijk,ik->ij", offsets, tangents)
     across = np.einsum("ijk,ik->ij", offsets, fit.normals)
     basis = np.stack([np.ones_like(along), along, along**2], axis=-1) * fit.weights[..., None]
-    curved = fit.valid & (fit.count >= 5)
-    coefficients = np.zeros((len(points), 3))
-    if np.any(curved):
-        gram = np.einsum("ijk,ijl->ikl", basis[curved], basis[curved])
-        moment = np.einsum("ijk,ij->ik", basis[curved], across[curved])
-        coefficients[curved] = np.linalg.solve(gram, moment[..., None])[..., 0]
-    a, b, c = coefficients.T
+    gram = np.einsum("ijk,ijl->ikl", basis, basis)
+    moment = np.einsum("ijk,ij->ik", basis, across)
+    a, b, c = np.linalg.solve(gram, moment[..., None])[..., 0].T
     s = np.einsum("ij,ij->i", points - fit.mean, tangents)
     on_curve = fit.mean + s[:, None] * tangents + (a + b * s + c * s**2)[:, None] * fit.normals
     curve_normals = fit.normals - (b + 2.0 * c * s)[:, None] * tangents
     curve_normals /= np.linalg.norm(curve_normals, axis=1)[:, None]
-    anchors = np.where(curved[:, None], on_curve, points)
-    normals = np.where(curved[:, None], curve_normals, fit.normals)
-    return normals, anchors
+    return curve_normals, on_curve
 
 
 def fit_local_curves(
@@ -223,10 +221,11 @@ def fit_local_curves(
     """
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
-    anchors = np.empty((len(points), 2))
+    anchors = points.astype(np.float64)
     for fit in _fit_lines(points, tree, k, max_radius, max_k):
-        normals[fit.rows], anchors[fit.rows] = _curve_points(points[fit.rows], fit)
-        valid[fit.rows] = fit.valid
+        normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
+        curved = _subset(fit, fit.valid & (fit.count >= 5))
+        normals[curved.rows], anchors[curved.rows] = _curve_points(points[curved.rows], curved)
     return normals, valid, anchors
 
 

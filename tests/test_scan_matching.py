@@ -95,3 +95,39 @@ def test_growing_does_not_smooth_a_recess_out_of_a_precise_wall():
     edges = (np.abs(points[:, 0] - 2.0) < 0.08) | (np.abs(points[:, 0] - 3.0) < 0.08)
     assert np.mean(valid[edges]) < 0.5
     np.testing.assert_array_equal(grown[edges], valid[edges])
+
+
+def test_anchors_match_a_parabola_fitted_point_by_point():
+    # Independent oracle: per point, its 9 nearest neighbours by brute force, their principal
+    # axis by eigh, and np.polyfit of the parabola in that axis' frame.
+    radius = 1.0
+    angle = np.arange(0.0, 2.0 * np.pi, 0.05 / radius)
+    radial = np.column_stack([np.cos(angle), np.sin(angle)])
+    points = _noisy(radius * radial, radial, 0.01, seed=4)
+    normals, valid, anchors = fit_local_curves(points, cKDTree(points), k=9)
+    assert np.mean(valid) > 0.9
+    for i in np.flatnonzero(valid):
+        neighbours = points[np.argsort(np.linalg.norm(points - points[i], axis=1))[:9]]
+        mean = neighbours.mean(axis=0)
+        normal = np.linalg.eigh(np.cov((neighbours - mean).T))[1][:, 0]
+        tangent = np.array([normal[1], -normal[0]])
+        along, across = (neighbours - mean) @ tangent, (neighbours - mean) @ normal
+        c, b, _ = coefficients = np.polyfit(along, across, 2)
+        s = (points[i] - mean) @ tangent
+        expected = mean + s * tangent + np.polyval(coefficients, s) * normal
+        np.testing.assert_allclose(anchors[i], expected, atol=1e-9)
+        slope_normal = normal - (b + 2.0 * c * s) * tangent
+        assert abs(normals[i] @ slope_normal) / np.linalg.norm(slope_normal) > 1.0 - 1e-9
+
+
+def test_anchors_of_grown_neighbourhoods_average_a_noisy_wall():
+    # Most of a 3 cm noise wall only forms lines through grown neighbourhoods (see above);
+    # their anchors then average many readings: far closer to the wall than the raw points.
+    points = _wall_band(0.03, seed=1)
+    inner = (points[:, 0] > 0.5) & (points[:, 0] < 3.5)
+    _, valid, anchors = fit_local_curves(points, cKDTree(points), k=9, max_k=72)
+    assert np.mean(valid[inner]) > 0.95
+    raw_error = np.sqrt(np.mean(points[inner, 1] ** 2))
+    anchor_error = np.sqrt(np.mean(anchors[inner & valid, 1] ** 2))
+    assert anchor_error < 0.3 * raw_error
+    np.testing.assert_array_equal(anchors[~valid], points[~valid])
