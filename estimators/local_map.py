@@ -142,9 +142,22 @@ class LocalMapOdometry(Estimator):
             that noise passed for information along the corridor's axis: hallway, straight
             run, seeds 0/1, ATE 0.50/0.55 m -> 0.05/0.09 m at 3 cm (0.50/0.45 -> 0.01/0.06 m
             at 2 cm); at 1 cm nothing changes (the walls' 9-point fits already pass).
-            A 5 m wide featureless corridor at 3 cm still drifts ~1 m over 5 m: there the
-            remaining two-nearest-point pairs still outvote the prior (dropping them fixes
-            it, 0.01-0.09 m, but costs ACES and Intel their corners: 0.043 / 0.049 m).
+            A 5 m wide featureless corridor at 2-3 cm still drifts ~1 m over 5 m
+            (``tests/test_local_map.py``'s 15 m drive, seeds 0-3: 0.73-1.43 m at 3 cm,
+            0.63-1.36 m at 2 cm, always lagging): the remaining two-nearest-point pairs,
+            often two points of the wall's noise band lying across it, carry ~28 points'
+            worth of information along the axis (the fitted lines alone ~1) and outvote
+            the prior. Dropping them fixes it (0.02-0.14 m) but costs ACES and Intel their
+            corners (0.043 / 0.049 m). Discounting them is no way out: the corridor needs
+            a weight below ~0.01 (0.3: 0.50-1.06 m; 0.03: 0.01-0.36 m) while ACES loses at
+            any fixed one (0.3: 0.0366 m; 0.03: 0.0395 m); weighing each line by its
+            direction's expected error against the map's measured noise
+            (``exp(-4 sigma^2 / separation^2)``) only halves the 3 cm drift (0.40-0.80 m;
+            0.74-0.95 m at 2 cm), for ACES 0.0338 -> 0.0334 m and Intel 0.0427 -> 0.0437 m; and
+            letting only the fitted lines decide which directions the scan pins down fixes
+            it (0.00-0.14 m) but costs ACES 0.0361-0.0371 m. By their neighbourhoods'
+            statistics the two cases look alike (map noise 22 vs 19 mm, two-point
+            separations 45 vs 65 mm, corridor at 3 cm vs ACES).
         denoise_map: pair on each map point moved onto the parabola through its neighbours
             rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
             cylinder's points are not pulled ~3 cm inwards).
