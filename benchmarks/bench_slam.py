@@ -208,11 +208,7 @@ def bench_sim(params: dict[str, Any], traces: list[str], seeds: list[int], draws
                 ate_fe, ate_slam = _ate(odometry, truth_arr), _ate(smoothed, truth_arr)
                 gains.append(ate_fe / max(ate_slam, 1e-9))  # front end's ATE / slam's
                 revisiting = _revisiting(slam, keyframe_truth)
-                path = np.array([k.path_length for k in slam.keyframes])
-                edges = slam.graph.edges[slam.graph.is_loop]
-                revisit_edges = edges[path[edges[:, 1]] - path[edges[:, 0]]
-                                      >= slam.min_loop_separation]
-                looped = len(np.intersect1d(revisit_edges[:, 1], revisiting))
+                looped = len(np.intersect1d(slam.graph.edges[slam.revisits, 1], revisiting))
                 revisits = len(revisiting)
                 line = (f"  {trace:12s} s{seed} {world:15s} {len(truth_arr):4d} steps: end "
                         f"error {1e3 * end_fe:6.1f} -> {1e3 * end_slam:4.1f} mm; ATE "

@@ -606,6 +606,17 @@ class GraphSlam(Estimator):
         return np.array(self._scan_odometry).reshape(-1, 3)
 
     @property
+    def revisits(self) -> NDArray[np.bool_]:
+        """``(E,)`` which graph edges are revisits: loop edges between keyframes at least
+        ``min_loop_separation`` of path apart (the others are odometry or overlap edges)."""
+        if not self.graph.n_edges:
+            return np.zeros(0, dtype=bool)
+        path = np.array([k.path_length for k in self.keyframes])
+        edges = self.graph.edges
+        return self.graph.is_loop & (path[edges[:, 1]] - path[edges[:, 0]]
+                                     >= self.min_loop_separation)
+
+    @property
     def n_loops(self) -> int:
         """Loop edges in the graph now (accepted and kept)."""
         return int(self.graph.is_loop.sum()) if self.graph.n_edges else 0

@@ -123,6 +123,27 @@ def test_bad_settings_are_named() -> None:
         GraphSlam(keyframe_distance=0.0)
     with pytest.raises(ValueError, match="loop_gate: expected a positive value, got -1"):
         GraphSlam(loop_gate=-1.0)
+    with pytest.raises(ValueError, match="overlap_radius: expected a positive value"):
+        GraphSlam(overlap_radius=0.0)
+    with pytest.raises(ValueError, match="min_overlap_separation: expected at most"):
+        GraphSlam(min_overlap_separation=12.0)
+    with pytest.raises(ValueError, match="min_overlap_separation: expected a value >= 0"):
+        GraphSlam(min_overlap_separation=-1.0)
+
+
+def test_overlap_edges_match_the_recent_stretch_and_can_be_turned_off() -> None:
+    truth = loop_poses()
+    slam = GraphSlam(min_loop_separation=8.0)
+    replay(slam, truth, drifting_odometry(truth), seed=0)
+    path = np.array([k.path_length for k in slam.keyframes])
+    edges = slam.graph.edges
+    overlaps = slam.graph.is_loop & ~slam.revisits
+    apart = path[edges[overlaps, 1]] - path[edges[overlaps, 0]]
+    assert len(apart) and np.all((apart >= slam.min_overlap_separation) & (apart < 8.0))
+    loops_only = GraphSlam(min_loop_separation=8.0, min_overlap_separation=8.0)
+    replay(loops_only, truth, drifting_odometry(truth), seed=0)
+    assert np.array_equal(loops_only.graph.is_loop, loops_only.revisits)
+    assert loops_only.n_loops >= 3
 
 
 def test_a_turn_the_front_end_missed_is_found_by_matching_the_keyframes() -> None:
@@ -193,8 +214,7 @@ def test_straight_hallway_drive_accepts_no_loop_and_keeps_the_front_end_accuracy
     # each agrees with the true relative pose.
     edges = slam.graph.edges[slam.graph.is_loop]
     assert len(edges)
-    path = np.array([k.path_length for k in slam.keyframes])
-    assert np.all(path[edges[:, 1]] - path[edges[:, 0]] < slam.min_loop_separation)
+    assert not np.any(slam.revisits)
     keyframe_truth = truth[slam.keyframe_scans]
     for (i, j), z in zip(edges, slam.graph.measurements[slam.graph.is_loop], strict=True):
         error = relative(relative(keyframe_truth[i], keyframe_truth[j]), z)
@@ -228,7 +248,7 @@ def test_a_corridor_driven_out_and_back_is_closed_all_along_the_way_back() -> No
     # Loop edges from every stretch of the way back, not only from its end: the return lane
     # (2 m beside the outward one) revisits the whole corridor. The way back is the last ~35 %
     # of the path (a 12 m turn-around between two 14 m straights).
-    looped = np.unique(slam.graph.edges[slam.graph.is_loop, 1])
+    looped = np.unique(slam.graph.edges[slam.revisits, 1])
     path = np.array([k.path_length for k in slam.keyframes])
     assert len(looped) >= 10
     assert path[looped].max() - path[looped].min() > 0.25 * path[-1]
