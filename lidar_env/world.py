@@ -554,15 +554,41 @@ def _convex_pieces(polygon: NDArray[np.float64]) -> list[NDArray[np.float64]]:
     from pymunk import autogeometry
 
     ccw = polygon if _signed_area(polygon) > 0 else polygon[::-1]
+    extent = float(np.ptp(polygon, axis=0).max())
     try:
         pieces = autogeometry.convex_decomposition([*map(tuple, ccw), tuple(ccw[0])], 0.0)
     except AssertionError:  # pymunk's way of rejecting a polygon it cannot decompose
         return _ear_clip(polygon)
-    arrays = [np.array([(v.x, v.y) for v in piece]) for piece in pieces]
+    arrays = [
+        cleaned
+        for piece in pieces
+        if len(cleaned := _drop_collinear(np.array([(v.x, v.y) for v in piece]), extent)) >= 3
+    ]
     area = sum(abs(_signed_area(piece)) for piece in arrays)
     if not np.isclose(area, abs(_signed_area(polygon)), rtol=1e-9, atol=0.0):
         return _ear_clip(polygon)
     return arrays
+
+
+def _drop_collinear(polygon: NDArray[np.float64], extent: float) -> NDArray[np.float64]:
+    """The polygon without repeated vertices and vertices on the line through their
+    neighbours (to 1e-12 of ``extent`` [m] squared, the size of the polygon it was cut from);
+    fewer than 3 rows left means it had no area (pymunk's decomposition can return such
+    slivers, e.g. 7.3.1 on a star)."""
+    points = polygon
+    while len(points) >= 3:
+        before, after = np.roll(points, 1, axis=0), np.roll(points, -1, axis=0)
+        cross = (points[:, 0] - before[:, 0]) * (after[:, 1] - before[:, 1]) - (
+            points[:, 1] - before[:, 1]
+        ) * (after[:, 0] - before[:, 0])
+        keep = np.abs(cross) > 1e-12 * extent**2
+        if keep.all():
+            return points
+        if not keep.any():
+            return points[:0]
+        # Drop one vertex at a time: removing both ends of a short edge at once could cut area.
+        points = np.delete(points, int(np.argmin(np.abs(cross))), axis=0)
+    return points[:0]
 
 
 def _is_convex(polygon: NDArray[np.float64]) -> bool:

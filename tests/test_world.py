@@ -156,8 +156,30 @@ def test_convex_pieces_cover_a_star_exactly(split) -> None:
     in_pieces = np.zeros(len(probe), dtype=bool)
     for piece in pieces:
         assert _is_convex(piece)
+        assert len(piece) >= 3 and abs(_signed_area(piece)) > 1e-9
         in_pieces |= World(polygons=[piece]).contains(probe)
     np.testing.assert_array_equal(in_pieces, star_world.contains(probe))
+
+
+def test_degenerate_pieces_from_the_decomposition_are_dropped(monkeypatch) -> None:
+    """Whatever pymunk's decomposition returns, slivers (repeated or collinear vertices, as
+    pymunk 7.3.1 gives on a star) never reach World: the cover stays exact and buildable."""
+    from pymunk import autogeometry
+
+    real = autogeometry.convex_decomposition
+
+    def with_slivers(polyline, tolerance):
+        pieces = list(real(polyline, tolerance))
+        a, b = pieces[0][0], pieces[0][1]
+        return [*pieces, [a, (a + b) / 2, b], [a, a, b], [a, b, b, a]]
+
+    monkeypatch.setattr(autogeometry, "convex_decomposition", with_slivers)
+    l_shape = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [0, 3]], dtype=float)
+    pieces = _convex_pieces(l_shape)
+    assert sum(abs(_signed_area(p)) for p in pieces) == pytest.approx(6.0, rel=1e-12)
+    for piece in pieces:
+        assert _is_convex(piece) and abs(_signed_area(piece)) > 1e-9
+    World(polygons=[l_shape]).build_space()
 
 
 def test_nested_polygons_stay_hollow_in_the_space() -> None:
