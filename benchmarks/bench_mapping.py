@@ -11,14 +11,14 @@ pc_fusion lidar_odometry slam] [--figures DIR] [--aces]`` (about 20 s without es
    (map update, detection, tracking) on one core.
 2. Quality: in every built-in world, driven along the paper's trace by the pure-pursuit
    driver, at each of ``--resolutions``, the map built at the true poses is scored against
-   the cells that hold an obstacle (``estimators.map_scoring.true_occupancy``) on the visible
-   ones (those a beam of the run hit) at one-cell tolerance (target IoU >= 0.9), and the
+   the cells that hold an obstacle (``estimators.mapping.map_scoring.true_occupancy``) on the
+   visible ones (those a beam of the run hit) at one-cell tolerance (target IoU >= 0.9), and the
    tracked cylinders against ``world.circles`` (target recall >= 95 %, error <= 5 cm). With
    ``--estimators`` the same scores follow for the map built at each estimator's poses, with
    the gap to the true-pose map (target: IoU within 0.05 of it).
 3. With ``--aces --figures DIR``: the maps of the real ACES log (Radish) at each estimator's
    poses next to the map at the SLAM poses of ``aces-corrected`` (pseudo truth), as a PNG, with
-   each map's return agreement (``estimators.map_scoring.return_agreement``).
+   each map's return agreement (``estimators.mapping.map_scoring.return_agreement``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import platform
 import time
 from pathlib import Path
 
-from estimators.real_log import SHARED_DATA
+from estimators.paths import SHARED_DATA
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # the target is for one core
 
@@ -40,15 +40,15 @@ import numpy as np  # noqa: E402
 import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
-from estimators.map_scoring import (  # noqa: E402
+from estimators.mapping.map_scoring import (  # noqa: E402
     CylinderScores,
     evaluate_run_map,
     map_truth,
     return_agreement,
     save_map_figure,
 )
-from estimators.obstacles import ObstacleTracker, detect_in_observation  # noqa: E402
-from estimators.occupancy import (  # noqa: E402
+from estimators.mapping.obstacles import ObstacleTracker, detect_in_observation  # noqa: E402
+from estimators.mapping.occupancy import (  # noqa: E402
     OccupancyGrid,
     bounds_around,
     from_estimator_run,
@@ -246,8 +246,8 @@ def main() -> None:
 def map_aces(estimators: list[str], path: Path) -> Path:
     """Maps of the whole ACES log at 0.1 m: at the SLAM poses of ``aces-corrected`` (pseudo
     truth, its keyframes only) and at each estimator's poses, each in its own first-pose frame."""
-    from estimators.carmen import load_log
-    from estimators.real_log import run_on_log, setup_from_log
+    from estimators.datasets.carmen import load_log
+    from estimators.datasets.real_log import run_on_log, setup_from_log
     from lidar_env.se2 import relative
 
     radish = SHARED_DATA / "radish"

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.ndimage import fourier_shift, gaussian_filter
 from skimage.registration import phase_cross_correlation
 
-from estimators.phase_correlation import image_spectrum, phase_correlate
+from estimators.paper.phase_correlation import image_spectrum, phase_correlate
 
 SIZE = 400
 

@@ -18,9 +18,9 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-from estimators.g2o import read_g2o
-from estimators.pose_graph import PoseGraph, _WhitenedProblem, optimize
-from estimators.real_log import SHARED_DATA
+from estimators.paths import SHARED_DATA
+from estimators.slam.g2o import read_g2o
+from estimators.slam.pose_graph import PoseGraph, _WhitenedProblem, optimize
 
 DATA = SHARED_DATA / "g2o"
 #: file -> (GTSAM 4.3 LM optimum, GTSAM time [s] where SOURCE.md / the issue gives one)

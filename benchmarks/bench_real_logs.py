@@ -15,15 +15,15 @@ import os
 import platform
 
 from estimators import make
-from estimators.carmen import load_log
-from estimators.real_log import (
-    SHARED_DATA,
+from estimators.datasets.carmen import load_log
+from estimators.datasets.real_log import (
     LogRun,
     pseudo_truth_relations,
     run_on_log,
     score_relations,
 )
-from estimators.relations import load_relations, relation_errors
+from estimators.evaluation.relations import load_relations, relation_errors
+from estimators.paths import SHARED_DATA
 
 DATA = SHARED_DATA / "radish"
 REFERENCE = "icp"

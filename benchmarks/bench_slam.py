@@ -37,17 +37,17 @@ from typing import Any
 import numpy as np
 
 from estimators import make
-from estimators.carmen import load_log
-from estimators.pose_graph import PoseGraph, optimize
-from estimators.real_log import (
-    SHARED_DATA,
+from estimators.datasets.carmen import load_log
+from estimators.datasets.real_log import (
     LogRun,
     pseudo_truth_relations,
     run_on_log,
     score_relations,
 )
-from estimators.relations import load_relations, relation_errors
-from estimators.slam import GraphSlam
+from estimators.evaluation.relations import load_relations, relation_errors
+from estimators.paths import SHARED_DATA
+from estimators.slam.graph_slam import GraphSlam
+from estimators.slam.pose_graph import PoseGraph, optimize
 from lidar_env.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"

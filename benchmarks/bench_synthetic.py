@@ -32,7 +32,7 @@ import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
-from estimators.metrics import evaluate
+from estimators.evaluation.metrics import evaluate
 
 #: (world, trace, Table I cases) in the paper's order, then the corridor case.
 SCENARIOS: tuple[tuple[str, str, str], ...] = (

@@ -28,8 +28,8 @@ import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
-from estimators.metrics import evaluate
-from estimators.tum import write_tum
+from estimators.evaluation.metrics import evaluate
+from estimators.evaluation.tum import write_tum
 
 #: (world, trace, {estimator: Table I case and accuracy [%]})
 GROUPS = (

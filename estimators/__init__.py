@@ -1,7 +1,24 @@
-"""Lidar-only motion estimators, their metrics and the pipeline that scores them."""
+"""Lidar-only motion estimators, their metrics and the pipeline that scores them.
 
+``base`` (the ``Estimator`` interface, ``SensorSetup``) and ``registry`` (``make``/``names``)
+are what every subpackage builds on; the subpackages, one per concern, import only those below
+them: ``paper`` and ``matching`` at the bottom, then ``odometry``, ``slam``, ``mapping``,
+``evaluation``, ``datasets``, and ``leaderboard`` at the top. ``estimators.metrics`` is
+``estimators.evaluation.metrics``, kept reachable for the README's example.
+"""
+
+from estimators import evaluation
 from estimators.base import LIDAR_KEYS, Estimator, SensorSetup
+from estimators.evaluation import ScoreEstimator, metrics
 from estimators.registry import make, names
-from estimators.scoring import ScoreEstimator
 
-__all__ = ["LIDAR_KEYS", "Estimator", "ScoreEstimator", "SensorSetup", "make", "names"]
+__all__ = [
+    "LIDAR_KEYS",
+    "Estimator",
+    "ScoreEstimator",
+    "SensorSetup",
+    "evaluation",
+    "make",
+    "metrics",
+    "names",
+]

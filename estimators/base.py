@@ -2,7 +2,7 @@
 
 An estimator sees only the scans and the known sensor geometry (:class:`SensorSetup`),
 never the ground truth. Timing, metrics and files belong to the pipeline that drives it
-(:mod:`estimators.scoring`, :mod:`estimators.leaderboard`).
+(:mod:`estimators.evaluation.scoring`, :mod:`estimators.leaderboard.cli`).
 """
 
 from __future__ import annotations

@@ -13,19 +13,19 @@ from estimators.base import Estimator
 
 #: name -> ("module:Class", default keyword parameters)
 _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
-    "zero": ("estimators.paper:ZeroMotion", {}),
-    "pc": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 0}),
-    "pc_offset": ("estimators.paper:PhaseCorrelationOdometry", {"lidar": 1}),
-    "pc_pg": ("estimators.paper:PoseGraphCorrelationOdometry", {}),
-    "pc_rot": ("estimators.rotation_pc:RotationPhaseCorrelation", {}),
+    "zero": ("estimators.paper.pc:ZeroMotion", {}),
+    "pc": ("estimators.paper.pc:PhaseCorrelationOdometry", {"lidar": 0}),
+    "pc_offset": ("estimators.paper.pc:PhaseCorrelationOdometry", {"lidar": 1}),
+    "pc_pg": ("estimators.paper.pc:PoseGraphCorrelationOdometry", {}),
+    "pc_rot": ("estimators.matching.rotation_pc:RotationPhaseCorrelation", {}),
     "pc_rot_icp": (
-        "estimators.rotation_pc:RotationPhaseCorrelation",
+        "estimators.matching.rotation_pc:RotationPhaseCorrelation",
         {"icp_iterations": 3, "image_size": 200},
     ),
-    "pc_fusion": ("estimators.fusion:FusionEstimator", {}),
-    "icp": ("estimators.icp:ICPEstimator", {}),
-    "lidar_odometry": ("estimators.local_map:LocalMapOdometry", {}),
-    "slam": ("estimators.slam:GraphSlam", {}),
+    "pc_fusion": ("estimators.odometry.fusion:FusionEstimator", {}),
+    "icp": ("estimators.matching.icp:ICPEstimator", {}),
+    "lidar_odometry": ("estimators.odometry.local_map:LocalMapOdometry", {}),
+    "slam": ("estimators.slam.graph_slam:GraphSlam", {}),
 }
 
 

@@ -367,16 +367,16 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._trajectories = checked
 
     def set_render_map(self, grid: Any) -> None:
-        """An :class:`estimators.occupancy.OccupancyGrid` to draw under the trajectories, or
-        ``None`` for none. The env builds no map itself: a user (or the scoring wrapper) builds
+        """An :class:`estimators.mapping.occupancy.OccupancyGrid` to draw under the trajectories,
+        or ``None`` for none. The env builds no map itself: a user (or the scoring wrapper) builds
         one from the scans at its estimated poses. The grid is kept by reference, so cells
         integrated into it later show in the next frame. Cleared at every reset.
         """
-        from estimators.occupancy import OccupancyGrid
+        from estimators.mapping.occupancy import OccupancyGrid
 
         if grid is not None and not isinstance(grid, OccupancyGrid):
-            raise TypeError(f"render map: expected an estimators.occupancy.OccupancyGrid or None, "
-                            f"got {type(grid).__name__}")
+            raise TypeError("render map: expected an estimators.mapping.occupancy.OccupancyGrid or "
+                            f"None, got {type(grid).__name__}")
         self._render_map = grid
 
     def render(self) -> NDArray[np.uint8] | None:

@@ -2,7 +2,7 @@
 
 ``rgb_array`` frames need no window and no pygame; the ``human`` window imports pygame only
 when first shown. Pixel convention (exactly :meth:`lidar_env.world.World.to_image`'s and
-:class:`estimators.occupancy.OccupancyGrid`'s): ``H, W = ceil(extent / resolution)`` pixels
+:class:`estimators.mapping.occupancy.OccupancyGrid`'s): ``H, W = ceil(extent / resolution)`` pixels
 anchored at ``(xmin, ymin)``; pixel ``(row, col)`` covers ``x`` in ``xmin + [col, col + 1) * res``
 and ``y`` in ``ymin + [H - 1 - row, H - row) * res``, so row 0 is the top (its upper edge may
 reach past ``ymax`` by less than a pixel) and column 0 the left edge. Anchoring at ``ymin`` keeps
@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from lidar_env.world import World
 
 if TYPE_CHECKING:
-    from estimators.occupancy import OccupancyGrid
+    from estimators.mapping.occupancy import OccupancyGrid
 
 #: Longest image side [pixels] by default: sharp enough to see 0.1 m on a 40 m world.
 DEFAULT_MAX_SIZE = 640
@@ -88,7 +88,7 @@ class Renderer:
         """Blend the occupancy map ``grid`` (its own bounds and cell size) over ``frame`` with
         opacity :data:`MAP_ALPHA`: occupied cells dark, free cells light; cells the map never
         observed (probability 0.5, grey 128) leave the frame as it is."""
-        from estimators.occupancy import occupancy_to_rgb
+        from estimators.mapping.occupancy import occupancy_to_rgb
 
         # same bounds and pixel size as World.to_image: the picture has the frame's shape
         picture = occupancy_to_rgb(grid, self.world.bounds, self.resolution)

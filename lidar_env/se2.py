@@ -41,8 +41,20 @@ def relative(a: ArrayLike, b: ArrayLike) -> Pose:
     return compose(inverse(a), b)
 
 
+def rotate(angle: ArrayLike, vectors: ArrayLike) -> NDArray[np.float64]:
+    """``R(angle) v``: vectors ``(2,)`` or ``(N, 2)`` turned CCW by ``angle`` [rad], one angle
+    for all or one per row ``(N,)``."""
+    angle = np.asarray(angle, dtype=np.float64)
+    vectors = np.asarray(vectors, dtype=np.float64)
+    c, s = np.cos(angle), np.sin(angle)
+    x, y = vectors[..., 0], vectors[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y], axis=-1)
+
+
 def transform_points(pose: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
-    """Map points ``(N, 2)`` given in the frame ``pose`` into that pose's parent frame."""
+    """Map points ``(N, 2)`` given in the frame ``pose`` into that pose's parent frame:
+    ``rotate(pose[2], points) + pose[:2]``, computed as one matrix product (whose rounding
+    differs from :func:`rotate`'s in the last bit; every stored trajectory was made with it)."""
     pose = np.asarray(pose, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
     c, s = np.cos(pose[2]), np.sin(pose[2])

@@ -1,0 +1,132 @@
+"""Run any registered estimator over a CARMEN log and score it with the relations metric.
+
+The pipeline owns the loop, the timing and the metric; the estimator sees only the scans
+(``{"lidar_1": ranges}``) and the sensor geometry, never the odometry or the logged poses.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.base import LIDAR_KEYS, Estimator, SensorSetup
+from estimators.datasets.carmen import CarmenLog
+from estimators.evaluation.relations import (
+    RelationErrors,
+    Relations,
+    RelationSummary,
+    relation_errors,
+    relations_from_trajectory,
+)
+
+
+def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetup:
+    """The single-Lidar :class:`SensorSetup` of a log: the laser's mount in the robot frame
+    (FLASER: ``robot_frontlaser_offset``; ROBOTLASER1: laser pose vs robot pose), its beam
+    angles [rad], and ``max_range`` [m].
+
+    ``max_range=None`` takes the sensor's stated maximum, or, for messages that state none
+    (FLASER), the largest reading in the log: SICK scanners saturate at a fixed value (50 m or
+    81.83 m in the Radish logs) that marks "no return".
+    """
+    if not log.scans:
+        raise ValueError(f"{log.source}: expected laser scans, found none")
+    first = log.scans[0]
+    for scan in log.scans:
+        if scan.angles.shape != first.angles.shape or not np.allclose(scan.angles, first.angles):
+            raise ValueError(
+                f"{log.source}, line {scan.line_number}: beam geometry changes within the log "
+                f"({len(scan.angles)} beams vs {len(first.angles)}); expected one laser setup"
+            )
+        if not np.allclose(scan.laser_offset, first.laser_offset, atol=1e-6):
+            raise ValueError(
+                f"{log.source}, line {scan.line_number}: laser mount changes within the log; "
+                "expected one fixed mount"
+            )
+    if max_range is None:
+        stated = min(scan.max_range for scan in log.scans)
+        max_range = stated if np.isfinite(stated) else max(s.ranges.max() for s in log.scans)
+    return SensorSetup(first.laser_offset[None, :], first.angles, float(max_range))
+
+
+@dataclass(frozen=True)
+class LogRun:
+    """An estimator's trajectory over a log: ``times`` (N,) [s], ``poses`` (N, 3) in the frame
+    of the first scan, and its compute time."""
+
+    times: NDArray[np.float64]
+    poses: NDArray[np.float64]
+    seconds_per_scan: float
+
+    @property
+    def scan_period(self) -> float:
+        """Median time between scans [s]."""
+        return float(np.median(np.diff(self.times))) if len(self.times) > 1 else float("nan")
+
+    @property
+    def realtime_factor(self) -> float:
+        """How many times faster than the log's own scan rate the estimator ran."""
+        return self.scan_period / self.seconds_per_scan
+
+
+def run_on_log(
+    estimator: Estimator,
+    log: CarmenLog,
+    clock: str = "ipc",
+    limit: int | None = None,
+    setup: SensorSetup | None = None,
+) -> LogRun:
+    """Feed the first ``limit`` scans of ``log`` (all when None) to ``estimator``, timestamped
+    on ``clock`` (``"ipc"`` for Kümmerle's relation files, ``"logger"`` for ``*-corrected``
+    logs); the first scan is the origin."""
+    setup = setup_from_log(log) if setup is None else setup
+    if setup.n_lidars != 1:
+        raise ValueError(f"setup: expected one Lidar for a CARMEN log, got {setup.n_lidars}")
+    times = log.scan_times(clock)
+    scans = log.scans if limit is None else log.scans[:limit]
+    times = times[: len(scans)]
+    estimator.reset(setup, np.zeros(3))
+    start = time.perf_counter()
+    for scan, t in zip(scans, times, strict=True):
+        estimator.update({LIDAR_KEYS[0]: scan.ranges}, float(t))
+    elapsed = time.perf_counter() - start
+    return LogRun(times, estimator.trajectory, elapsed / max(len(scans), 1))
+
+
+def score_relations(
+    run: LogRun, relations: Relations, tolerance: float = 1e-3
+) -> dict[str, RelationSummary]:
+    """``{"local": ..., "all": ...}`` relation summaries of ``run`` over the relations that
+    lie within its time span (local = shorter than 2 s)."""
+    start, end = run.times[0] - tolerance, run.times[-1] + tolerance
+    ends = np.stack([relations.t1, relations.t2])
+    inside = np.all((ends >= start) & (ends <= end), axis=0)
+    selected = relations.select(inside)
+    errors = relation_errors(run.times, run.poses, selected, tolerance)
+    local = np.abs(errors.dt) < 2.0
+    return {
+        "local": _subset(errors, local).summary(),
+        "all": errors.summary(),
+    }
+
+
+def _subset(errors: RelationErrors, mask: NDArray[np.bool_]) -> RelationErrors:
+    return RelationErrors(errors.translation[mask], errors.rotation[mask], errors.dt[mask])
+
+
+def pseudo_truth_relations(
+    reference: CarmenLog, windows: tuple[float | None, ...] = (None, 1.0, 5.0)
+) -> dict[str, Relations]:
+    """Relations from a ``*-corrected`` log's SLAM poses (pseudo ground truth, logger clock):
+    ``"consecutive"`` keyframes and one entry per window [s], e.g. ``"1 s"``."""
+    times = reference.scan_times("logger")
+    # intel-corrected.log.gz lists a few keyframes out of time order; the poses are what count.
+    order = np.argsort(times, kind="stable")
+    times, poses = times[order], reference.logged_poses()[order]
+    return {
+        ("consecutive" if w is None else f"{w:g} s"): relations_from_trajectory(times, poses, w)
+        for w in windows
+    }

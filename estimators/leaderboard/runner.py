@@ -1,0 +1,480 @@
+"""The scenario runner: record missing sensor datasets, replay them through every estimator.
+
+Work is split by scenario: one task records the scenario's sensor dataset if the database lacks
+it (or receives the stored one) and replays it through every estimator that has no trace there
+yet. Tasks go to any *executor*: an object with ``submit(fn, *args) -> future`` whose futures
+have ``done()`` and ``result()``. That covers
+
+* ``None``: run in this process, one task after another;
+* ``concurrent.futures.ProcessPoolExecutor(n)``: a local process pool;
+* ``dask.distributed.Client(...)`` (or ``client.get_executor()``): a Dask cluster;
+* Ray, through a two-line adapter over ``ray.util`` / object refs::
+
+      class RayExecutor:
+          def submit(self, fn, *args):
+              return ray.remote(fn).remote(*args).future()  # a concurrent.futures.Future
+
+Design choice: **workers return results and only this (parent) process writes the database.**
+SQLite allows one writer at a time, cluster workers often share no filesystem with the
+database, and a stateless worker can be killed or retried freely. Each finished scenario is
+committed as it arrives, one transaction per dataset and per trace, so killing the run (or a
+worker) loses only the scenarios still in flight; a re-run skips everything already stored.
+At most ``max_in_flight`` tasks are submitted at once, which bounds the memory held by
+datasets travelling to and from workers.
+
+A :class:`SideRun` replays extra scenarios through a subset of the estimators in the same
+queue (Table I's world-aligned recordings). An estimator that needs more Lidars than a real
+log has (:attr:`estimators.base.Estimator.min_lidars`) is decided against before any work: it
+is listed in :attr:`RunSummary.not_applicable`, never run, never a failure, never retried.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import time
+import traceback
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any, Protocol
+
+import numpy as np
+
+from estimators.leaderboard.database import (
+    ExperimentDatabase,
+    Scenario,
+    SensorDataset,
+    TraceDataset,
+    package_version,
+)
+from estimators.leaderboard.recording import map_reference, record, replay, score, score_map
+from estimators.registry import defaults, make, names
+
+
+class FutureLike(Protocol):
+    def done(self) -> bool: ...
+
+    def result(self, timeout: float | None = None) -> Any: ...
+
+
+class ExecutorLike(Protocol):
+    def submit(self, fn: Callable[..., Any], /, *args: Any) -> FutureLike: ...
+
+
+class RunInterrupted(RuntimeError):
+    """The executor failed (e.g. a worker process died); committed scenarios are kept."""
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """A registered estimator and the parameters it runs with (over the registry defaults)."""
+
+    name: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.name not in names():
+            raise ValueError(
+                f"unknown estimator {self.name!r}: expected one of {', '.join(names())}"
+            )
+
+    @property
+    def resolved_params(self) -> dict[str, Any]:
+        """Every parameter: registry defaults overridden by ``params`` (what gets recorded)."""
+        return {**defaults(self.name), **dict(self.params)}
+
+    @property
+    def min_lidars(self) -> int:
+        """Lidars the estimator needs (:attr:`estimators.base.Estimator.min_lidars`)."""
+        return make(self.name, **dict(self.params)).min_lidars
+
+    def not_applicable(self, n_lidars: int) -> str | None:
+        """Why the estimator cannot run on data from ``n_lidars`` Lidars, or ``None`` if it can:
+        decided before any work, so such a pair is neither run nor a failure."""
+        needed = self.min_lidars
+        return f"needs {needed} Lidars" if needed > n_lidars else None
+
+
+@dataclass(frozen=True)
+class ScenarioTask:
+    """What a worker gets: the scenario, its stored dataset (``None``: record it), the
+    estimators still to run on it and whether their maps are scored."""
+
+    scenario: Scenario
+    estimators: tuple[EstimatorSpec, ...]
+    dataset: SensorDataset | None = None
+    score_maps: bool = True
+
+
+@dataclass(frozen=True)
+class SideRun:
+    """Scenarios replayed through some estimators only, their maps not scored: e.g. Table I's
+    world-aligned recordings, which only the paper's translation-only estimators need."""
+
+    scenarios: tuple[Scenario, ...]
+    estimators: tuple[EstimatorSpec, ...]
+
+
+@dataclass
+class ScenarioOutcome:
+    """What a worker returns; ``failures`` maps a stage (``record``, ``map reference`` or an
+    estimator name) to the error it raised, so one broken estimator does not stop the run;
+    ``seconds`` is the worker's wall time [s] per kind of work (:data:`STAGES`)."""
+
+    scenario: Scenario
+    dataset: SensorDataset | None
+    recorded: bool
+    traces: list[tuple[TraceDataset, dict[str, float]]] = field(default_factory=list)
+    failures: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    cpu_seconds: float = 0.0  # CPU time of the worker process on the whole task [s]
+
+    def timed(self, stage: str, started: float) -> None:
+        """Add the time since ``started`` (``time.perf_counter()``) to ``stage``."""
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - started
+
+
+#: Kinds of worker time reported in :attr:`RunSummary.seconds`: simulating scenarios, running
+#: the estimators (their ``update`` calls and setup), the per-scenario map reference and the
+#: per-trace map scores.
+STAGES = ("record", "estimators", "map reference", "map scores")
+
+
+@dataclass
+class RunSummary:
+    """Counts of one :func:`run_scenarios` call."""
+
+    scenarios: int = 0
+    skipped: int = 0
+    recorded: int = 0
+    traces: int = 0
+    failures: dict[str, str] = field(default_factory=dict)
+    #: "<scenario>: <estimator>" -> why it was not run (e.g. "needs 2 Lidars"); not failures
+    not_applicable: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0  # wall time of the call
+    stage_seconds: dict[str, float] = field(default_factory=dict)  # worker time per stage
+    cpu_seconds: float = 0.0  # workers' CPU time over all tasks: the run's work, whatever load
+
+
+def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
+    """Record (if needed) and replay one scenario, scoring each trace and the map its poses
+    yield (the map reference, and the scores of the map at the true poses, stored with every
+    trace as ``<metric>_true_poses``, are computed once here for all estimators); runs in a
+    worker, touches no database."""
+    dataset, recorded = task.dataset, False
+    outcome = ScenarioOutcome(task.scenario, None, False)
+    if dataset is None:
+        started = time.perf_counter()
+        try:
+            dataset, recorded = record(task.scenario), True
+        except Exception:  # reported per stage; the rest of the run goes on
+            outcome.failures["record"] = traceback.format_exc(limit=-6)
+            return outcome
+        finally:
+            outcome.timed("record", started)
+    outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
+    reference, ceiling = None, {}
+    if task.estimators and task.score_maps:
+        started = time.perf_counter()
+        try:
+            reference = map_reference(dataset)
+            if reference is not None:  # the mapper's own score, at the true poses
+                ceiling = {f"{name}_true_poses": value for name, value in
+                           score_map(reference, dataset.poses, dataset).items()}
+        except Exception:  # the trajectories are still scored, without map metrics
+            outcome.failures["map reference"] = traceback.format_exc(limit=-6)
+        outcome.timed("map reference", started)
+    for spec in task.estimators:
+        started = time.perf_counter()
+        try:
+            trace = replay(dataset, spec.name, spec.params, resolved_params=spec.resolved_params)
+            metrics = score(trace, dataset.poses)
+        except Exception:  # a broken estimator must not sink the others
+            outcome.failures[spec.name] = traceback.format_exc(limit=-6)
+            continue
+        finally:
+            outcome.timed("estimators", started)
+        if reference is not None:
+            started = time.perf_counter()
+            try:
+                metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
+            except Exception:  # e.g. poses far outside the world: the trace is kept unmapped
+                outcome.failures[f"{spec.name} map"] = traceback.format_exc(limit=-6)
+            outcome.timed("map scores", started)
+        outcome.traces.append((trace, metrics))
+    return outcome
+
+
+@dataclass(frozen=True)
+class RealLog:
+    """A recorded CARMEN log with ground-truth relations, scored on its first ``scans`` scans
+    (all when ``None``); stored as a scenario of kind ``real``."""
+
+    name: str
+    log_path: str
+    relations_path: str
+    scans: int | None = None
+
+    @property
+    def n_lidars(self) -> int:
+        """Lidars the estimators see: one, the front laser
+        (:func:`estimators.datasets.real_log.run_on_log`)."""
+        return 1
+
+    @property
+    def scenario(self) -> Scenario:
+        return Scenario(self.name, "log", 0, {"scans": self.scans}, driver="recorded",
+                        kind="real")
+
+
+@dataclass(frozen=True)
+class RealLogTask:
+    log: RealLog
+    estimator: EstimatorSpec
+
+
+@lru_cache(maxsize=2)
+def _load_log(path: str) -> Any:
+    """A parsed CARMEN log, kept per worker process: every estimator replays the same log."""
+    from estimators.datasets.carmen import load_log
+
+    return load_log(path)
+
+
+def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
+    """Run one estimator over a real log and score it with the relations metric
+    (Kümmerle et al. 2009): mean translational [m] and rotational [deg] relation errors."""
+    from estimators.datasets.real_log import run_on_log, score_relations
+    from estimators.evaluation.relations import load_relations
+    from estimators.registry import make
+
+    log, spec = task.log, task.estimator
+    outcome = ScenarioOutcome(log.scenario, None, False)
+    started = time.perf_counter()
+    try:
+        carmen = _load_log(log.log_path)
+        run = run_on_log(make(spec.name, **dict(spec.params)), carmen, limit=log.scans)
+        metrics: dict[str, float] = {"ms_per_step": 1e3 * run.seconds_per_scan}
+        for subset, summary in score_relations(run, load_relations(log.relations_path)).items():
+            metrics.update({
+                f"relations_{subset}_translation_m": summary.translation_mean,
+                f"relations_{subset}_rotation_deg": summary.rotation_mean,
+                f"relations_{subset}_failure_rate": summary.failure_rate,
+                f"relations_{subset}_count": float(summary.count),
+            })
+        step_ms = np.full(len(run.times), 1e3 * run.seconds_per_scan)
+        trace = TraceDataset(spec.name, spec.resolved_params, run.times, run.poses, step_ms)
+        outcome.traces.append((trace, metrics))
+    except Exception:  # a broken estimator: reported, not fatal
+        outcome.failures[spec.name] = traceback.format_exc(limit=-6)
+    outcome.timed("estimators", started)
+    return outcome
+
+
+def _pending_task(db: ExperimentDatabase, scenario: Scenario,
+                  estimators: Sequence[EstimatorSpec],
+                  score_maps: bool = True) -> ScenarioTask | None:
+    """The task still to do for ``scenario``, or ``None`` when everything is stored."""
+    version = package_version()
+    missing = tuple(spec for spec in estimators
+                    if not db.has_trace(scenario, spec.name, spec.resolved_params, version))
+    has_dataset = db.has_sensor_dataset(scenario)
+    if has_dataset and not missing:
+        return None
+    dataset = db.load_sensor_dataset(scenario) if has_dataset and missing else None
+    return ScenarioTask(scenario, missing, dataset, score_maps)
+
+
+def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummary) -> None:
+    if outcome.dataset is not None and db.save_sensor_dataset(outcome.scenario, outcome.dataset):
+        summary.recorded += 1
+    if outcome.traces:  # one transaction for all the scenario's traces
+        new = db.save_traces(outcome.scenario, outcome.traces)
+        summary.traces += sum(trace_id is not None for trace_id in new)
+    for stage, error in outcome.failures.items():
+        summary.failures[f"{outcome.scenario.label}: {stage}"] = error
+    for stage, seconds in outcome.seconds.items():
+        summary.stage_seconds[stage] = summary.stage_seconds.get(stage, 0.0) + seconds
+    summary.cpu_seconds += outcome.cpu_seconds
+
+
+def _first_done(pending: set[Any]) -> set[Any]:
+    """Block until at least one future is done; return the done ones."""
+    if all(isinstance(future, cf.Future) for future in pending):
+        done, _ = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
+        return set(done)
+    while True:  # Dask / Ray futures: poll, they all have done()
+        done = {future for future in pending if future.done()}
+        if done:
+            return done
+        time.sleep(0.01)
+
+
+def _scenario_tasks(db: ExperimentDatabase, scenarios: Iterable[Scenario],
+                    estimators: Sequence[EstimatorSpec], summary: RunSummary,
+                    on_done: Callable[[Scenario], None] | None,
+                    score_maps: bool = True) -> list[ScenarioTask]:
+    """The pending scenario tasks; complete scenarios are counted as skipped."""
+    todo = []
+    for scenario in scenarios:
+        summary.scenarios += 1
+        task = _pending_task(db, scenario, estimators, score_maps)
+        if task is None:
+            summary.skipped += 1
+            if on_done is not None:
+                on_done(scenario)
+        else:
+            todo.append(task)
+    return todo
+
+
+def _real_log_tasks(db: ExperimentDatabase, logs: Iterable[RealLog],
+                    estimators: Sequence[EstimatorSpec], summary: RunSummary,
+                    on_done: Callable[[Scenario], None] | None) -> list[RealLogTask]:
+    """The pending (log, estimator) tasks; stored traces are counted as skipped, estimators
+    that need more Lidars than the log has as not applicable (never run, never failed)."""
+    version = package_version()
+    todo = []
+    for log in logs:
+        for spec in estimators:
+            summary.scenarios += 1
+            reason = spec.not_applicable(log.n_lidars)
+            if reason is not None:
+                summary.not_applicable[f"{log.scenario.label}: {spec.name}"] = reason
+            elif db.has_trace(log.scenario, spec.name, spec.resolved_params, version):
+                summary.skipped += 1
+            else:
+                todo.append(RealLogTask(log, spec))
+                continue
+            if on_done is not None:
+                on_done(log.scenario)
+    return todo
+
+
+def run_scenarios(
+    db: ExperimentDatabase,
+    scenarios: Iterable[Scenario],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """Make sure every scenario has a sensor dataset and a scored trace per estimator.
+
+    Scenarios already complete in ``db`` are skipped; the rest go to ``executor`` (``None``:
+    this process) and are committed one by one as they finish. ``on_done`` is called after
+    each scenario is settled (e.g. to advance a progress bar). Raises :class:`RunInterrupted`
+    when the executor breaks (a killed worker); everything committed before stays.
+    """
+    return run_matrix(db, scenarios, (), estimators, executor, max_in_flight=max_in_flight,
+                      on_done=on_done)
+
+
+def run_real_logs(
+    db: ExperimentDatabase,
+    logs: Iterable[RealLog],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """Score every estimator on recorded logs (relations metric), skipping stored traces.
+
+    One task per (log, estimator), since a log is one long sequence; tasks, commits and
+    failures behave as in :func:`run_scenarios`.
+    """
+    return run_matrix(db, (), logs, estimators, executor, max_in_flight=max_in_flight,
+                      on_done=on_done)
+
+
+def run_matrix(
+    db: ExperimentDatabase,
+    scenarios: Iterable[Scenario],
+    logs: Iterable[RealLog],
+    estimators: Sequence[EstimatorSpec],
+    executor: ExecutorLike | None = None,
+    *,
+    side_runs: Iterable[SideRun] = (),
+    max_in_flight: int = 8,
+    on_done: Callable[[Scenario], None] | None = None,
+) -> RunSummary:
+    """:func:`run_scenarios`, then each of ``side_runs`` (its scenarios through its own
+    estimators, no map scores), then :func:`run_real_logs`, through one queue: the short
+    tasks go last, so they fill the workers that finish their scenarios first instead of
+    waiting for the slowest scenario."""
+    summary = RunSummary()
+    todo: list[ScenarioTask | RealLogTask] = []
+    todo += _scenario_tasks(db, scenarios, estimators, summary, on_done)
+    for side in side_runs:
+        todo += _scenario_tasks(db, side.scenarios, side.estimators, summary, on_done,
+                                score_maps=False)
+    todo += _real_log_tasks(db, logs, estimators, summary, on_done)
+    return _execute(db, todo, executor, summary, max_in_flight, on_done)
+
+
+def run_task(task: ScenarioTask | RealLogTask) -> ScenarioOutcome:
+    """Run one task of either kind (what is sent to the executor), noting its CPU time."""
+    started = time.process_time()
+    if isinstance(task, RealLogTask):
+        outcome = run_real_log_task(task)
+    else:
+        outcome = run_scenario_task(task)
+    outcome.cpu_seconds = time.process_time() - started
+    return outcome
+
+
+def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
+             executor: ExecutorLike | None, summary: RunSummary, max_in_flight: int,
+             on_done: Callable[[Scenario], None] | None) -> RunSummary:
+    """Run ``todo`` (here or on ``executor``), committing each outcome."""
+    if max_in_flight < 1:
+        raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
+    start = time.perf_counter()
+    if executor is None:
+        for task in todo:
+            outcome = run_task(task)
+            _commit(db, outcome, summary)
+            if on_done is not None:
+                on_done(outcome.scenario)
+    else:
+        _run_on(executor, todo, db, summary, max_in_flight, on_done)
+    summary.seconds = time.perf_counter() - start
+    return summary
+
+
+def _run_on(executor: ExecutorLike, todo: Sequence[ScenarioTask | RealLogTask],
+            db: ExperimentDatabase, summary: RunSummary,
+            max_in_flight: int, on_done: Callable[[Scenario], None] | None) -> None:
+    queue = list(reversed(todo))
+    pending: set[Any] = set()
+    failure: Exception | None = None
+    lost = 0
+    while (queue or pending) and failure is None:
+        # the tasks catch their own errors: whatever is raised here is the executor's
+        try:
+            while queue and len(pending) < max_in_flight:
+                pending.add(executor.submit(run_task, queue[-1]))
+                queue.pop()
+            done = _first_done(pending)
+        except Exception as error:
+            failure, done = error, set()
+        for future in done:
+            pending.discard(future)
+            try:
+                outcome = future.result()
+            except Exception as error:
+                failure, lost = failure or error, lost + 1
+                continue
+            _commit(db, outcome, summary)  # finished work is kept even when others failed
+            if on_done is not None:
+                on_done(outcome.scenario)
+    if failure is not None:
+        for future in pending:
+            future.cancel()
+        raise RunInterrupted(
+            f"the executor failed ({type(failure).__name__}: {failure}); {summary.recorded} "
+            f"sensor datasets and {summary.traces} traces of this run are committed, "
+            f"{len(pending) + len(queue) + lost} tasks are not: re-run to resume"
+        ) from failure

@@ -1,0 +1,12 @@
+"""Maps from estimated poses: the log-odds occupancy grid (``occupancy``), obstacle detection and
+tracking (``obstacles``) and map scores against the true world (``map_scoring``). It imports
+``estimators.base`` and ``lidar_env`` only; the env draws a grid through
+``OccupancyGrid.render_overlay()``, never by importing this package.
+"""
+
+from estimators.mapping.map_scoring import score_cylinders, score_occupancy
+from estimators.mapping.obstacles import ObstacleTracker, detect_obstacles
+from estimators.mapping.occupancy import OccupancyGrid
+
+__all__ = ["ObstacleTracker", "OccupancyGrid", "detect_obstacles", "score_cylinders",
+           "score_occupancy"]

@@ -1,0 +1,12 @@
+"""Pose-graph SLAM: SE(2) pose graphs and their solver (``pose_graph``), loop closure (place
+descriptors, correlative match, verification: ``loop_closure``), g2o files (``g2o``) and the
+``slam`` estimator (``graph_slam``: a front end plus loop closure). It imports
+``estimators.base``, ``estimators.registry`` (to build its front end), ``estimators.matching``
+and ``lidar_env``.
+"""
+
+from estimators.slam.g2o import read_g2o, write_g2o
+from estimators.slam.graph_slam import GraphSlam
+from estimators.slam.pose_graph import PoseGraph, optimize
+
+__all__ = ["GraphSlam", "PoseGraph", "optimize", "read_g2o", "write_g2o"]
