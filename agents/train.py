@@ -1,11 +1,14 @@
 """Train the PPO trace-following driver.
 
-    python -m agents.train --seed 0 --out agents/models/ppo_driver.zip
+    python -m agents.train --seed 0                  # -> runs/ppo_driver.zip
+    python -m agents.train --seed 0 --out agents/models/ppo_driver.zip --overwrite  # re-ship
 
-Hyperparameters come from ``agents/ppo_driver.yaml`` (rl-zoo3 layout); ``--timesteps`` and
-``--n-envs`` override it. Every episode draws its world (the built-in ones and ``random``) and
-trace seed, so the policy is not fitted to one scenario; the evaluation callback scores it on a
-fixed, seeded set of episodes and keeps the best model.
+The default output is ``runs/ppo_driver.zip``, never the shipped model; an existing file is
+only replaced with ``--overwrite``. A progress bar (steps, steps/s, time left) is printed to
+stderr while it trains. Hyperparameters come from ``agents/ppo_driver.yaml`` (rl-zoo3
+layout); ``--timesteps`` and ``--n-envs`` override it. Every episode draws its world (the
+built-in ones and ``random``) and trace seed, so the policy is not fitted to one scenario; the
+evaluation callback scores it on a fixed, seeded set of episodes and keeps the best model.
 """
 
 from __future__ import annotations
@@ -23,6 +26,11 @@ from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
 
 HYPERPARAMETERS = Path(__file__).with_name("ppo_driver.yaml")
+DEFAULT_OUT = Path("runs/ppo_driver.zip")
+
+
+class TrainingExistsError(FileExistsError):
+    """``--out`` names a model that exists and ``overwrite`` was not given."""
 
 
 def load_hyperparameters(path: Path = HYPERPARAMETERS) -> dict[str, Any]:
@@ -43,14 +51,25 @@ def make_training_env(
 def train(
     timesteps: int | None = None,
     seed: int = 0,
-    out: Path = SHIPPED_MODEL,
+    out: Path = DEFAULT_OUT,
     n_envs: int | None = None,
     tensorboard: Path | None = None,
     eval_episodes: int = 12,
     torch_threads: int = 1,
     hyperparameters: Path = HYPERPARAMETERS,
+    overwrite: bool = False,
+    progress: bool = True,
 ) -> Path:
-    """Train PPO and save the best evaluated model to ``out`` (a .zip); return its path."""
+    """Train PPO and save the best evaluated model to ``out`` (a .zip); return its path.
+
+    Raises :class:`TrainingExistsError` before any training when ``out`` exists and
+    ``overwrite`` is False, so a run never replaces the shipped model by accident.
+    """
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise TrainingExistsError(
+            f"out: {out} exists; pass overwrite=True (--overwrite) to replace it"
+        )
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback
@@ -74,7 +93,6 @@ def train(
     if normalize:
         vec_env = VecNormalize(vec_env)
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     best_dir = out.parent / f"{out.stem}_best"
     callback = EvalCallback(
@@ -90,7 +108,8 @@ def train(
         tensorboard_log=str(tensorboard) if tensorboard else None, **params,
     )
     start = time.perf_counter()
-    model.learn(total_timesteps=total, callback=callback, progress_bar=False)
+    callbacks = [callback, _progress_callback(total)] if progress else [callback]
+    model.learn(total_timesteps=total, callback=callbacks, progress_bar=False)
     elapsed = time.perf_counter() - start
     best = best_dir / "best_model.zip"
     final = PPO.load(best, device="cpu") if best.is_file() else model
@@ -101,18 +120,46 @@ def train(
     return out
 
 
+def _progress_callback(total: int) -> Any:
+    """An SB3 callback drawing a tqdm bar over ``total`` env steps, built here because SB3 is
+    an optional import (SB3's own ``progress_bar=True`` needs rich, which we do not install)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class ProgressBar(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, unit="step", desc="training", smoothing=0.05)
+
+        def _on_step(self) -> bool:
+            self.bar.n = min(self.num_timesteps, total)
+            self.bar.refresh()
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return ProgressBar()
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--timesteps", type=int, default=None, help="override n_timesteps")
     parser.add_argument("--n-envs", type=int, default=None, help="override n_envs")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=SHIPPED_MODEL)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"model .zip (default: %(default)s; shipped: {SHIPPED_MODEL})")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tensorboard", type=Path, default=None, help="TensorBoard log dir")
     parser.add_argument("--hyperparameters", type=Path, default=HYPERPARAMETERS,
                         help="rl-zoo3-style YAML (default: %(default)s)")
     args = parser.parse_args(argv)
-    train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
-          hyperparameters=args.hyperparameters)
+    try:
+        train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
+              hyperparameters=args.hyperparameters, overwrite=args.overwrite,
+              progress=not args.no_progress)
+    except TrainingExistsError as error:
+        parser.error(str(error))
 
 
 if __name__ == "__main__":

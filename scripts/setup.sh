@@ -1,10 +1,34 @@
 #!/usr/bin/env bash
-# Create .venv and install the project with every extra. torch is pinned to the CPU build
-# (2.13.0) *before* stable-baselines3 asks for it, so pip never pulls a multi-GB CUDA build.
+# Create .venv and install exactly requirements.lock (every dependency of every extra, pinned),
+# then the project itself (editable). torch is the CPU build 2.13.0, installed first so that no
+# step ever resolves a multi-GB CUDA build. Nothing is installed when requirements.lock,
+# pyproject.toml and this script are unchanged since the last successful set-up.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
-[ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
-.venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q "torch==2.13.0"
-.venv/bin/python -m pip install -q -e ".[dev]"
+stamp=.venv/.setup-stamp
+wanted="$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)"
+if [ -x .venv/bin/python ] && [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ]; then
+    echo "set-up: .venv matches requirements.lock (delete .venv/.setup-stamp to reinstall)"
+    exit 0
+fi
+started=$SECONDS
+stale=1
+[ -x .venv/bin/python ] || { "$PYTHON" -m venv .venv; stale=0; }
+rm -f "$stamp"
+# pip warns about every package missing from this machine's local file indexes: noise, not news.
+# --no-compile: byte-compiling torch's and scipy's thousands of modules up front was most of the
+# set-up time; Python compiles each module once, on its first import, instead.
+quiet() { "$@" 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }; }
+pip=(.venv/bin/python -m pip -q)
+quiet "${pip[@]}" install --no-compile --no-deps "torch==2.13.0"
+quiet "${pip[@]}" install --no-compile --no-deps -r requirements.lock
+# An older .venv may hold packages the lock no longer names: pip-sync removes them.
+[ "$stale" = 0 ] || quiet .venv/bin/pip-sync -q --pip-args "--no-compile --no-deps" requirements.lock
+# setuptools warns that a flat layout's editable install sees same-named folders in the working
+# directory; that is how this project is meant to run, so the warning is filtered.
+PYTHONWARNINGS="ignore:Editable installation" \
+    quiet "${pip[@]}" install --no-compile --no-deps --no-build-isolation -e .
+.venv/bin/python scripts/check_lock.py
+echo "$wanted" > "$stamp"
+echo "set-up: .venv holds requirements.lock ($((SECONDS - started)) s)"

@@ -1,0 +1,59 @@
+"""requirements.lock pins what pyproject.toml asks for, and the check that says so can fail."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("check_lock", ROOT / "scripts" / "check_lock.py")
+check_lock = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(check_lock)
+
+
+def test_the_committed_lock_agrees_with_pyproject() -> None:
+    assert check_lock.lock_mismatches(ROOT / "pyproject.toml", ROOT / "requirements.lock") == []
+
+
+def test_the_lock_pins_torch_to_the_cpu_build() -> None:
+    pins, _ = check_lock.locked_pins(ROOT / "requirements.lock")
+    assert str(pins["torch"]) == "2.13.0+cpu"
+    assert not any(name.startswith(("nvidia-", "triton")) for name in pins)
+
+
+def edited_pyproject(tmp_path: Path, old: str, new: str) -> Path:
+    text = (ROOT / "pyproject.toml").read_text()
+    assert old in text
+    path = tmp_path / "pyproject.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def test_a_dependency_missing_from_the_lock_is_named(tmp_path: Path) -> None:
+    pyproject = edited_pyproject(tmp_path, '"numpy>=1.26",', '"numpy>=1.26",\n    "left-pad>=1",')
+    problems = check_lock.lock_mismatches(pyproject, ROOT / "requirements.lock")
+    assert problems == ["left-pad>=1 is in pyproject.toml but not pinned in requirements.lock"]
+    assert check_lock.main(["--pyproject", str(pyproject)]) == 1
+
+
+def test_a_pin_outside_the_specifier_is_named(tmp_path: Path) -> None:
+    pyproject = edited_pyproject(tmp_path, '"numpy>=1.26",', '"numpy>=99",')
+    [problem] = check_lock.lock_mismatches(pyproject, ROOT / "requirements.lock")
+    assert "numpy==" in problem and "numpy>=99" in problem
+
+
+def test_a_pin_for_a_dependency_pyproject_dropped_is_named(tmp_path: Path) -> None:
+    pyproject = edited_pyproject(tmp_path, '    "tqdm>=4.60",\n', "")
+    lock = tmp_path / "requirements.lock"
+    shutil.copy(ROOT / "requirements.lock", lock)
+    problems = check_lock.lock_mismatches(pyproject, lock)
+    assert any("tqdm" in p and "no longer asks" in p for p in problems), problems
+
+
+@pytest.mark.parametrize("script", ["setup.sh", "lock.sh"])
+def test_set_up_scripts_install_from_the_lock_with_pip(script: str) -> None:
+    text = (ROOT / "scripts" / script).read_text()
+    assert "requirements.lock" in text and "uv " not in text and "poetry" not in text
