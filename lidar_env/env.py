@@ -367,14 +367,17 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._trajectories = checked
 
     def set_render_map(self, grid: Any) -> None:
-        """An :class:`estimators.mapping.occupancy.OccupancyGrid` to draw under the trajectories,
-        or ``None`` for none. The env builds no map itself: a user (or the scoring wrapper) builds
-        one from the scans at its estimated poses. The grid is kept by reference, so cells
-        integrated into it later show in the next frame. Cleared at every reset.
+        """An occupancy map to draw under the trajectories, or ``None`` for none: anything with
+        ``bounds``, ``resolution`` and ``probabilities()``
+        (:class:`lidar_env.rendering.OccupancyMap`, e.g. an
+        ``estimators.mapping.occupancy.OccupancyGrid``; the env imports no estimator).
+        The env builds no map itself: a user (or the scoring wrapper) builds one from the scans
+        at its estimated poses. The grid is kept by reference, so cells integrated into it
+        later show in the next frame. Cleared at every reset.
         """
-        from estimators.mapping.occupancy import OccupancyGrid
+        from lidar_env.rendering import OccupancyMap
 
-        if grid is not None and not isinstance(grid, OccupancyGrid):
+        if grid is not None and not isinstance(grid, OccupancyMap):
             raise TypeError("render map: expected an estimators.mapping.occupancy.OccupancyGrid or "
                             f"None, got {type(grid).__name__}")
         self._render_map = grid

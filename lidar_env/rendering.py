@@ -1,31 +1,32 @@
-"""Top-down pictures of a ``DualLidar-v0`` episode, drawn with numpy alone.
+"""Top-down pictures of a ``DualLidar-v0`` episode, drawn with numpy (PNG files by Pillow).
 
 ``rgb_array`` frames need no window and no pygame; the ``human`` window imports pygame only
 when first shown. Pixel convention (exactly :meth:`lidar_env.world.World.to_image`'s and
-:class:`estimators.mapping.occupancy.OccupancyGrid`'s): ``H, W = ceil(extent / resolution)`` pixels
+``estimators.mapping.occupancy.OccupancyGrid``'s): ``H, W = ceil(extent / resolution)`` pixels
 anchored at ``(xmin, ymin)``; pixel ``(row, col)`` covers ``x`` in ``xmin + [col, col + 1) * res``
 and ``y`` in ``ymin + [H - 1 - row, H - row) * res``, so row 0 is the top (its upper edge may
 reach past ``ymax`` by less than a pixel) and column 0 the left edge. Anchoring at ``ymin`` keeps
 the world raster, the points drawn on it and an occupancy-map overlay on the same pixels.
+
+An overlay is anything shaped like :class:`OccupancyMap` (bounds, resolution, probabilities):
+the env never imports the estimators that build maps.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import struct
-import zlib
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from gymnasium.error import DependencyNotInstalled
 from numpy.typing import ArrayLike, NDArray
+from PIL import Image
 
 from lidar_env.world import World
 
-if TYPE_CHECKING:
-    from estimators.mapping.occupancy import OccupancyGrid
+Bounds = tuple[float, float, float, float]
 
 #: Longest image side [pixels] by default: sharp enough to see 0.1 m on a 40 m world.
 DEFAULT_MAX_SIZE = 640
@@ -42,6 +43,63 @@ TRAJECTORY_COLOURS = tuple(
     np.array(c, dtype=np.uint8)
     for c in ((30, 60, 200), (150, 40, 170), (140, 90, 40), (0, 140, 140), (120, 120, 0))
 )
+
+
+@runtime_checkable
+class OccupancyMap(Protocol):
+    """What an overlay needs of an occupancy map (``estimators.mapping.occupancy.OccupancyGrid``
+    is one): ``bounds`` (xmin, ymin, xmax, ymax) [m], ``resolution`` [m/cell] and
+    ``probabilities()``, the ``(rows, cols)`` occupancy probability of each cell (0.5: never
+    observed), laid out as :meth:`lidar_env.world.World.to_image` (row 0 the top)."""
+
+    bounds: Bounds
+    resolution: float
+
+    def probabilities(self) -> NDArray[np.float64]: ...
+
+
+def raster_shape(bounds: Bounds, resolution: float) -> tuple[int, int]:
+    """``(rows, cols)`` of a raster of ``bounds`` at ``resolution`` [m/pixel]; a relative
+    tolerance keeps 10 m / 0.05 m at 200 pixels despite rounding."""
+    xmin, ymin, xmax, ymax = bounds
+    cols = math.ceil((xmax - xmin) / resolution - 1e-9)
+    rows = math.ceil((ymax - ymin) / resolution - 1e-9)
+    return rows, cols
+
+
+def occupancy_to_rgb(
+    probabilities: ArrayLike,
+    map_bounds: Bounds,
+    map_resolution: float,
+    bounds: Bounds,
+    resolution: float,
+) -> NDArray[np.uint8]:
+    """An ``(H, W, 3)`` uint8 picture of an occupancy map for overlays, row 0 = largest ``y``.
+
+    ``probabilities`` ``(rows, cols)``: the map's cells over ``map_bounds`` at
+    ``map_resolution`` [m/cell], laid out as :class:`OccupancyMap`. Grey level
+    ``255 * (1 - p)``: occupied cells dark, free cells white, unobserved cells mid-grey (128).
+    The picture spans ``bounds`` at ``resolution`` [m/pixel], sampled at pixel centres
+    (nearest cell); area outside the map is unobserved."""
+    cells_p = np.asarray(probabilities, dtype=np.float64)
+    height, width = raster_shape(bounds, resolution)
+    xmin, ymin, _, _ = bounds
+    x = xmin + (np.arange(width) + 0.5) * resolution
+    y = ymin + (height - np.arange(height) - 0.5) * resolution
+    centres = np.stack(np.meshgrid(x, y), axis=-1).reshape(-1, 2)
+    rows, cols = cells_p.shape
+    map_xmin, map_ymin, _, _ = map_bounds
+    cells = np.floor(
+        np.column_stack(
+            [(centres[:, 0] - map_xmin) / map_resolution,
+             rows - (centres[:, 1] - map_ymin) / map_resolution]
+        )
+    ).astype(np.int64)
+    inside = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (cells[:, 1] < rows)
+    probability = np.full(len(centres), 0.5)
+    probability[inside] = cells_p[cells[inside, 1], cells[inside, 0]]
+    grey = np.round(255.0 * (1.0 - probability)).clip(0, 255).astype(np.uint8)
+    return np.repeat(grey.reshape(height, width)[..., None], 3, axis=-1)
 
 
 class Renderer:
@@ -84,14 +142,14 @@ class Renderer:
         y = ymin + (self.shape[0] - np.asarray(rows, dtype=np.float64) - 0.5) * self.resolution
         return np.stack(np.broadcast_arrays(x, y), axis=-1)
 
-    def overlay_map(self, frame: NDArray[np.uint8], grid: OccupancyGrid) -> None:
+    def overlay_map(self, frame: NDArray[np.uint8], grid: OccupancyMap) -> None:
         """Blend the occupancy map ``grid`` (its own bounds and cell size) over ``frame`` with
         opacity :data:`MAP_ALPHA`: occupied cells dark, free cells light; cells the map never
         observed (probability 0.5, grey 128) leave the frame as it is."""
-        from estimators.mapping.occupancy import occupancy_to_rgb
-
         # same bounds and pixel size as World.to_image: the picture has the frame's shape
-        picture = occupancy_to_rgb(grid, self.world.bounds, self.resolution)
+        picture = occupancy_to_rgb(
+            grid.probabilities(), grid.bounds, grid.resolution, self.world.bounds, self.resolution
+        )
         observed = picture[..., 0] != 128
         blended = (1.0 - MAP_ALPHA) * frame[observed] + MAP_ALPHA * picture[observed]
         frame[observed] = np.round(blended).astype(np.uint8)
@@ -154,7 +212,7 @@ class Renderer:
         world_aligned: bool = False,
         trace: ArrayLike | None = None,
         trajectories: Mapping[str, ArrayLike] | None = None,
-        occupancy: OccupancyGrid | None = None,
+        occupancy: OccupancyMap | None = None,
     ) -> NDArray[np.uint8]:
         """One ``(H, W, 3)`` uint8 frame.
 
@@ -241,19 +299,8 @@ def tile_frames(frames: Sequence[NDArray[np.uint8]], columns: int = 3) -> NDArra
 
 
 def write_png(path: str | os.PathLike, image: ArrayLike) -> None:
-    """Save an ``(H, W, 3)`` uint8 RGB image as a PNG file (zlib only, no imaging library)."""
+    """Save an ``(H, W, 3)`` uint8 RGB image as a PNG file."""
     rgb = np.asarray(image)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ValueError(f"image: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
-    height, width = rgb.shape[:2]
-    # each scanline starts with filter type 0 (none)
-    raw = np.hstack([np.zeros((height, 1), dtype=np.uint8), rgb.reshape(height, -1)]).tobytes()
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        body = kind + data
-        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
-
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)  # 8-bit RGB
-    with open(path, "wb") as file:
-        file.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-                   + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
+    Image.fromarray(np.ascontiguousarray(rgb)).save(path, format="PNG")

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import SensorSetup
+from lidar_env import rendering
 from lidar_env.se2 import compose
 
 #: ``(xmin, ymin, xmax, ymax)`` [m] of an axis-aligned world rectangle.
@@ -180,6 +181,9 @@ def _trace_scans(
 class OccupancyGrid:
     """A log-odds occupancy grid over ``bounds`` at ``resolution`` [m/cell], image layout.
 
+    It has what :class:`lidar_env.rendering.OccupancyMap` asks for (``bounds``, ``resolution``,
+    ``probabilities()``), so ``env.unwrapped.set_render_map(grid)`` draws it.
+
     Attributes:
         bounds: ``(xmin, ymin, xmax, ymax)`` [m] of the mapped world rectangle; the grid has
             ``ceil(width / resolution)`` columns and ``ceil(height / resolution)`` rows anchored
@@ -248,11 +252,7 @@ class OccupancyGrid:
     @property
     def shape(self) -> tuple[int, int]:
         """``(rows, cols)`` of the grid."""
-        xmin, ymin, xmax, ymax = self.bounds
-        # a relative tolerance keeps 10 m / 0.05 m at 200 cells despite rounding
-        cols = math.ceil((xmax - xmin) / self.resolution - 1e-9)
-        rows = math.ceil((ymax - ymin) / self.resolution - 1e-9)
-        return rows, cols
+        return rendering.raster_shape(self.bounds, self.resolution)
 
     def to_grid_coordinates(self, points: ArrayLike) -> NDArray[np.float64]:
         """World points ``(N, 2)`` [m] -> continuous ``(col, row)`` [cells]; ``floor`` gives the
@@ -391,20 +391,16 @@ def from_estimator_run(
 def occupancy_to_rgb(
     grid: OccupancyGrid, bounds: Bounds | None = None, resolution: float | None = None
 ) -> NDArray[np.uint8]:
-    """An ``(H, W, 3)`` uint8 picture of ``grid`` for overlays, row 0 = largest ``y``.
+    """An ``(H, W, 3)`` uint8 picture of ``grid`` for overlays, row 0 = largest ``y``
+    (:func:`lidar_env.rendering.occupancy_to_rgb` of its probabilities).
 
     Grey level ``255 * (1 - p)``: occupied cells dark, free cells white, unobserved cells
     mid-grey (128). The picture spans ``bounds`` (default: the grid's) at ``resolution``
     [m/pixel] (default: the grid's), sampled at pixel centres (nearest cell); area outside the
-    grid is unobserved. A renderer can blend it over its own frame of the same bounds."""
+    grid is unobserved."""
     bounds = grid.bounds if bounds is None else bounds
     resolution = grid.resolution if resolution is None else resolution
-    view = OccupancyGrid(bounds, resolution)  # validates and sizes the picture
-    centres = view.cell_centres().reshape(-1, 2)
-    cells = np.floor(grid.to_grid_coordinates(centres)).astype(np.int64)
-    rows, cols = grid.shape
-    inside = (cells[:, 0] >= 0) & (cells[:, 0] < cols) & (cells[:, 1] >= 0) & (cells[:, 1] < rows)
-    probability = np.full(len(centres), 0.5)
-    probability[inside] = grid.probabilities()[cells[inside, 1], cells[inside, 0]]
-    grey = np.round(255.0 * (1.0 - probability)).clip(0, 255).astype(np.uint8)
-    return np.repeat(grey.reshape(view.shape)[..., None], 3, axis=-1)
+    OccupancyGrid(bounds, resolution)  # validates the picture's bounds and pixel size
+    return rendering.occupancy_to_rgb(
+        grid.probabilities(), grid.bounds, grid.resolution, bounds, resolution
+    )
