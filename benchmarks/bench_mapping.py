@@ -40,14 +40,9 @@ import numpy as np  # noqa: E402
 import lidar_env  # noqa: E402, F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver  # noqa: E402
 from estimators import SensorSetup, make  # noqa: E402
-from estimators.mapping.map_scoring import (  # noqa: E402
-    CylinderScores,
-    evaluate_run_map,
-    map_truth,
-    return_agreement,
-    save_map_figure,
-)
-from estimators.mapping.obstacles import ObstacleTracker, detect_in_observation  # noqa: E402
+from estimators.mapping.map_figure import save_map_figure
+from estimators.mapping.map_scoring import CylinderScores, return_agreement
+from estimators.mapping.obstacles import detect_in_observation
 from estimators.mapping.occupancy import (  # noqa: E402
     OccupancyGrid,
     bounds_around,
@@ -55,6 +50,8 @@ from estimators.mapping.occupancy import (  # noqa: E402
     logit,
     sensor_poses,
 )
+from estimators.mapping.run_maps import evaluate_run_map, map_truth
+from estimators.mapping.tracking import ObstacleTracker
 
 WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 SPEED_RESOLUTION = 0.05  # [m] cells of the timing (the target is stated at 5 cm)

@@ -20,7 +20,8 @@ from scipy.optimize import least_squares
 
 from estimators.paths import SHARED_DATA
 from estimators.slam.g2o import read_g2o
-from estimators.slam.pose_graph import PoseGraph, _WhitenedProblem, optimize
+from estimators.slam.pose_graph import PoseGraph
+from estimators.slam.solver import _WhitenedProblem, optimize
 
 DATA = SHARED_DATA / "g2o"
 #: file -> (GTSAM 4.3 LM optimum, GTSAM time [s] where SOURCE.md / the issue gives one)

@@ -47,7 +47,8 @@ from estimators.datasets.real_log import (
 from estimators.evaluation.relations import load_relations, relation_errors
 from estimators.paths import SHARED_DATA
 from estimators.slam.graph_slam import GraphSlam
-from estimators.slam.pose_graph import PoseGraph, optimize
+from estimators.slam.pose_graph import PoseGraph
+from estimators.slam.solver import optimize
 from lidar_env.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"

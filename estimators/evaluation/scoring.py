@@ -143,7 +143,8 @@ class ScoreEstimator(gym.Wrapper):
         return summary
 
     def _map_scores(self) -> dict[str, float]:
-        from estimators.mapping.map_scoring import map_truth, score_occupancy
+        from estimators.mapping.map_scoring import score_occupancy
+        from estimators.mapping.run_maps import map_truth
 
         assert self.grid is not None and self._setup is not None
         truth = map_truth(self.env.unwrapped.world, self.true_trajectory, self._setup,

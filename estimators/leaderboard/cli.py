@@ -506,7 +506,7 @@ def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
     best-ranked estimator (first of ``ranked`` that ran there) and of :data:`PAPER_ESTIMATOR`,
     as scored (:data:`estimators.leaderboard.recording.MAP_RESOLUTION`). Returns the PNG paths."""
     from estimators.leaderboard.recording import MAP_RESOLUTION, world_from_geometry
-    from estimators.mapping.map_scoring import save_map_figure
+    from estimators.mapping.map_figure import save_map_figure
     from estimators.mapping.occupancy import from_estimator_run
 
     candidates = [(g, scenarios[g.name][0]) for g in groups if scenarios[g.name]]

@@ -34,7 +34,7 @@ from estimators.leaderboard.database import Scenario, SensorDataset, TraceDatase
 from estimators.registry import make
 
 if TYPE_CHECKING:
-    from estimators.mapping.map_scoring import MapTruth
+    from estimators.mapping.run_maps import MapTruth
 
 ENV_ID = "DualLidar-v0"
 #: Cell side [m] of the scored maps: 10 cm, about the size of the smallest obstacle detail that
@@ -175,9 +175,10 @@ def map_reference(dataset: SensorDataset, resolution: float = MAP_RESOLUTION,
     true world's image and visible cells along the true poses, and the cylinders observable in
     the scans the detector gets (every ``obstacle_stride``-th). ``None`` when the dataset holds
     no world geometry (nothing to score against)."""
-    from estimators.mapping.map_scoring import map_truth, observable_cylinders
+    from estimators.mapping.map_scoring import observable_cylinders
     from estimators.mapping.obstacles import DetectorParams
     from estimators.mapping.occupancy import sensor_poses
+    from estimators.mapping.run_maps import map_truth
 
     if not dataset.world:
         return None
@@ -202,8 +203,9 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
     with cylinders ``cylinder_recall`` (share of the observable ones found),
     ``cylinder_precision`` and ``cylinder_error_m`` (mean centre error [m] of the matched ones)
     of the cylinders tracked over every ``obstacle_stride``-th scan."""
-    from estimators.mapping.map_scoring import score_cylinders, score_occupancy, track_obstacles
+    from estimators.mapping.map_scoring import score_cylinders, score_occupancy
     from estimators.mapping.occupancy import from_estimator_run
+    from estimators.mapping.run_maps import track_obstacles
 
     if isinstance(obstacle_stride, bool) or not isinstance(obstacle_stride, int) \
             or obstacle_stride < 1:

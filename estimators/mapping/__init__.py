@@ -6,8 +6,9 @@ this package.
 """
 
 from estimators.mapping.map_scoring import score_cylinders, score_occupancy
-from estimators.mapping.obstacles import ObstacleTracker, detect_obstacles
+from estimators.mapping.obstacles import detect_obstacles
 from estimators.mapping.occupancy import OccupancyGrid
+from estimators.mapping.tracking import ObstacleTracker
 
 __all__ = ["ObstacleTracker", "OccupancyGrid", "detect_obstacles", "score_cylinders",
            "score_occupancy"]

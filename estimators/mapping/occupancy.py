@@ -386,21 +386,3 @@ def from_estimator_run(
     for observation, car_pose in zip(observations, trajectory, strict=True):
         grid.integrate_observation(observation, car_pose, setup)
     return grid
-
-
-def occupancy_to_rgb(
-    grid: OccupancyGrid, bounds: Bounds | None = None, resolution: float | None = None
-) -> NDArray[np.uint8]:
-    """An ``(H, W, 3)`` uint8 picture of ``grid`` for overlays, row 0 = largest ``y``
-    (:func:`lidar_env.rendering.occupancy_to_rgb` of its probabilities).
-
-    Grey level ``255 * (1 - p)``: occupied cells dark, free cells white, unobserved cells
-    mid-grey (128). The picture spans ``bounds`` (default: the grid's) at ``resolution``
-    [m/pixel] (default: the grid's), sampled at pixel centres (nearest cell); area outside the
-    grid is unobserved."""
-    bounds = grid.bounds if bounds is None else bounds
-    resolution = grid.resolution if resolution is None else resolution
-    OccupancyGrid(bounds, resolution)  # validates the picture's bounds and pixel size
-    return rendering.occupancy_to_rgb(
-        grid.probabilities(), grid.bounds, grid.resolution, bounds, resolution
-    )

@@ -5,7 +5,8 @@ the ``pc_rot``/``pc_rot_icp`` estimators). It imports ``estimators.base``, ``est
 and ``lidar_env`` only.
 """
 
-from estimators.matching.icp import ICPParams, PointToLineReference, register
+from estimators.matching.icp import ICPParams, register
+from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.rotation_pc import ScanMatcher
 from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 

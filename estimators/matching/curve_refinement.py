@@ -13,7 +13,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from estimators.matching.icp import gauss_newton_step, point_to_line_jacobian, robust_weights
+from estimators.matching.point_to_line import (
+    gauss_newton_step,
+    point_to_line_jacobian,
+    robust_weights,
+)
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
 from lidar_env.se2 import rotate, transform_points, wrap_angle
 

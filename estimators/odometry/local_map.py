@@ -63,7 +63,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
-from estimators.matching.icp import ICPParams, MatchResult, PointToLineReference, register
+from estimators.matching.icp import ICPParams, MatchResult, register
+from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
     LikelihoodField,

@@ -7,6 +7,7 @@ and ``lidar_env``.
 
 from estimators.slam.g2o import read_g2o, write_g2o
 from estimators.slam.graph_slam import GraphSlam
-from estimators.slam.pose_graph import PoseGraph, optimize
+from estimators.slam.pose_graph import PoseGraph
+from estimators.slam.solver import optimize
 
 __all__ = ["GraphSlam", "PoseGraph", "optimize", "read_g2o", "write_g2o"]

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
-from estimators.matching.icp import PointToLineReference
+from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
 from estimators.slam.g2o import write_g2o
@@ -48,7 +48,8 @@ from estimators.slam.loop_closure import (
     range_histogram,
     verify_loop,
 )
-from estimators.slam.pose_graph import PoseGraph, chain_covariance, optimize
+from estimators.slam.pose_graph import PoseGraph, chain_covariance
+from estimators.slam.solver import optimize
 from lidar_env.se2 import compose, inverse, relative, transform_points, wrap_angle
 
 

@@ -30,12 +30,8 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from estimators.matching.icp import (
-    ICPParams,
-    PointToLineReference,
-    point_to_line_jacobian,
-    register,
-)
+from estimators.matching.icp import ICPParams, register
+from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from lidar_env.se2 import transform_points, wrap_angle
 

@@ -6,23 +6,17 @@ import numpy as np
 import pytest
 
 from estimators.base import SensorSetup, default_beam_angles
+from estimators.mapping.map_figure import occupancy_to_rgb, save_map_figure
 from estimators.mapping.map_scoring import (
-    evaluate_run_map,
-    map_truth,
     observable_cylinders,
     return_agreement,
-    save_map_figure,
     score_cylinders,
     score_occupancy,
     true_occupancy,
     visible_cells,
 )
-from estimators.mapping.occupancy import (
-    OccupancyGrid,
-    bounds_around,
-    from_estimator_run,
-    occupancy_to_rgb,
-)
+from estimators.mapping.occupancy import OccupancyGrid, bounds_around, from_estimator_run
+from estimators.mapping.run_maps import evaluate_run_map, map_truth
 from estimators.paths import SHARED_DATA
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World

@@ -6,14 +6,9 @@ import numpy as np
 import pytest
 
 from estimators.base import default_beam_angles
-from estimators.mapping.obstacles import (
-    DetectorParams,
-    Obstacle,
-    ObstacleTracker,
-    detect_obstacles,
-    fit_circle,
-    split_scan,
-)
+from estimators.mapping.circle_fit import fit_circle
+from estimators.mapping.obstacles import DetectorParams, Obstacle, detect_obstacles, split_scan
+from estimators.mapping.tracking import ObstacleTracker
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World
 

@@ -6,13 +6,8 @@ import numpy as np
 import pytest
 
 from estimators.base import SensorSetup, default_beam_angles
-from estimators.mapping.occupancy import (
-    OccupancyGrid,
-    from_estimator_run,
-    logit,
-    occupancy_to_rgb,
-    sensor_poses,
-)
+from estimators.mapping.map_figure import occupancy_to_rgb
+from estimators.mapping.occupancy import OccupancyGrid, from_estimator_run, logit, sensor_poses
 
 MISS, HIT = logit(0.4), logit(0.7)
 

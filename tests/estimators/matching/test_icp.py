@@ -8,13 +8,11 @@ import pytest
 from scipy.optimize import least_squares
 
 from estimators import SensorSetup, make
-from estimators.matching.icp import (
-    ICPParams,
+from estimators.matching.icp import ICPParams, match_scans, register
+from estimators.matching.point_to_line import (
     PointToLineReference,
     gauss_newton_step,
-    match_scans,
     point_to_line_jacobian,
-    register,
     robust_weights,
 )
 from estimators.matching.scan_matching import scan_to_points, voxel_downsample

@@ -7,12 +7,8 @@ import pytest
 
 from estimators.paths import SHARED_DATA
 from estimators.slam.g2o import read_g2o
-from estimators.slam.pose_graph import (
-    DisconnectedGraphError,
-    PoseGraph,
-    _WhitenedProblem,
-    optimize,
-)
+from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
+from estimators.slam.solver import _WhitenedProblem, optimize
 from lidar_env.se2 import compose, relative, wrap_angle
 
 DATA = SHARED_DATA / "g2o"

@@ -1,0 +1,206 @@
+"""The point-to-line geometry ICP iterates on (Censi 2008): robust IRLS weights, the Jacobian of
+point-to-line residuals, the closed-form Gauss-Newton step, and :class:`PointToLineReference`,
+a reference scan with a normal at each point that pairs query points with the lines through
+their nearest points.
+
+    sum_i rho(n_i . (R(theta) p_i + t - q_i))                                   (Censi eq. 5)
+
+Shared by :mod:`estimators.matching.icp`, :mod:`estimators.matching.curve_refinement` and loop
+closure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from estimators.matching.scan_matching import (
+    estimate_normals,
+    fit_local_curves,
+)
+
+#: Robust losses by name: weight of a residual r at scale c (IRLS weights).
+LOSSES: tuple[str, ...] = ("cauchy", "huber", "squared")
+
+
+def robust_weights(residuals: NDArray[np.float64], loss: str, scale: float) -> NDArray[np.float64]:
+    """IRLS weights ``rho'(r) / r`` of ``residuals`` [m] for ``loss`` at ``scale`` [m]."""
+    if loss == "cauchy":
+        return 1.0 / (1.0 + (residuals / scale) ** 2)
+    if loss == "huber":
+        magnitude = np.abs(residuals)
+        return np.where(magnitude <= scale, 1.0, scale / np.maximum(magnitude, 1e-12))
+    if loss == "squared":
+        return np.ones_like(residuals)
+    raise ValueError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
+
+
+def point_to_line_jacobian(
+    world_points: NDArray[np.float64], position: NDArray[np.float64], normals: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``(M, 3)`` derivative of ``n . (R(theta) p + t)`` w.r.t. the pose ``(x, y, theta)``,
+    evaluated at the mapped points ``world_points = R p + t`` with ``t = position``."""
+    lever = world_points - position
+    return np.column_stack(
+        [normals[:, 0], normals[:, 1], normals[:, 1] * lever[:, 0] - normals[:, 0] * lever[:, 1]]
+    )
+
+
+def gauss_newton_step(
+    jacobian: NDArray[np.float64],
+    residuals: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    prior_information: NDArray[np.float64] | None = None,
+    prior_offset: NDArray[np.float64] | None = None,
+    min_information: float = 0.0,
+) -> NDArray[np.float64]:
+    """Pose increment (3,) minimising ``sum w (r + J d)^2 + (d - e)^T L (d - e)`` over ``d``,
+    with ``L = diag(prior_information)`` and ``e = prior_offset`` (prior pose minus current).
+
+    With ``min_information`` > 0 and a prior, directions in which the data carry less
+    information than that many fully weighted points facing that way (a corridor's axis) are
+    left to the prior alone (Zhang, Kaess and Singh, "On degeneracy of optimization-based
+    state estimation problems", ICRA 2016): the data's weak pull there comes from noisy
+    normals and the nearest-neighbour bias towards "no motion", not from evidence. Rotation
+    is scaled by the points' RMS lever arm to compare it with translation.
+    """
+    weighted = jacobian * weights[:, None]
+    hessian = weighted.T @ jacobian
+    gradient = -weighted.T @ residuals
+    if min_information > 0 and prior_information is not None:
+        lever = np.sqrt(np.mean(jacobian[:, 2] ** 2)) or 1.0
+        scale = np.array([1.0, 1.0, lever])
+        values, vectors = np.linalg.eigh(hessian / np.outer(scale, scale))
+        kept = vectors[:, values >= min_information]
+        projection = kept @ kept.T
+        hessian = np.outer(scale, scale) * (projection @ (hessian / np.outer(scale, scale))
+                                            @ projection)
+        gradient = scale * (projection @ (gradient / scale))
+    if prior_information is not None:
+        hessian = hessian + np.diag(prior_information)
+        gradient = gradient + prior_information * prior_offset
+    # A tiny damping keeps degenerate geometry (one wall) solvable; it moves nothing that the
+    # data constrain.
+    hessian = hessian + 1e-9 * np.eye(3)
+    return np.linalg.solve(hessian, gradient)
+
+
+@dataclass(frozen=True)
+class Correspondences:
+    """Pairs for the query points ``index``: the line through ``anchors`` with unit ``normals``."""
+
+    index: NDArray[np.intp]
+    anchors: NDArray[np.float64]
+    normals: NDArray[np.float64]
+
+
+class PointToLineReference:
+    """Reference points (world or any fixed frame) with a k-d tree, paired point-to-line.
+
+    With ``normals`` (M, 2) given, a query point's line passes through its nearest reference
+    point (or that point's ``anchors`` row, a denoised position of it) along that point's
+    normal (rows of ``valid_normals`` false fall back to the line
+    through the two nearest points). Without, the line runs through the two nearest reference
+    points (Censi's PL-ICP); when the second lies beyond the pairing distance, or a stored normal
+    is not valid, the pair is point-to-point (the normal points from the reference point to
+    the query point).
+    """
+
+    def __init__(
+        self,
+        points: ArrayLike,
+        normals: NDArray[np.float64] | None = None,
+        valid_normals: NDArray[np.bool_] | None = None,
+        anchors: NDArray[np.float64] | None = None,
+    ) -> None:
+        self.points = np.asarray(points, dtype=np.float64)
+        if self.points.ndim != 2 or self.points.shape[1] != 2 or len(self.points) < 2:
+            raise ValueError(
+                f"reference points: expected shape (N >= 2, 2), got {self.points.shape}"
+            )
+        self.tree = cKDTree(self.points)
+        self.normals = normals
+        self.valid_normals = (
+            valid_normals
+            if valid_normals is not None or normals is None
+            else np.ones(len(self.points), bool)
+        )
+        self.anchors = self.points if anchors is None else np.asarray(anchors, dtype=np.float64)
+        if self.anchors.shape != self.points.shape:
+            raise ValueError(
+                f"anchors: expected the points' shape {self.points.shape}, got "
+                f"{self.anchors.shape}"
+            )
+
+    @classmethod
+    def with_estimated_normals(
+        cls, points: ArrayLike, k: int = 5, denoise: bool = False, max_k: int | None = None
+    ) -> PointToLineReference:
+        """Reference whose normals come from each point's ``k`` nearest neighbours
+        (:func:`estimators.matching.scan_matching.estimate_normals`), sharing one k-d tree. With
+        ``denoise``, lines pass through each point moved onto the curve fitted through its
+        neighbours, with that curve's normal
+        (:func:`estimators.matching.scan_matching.fit_local_curves`): pairs then carry the
+        reference's range noise averaged over ``k`` readings rather than one reading's. With
+        ``max_k``, neighbourhoods that do not form a line are refitted through up to that
+        many points (noisy walls; see
+        :func:`estimators.matching.scan_matching.estimate_normals`)."""
+        reference = cls(points)
+        if denoise:
+            reference.normals, reference.valid_normals, reference.anchors = fit_local_curves(
+                reference.points, reference.tree, k, max_k=max_k
+            )
+        else:
+            reference.normals, reference.valid_normals = estimate_normals(
+                reference.points, reference.tree, k, max_k=max_k
+            )
+        return reference
+
+    def correspond(
+        self, world_points: NDArray[np.float64], max_distance: float
+    ) -> Correspondences:
+        """Pairs for the points ``(M, 2)`` whose nearest reference point is within
+        ``max_distance`` [m]."""
+        if self.normals is None:
+            return self._censi_pairs(world_points, np.arange(len(world_points)), max_distance)
+        # Stored normals need only the nearest neighbour: half the k-d tree work.
+        distances, nearest = self.tree.query(world_points, distance_upper_bound=max_distance)
+        index = np.flatnonzero(np.isfinite(distances))
+        nearest = nearest[index]
+        stored = self.valid_normals[nearest]
+        pairs = Correspondences(index[stored], self.anchors[nearest[stored]],
+                                self.normals[nearest[stored]])
+        if np.all(stored):
+            return pairs
+        censi = self._censi_pairs(world_points, index[~stored], max_distance)
+        return Correspondences(
+            np.concatenate([pairs.index, censi.index]),
+            np.concatenate([pairs.anchors, censi.anchors]),
+            np.concatenate([pairs.normals, censi.normals]),
+        )
+
+    def _censi_pairs(
+        self, world_points: NDArray[np.float64], candidates: NDArray[np.intp], max_distance: float
+    ) -> Correspondences:
+        """Lines through the two nearest reference points of ``world_points[candidates]``."""
+        distances, neighbours = self.tree.query(
+            world_points[candidates], k=2, distance_upper_bound=max_distance
+        )
+        found = np.isfinite(distances[:, 0])
+        index, neighbours = candidates[found], neighbours[found]
+        nearest = neighbours[:, 0]
+        has_line = np.isfinite(distances[found, 1])
+        second = np.where(has_line, neighbours[:, 1], nearest)
+        along = self.points[second] - self.points[nearest]
+        length = np.hypot(along[:, 0], along[:, 1])
+        has_line &= length > 1e-9
+        normals = np.column_stack([-along[:, 1], along[:, 0]]) / np.maximum(length, 1e-12)[:, None]
+        first = self.points[nearest]
+        # No line: point-to-point, linearised along the current offset.
+        offset = world_points[index[~has_line]] - first[~has_line]
+        offset_length = np.maximum(np.hypot(offset[:, 0], offset[:, 1]), 1e-12)
+        normals[~has_line] = offset / offset_length[:, None]
+        return Correspondences(index, first, normals)
