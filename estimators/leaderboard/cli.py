@@ -43,18 +43,14 @@ workers' time per stage and their CPU time, so a slow run can be told apart from
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import sys
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from agents.driver import DRIVERS
 from estimators.leaderboard.database import (
@@ -62,97 +58,33 @@ from estimators.leaderboard.database import (
     ExperimentDatabase,
     Scenario,
     TraceRecord,
-    canonical_json,
     package_version,
 )
-from estimators.leaderboard.runner import (
-    STAGES,
-    EstimatorSpec,
-    RealLog,
-    RunInterrupted,
-    SideRun,
-    run_matrix,
+from estimators.leaderboard.figures import draw_figure_8, draw_map_figure
+from estimators.leaderboard.matrix import (
+    DEFAULT_NOISE,
+    DEFAULT_SEEDS,
+    PAPER_DRIVER,
+    PAPER_ESTIMATORS,
+    Group,
+    build_groups,
+    table_one_scenarios,
 )
+from estimators.leaderboard.runner import RunInterrupted, RunSummary, SideRun, run_matrix
+from estimators.leaderboard.tables import (
+    RANK_KEYS,
+    current_records,
+    leaderboard_markdown,
+    map_ceiling_note,
+    rank_table,
+    table_one,
+    table_one_markdown,
+    write_csv,
+)
+from estimators.leaderboard.tasks import STAGES, EstimatorSpec, RealLog
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
 
-
-@dataclass(frozen=True)
-class Group:
-    """A column of the leaderboard: one world driven along one trace seed."""
-
-    name: str
-    world: str
-    trace: str
-
-
-#: The paper's three groups (Fig. 7) plus the straight seed and a drive that revisits a place.
-#: The straight run goes through the hallway: motion along a corridor is the classic hard case
-#: for scan matching. The out-and-back drive goes down that corridor and back along it, 2 m to
-#: the left: the one default drive where loop closure (``slam``) can correct a front end.
-DEFAULT_GROUPS: tuple[Group, ...] = (
-    Group("G1 open+right_turn", "open_cylinders", "right_turn"),
-    Group("G2 hallway+zigzag", "hallway", "zigzag"),
-    Group("G3 closed-to-open+zigzag", "closed_to_open", "zigzag"),
-    Group("hallway+straight", "hallway", "straight"),
-    Group("hallway+out_and_back", "hallway", "out_and_back"),
-)
-#: A few seeds per group: each seed draws new range noise (and a new world for "random").
-DEFAULT_SEEDS: tuple[int, ...] = (0, 1)
-#: Range noise [m] of Table I's runs: 1 cm, a cheap time-of-flight Lidar.
-DEFAULT_NOISE = 0.01
-
-
-@dataclass(frozen=True)
-class TableICase:
-    """One row of the paper's Table I (section IV.C)."""
-
-    case: int
-    area: str
-    feature: str
-    pose_graph: bool
-    world: str
-    trace: str
-    paper_accuracy: float
-    estimator: str  # the paper's line colour: brown = offset Lidar only, blue = both + eq. 10
-
-
-TABLE_I: tuple[TableICase, ...] = (
-    TableICase(1, "open", "rich", False, "open_cylinders", "right_turn", 31.25, "pc_offset"),
-    TableICase(2, "open", "rich", True, "open_cylinders", "right_turn", 91.10, "pc_pg"),
-    TableICase(3, "close", "low", False, "hallway", "zigzag", 60.08, "pc_offset"),
-    TableICase(4, "close", "low", True, "hallway", "zigzag", 60.31, "pc_pg"),
-    TableICase(5, "close to open", "medium", False, "closed_to_open", "zigzag", 64.45,
-               "pc_offset"),
-    TableICase(6, "close to open", "medium", True, "closed_to_open", "zigzag", 63.54, "pc_pg"),
-)
-#: The paper's estimators: the only ones replayed on Table I's world-aligned recordings.
-PAPER_ESTIMATORS: tuple[str, ...] = ("pc", "pc_offset", "pc_pg")
-#: Table I's columns: env ``scan_frame`` -> title. World-aligned is the paper's setting.
-TABLE_I_FRAMES: dict[str, str] = {"world": "world-aligned", "sensor": "sensor-frame"}
-#: Who drives the world-aligned recordings, whatever ``--driver`` says: the paper's scripted
-#: traces, and no learned policy (trained on sensor-frame scans) sees rotated inputs.
-PAPER_DRIVER = "scripted"
-
-#: (metric stored in the database, column title, lower is better)
-METRIC_COLUMNS: tuple[tuple[str, str, bool], ...] = (
-    ("accuracy_percent", "eq.-11 accuracy [%]", False),
-    ("ate_rmse_m", "ATE [m]", True),
-    ("heading_rmse_deg", "heading RMSE [deg]", True),
-    ("drift_percent", "drift [%]", True),
-    ("ms_per_step", "ms/step", True),
-    ("map_iou", "map IoU", False),
-    ("map_precision", "map precision", False),
-    ("map_recall", "map recall", False),
-    ("cylinder_recall", "cylinder recall", False),
-    ("cylinder_error_m", "cylinder error [m]", True),
-)
-RANK_KEYS: dict[str, str] = {"ate": "ate_rmse_m", "accuracy": "accuracy_percent",
-                             "heading": "heading_rmse_deg", "drift": "drift_percent",
-                             "map": "map_iou"}
-#: The paper's estimator, whose map ``maps.png`` shows next to the best one's.
-PAPER_ESTIMATOR = "pc_pg"
-REAL_METRIC = "relations_all_translation_m"
 DATA_DIR = SHARED_DATA / "radish"
 #: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
 #: few hundred ground-truth relations while keeping the default run within a minute.
@@ -212,21 +144,6 @@ def _check_names(parser: argparse.ArgumentParser, kind: str, given: Sequence[str
             parser.error(f"unknown {kind} {name!r}: expected one of {', '.join(valid)}")
 
 
-def build_groups(worlds: Sequence[str] | None, traces: Sequence[str] | None) -> list[Group]:
-    """The scenario groups: the defaults, or ``worlds`` x ``traces`` (each defaulting to the
-    paper's trace of the world / every world of the default groups)."""
-    from lidar_env.worlds import PAPER_TRACES
-
-    if worlds is None and traces is None:
-        return list(DEFAULT_GROUPS)
-    chosen_worlds = list(worlds) if worlds else list(dict.fromkeys(g.world for g in DEFAULT_GROUPS))
-    return [
-        Group(f"{world}+{trace}", world, trace)
-        for world in chosen_worlds
-        for trace in (traces or [PAPER_TRACES[world]])
-    ]
-
-
 def check_output_dir(out: Path) -> None:
     """Create ``out`` if needed and prove it writable, before any work is done."""
     try:
@@ -238,311 +155,6 @@ def check_output_dir(out: Path) -> None:
             f"output directory {out} is not writable ({error.strerror}); "
             "choose another --out"
         ) from error
-
-
-def _mean(values: list[float]) -> float:
-    finite = [v for v in values if v is not None and math.isfinite(v)]
-    return float(np.mean(finite)) if finite else math.nan
-
-
-def _fmt(value: float, digits: int = 2) -> str:
-    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
-
-
-def _current(records: list[TraceRecord], specs: Sequence[EstimatorSpec],
-             version: str) -> dict[tuple[Scenario, str], TraceRecord]:
-    """The records made by exactly the requested estimators, params and package version."""
-    wanted = {spec.name: spec.resolved_params for spec in specs}
-    return {
-        (record.scenario, record.trace.estimator): record
-        for record in records
-        if record.trace.estimator in wanted
-        and canonical_json(record.trace.params) == canonical_json(wanted[record.trace.estimator])
-        and record.trace.package_version == version
-    }
-
-
-def rank_table(groups: Sequence[Group], scenarios: dict[str, list[Scenario]],
-               specs: Sequence[EstimatorSpec], records: dict[tuple[Scenario, str], TraceRecord],
-               real: Scenario | None, rank_key: str,
-               real_not_applicable: Mapping[str, str] | None = None) -> list[dict[str, Any]]:
-    """One row per estimator: metric means over every simulated scenario, per-group accuracy
-    and ATE, the real-log relation error (or, in ``real_note``, why the estimator does not
-    apply to the log: ``real_not_applicable`` maps its name to the reason); sorted best first
-    (NaN last)."""
-    rows = []
-    for spec in specs:
-        mine = [records[(s, spec.name)] for group in groups for s in scenarios[group.name]
-                if (s, spec.name) in records]
-        total = sum(len(scenarios[group.name]) for group in groups)
-        row: dict[str, Any] = {"estimator": spec.name, "scenarios": len(mine),
-                               "scenarios_run": total}
-        for key, _, _ in METRIC_COLUMNS:
-            row[key] = _mean([r.metrics.get(key, math.nan) for r in mine])
-        for group in groups:
-            in_group = [records[(s, spec.name)] for s in scenarios[group.name]
-                        if (s, spec.name) in records]
-            row[f"{group.name} accuracy_percent"] = _mean(
-                [r.metrics.get("accuracy_percent", math.nan) for r in in_group])
-            row[f"{group.name} ate_rmse_m"] = _mean(
-                [r.metrics.get("ate_rmse_m", math.nan) for r in in_group])
-        if real is not None:
-            record = records.get((real, spec.name))
-            row[REAL_METRIC] = math.nan if record is None else record.metrics.get(REAL_METRIC)
-            row["real_note"] = (real_not_applicable or {}).get(spec.name, "")
-        rows.append(row)
-    lower_better = next(lower for key, _, lower in METRIC_COLUMNS if key == rank_key)
-
-    def order(row: dict[str, Any]) -> tuple[bool, float]:
-        value = row[rank_key]
-        return (not math.isfinite(value), value if lower_better else -value)
-
-    return sorted(rows, key=order)
-
-
-def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(cells) + " |" for cells in body]
-    return "\n".join(lines) + "\n"
-
-
-def leaderboard_markdown(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
-                         real_name: str | None) -> str:
-    header = ["#", "estimator", *(title for _, title, _ in METRIC_COLUMNS)]
-    header += [f"{g.name}: acc % / ATE m" for g in groups]
-    if real_name:
-        header.append(f"{real_name} rel. error [m]")
-    body = []
-    for rank, row in enumerate(rows, 1):
-        name = row["estimator"]
-        if row["scenarios"] < row["scenarios_run"]:  # means over fewer scenarios: say so
-            name += f" (scored on {row['scenarios']} of {row['scenarios_run']})"
-        cells = [str(rank), name]
-        cells += [_fmt(row[key], 1 if key.endswith("percent") else 3) for key, _, _ in
-                  METRIC_COLUMNS]
-        cells += [f"{_fmt(row[f'{g.name} accuracy_percent'], 1)} / "
-                  f"{_fmt(row[f'{g.name} ate_rmse_m'], 3)}" for g in groups]
-        if real_name:
-            note = row.get("real_note")
-            cells.append(f"n/a ({note})" if note else _fmt(row.get(REAL_METRIC, math.nan), 3))
-        body.append(cells)
-    return _markdown(header, body)
-
-
-def map_ceiling_note(records: dict[tuple[Scenario, str], TraceRecord]) -> str:
-    """A line under the table: the map scores at the true poses (the mapper's own ceiling for
-    the estimators' map columns), averaged over the scenarios like the columns."""
-    per_scenario = {scenario: record.metrics for (scenario, _), record in records.items()
-                    if "map_iou_true_poses" in record.metrics}
-    if not per_scenario:
-        return ""
-    scores = []
-    for key, title, _ in METRIC_COLUMNS:
-        if key.startswith(("map_", "cylinder_")):
-            mean = _mean([m.get(f"{key}_true_poses", math.nan) for m in per_scenario.values()])
-            scores.append(f"{title} {_fmt(mean, 3)}")
-    return f"\nMaps at the true poses (the mapper's ceiling): {', '.join(scores)}.\n"
-
-
-def _seed_metrics(runs: Sequence[Scenario], estimator: str,
-                  records: dict[tuple[Scenario, str], TraceRecord]) -> list[dict[str, float]]:
-    return [records[(s, estimator)].metrics for s in runs if (s, estimator) in records]
-
-
-def table_one(by_frame: Mapping[str, Mapping[tuple[str, str], Sequence[Scenario]]],
-              records: dict[tuple[Scenario, str], TraceRecord]) -> list[dict[str, Any]]:
-    """Table I: the paper's accuracy per case beside ours, for each scan frame of ``by_frame``
-    (``"world"``/``"sensor"`` -> (world, trace) -> the scenarios, one per seed): the mean and
-    std over seeds, the mean ATE, and, for the cases without pose-graph correlation, the
-    main-Lidar-only ``pc`` as well (NaN where nothing ran)."""
-    rows = []
-    for case in TABLE_I:
-        row: dict[str, Any] = {
-            "case": case.case, "area": case.area, "feature": case.feature,
-            "pose_graph": "yes" if case.pose_graph else "no",
-            "scenario": f"{case.world}+{case.trace}", "estimator": case.estimator,
-            "paper_accuracy_percent": case.paper_accuracy,
-        }
-        for frame in TABLE_I_FRAMES:
-            runs = by_frame.get(frame, {}).get((case.world, case.trace), [])
-            ours = _seed_metrics(runs, case.estimator, records)
-            accuracy = [m["accuracy_percent"] for m in ours]
-            main_only = [] if case.pose_graph else _seed_metrics(runs, "pc", records)
-            row.update({
-                f"ours_{frame}_accuracy_percent": _mean(accuracy),
-                f"ours_{frame}_std_percent": float(np.std(accuracy)) if ours else math.nan,
-                f"ours_{frame}_seeds": len(ours),
-                f"ours_{frame}_ate_m": _mean([m.get("ate_rmse_m", math.nan) for m in ours]),
-                f"pc_main_only_{frame}_accuracy_percent": _mean(
-                    [m["accuracy_percent"] for m in main_only]),
-            })
-        rows.append(row)
-    return rows
-
-
-def table_one_markdown(rows: Sequence[dict[str, Any]]) -> str:
-    """Table I as markdown, with a legend of the two scan frames."""
-    titles = list(TABLE_I_FRAMES.values())
-    header = ["case", "area", "feature", "pose-graph", "scenario", "estimator", "paper [%]",
-              *(f"ours, {title} [%] (mean ± std, seeds)" for title in titles),
-              f"ATE {' / '.join(titles)} [m]", f"pc main only, {' / '.join(titles)} [%]"]
-    body = []
-    for r in rows:
-        ours = [f"{_fmt(r[f'ours_{frame}_accuracy_percent'])} ± "
-                f"{_fmt(r[f'ours_{frame}_std_percent'])} ({r[f'ours_{frame}_seeds']})"
-                if r[f"ours_{frame}_seeds"] else "not run" for frame in TABLE_I_FRAMES]
-        ate = " / ".join(_fmt(r[f"ours_{frame}_ate_m"], 3) for frame in TABLE_I_FRAMES)
-        main_only = "" if r["pose_graph"] == "yes" else " / ".join(
-            _fmt(r[f"pc_main_only_{frame}_accuracy_percent"]) for frame in TABLE_I_FRAMES)
-        body.append([str(r["case"]), r["area"], r["feature"], r["pose_graph"], r["scenario"],
-                     r["estimator"], f"{r['paper_accuracy_percent']:.2f}", *ours, ate,
-                     main_only])
-    legend = (
-        "\nworld-aligned: the paper's setting, scans rotated into world axes (env "
-        "`scan_frame=\"world\"`): the translation-only phase correlation never sees a rotation. "
-        "sensor-frame: the scans as mounted Lidars give them (the leaderboard's scenarios), "
-        "where the paper's method cannot see the car turn. Accuracy = 100% - eq. 11, floored "
-        "at 0; ATE for context (eq. 11 ignores direction).\n"
-    )
-    return _markdown(header, body) + legend
-
-
-def table_one_scenarios(groups: Sequence[Group], scenarios: Mapping[str, Sequence[Scenario]],
-                        specs: Sequence[EstimatorSpec]
-                        ) -> dict[str, dict[tuple[str, str], list[Scenario]]]:
-    """Table I's scenarios per scan frame (:data:`TABLE_I_FRAMES`): the groups that are Table I
-    cases as the leaderboard runs them (``"sensor"``), and the same scenarios with
-    ``scan_frame="world"``, driven by :data:`PAPER_DRIVER` (``"world"``; none unless one of
-    :data:`PAPER_ESTIMATORS` runs)."""
-    cases = {(case.world, case.trace) for case in TABLE_I}
-    sensor = {(g.world, g.trace): list(scenarios[g.name]) for g in groups
-              if (g.world, g.trace) in cases}
-    world: dict[tuple[str, str], list[Scenario]] = {}
-    if any(spec.name in PAPER_ESTIMATORS for spec in specs):
-        world = {pair: [replace(s, config={**s.config, "scan_frame": "world"},
-                                driver=PAPER_DRIVER) for s in runs]
-                 for pair, runs in sensor.items()}
-    return {"world": world, "sensor": sensor}
-
-
-def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
-    fields = list(dict.fromkeys(key for row in rows for key in row))
-    with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def draw_figure_8(db: ExperimentDatabase, groups: Sequence[Group],
-                  scenarios: dict[str, list[Scenario]],
-                  records: dict[tuple[Scenario, str], TraceRecord],
-                  specs: Sequence[EstimatorSpec], out: Path) -> list[Path]:
-    """Fig. 8: an eq.-5 Lidar image, and per group (first seed) the true trace and every
-    estimator's trace over the world map. Returns the PNG paths."""
-    from matplotlib.figure import Figure
-
-    from estimators.leaderboard.recording import world_from_geometry
-    from estimators.paper.scan_image import scan_to_image
-
-    first = [(group, scenarios[group.name][0]) for group in groups if scenarios[group.name]]
-    first = [(g, s) for g, s in first if db.has_sensor_dataset(s)]
-    if not first:
-        return []
-    paths = []
-    dataset = db.load_sensor_dataset(first[0][1])
-    step = len(dataset) // 2
-    image = scan_to_image(dataset.scans["lidar_1"][step], dataset.setup.beam_angles,
-                          dataset.setup.max_range)
-    figure = Figure(figsize=(6, 5))
-    axes = figure.add_subplot()
-    shown = axes.imshow(image, cmap="gray_r", interpolation="none")
-    figure.colorbar(shown, ax=axes, label="pixel value (eq. 5)")
-    axes.set_title(f"eq. 5 Lidar image: {first[0][1].label}, step {step}, lidar_1", fontsize=9)
-    axes.set_xlabel("column [px]")
-    axes.set_ylabel("row [px]")
-    paths.append(out / "fig8_lidar_image.png")
-    figure.savefig(paths[-1], dpi=150, bbox_inches="tight")
-
-    columns = min(2, len(first))
-    rows = -(-len(first) // columns)
-    figure = Figure(figsize=(7 * columns, 5 * rows), layout="constrained")
-    colours = [f"C{i % 10}" for i in range(len(specs))]
-    for index, (group, scenario) in enumerate(first, 1):
-        axes = figure.add_subplot(rows, columns, index)
-        dataset = db.load_sensor_dataset(scenario)
-        world = world_from_geometry(dataset.world)  # the map as it was recorded
-        xmin, ymin, xmax, ymax = world.bounds
-        axes.imshow(world.to_image(0.05), cmap="gray_r", extent=(xmin, xmax, ymin, ymax),
-                    vmax=400)
-        truth = dataset.poses
-        axes.plot(truth[:, 0], truth[:, 1], "k-", linewidth=3, label="truth")
-        with_poses = {r.trace_id: r for r in db.traces(scenario)}
-        for spec, colour in zip(specs, colours, strict=True):
-            key = (scenario, spec.name)
-            record = with_poses[records[key].trace_id] if key in records else None
-            if record is not None:
-                poses = record.trace.poses
-                axes.plot(poses[:, 0], poses[:, 1], "-", color=colour, linewidth=1.2,
-                          label=spec.name)
-        axes.set_xlim(xmin, xmax)
-        axes.set_ylim(ymin, ymax)
-        axes.set_aspect("equal")
-        axes.set_title(f"{group.name} (seed {scenario.seed})")
-        axes.set_xlabel("x [m]")
-        axes.set_ylabel("y [m]")
-    figure.legend(*axes.get_legend_handles_labels(), loc="outside right upper",
-                  fontsize="small")
-    paths.append(out / "fig8_traces.png")
-    figure.savefig(paths[-1], dpi=80, bbox_inches="tight")
-    return paths
-
-
-def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
-                    scenarios: dict[str, list[Scenario]],
-                    records: dict[tuple[Scenario, str], TraceRecord],
-                    ranked: Sequence[str], out: Path) -> list[Path]:
-    """``maps.png``: the true map of the first group whose world has cylinders (else the first
-    group), first seed, next to the occupancy maps built from its scans at the poses of the
-    best-ranked estimator (first of ``ranked`` that ran there) and of :data:`PAPER_ESTIMATOR`,
-    as scored (:data:`estimators.leaderboard.recording.MAP_RESOLUTION`). Returns the PNG paths."""
-    from estimators.leaderboard.recording import MAP_RESOLUTION, world_from_geometry
-    from estimators.mapping.map_figure import save_map_figure
-    from estimators.mapping.occupancy import from_estimator_run
-
-    candidates = [(g, scenarios[g.name][0]) for g in groups if scenarios[g.name]]
-    candidates = [(g, s) for g, s in candidates if db.has_sensor_dataset(s)]
-    if not candidates:
-        return []
-
-    def has_cylinders(scenario: Scenario) -> bool:
-        world = db.load_sensor_dataset(scenario).world
-        return bool(world) and len(world["circles"]) > 0
-
-    group, scenario = next((c for c in candidates if has_cylinders(c[1])), candidates[0])
-    dataset = db.load_sensor_dataset(scenario)
-    if not dataset.world:
-        return []
-    ran = [name for name in ranked if (scenario, name) in records]
-    shown = list(dict.fromkeys(ran[:1] + [n for n in ran if n == PAPER_ESTIMATOR]))
-    if not shown:
-        return []
-    world = world_from_geometry(dataset.world)
-    observations = list(dataset.observations())
-    by_id = {r.trace_id: r for r in db.traces(scenario)}
-    panels: dict[str, Any] = {"true map": world.to_image(MAP_RESOLUTION)}
-    trajectories = {"truth": dataset.poses}
-    for name in shown:
-        record = records[(scenario, name)]
-        poses = by_id[record.trace_id].trace.poses
-        role = "paper" if name == PAPER_ESTIMATOR else "best"
-        iou = record.metrics.get("map_iou", math.nan)
-        panels[f"{role}: {name} (IoU {_fmt(iou)})"] = from_estimator_run(
-            poses, observations, dataset.setup, MAP_RESOLUTION, bounds=world.bounds)
-        trajectories[name] = poses
-    path = save_map_figure(out / "maps.png", panels, world.bounds, trajectories,
-                           title=f"{group.name}, seed {scenario.seed}: occupancy maps, "
-                                 f"{100 * MAP_RESOLUTION:.0f} cm cells")
-    return [path]
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -610,42 +222,45 @@ def main(argv: Sequence[str] | None = None) -> int:
                     [EstimatorSpec(name) for name in estimator_names], start)
 
 
-def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
-         specs: list[EstimatorSpec], start: float) -> int:
-    config = {"range_noise_std": args.noise}
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config, args.driver)
-                          for seed in args.seeds]
-                 for g in groups}
-    logs = []
-    if not args.no_real:
-        log = RealLog("aces", str(DATA_DIR / "aces.clf.bz2"), str(DATA_DIR / "aces.relations"),
-                      args.real_scans or None)
-        if Path(log.log_path).exists() and Path(log.relations_path).exists():
-            logs.append(log)
-        else:
-            print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
-    table_i_runs = table_one_scenarios(groups, scenarios, specs)
-    world_aligned = SideRun(
-        tuple(s for runs in table_i_runs["world"].values() for s in runs),
-        tuple(spec for spec in specs if spec.name in PAPER_ESTIMATORS))
+def _real_logs(args: argparse.Namespace) -> list[RealLog]:
+    """The real logs to score on: ACES, unless ``--no-real`` or it is not in :data:`DATA_DIR`."""
+    if args.no_real:
+        return []
+    log = RealLog("aces", str(DATA_DIR / "aces.clf.bz2"), str(DATA_DIR / "aces.relations"),
+                  args.real_scans or None)
+    if Path(log.log_path).exists() and Path(log.relations_path).exists():
+        return [log]
+    print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
+    return []
+
+
+def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: list[Scenario],
+                     logs: list[RealLog], specs: list[EstimatorSpec],
+                     world_aligned: SideRun) -> RunSummary | None:
+    """Run the matrix on the executor ``--workers``/``--scheduler`` ask for (:func:`_executor`:
+    the worker pool is created here and shut down after); None if the run was interrupted."""
     executor = _executor(args)
     try:
-        every = [s for group in groups for s in scenarios[group.name]]
         tasks = len(every) + len(world_aligned.scenarios) + len(logs) * len(specs)
         with _progress(tasks, "scenarios", not args.no_progress) as bar:
-            summary = run_matrix(db, every, logs, specs, executor, side_runs=[world_aligned],
-                                 on_done=lambda _: bar.update())
+            return run_matrix(db, every, logs, specs, executor, side_runs=[world_aligned],
+                              on_done=lambda _: bar.update())
     except RunInterrupted as error:
         print(f"error: {error}", file=sys.stderr)
-        return 1
+        return None
     finally:
         if isinstance(executor, ProcessPoolExecutor):
             executor.shutdown(cancel_futures=True)
         elif executor is not None:
             executor.close()  # a Dask client: disconnect, the cluster stays up
 
-    reporting = time.perf_counter()
-    records = _current(db.traces(poses=False), specs, package_version())
+
+def _write_tables(args: argparse.Namespace, groups: list[Group],
+                  scenarios: dict[str, list[Scenario]], specs: list[EstimatorSpec],
+                  records: dict[tuple[Scenario, str], TraceRecord], logs: list[RealLog],
+                  table_i_runs: dict[str, Any]) -> tuple[list[Path], list[dict[str, Any]]]:
+    """Write and print the leaderboard (.md, .csv), results.csv and Table I (.md, .csv);
+    returns the files written and the ranked rows."""
     real = logs[0].scenario if logs else None
     not_applicable = {spec.name: reason for spec in specs
                       if logs and (reason := spec.not_applicable(logs[0].n_lidars))}
@@ -659,8 +274,8 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     (out / "leaderboard.md").write_text(
         f"# duallidar leaderboard (ranked by {args.rank_by}; noise {args.noise} m; seeds "
         f"{', '.join(map(str, args.seeds))})\n\n{table}")
-    _write_csv(out / "leaderboard.csv", rows)
-    _write_csv(out / "results.csv", [
+    write_csv(out / "leaderboard.csv", rows)
+    write_csv(out / "results.csv", [
         {"estimator": name, "kind": scenario.kind, "world": scenario.world,
          "trace": scenario.trace, "seed": scenario.seed,
          "scan_frame": scenario.config.get("scan_frame", "sensor"), **record.metrics}
@@ -673,11 +288,34 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
             f"# Table I: eq.-11 accuracy, paper vs ours (noise {args.noise} m; seeds "
             f"{', '.join(map(str, args.seeds))}; driver {args.driver}, world-aligned runs "
             f"{PAPER_DRIVER})\n\n{table_i}")
-        _write_csv(out / "table1.csv", case_rows)
+        write_csv(out / "table1.csv", case_rows)
         written += [out / "table1.md", out / "table1.csv"]
         print("Table I (accuracy = 100% - eq. 11):\n" + table_i)
     else:
         print("note: Table I skipped: the run holds none of the paper's world/trace pairs")
+    return written, rows
+
+
+def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
+         specs: list[EstimatorSpec], start: float) -> int:
+    config = {"range_noise_std": args.noise}
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config, args.driver)
+                          for seed in args.seeds]
+                 for g in groups}
+    logs = _real_logs(args)
+    table_i_runs = table_one_scenarios(groups, scenarios, specs)
+    world_aligned = SideRun(
+        tuple(s for runs in table_i_runs["world"].values() for s in runs),
+        tuple(spec for spec in specs if spec.name in PAPER_ESTIMATORS))
+    every = [s for group in groups for s in scenarios[group.name]]
+    summary = _run_on_executor(args, db, every, logs, specs, world_aligned)
+    if summary is None:
+        return 1
+
+    reporting = time.perf_counter()
+    records = current_records(db.traces(poses=False), specs, package_version())
+    out: Path = args.out
+    written, rows = _write_tables(args, groups, scenarios, specs, records, logs, table_i_runs)
     try:
         written += draw_figure_8(db, groups, scenarios, records, specs, out)
         written += draw_map_figure(db, groups, scenarios, records,

@@ -12,8 +12,9 @@ import pytest
 from estimators.base import SensorSetup
 from estimators.datasets.carmen import flaser_beam_angles
 from estimators.leaderboard import cli as leaderboard
+from estimators.leaderboard import matrix, tables
 from estimators.leaderboard.database import Scenario, TraceDataset, TraceRecord
-from estimators.leaderboard.runner import EstimatorSpec
+from estimators.leaderboard.tasks import EstimatorSpec
 from estimators.paths import SHARED_DATA
 from estimators.registry import make, names
 
@@ -246,11 +247,11 @@ def test_two_lidar_estimators_show_na_on_a_one_lidar_log_and_are_no_failures(
 
 
 def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators() -> None:
-    groups = leaderboard.build_groups(None, None)
+    groups = matrix.build_groups(None, None)
     scenarios = {g.name: [Scenario(g.world, g.trace, seed, {"range_noise_std": 0.01}, "sb3")
                           for seed in (0, 1)] for g in groups}
-    runs = leaderboard.table_one_scenarios(groups, scenarios, [EstimatorSpec("pc_pg")])
-    cases = {(c.world, c.trace) for c in leaderboard.TABLE_I}
+    runs = matrix.table_one_scenarios(groups, scenarios, [EstimatorSpec("pc_pg")])
+    cases = {(c.world, c.trace) for c in matrix.TABLE_I}
     assert set(runs["sensor"]) == set(runs["world"]) == cases  # not straight nor out_and_back
     for pair, sensor in runs["sensor"].items():
         world = runs["world"][pair]
@@ -258,7 +259,7 @@ def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators()
         assert all(dict(w.config) == {**s.config, "scan_frame": "world"}
                    for w, s in zip(world, sensor, strict=True))
         assert {s.driver for s in world} == {"scripted"}  # no policy sees rotated scans
-    assert leaderboard.table_one_scenarios(groups, scenarios,
+    assert matrix.table_one_scenarios(groups, scenarios,
                                            [EstimatorSpec("icp")])["world"] == {}
 
 
@@ -274,7 +275,7 @@ def test_table_one_reports_world_aligned_and_sensor_frame_beside_the_paper() -> 
             trace = TraceDataset(name, {}, np.zeros(1), np.zeros((1, 3)), np.zeros(1))
             records[(scenario, name)] = TraceRecord(0, scenario, trace, {
                 "accuracy_percent": value, "ate_rmse_m": 100.0 - value})
-    rows = leaderboard.table_one(runs, records)
+    rows = tables.table_one(runs, records)
     case_1, case_2 = rows[0], rows[1]
     assert case_1["ours_world_accuracy_percent"] == pytest.approx(92.0)
     assert case_1["ours_world_std_percent"] == pytest.approx(2.0)
@@ -284,7 +285,7 @@ def test_table_one_reports_world_aligned_and_sensor_frame_beside_the_paper() -> 
     assert math.isnan(case_1["pc_main_only_sensor_accuracy_percent"])
     assert case_2["ours_world_seeds"] == 2 and case_2["ours_sensor_seeds"] == 0
     assert all(r["ours_world_seeds"] == 0 for r in rows[2:])  # scenarios not in the run
-    table = leaderboard.table_one_markdown(rows)
+    table = tables.table_one_markdown(rows)
     assert ("| paper [%] | ours, world-aligned [%] (mean ± std, seeds) | ours, sensor-frame [%] "
             "(mean ± std, seeds) | ATE world-aligned / sensor-frame [m] |") in table
     assert "| pc_offset | 31.25 | 92.00 ± 2.00 (2) | 80.50 ± 0.50 (2) | 8.000 / 19.500 |" in table

@@ -14,14 +14,13 @@ import pytest
 
 from estimators.leaderboard.database import ExperimentDatabase, Scenario
 from estimators.leaderboard.runner import (
-    EstimatorSpec,
-    RealLog,
     RunInterrupted,
     SideRun,
     run_matrix,
     run_real_logs,
     run_scenarios,
 )
+from estimators.leaderboard.tasks import EstimatorSpec, RealLog
 
 # Short episodes (4 s of driving, 41 observations) keep the test quick.
 SHORT = {"range_noise_std": 0.01, "max_episode_time": 4.0}
@@ -113,7 +112,7 @@ def test_unknown_estimator_and_bad_window_are_readable_errors(tmp_path: Path) ->
 
 def test_the_map_reference_is_computed_once_per_scenario(monkeypatch: pytest.MonkeyPatch,
                                                         tmp_path: Path) -> None:
-    from estimators.leaderboard import runner
+    from estimators.leaderboard import tasks
 
     calls = []
 
@@ -121,8 +120,8 @@ def test_the_map_reference_is_computed_once_per_scenario(monkeypatch: pytest.Mon
         calls.append(len(dataset))
         return real(dataset)
 
-    real = runner.map_reference
-    monkeypatch.setattr(runner, "map_reference", counted)
+    real = tasks.map_reference
+    monkeypatch.setattr(tasks, "map_reference", counted)
     with ExperimentDatabase(tmp_path / "db.sqlite") as db:
         summary = run_scenarios(db, SCENARIOS[:1], ESTIMATORS)
         records = db.traces(poses=False)
@@ -136,16 +135,16 @@ def test_the_map_reference_is_computed_once_per_scenario(monkeypatch: pytest.Mon
 
 def test_a_failing_map_score_keeps_the_trace(monkeypatch: pytest.MonkeyPatch,
                                              tmp_path: Path) -> None:
-    from estimators.leaderboard import runner
+    from estimators.leaderboard import tasks
 
-    real = runner.score_map
+    real = tasks.score_map
 
     def fails_for_zero(reference, poses, dataset):  # noqa: ANN001, ANN202 - a faulty mapper
         if not np.any(np.diff(poses, axis=0)):
             raise FloatingPointError("no motion")
         return real(reference, poses, dataset)
 
-    monkeypatch.setattr(runner, "score_map", fails_for_zero)
+    monkeypatch.setattr(tasks, "score_map", fails_for_zero)
     with ExperimentDatabase(tmp_path / "db.sqlite") as db:
         summary = run_scenarios(db, SCENARIOS[:1], ESTIMATORS)
         metrics = {r.trace.estimator: r.metrics for r in db.traces(poses=False)}

@@ -8,7 +8,7 @@ import estimators
 from estimators.base import LIDAR_KEYS, SensorSetup, default_beam_angles
 from estimators.evaluation.metrics import evaluate
 from estimators.matching.rotation_pc import motion_from_sensor_match
-from estimators.odometry.fusion import (
+from estimators.odometry.sensor_graph import (
     SensorEdge,
     fuse_car_motion,
     optimize_poses,
