@@ -1,0 +1,40 @@
+"""The project's exception hierarchy: every error duallidar raises for bad input derives from
+:class:`DualLidarError`, so a user can catch ours and tell them apart from bugs.
+
+``DualLidarError`` subclasses ``ValueError`` (bad input is a bad value), and each area has its
+own subclass. Messages name the argument, or the file and line, and say what was expected::
+
+    try:
+        env = gym.make("DualLidar-v0", config={"max_speed": -1})
+    except ConfigError as error:
+        print(error)  # max_speed: expected a finite value > 0 [m/s], got -1
+
+This module imports nothing, so every package (``lidar_env``, ``estimators``, ``agents``) can
+use it.
+"""
+
+from __future__ import annotations
+
+
+class DualLidarError(ValueError):
+    """Base of every error duallidar raises for bad input."""
+
+
+class ConfigError(DualLidarError):
+    """An env config, reset option, action, or an estimator's or tool's parameter is invalid."""
+
+
+class MapError(DualLidarError):
+    """A world, map image, ROS map, obstacle geometry or trace cannot be built as asked."""
+
+
+class EstimatorInputError(DualLidarError):
+    """Scans, clock times or a sensor setup handed to an estimator are invalid."""
+
+
+class LogFormatError(DualLidarError):
+    """A recording or graph file (CARMEN, ROS bag, g2o, TUM, relations) is malformed."""
+
+
+class DatabaseError(DualLidarError):
+    """The experiment database is missing, foreign, corrupt or of another schema."""
