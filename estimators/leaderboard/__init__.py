@@ -6,8 +6,9 @@ nothing imports it.
 """
 
 from estimators.leaderboard.cli import main
-from estimators.leaderboard.database import ExperimentDatabase, Scenario
+from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.recording import record, replay
+from estimators.leaderboard.records import Scenario
 from estimators.leaderboard.runner import run_matrix, run_scenarios
 
 __all__ = ["ExperimentDatabase", "Scenario", "main", "record", "replay", "run_matrix",

@@ -53,13 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.driver import DRIVERS
-from estimators.leaderboard.database import (
-    DatabaseError,
-    ExperimentDatabase,
-    Scenario,
-    TraceRecord,
-    package_version,
-)
+from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.figures import draw_figure_8, draw_map_figure
 from estimators.leaderboard.matrix import (
     DEFAULT_NOISE,
@@ -70,7 +64,9 @@ from estimators.leaderboard.matrix import (
     build_groups,
     table_one_scenarios,
 )
+from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import RunInterrupted, RunSummary, SideRun, run_matrix
+from estimators.leaderboard.schema import DatabaseError
 from estimators.leaderboard.tables import (
     RANK_KEYS,
     current_records,

@@ -35,22 +35,18 @@ Every write is one transaction: a sensor dataset with all its steps, or a trace 
 poses and metrics. An interrupted run therefore leaves only complete datasets, and the
 UNIQUE constraints make a re-run skip what is stored instead of duplicating it. A file that is
 not SQLite, is corrupt, belongs to another program or has another schema version is refused
-with a specific error before anything is written to it.
+with a specific error before anything is written to it (:mod:`estimators.leaderboard.schema`).
+The dataclasses stored are :mod:`estimators.leaderboard.records`.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import sqlite3
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from functools import lru_cache
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -58,294 +54,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import LIDAR_KEYS, SensorSetup
-from estimators.paths import PROJECT_ROOT
-
-#: The schema this module reads and writes (see the module docstring).
-SCHEMA_VERSION = 1
-#: The packages whose code makes a trace (hashed into :func:`package_version`).
-SOURCE_PACKAGES = ("agents", "estimators", "lidar_env")
-
-_SQLITE_HEADER = b"SQLite format 3\x00"
-
-_SCHEMA = """
-CREATE TABLE schema_version (version INTEGER NOT NULL);
-CREATE TABLE scenarios (
-    id INTEGER PRIMARY KEY,
-    kind TEXT NOT NULL CHECK (kind IN ('sim', 'real')),
-    world TEXT NOT NULL,
-    trace TEXT NOT NULL,
-    seed INTEGER NOT NULL,
-    driver TEXT NOT NULL,
-    config TEXT NOT NULL,
-    UNIQUE (kind, world, trace, seed, driver, config)
-);
-CREATE TABLE sensor_datasets (
-    scenario_id INTEGER PRIMARY KEY REFERENCES scenarios (id),
-    n_steps INTEGER NOT NULL,
-    n_beams INTEGER NOT NULL,
-    max_range REAL NOT NULL,
-    world_aligned INTEGER NOT NULL,
-    mounts TEXT NOT NULL,
-    beam_angles BLOB NOT NULL,
-    env_config TEXT NOT NULL,
-    world TEXT NOT NULL,
-    package_version TEXT NOT NULL,
-    recorded_at TEXT NOT NULL
-);
-CREATE TABLE sensor_steps (
-    scenario_id INTEGER NOT NULL REFERENCES sensor_datasets (scenario_id),
-    step INTEGER NOT NULL,
-    time REAL NOT NULL,
-    lidar_1 BLOB NOT NULL,
-    lidar_2 BLOB,
-    x REAL NOT NULL,
-    y REAL NOT NULL,
-    heading REAL NOT NULL,
-    lidar_poses BLOB NOT NULL,
-    PRIMARY KEY (scenario_id, step)
-);
-CREATE TABLE traces (
-    id INTEGER PRIMARY KEY,
-    scenario_id INTEGER NOT NULL REFERENCES scenarios (id),
-    estimator TEXT NOT NULL,
-    params TEXT NOT NULL,
-    package_version TEXT NOT NULL,
-    n_steps INTEGER NOT NULL,
-    ms_per_step REAL NOT NULL,
-    created_at TEXT NOT NULL,
-    UNIQUE (scenario_id, estimator, params, package_version)
-);
-CREATE TABLE trace_poses (
-    trace_id INTEGER NOT NULL REFERENCES traces (id),
-    step INTEGER NOT NULL,
-    time REAL NOT NULL,
-    x REAL NOT NULL,
-    y REAL NOT NULL,
-    heading REAL NOT NULL,
-    ms REAL NOT NULL,
-    PRIMARY KEY (trace_id, step)
-);
-CREATE TABLE results (
-    trace_id INTEGER NOT NULL REFERENCES traces (id),
-    metric TEXT NOT NULL,
-    value REAL,
-    PRIMARY KEY (trace_id, metric)
-);
-"""
-
-
-class DatabaseError(Exception):
-    """Base class of the experiment database's errors."""
-
-
-class NotADatabaseError(DatabaseError):
-    """The file is not an SQLite database at all."""
-
-
-class CorruptDatabaseError(DatabaseError):
-    """The file is SQLite but damaged."""
-
-
-class ForeignDatabaseError(DatabaseError):
-    """The file is a healthy SQLite database that this project did not create."""
-
-
-class SchemaVersionError(DatabaseError):
-    """The database was written with another schema version."""
-
-
-class DatabaseLocationError(DatabaseError):
-    """The database file cannot be created or written where it was asked for."""
-
-
-def package_version() -> str:
-    """The installed duallidar version and a digest of its source, e.g. ``0.1.0+src.1a2b3c4d5e6f``,
-    recorded with every dataset and trace.
-
-    The digest is why: an editable install keeps its version number while the code changes, and
-    a stored trace must not stand in for an estimator that has changed since (a re-run then
-    replays the stored sensor datasets through the new code)."""
-    try:
-        version = metadata.version("duallidar")
-    except metadata.PackageNotFoundError:
-        version = "0+unknown"
-    return f"{version}+src.{source_digest(PROJECT_ROOT)}"
-
-
-@lru_cache(maxsize=4)
-def source_digest(root: Path, packages: tuple[str, ...] = SOURCE_PACKAGES) -> str:
-    """SHA-256 (first 12 hex digits) of the paths and contents of the ``*.py`` files of
-    ``packages`` under ``root``, read once per process (worker processes forked later inherit
-    it, so one run has one version)."""
-    digest = hashlib.sha256()
-    for package in packages:
-        for path in sorted((root / package).rglob("*.py")):
-            digest.update(path.relative_to(root).as_posix().encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()[:12]
-
-
-def canonical_json(value: Any) -> str:
-    """Compact JSON with sorted keys, numpy scalars/arrays and tuples as plain lists/numbers.
-
-    Used for configs and params so that equal settings give equal strings (UNIQUE keys).
-    """
-
-    def plain(item: Any) -> Any:
-        if isinstance(item, np.ndarray):
-            return item.tolist()
-        if isinstance(item, np.generic):
-            return item.item()
-        raise TypeError(f"cannot store {type(item).__name__} {item!r} as JSON")
-
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=plain)
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """One simulated (or recorded) run: world, trace seed, env seed, driver and env config.
-
-    ``config`` holds the env config overrides passed to ``gym.make(..., config=...)``; it is
-    part of the scenario's identity (two noise levels are two scenarios).
-    """
-
-    world: str
-    trace: str
-    seed: int
-    config: Mapping[str, Any] = field(default_factory=dict)
-    driver: str = "scripted"
-    kind: str = "sim"
-
-    def __hash__(self) -> int:  # config is a dict: hash its canonical JSON instead
-        return hash((self.kind, self.world, self.trace, self.seed, self.driver, self.config_json))
-
-    @property
-    def config_json(self) -> str:
-        return canonical_json(dict(self.config))
-
-    @property
-    def label(self) -> str:
-        """Short human-readable name, e.g. ``hallway/zigzag/s0``; scans in another frame than
-        the sensor's (the paper's world-aligned ones) add it: ``hallway/zigzag/s0/world``."""
-        label = f"{self.world}/{self.trace}/s{self.seed}"
-        frame = self.config.get("scan_frame", "sensor")
-        return label if frame == "sensor" else f"{label}/{frame}"
-
-
-@dataclass(frozen=True)
-class SensorDataset:
-    """What the Lidars saw along one scenario, with the ground truth beside it.
-
-    Attributes:
-        setup: the sensor geometry an estimator may know.
-        times: ``(N,)`` observation times [s].
-        scans: ``{key: (N, n_beams) float32}`` ranges [m] in each sensor's own frame, keyed by
-            ``setup.keys``; ``>= setup.max_range`` means no return.
-        poses: ``(N, 3)`` true car poses (x [m], y [m], heading [rad]) in the world frame.
-        lidar_poses: ``(N, K, 3)`` true sensor poses in the world frame.
-        env_config: every resolved env setting (JSON-able), for the record.
-        world: the world map's geometry (``name``, ``circles`` (N, 3), ``walls`` (M, 4),
-            ``polygons``, ``bounds``; metres, world frame), so the map can be drawn as it was
-            when recorded; empty when unknown.
-    """
-
-    setup: SensorSetup
-    times: NDArray[np.float64]
-    scans: dict[str, NDArray[np.float32]]
-    poses: NDArray[np.float64]
-    lidar_poses: NDArray[np.float64]
-    env_config: Mapping[str, Any] = field(default_factory=dict)
-    world: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        n = len(self.times)
-        if n < 1:
-            raise ValueError("a sensor dataset needs at least one step, got 0")
-        k, n_beams = self.setup.n_lidars, len(self.setup.beam_angles)
-        if set(self.scans) != set(self.setup.keys):
-            raise ValueError(f"scans: expected keys {self.setup.keys}, got {tuple(self.scans)}")
-        for key, scan in self.scans.items():
-            if scan.shape != (n, n_beams) or scan.dtype != np.float32:
-                raise ValueError(
-                    f"scans[{key!r}]: expected float32 ({n}, {n_beams}), "
-                    f"got {scan.dtype} {scan.shape}"
-                )
-        if self.poses.shape != (n, 3):
-            raise ValueError(f"poses: expected shape ({n}, 3), got {self.poses.shape}")
-        if self.lidar_poses.shape != (n, k, 3):
-            raise ValueError(
-                f"lidar_poses: expected shape ({n}, {k}, 3), got {self.lidar_poses.shape}"
-            )
-
-    def __len__(self) -> int:
-        return len(self.times)
-
-    def observations(self) -> Iterator[dict[str, NDArray[np.float32]]]:
-        """The observations in order, as the env emitted them."""
-        for step in range(len(self)):
-            yield {key: scan[step] for key, scan in self.scans.items()}
-
-
-@dataclass(frozen=True)
-class TraceDataset:
-    """What one estimator made of one sensor dataset.
-
-    Attributes:
-        estimator: registered name; ``params``: every parameter it ran with (JSON-able).
-        times: ``(N,)`` [s]; poses: ``(N, 3)`` estimated car poses (x [m], y [m], heading
-        [rad]); step_ms: ``(N,)`` wall time of each ``update`` call [ms].
-    """
-
-    estimator: str
-    params: Mapping[str, Any]
-    times: NDArray[np.float64]
-    poses: NDArray[np.float64]
-    step_ms: NDArray[np.float64]
-    package_version: str = field(default_factory=package_version)
-
-    def __post_init__(self) -> None:
-        n = len(self.times)
-        if self.poses.shape != (n, 3) or self.step_ms.shape != (n,):
-            raise ValueError(
-                f"a trace of {n} times needs poses ({n}, 3) and step_ms ({n},), "
-                f"got {self.poses.shape} and {self.step_ms.shape}"
-            )
-
-    @property
-    def params_json(self) -> str:
-        return canonical_json(dict(self.params))
-
-    @property
-    def ms_per_step(self) -> float:
-        """Mean wall time [ms] of one ``update`` after the first (which only takes the scan),
-        as :class:`estimators.evaluation.scoring.ScoreEstimator` reports it."""
-        return float(np.mean(self.step_ms[1:] if len(self.step_ms) > 1 else self.step_ms))
-
-
-@dataclass(frozen=True)
-class TraceRecord:
-    """A stored trace with its scenario and metrics (what :meth:`ExperimentDatabase.traces`
-    returns)."""
-
-    trace_id: int
-    scenario: Scenario
-    trace: TraceDataset
-    metrics: dict[str, float]
+from estimators.leaderboard.records import (
+    Scenario,
+    SensorDataset,
+    TraceDataset,
+    TraceRecord,
+    canonical_json,
+    package_version,
+)
+from estimators.leaderboard.schema import (
+    _SCHEMA,
+    SCHEMA_VERSION,
+    CorruptDatabaseError,
+    DatabaseLocationError,
+    _check_header,
+    check_writable,
+    inspect_existing,
+)
 
 
 def _blob(array: NDArray[Any], dtype: str) -> bytes:
     return np.ascontiguousarray(array, dtype=dtype).tobytes()
-
-
-def _check_header(path: Path) -> None:
-    """Refuse a non-empty file that does not start with the SQLite header (reads 16 bytes)."""
-    with path.open("rb") as handle:
-        header = handle.read(len(_SQLITE_HEADER))
-    if header and header != _SQLITE_HEADER:
-        raise NotADatabaseError(
-            f"{path} is not an SQLite database (expected a file starting with "
-            f"{_SQLITE_HEADER!r}, found {header!r}); refusing to touch it"
-        )
 
 
 class ExperimentDatabase:
@@ -365,8 +94,8 @@ class ExperimentDatabase:
             raise DatabaseLocationError(f"{self.path} is a directory; expected a database file")
         if self.path.exists():
             _check_header(self.path)
-            self._inspect_existing(verify)
-        self._check_writable()
+            inspect_existing(self.path, verify)
+        check_writable(self.path)
         try:
             self._conn = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
             self._conn.execute("PRAGMA foreign_keys = ON")
@@ -382,80 +111,6 @@ class ExperimentDatabase:
                     )
         except sqlite3.OperationalError as error:
             raise DatabaseLocationError(f"cannot open {self.path} for writing: {error}") from error
-
-    # -- opening ---------------------------------------------------------------------------
-
-    def _inspect_existing(self, verify: bool) -> None:
-        """Check an existing file read-only; raise the matching error, leave the file as is.
-
-        One exception: a *hot journal* next to the file means a write of ours was killed
-        mid-transaction. SQLite then has to roll it back before anything can be read, which
-        needs write access; that rollback restores the last committed state, so it is done.
-        """
-        try:
-            conn = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True)
-            try:
-                self._inspect(conn, verify)
-                return
-            except sqlite3.OperationalError:
-                if not Path(f"{self.path}-journal").exists():
-                    raise
-            finally:
-                conn.close()
-            conn = sqlite3.connect(self.path)
-            try:
-                self._inspect(conn, verify)
-            finally:
-                conn.close()
-        except sqlite3.DatabaseError as error:
-            raise CorruptDatabaseError(
-                f"{self.path} cannot be read as SQLite ({error}); left untouched"
-            ) from error
-
-    def _inspect(self, conn: sqlite3.Connection, verify: bool) -> None:
-        if verify:
-            problems = [row[0] for row in conn.execute("PRAGMA quick_check")]
-            if problems != ["ok"]:
-                raise CorruptDatabaseError(
-                    f"{self.path} is a damaged SQLite file ({'; '.join(problems[:3])}); "
-                    "left untouched: restore a backup or choose another --db path"
-                )
-        tables = {row[0] for row in conn.execute(
-            "SELECT name FROM sqlite_master WHERE type = 'table'"
-        )}
-        if tables and "schema_version" not in tables:
-            raise ForeignDatabaseError(
-                f"{self.path} is an SQLite database of another program (tables: "
-                f"{', '.join(sorted(tables))}; expected a schema_version table); left untouched"
-            )
-        if tables:
-            versions = [row[0] for row in conn.execute("SELECT version FROM schema_version")]
-            if versions != [SCHEMA_VERSION]:
-                raise SchemaVersionError(
-                    f"{self.path} has schema version {versions}, this duallidar reads version "
-                    f"{SCHEMA_VERSION}; left untouched: use another --db path or the duallidar "
-                    "version that wrote it"
-                )
-
-    def _check_writable(self) -> None:
-        """The file (if present) and its directory (for the journal) must accept writes."""
-        parent = self.path.parent
-        if not parent.is_dir():
-            raise DatabaseLocationError(
-                f"cannot create {self.path}: directory {parent} does not exist"
-            )
-        try:
-            with tempfile.TemporaryFile(dir=parent):
-                pass
-            if self.path.exists():
-                with self.path.open("r+b"):
-                    pass
-        except OSError as error:
-            what = "open" if self.path.exists() else "create"
-            raise DatabaseLocationError(
-                f"cannot {what} {self.path} for writing: {error.strerror} "
-                f"(the file and its directory {parent} must be writable)"
-            ) from error
 
     @contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:

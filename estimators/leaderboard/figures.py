@@ -10,14 +10,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from estimators.leaderboard.database import (
-    ExperimentDatabase,
-    Scenario,
-    TraceRecord,
-)
+from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.matrix import (
     Group,
 )
+from estimators.leaderboard.records import Scenario, TraceRecord
 from estimators.leaderboard.tables import (
     PAPER_ESTIMATOR,
     _fmt,

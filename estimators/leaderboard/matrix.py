@@ -9,9 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
-from estimators.leaderboard.database import (
-    Scenario,
-)
+from estimators.leaderboard.records import Scenario
 from estimators.leaderboard.tasks import EstimatorSpec
 
 

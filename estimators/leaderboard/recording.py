@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from agents.driver import make_driver
 from estimators.base import SensorSetup
-from estimators.leaderboard.database import Scenario, SensorDataset, TraceDataset
+from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
 
 if TYPE_CHECKING:

@@ -37,11 +37,8 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from estimators.leaderboard.database import (
-    ExperimentDatabase,
-    Scenario,
-    package_version,
-)
+from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.records import Scenario, package_version
 from estimators.leaderboard.tasks import (
     EstimatorSpec,
     RealLog,

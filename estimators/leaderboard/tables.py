@@ -13,16 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from estimators.leaderboard.database import (
-    Scenario,
-    TraceRecord,
-    canonical_json,
-)
 from estimators.leaderboard.matrix import (
     TABLE_I,
     TABLE_I_FRAMES,
     Group,
 )
+from estimators.leaderboard.records import Scenario, TraceRecord, canonical_json
 from estimators.leaderboard.tasks import EstimatorSpec
 
 #: (metric stored in the database, column title, lower is better)

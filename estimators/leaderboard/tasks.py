@@ -16,12 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from estimators.leaderboard.database import (
-    Scenario,
-    SensorDataset,
-    TraceDataset,
-)
 from estimators.leaderboard.recording import map_reference, record, replay, score, score_map
+from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import defaults, make, names
 
 

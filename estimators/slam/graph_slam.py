@@ -38,34 +38,23 @@ from estimators.base import Estimator
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
+from estimators.slam.figure import save_slam_figure
 from estimators.slam.g2o import write_g2o
+from estimators.slam.keyframe_matching import Keyframe, KeyframeMatching
 from estimators.slam.loop_closure import (
     LoopClosureParams,
     LoopVerification,
     PlaceMap,
-    descriptor_distance,
-    match_information,
     range_histogram,
-    verify_loop,
 )
-from estimators.slam.pose_graph import PoseGraph, chain_covariance
+from estimators.slam.pose_graph import PoseGraph
+from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import optimize
-from lidar_env.se2 import compose, inverse, relative, transform_points, wrap_angle
+from lidar_env.se2 import compose, relative, transform_points
 
 
 @dataclass
-class Keyframe:
-    """A graph node's data: its car-frame points (M, 2), place descriptor, the front end's
-    pose when it was taken, and the path length [m] driven up to it."""
-
-    points: NDArray[np.float64]
-    descriptor: NDArray[np.float64]
-    odometry: NDArray[np.float64]
-    path_length: float
-
-
-@dataclass
-class GraphSlam(Estimator):
+class GraphSlam(KeyframeMatching, Estimator):
     """Front end + loop closure + pose-graph optimisation. Distances [m], angles [rad].
 
     Defaults are for 2D Lidars indoors driven at walking speed, not tuned to one log:
@@ -304,178 +293,6 @@ class GraphSlam(Estimator):
         sigma_th = self.odometry_sigma_rotation + self.odometry_drift_rotation * distance
         return np.diag([sigma_xy**-2, sigma_xy**-2, sigma_th**-2])
 
-    def _submap(self, index: int, before: int, after: int) -> NDArray[np.float64]:
-        """Points (M, 2) of keyframes ``index - before .. index + after`` in the frame of
-        keyframe ``index``, placed by the graph's current poses."""
-        poses = self.graph.poses
-        lo, hi = max(0, index - before), min(len(self.keyframes), index + after + 1)
-        return np.concatenate([
-            transform_points(relative(poses[index], poses[k]), self.keyframes[k].points)
-            for k in range(lo, hi)
-        ])
-
-    def _matched_information(self, reference: PointToLineReference, points: NDArray[np.float64],
-                             step: NDArray[np.float64], prior: NDArray[np.float64]
-                             ) -> NDArray[np.float64]:
-        """Odometry edge information that also knows the scene: the covariance of the
-        distance model plus that of the keyframe-to-keyframe match Hessian at the front
-        end's step, so a step along a featureless corridor (where front ends drift) is
-        a weak edge in that direction and absorbs the loop corrections."""
-        matched = match_information(reference, points, step, self.loop_params)
-        return np.linalg.inv(np.linalg.inv(prior) + np.linalg.inv(matched))
-
-    def _checked_step(self, reference: PointToLineReference, previous: NDArray[np.float64],
-                      points: NDArray[np.float64], step: NDArray[np.float64]
-                      ) -> NDArray[np.float64]:
-        """The front end's step (3,) between two keyframes, or, if it leaves fewer than
-        ``min_quality`` of the new keyframe's points on the previous one's walls, the step
-        found by matching the two keyframes over all headings (when that match is accepted
-        and explains more). A front end can lose a fast turn (on ACES at 540 s it missed 78
-        deg of a corner in 1.5 s); left in the edge, the loop closures cannot localise the
-        error and spread it over tens of metres of corridor, bending them into arcs."""
-        world = transform_points(step, points)
-        share = len(reference.correspond(world, self.loop_params.inlier_distance).index)
-        share /= len(points)
-        if share >= self.loop_params.min_quality:
-            return step
-        result = verify_loop(PlaceMap(previous, self.loop_params), points, step,
-                             self.keyframe_distance, self._step_params)
-        self.step_checks.append((len(self.keyframes), share, result))
-        return result.pose if result.accepted and result.quality > share else step
-
-    def _place(self, index: int, neighbours: int | None = None) -> PlaceMap:
-        """The old place around keyframe ``index``: its points and its ``neighbours`` on each
-        side (default ``submap_neighbours``), in its frame (cached; the neighbours' relative
-        poses hardly change once optimised)."""
-        neighbours = self.submap_neighbours if neighbours is None else neighbours
-        key = (index, neighbours)
-        if key not in self._places:
-            self._places[key] = PlaceMap(self._submap(index, neighbours, neighbours),
-                                         self.loop_params)
-        return self._places[key]
-
-    def loop_candidates(self, index: int) -> list[tuple[int, float]]:
-        """Old keyframes keyframe ``index`` may revisit or overlap, with their search window
-        [m]: revisits first, then overlaps, each best place descriptor first; at most
-        ``max_candidates``, one per stretch of old path."""
-        current = self.keyframes[index]
-        if index == 0:
-            return []
-        path = np.array([k.path_length for k in self.keyframes[:index]])
-        behind = current.path_length - path
-        poses = self.graph.poses
-        distance = np.hypot(*(poses[:index, :2] - poses[index, :2]).T)
-        eligible = np.flatnonzero((behind >= self.min_overlap_separation)
-                                  & (distance <= self.overlap_radius + self.loop_drift * behind))
-        if len(eligible) == 0:
-            return []
-        similarity = np.array([descriptor_distance(current.descriptor,
-                                                   self.keyframes[k].descriptor)
-                               for k in eligible])
-        window = np.minimum(self.loop_radius + self.loop_drift * behind, self.max_search_window)
-        chosen: list[tuple[int, float]] = []
-        for k in eligible[np.lexsort((similarity, behind[eligible] < self.min_loop_separation))]:
-            # one candidate per stretch of old path: neighbours share a submap anyway
-            if all(abs(k - other) > 2 * self.submap_neighbours for other, _ in chosen):
-                chosen.append((int(k), float(window[k])))
-            if len(chosen) == self.max_candidates:
-                break
-        return chosen
-
-    def loop_mahalanobis(self, old: int, new: int, pose: NDArray[np.float64],
-                         information: NDArray[np.float64]) -> float:
-        """Mahalanobis distance of a loop measurement (keyframe ``new``'s pose (3,) in keyframe
-        ``old``'s frame, ``information`` (3, 3)) from the graph's current estimate of it, under
-        the odometry chain's covariance from ``old`` to ``new`` plus the measurement's own.
-
-        The chain's edge errors may be correlated (a front end errs the same way all along a
-        featureless stretch), so their covariance is bounded for any correlation
-        (:func:`~estimators.slam.pose_graph.chain_covariance` with ``correlated=True``); and the
-        chain ignores loop edges already in the graph, which only shrink the uncertainty:
-        both err on the side of accepting a true loop after a long, drifting drive."""
-        poses = self.graph.poses
-        chain = chain_covariance(poses[old:new + 1],
-                                 np.array(self._odometry_covariance[old + 1:new + 1]),
-                                 correlated=True)
-        residual = compose(inverse(pose), relative(poses[old], poses[new]))  # the graph residual
-        covariance = chain + np.linalg.inv(information)
-        return float(np.sqrt(residual @ np.linalg.solve(covariance, residual)))
-
-    def _gate(self, old: int, new: int, result: LoopVerification) -> LoopVerification:
-        """``result``, rejected if the graph cannot have drifted to it (``loop_gate``)."""
-        if not result.accepted:
-            return result
-        distance = self.loop_mahalanobis(old, new, result.pose, result.information)
-        if distance <= self.loop_gate:
-            return result
-        return replace(result, accepted=False,
-                       reason=f"unreachable from the graph's estimate: Mahalanobis distance "
-                              f"{distance:.1f} > loop_gate {self.loop_gate}")
-
-    def _close_loops(self, index: int) -> bool:
-        """Verify the candidates of keyframe ``index`` and add the accepted ones as loop edges;
-        return whether one of them is a revisit (at least ``min_loop_separation`` back)."""
-        revisited = False
-        poses = self.graph.poses
-        for old, window in self.loop_candidates(index):
-            guess = relative(poses[old], poses[index])
-            result = self._gate(old, index, verify_loop(
-                self._place(old), self.keyframes[index].points, guess, window, self.loop_params))
-            self.loop_attempts.append((old, index, result))
-            if result.accepted:
-                self.graph.add_edge(old, index, result.pose, result.information, is_loop=True)
-                self._dirty = True
-                behind = self.keyframes[index].path_length - self.keyframes[old].path_length
-                revisited |= behind >= self.min_loop_separation
-        return revisited
-
-    def _close_global_loops(self, index: int) -> None:
-        """Match keyframe ``index`` over all headings against look-alike old keyframes; add
-        loop edges once two matches agree on the correction (then optimise at once, trusting
-        them: the robust kernel would otherwise refuse a correction of many metres)."""
-        current = self.keyframes[index]
-        path = np.array([k.path_length for k in self.keyframes[:index]])
-        old = np.flatnonzero(current.path_length - path >= self.min_loop_separation)
-        if len(old) == 0:
-            return
-        distance = np.array([descriptor_distance(current.descriptor, self.keyframes[k].descriptor)
-                             for k in old])
-        order = np.argsort(distance, kind="stable")[: self.global_candidates]
-        self._pending = [p for p in self._pending if index - p[1] <= self.global_confirmation]
-        poses = self.graph.poses
-        # A few keyframes of the recent path on both sides: more walls, fewer look-alikes.
-        query = self._submap(index, self.global_submap_keyframes, 0)
-        for k in old[order][distance[order] <= self.max_descriptor_distance]:
-            result = self._gate(int(k), index, verify_loop(
-                self._place(int(k), self.global_submap_keyframes), query, np.zeros(3),
-                self.global_window, self._global_params))
-            self.loop_attempts.append((int(k), index, result))
-            if not result.accepted:
-                continue
-            # where the match puts this keyframe, as a correction of the whole graph
-            correction = compose(compose(poses[k], result.pose), inverse(poses[index]))
-            for old_k, new_k, other in self._pending:
-                predicted = relative(poses[old_k], compose(correction, poses[new_k]))
-                error = relative(predicted, other.pose)
-                if (np.hypot(error[0], error[1]) <= self.consistency_distance
-                        and abs(error[2]) <= self.consistency_angle):
-                    self.graph.add_edge(old_k, new_k, other.pose, other.information, True)
-                    self.graph.add_edge(int(k), index, result.pose, result.information, True)
-                    trusted = np.zeros(self.graph.n_edges, dtype=bool)
-                    trusted[-2:] = True
-                    self.optimize(trusted=trusted)
-                    self._pending.clear()
-                    self._last_loop = index
-                    return
-            self._pending.append((int(k), index, result))
-
-    def add_loop_closure(self, old: int, new: int, pose: NDArray[np.float64],
-                         information: NDArray[np.float64]) -> None:
-        """Add a loop edge by hand (keyframe ``new``'s pose in keyframe ``old``'s frame); it
-        is treated like a detected one: robust kernel, dropped if irreconcilable."""
-        self.graph.add_edge(old, new, pose, information, is_loop=True)
-        self._dirty = True
-
     def optimize(self, trusted: NDArray[np.bool_] | None = None) -> None:
         """Optimise the graph (Cauchy kernel on loop edges); drop loop edges whose error is
         still above ``max_loop_sigma`` and optimise again without them.
@@ -521,40 +338,23 @@ class GraphSlam(Estimator):
             np.int64)
 
     def anchored_trajectory(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``(N, 3)`` car poses of every scan placed on the given keyframe poses (K, 3).
-
-        A scan between keyframes ``k`` and ``k + 1`` is placed on each of their poses by the
-        front end's motion relative to it, and the two placements are blended by the share of
-        the way driven from ``k`` to ``k + 1``: a loop correction then changes smoothly along
-        the path instead of jumping at keyframes (which would add error to the short
-        relations). Given the true keyframe poses it shows the error the front end's motion
-        between keyframes leaves, which no correction of the keyframes can remove."""
+        """``(N, 3)`` car poses of every scan placed on the given keyframe poses (K, 3),
+        blended between its two keyframes (:func:`estimators.slam.smoothing.blend_on_keyframes`):
+        a loop correction then changes smoothly along the path instead of jumping at
+        keyframes (which would add error to the short relations). Given the true keyframe
+        poses it shows the error the front end's motion between keyframes leaves, which no
+        correction of the keyframes can remove."""
         keyframe_poses = np.asarray(keyframe_poses, dtype=np.float64)
         if keyframe_poses.shape != (len(self.keyframes), 3):
             raise ValueError(f"keyframe_poses: expected shape ({len(self.keyframes)}, 3), got "
                              f"{keyframe_poses.shape}")
-        odometry = np.array(self._scan_odometry).reshape(-1, 3)
-        keyframe_odometry = np.array([k.odometry for k in self.keyframes]).reshape(-1, 3)
-        before = np.array(self._scan_keyframe, dtype=np.int64)
-        after = np.minimum(before + 1, len(self.keyframes) - 1)
-        from_before = compose(keyframe_poses[before],
-                              relative(keyframe_odometry[before], odometry))
-        from_after = compose(keyframe_poses[after], relative(keyframe_odometry[after], odometry))
-        # Progress counts turning too (a keyframe_angle turn weighs a keyframe_distance), so
-        # turning on the spot blends as smoothly as driving.
-        weight = self.keyframe_distance / self.keyframe_angle
-
-        def progress(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-            return np.hypot(*(b[:, :2] - a[:, :2]).T) + weight * np.abs(wrap_angle(b[:, 2]
-                                                                                  - a[:, 2]))
-
-        driven = progress(keyframe_odometry[before], odometry)
-        spacing = progress(keyframe_odometry[before], keyframe_odometry[after])
-        share = np.where(spacing > 0, np.clip(driven / np.maximum(spacing, 1e-12), 0, 1), 0.0)
-        smoothed = from_before + share[:, None] * (from_after - from_before)
-        turn = wrap_angle(from_after[:, 2] - from_before[:, 2])
-        smoothed[:, 2] = wrap_angle(from_before[:, 2] + share * turn)
-        return smoothed
+        return blend_on_keyframes(
+            keyframe_poses,
+            np.array([k.odometry for k in self.keyframes]).reshape(-1, 3),
+            np.array(self._scan_odometry).reshape(-1, 3),
+            np.array(self._scan_keyframe, dtype=np.int64),
+            self.keyframe_distance / self.keyframe_angle,
+        )
 
     def corrected_map(self) -> NDArray[np.float64]:
         """``(M, 2)`` every keyframe's points in the world frame at its optimised pose [m]."""
@@ -575,31 +375,7 @@ class GraphSlam(Estimator):
         """Save a picture of the corrected map (grey points), the front end's path (dotted),
         the smoothed path, odometry edges and loop edges (red), and ``truth`` (N, 3) poses
         if given. Needs matplotlib (``pip install duallidar[plots]``)."""
-        try:
-            import matplotlib
-
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-        except ImportError as err:
-            raise ImportError("render needs matplotlib: pip install duallidar[plots]") from err
-        points, poses, edges = self.corrected_map(), self.graph.poses, self.graph.edges
-        fig, ax = plt.subplots(figsize=(8, 8))
-        ax.scatter(points[:, 0], points[:, 1], s=0.2, c="0.6", linewidths=0)
-        odometry, smoothed = self.odometry_trajectory, self.trajectory
-        ax.plot(odometry[:, 0], odometry[:, 1], ":", lw=0.8, c="tab:orange", label="front end")
-        ax.plot(smoothed[:, 0], smoothed[:, 1], lw=0.8, c="tab:blue", label="slam")
-        if truth is not None:
-            ax.plot(truth[:, 0], truth[:, 1], lw=0.8, c="k", label="truth")
-        for (i, j), loop in zip(edges, self.graph.is_loop, strict=True):
-            if loop:
-                ax.plot(poses[[i, j], 0], poses[[i, j], 1], c="tab:red", lw=0.6)
-        ax.plot([], [], c="tab:red", label=f"loop edges ({self.n_loops})")
-        ax.set_aspect("equal")
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.legend(loc="best", fontsize=8)
-        fig.savefig(path, dpi=150, bbox_inches="tight")
-        plt.close(fig)
+        save_slam_figure(self, path, truth)
 
     @property
     def odometry_trajectory(self) -> NDArray[np.float64]:

@@ -88,8 +88,8 @@ def test_shipped_model_completes_each_trace_seed(trace: str) -> None:
 @pytest.mark.skipif(not SHIPPED_MODEL.is_file(), reason="no shipped model")
 @pytest.mark.parametrize("driver", ["scripted", "sb3"])
 def test_the_recorder_takes_either_driver(driver: str) -> None:
-    from estimators.leaderboard.database import Scenario
     from estimators.leaderboard.recording import record
+    from estimators.leaderboard.records import Scenario
 
     scenario = Scenario("hallway", "zigzag", 0, {"max_episode_time": 4.0}, driver)
     dataset = record(scenario)

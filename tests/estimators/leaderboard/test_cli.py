@@ -13,7 +13,7 @@ from estimators.base import SensorSetup
 from estimators.datasets.carmen import flaser_beam_angles
 from estimators.leaderboard import cli as leaderboard
 from estimators.leaderboard import matrix, tables
-from estimators.leaderboard.database import Scenario, TraceDataset, TraceRecord
+from estimators.leaderboard.records import Scenario, TraceDataset, TraceRecord
 from estimators.leaderboard.tasks import EstimatorSpec
 from estimators.paths import SHARED_DATA
 from estimators.registry import make, names

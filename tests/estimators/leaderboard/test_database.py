@@ -16,17 +16,15 @@ import numpy as np
 import pytest
 
 from estimators.base import SensorSetup, default_beam_angles
-from estimators.leaderboard.database import (
+from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
+from estimators.leaderboard.schema import (
     SCHEMA_VERSION,
     CorruptDatabaseError,
     DatabaseLocationError,
-    ExperimentDatabase,
     ForeignDatabaseError,
     NotADatabaseError,
-    Scenario,
     SchemaVersionError,
-    SensorDataset,
-    TraceDataset,
 )
 
 SCENARIO = Scenario("hallway", "zigzag", 3, {"range_noise_std": 0.01})
@@ -277,7 +275,7 @@ def test_tum_export_is_read_back_by_evo(filled_db: Path, tmp_path: Path) -> None
 
 
 def test_the_recorded_version_follows_the_source_code(tmp_path: Path) -> None:
-    from estimators.leaderboard.database import package_version, source_digest
+    from estimators.leaderboard.records import package_version, source_digest
 
     assert "+src." in package_version() and package_version() == package_version()
     (tmp_path / "pkg" / "sub").mkdir(parents=True)

@@ -11,7 +11,7 @@ import pytest
 from agents.driver import make_driver
 from agents.scripted import PurePursuitDriver
 from estimators.evaluation.scoring import ScoreEstimator
-from estimators.leaderboard.database import ExperimentDatabase, Scenario
+from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.recording import (
     make_env,
     map_reference,
@@ -21,6 +21,7 @@ from estimators.leaderboard.recording import (
     score_map,
     world_from_geometry,
 )
+from estimators.leaderboard.records import Scenario
 from lidar_env.se2 import compose
 
 # 6 s of driving keeps the test short; the env truncates the episode there.

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimators.leaderboard.database import ExperimentDatabase, Scenario
+from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.records import Scenario
 from estimators.leaderboard.runner import (
     RunInterrupted,
     SideRun,

@@ -13,8 +13,8 @@ import pytest
 import scipy.linalg
 
 from estimators import SensorSetup, make
-from estimators.leaderboard.database import Scenario
 from estimators.leaderboard.recording import record
+from estimators.leaderboard.records import Scenario
 from estimators.matching.scan_matching import scan_to_points, scans_to_car_points
 from estimators.slam.g2o import read_g2o
 from estimators.slam.graph_slam import GraphSlam

@@ -1,0 +1,194 @@
+"""The experiment database's file: its SQLite schema (:data:`SCHEMA_VERSION` 1, laid out in
+:mod:`estimators.leaderboard.database`'s docstring), the errors a refused file raises (one
+:class:`DatabaseError` subclass per reason) and the read-only checks made before a file is
+opened for writing: the SQLite header, integrity, a foreign or other-version schema, and
+whether the file and its directory accept writes.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import tempfile
+from pathlib import Path
+
+#: The schema this module reads and writes (see the module docstring).
+SCHEMA_VERSION = 1
+
+
+_SQLITE_HEADER = b"SQLite format 3\x00"
+
+
+_SCHEMA = """
+CREATE TABLE schema_version (version INTEGER NOT NULL);
+CREATE TABLE scenarios (
+    id INTEGER PRIMARY KEY,
+    kind TEXT NOT NULL CHECK (kind IN ('sim', 'real')),
+    world TEXT NOT NULL,
+    trace TEXT NOT NULL,
+    seed INTEGER NOT NULL,
+    driver TEXT NOT NULL,
+    config TEXT NOT NULL,
+    UNIQUE (kind, world, trace, seed, driver, config)
+);
+CREATE TABLE sensor_datasets (
+    scenario_id INTEGER PRIMARY KEY REFERENCES scenarios (id),
+    n_steps INTEGER NOT NULL,
+    n_beams INTEGER NOT NULL,
+    max_range REAL NOT NULL,
+    world_aligned INTEGER NOT NULL,
+    mounts TEXT NOT NULL,
+    beam_angles BLOB NOT NULL,
+    env_config TEXT NOT NULL,
+    world TEXT NOT NULL,
+    package_version TEXT NOT NULL,
+    recorded_at TEXT NOT NULL
+);
+CREATE TABLE sensor_steps (
+    scenario_id INTEGER NOT NULL REFERENCES sensor_datasets (scenario_id),
+    step INTEGER NOT NULL,
+    time REAL NOT NULL,
+    lidar_1 BLOB NOT NULL,
+    lidar_2 BLOB,
+    x REAL NOT NULL,
+    y REAL NOT NULL,
+    heading REAL NOT NULL,
+    lidar_poses BLOB NOT NULL,
+    PRIMARY KEY (scenario_id, step)
+);
+CREATE TABLE traces (
+    id INTEGER PRIMARY KEY,
+    scenario_id INTEGER NOT NULL REFERENCES scenarios (id),
+    estimator TEXT NOT NULL,
+    params TEXT NOT NULL,
+    package_version TEXT NOT NULL,
+    n_steps INTEGER NOT NULL,
+    ms_per_step REAL NOT NULL,
+    created_at TEXT NOT NULL,
+    UNIQUE (scenario_id, estimator, params, package_version)
+);
+CREATE TABLE trace_poses (
+    trace_id INTEGER NOT NULL REFERENCES traces (id),
+    step INTEGER NOT NULL,
+    time REAL NOT NULL,
+    x REAL NOT NULL,
+    y REAL NOT NULL,
+    heading REAL NOT NULL,
+    ms REAL NOT NULL,
+    PRIMARY KEY (trace_id, step)
+);
+CREATE TABLE results (
+    trace_id INTEGER NOT NULL REFERENCES traces (id),
+    metric TEXT NOT NULL,
+    value REAL,
+    PRIMARY KEY (trace_id, metric)
+);
+"""
+
+
+class DatabaseError(Exception):
+    """Base class of the experiment database's errors."""
+
+
+class NotADatabaseError(DatabaseError):
+    """The file is not an SQLite database at all."""
+
+
+class CorruptDatabaseError(DatabaseError):
+    """The file is SQLite but damaged."""
+
+
+class ForeignDatabaseError(DatabaseError):
+    """The file is a healthy SQLite database that this project did not create."""
+
+
+class SchemaVersionError(DatabaseError):
+    """The database was written with another schema version."""
+
+
+class DatabaseLocationError(DatabaseError):
+    """The database file cannot be created or written where it was asked for."""
+
+
+def _check_header(path: Path) -> None:
+    """Refuse a non-empty file that does not start with the SQLite header (reads 16 bytes)."""
+    with path.open("rb") as handle:
+        header = handle.read(len(_SQLITE_HEADER))
+    if header and header != _SQLITE_HEADER:
+        raise NotADatabaseError(
+            f"{path} is not an SQLite database (expected a file starting with "
+            f"{_SQLITE_HEADER!r}, found {header!r}); refusing to touch it"
+        )
+
+
+def inspect_existing(path: Path, verify: bool) -> None:
+    """Check the existing database file ``path`` read-only; raise the matching error, leave
+    the file as is.
+
+    One exception: a *hot journal* next to the file means a write of ours was killed
+    mid-transaction. SQLite then has to roll it back before anything can be read, which
+    needs write access; that rollback restores the last committed state, so it is done.
+    """
+    try:
+        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            _inspect(conn, path, verify)
+            return
+        except sqlite3.OperationalError:
+            if not Path(f"{path}-journal").exists():
+                raise
+        finally:
+            conn.close()
+        conn = sqlite3.connect(path)
+        try:
+            _inspect(conn, path, verify)
+        finally:
+            conn.close()
+    except sqlite3.DatabaseError as error:
+        raise CorruptDatabaseError(
+            f"{path} cannot be read as SQLite ({error}); left untouched"
+        ) from error
+
+def _inspect(conn: sqlite3.Connection, path: Path, verify: bool) -> None:
+    if verify:
+        problems = [row[0] for row in conn.execute("PRAGMA quick_check")]
+        if problems != ["ok"]:
+            raise CorruptDatabaseError(
+                f"{path} is a damaged SQLite file ({'; '.join(problems[:3])}); "
+                "left untouched: restore a backup or choose another --db path"
+            )
+    tables = {row[0] for row in conn.execute(
+        "SELECT name FROM sqlite_master WHERE type = 'table'"
+    )}
+    if tables and "schema_version" not in tables:
+        raise ForeignDatabaseError(
+            f"{path} is an SQLite database of another program (tables: "
+            f"{', '.join(sorted(tables))}; expected a schema_version table); left untouched"
+        )
+    if tables:
+        versions = [row[0] for row in conn.execute("SELECT version FROM schema_version")]
+        if versions != [SCHEMA_VERSION]:
+            raise SchemaVersionError(
+                f"{path} has schema version {versions}, this duallidar reads version "
+                f"{SCHEMA_VERSION}; left untouched: use another --db path or the duallidar "
+                "version that wrote it"
+            )
+
+def check_writable(path: Path) -> None:
+    """The file ``path`` (if present) and its directory (for the journal) must accept writes."""
+    parent = path.parent
+    if not parent.is_dir():
+        raise DatabaseLocationError(
+            f"cannot create {path}: directory {parent} does not exist"
+        )
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+        if path.exists():
+            with path.open("r+b"):
+                pass
+    except OSError as error:
+        what = "open" if path.exists() else "create"
+        raise DatabaseLocationError(
+            f"cannot {what} {path} for writing: {error.strerror} "
+            f"(the file and its directory {parent} must be writable)"
+        ) from error
