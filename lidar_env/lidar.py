@@ -31,7 +31,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.world import PrimitiveGrid, World, grid_cell, odd_crossings, segment_distance2
+from lidar_env.primitive_grid import PrimitiveGrid, grid_cell, odd_crossings, segment_distance2
+from lidar_env.world import World
 
 #: Extra angle [rad] each subtended interval is widened by. It covers the error of
 #: :func:`_bearing` (< 1.7e-6 rad) so no beam that grazes a primitive is dropped; the exact

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.polygons import segment_distances
 from lidar_env.traces import TRACE_NAMES, Trace, build_trace, check_trace_name, make_trace
-from lidar_env.world import World, segment_distances
+from lidar_env.world import World
 
 Pose = tuple[float, float, float]
 
