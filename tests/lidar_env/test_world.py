@@ -9,16 +9,15 @@ import numpy as np
 import pymunk
 import pytest
 
-from lidar_env.world import (
-    OBSTACLE_COLLISION_TYPE,
-    World,
-    _convex_pieces,
+from lidar_env.polygons import (
     _ear_clip,
     _is_convex,
-    _signed_area,
+    convex_pieces,
     even_odd_inside,
     segment_distances,
+    signed_area,
 )
+from lidar_env.world import OBSTACLE_COLLISION_TYPE, World
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 
@@ -142,21 +141,21 @@ def test_build_space_shapes() -> None:
     )
 
 
-@pytest.mark.parametrize("split", [_convex_pieces, _ear_clip])
+@pytest.mark.parametrize("split", [convex_pieces, _ear_clip])
 def test_convex_pieces_cover_a_star_exactly(split) -> None:
     angles = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     radii = np.where(np.arange(24) % 2 == 0, 3.0, 1.0)
     star = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])[::-1]  # clockwise
     pieces = split(star)
     star_world = World(polygons=[star])
-    assert sum(abs(_signed_area(p)) for p in pieces) == pytest.approx(
-        abs(_signed_area(star)), rel=1e-12
+    assert sum(abs(signed_area(p)) for p in pieces) == pytest.approx(
+        abs(signed_area(star)), rel=1e-12
     )
     probe = np.random.default_rng(1).uniform(-3, 3, (2000, 2))
     in_pieces = np.zeros(len(probe), dtype=bool)
     for piece in pieces:
         assert _is_convex(piece)
-        assert len(piece) >= 3 and abs(_signed_area(piece)) > 1e-9
+        assert len(piece) >= 3 and abs(signed_area(piece)) > 1e-9
         in_pieces |= World(polygons=[piece]).contains(probe)
     np.testing.assert_array_equal(in_pieces, star_world.contains(probe))
 
@@ -175,10 +174,10 @@ def test_degenerate_pieces_from_the_decomposition_are_dropped(monkeypatch) -> No
 
     monkeypatch.setattr(autogeometry, "convex_decomposition", with_slivers)
     l_shape = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [0, 3]], dtype=float)
-    pieces = _convex_pieces(l_shape)
-    assert sum(abs(_signed_area(p)) for p in pieces) == pytest.approx(6.0, rel=1e-12)
+    pieces = convex_pieces(l_shape)
+    assert sum(abs(signed_area(p)) for p in pieces) == pytest.approx(6.0, rel=1e-12)
     for piece in pieces:
-        assert _is_convex(piece) and abs(_signed_area(piece)) > 1e-9
+        assert _is_convex(piece) and abs(signed_area(piece)) > 1e-9
     World(polygons=[l_shape]).build_space()
 
 
