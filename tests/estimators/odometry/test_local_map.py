@@ -18,8 +18,9 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.local_map import LocalMapOdometry
 from lidar_env.lidar import Lidar
+from lidar_env.polygons import segment_distances
 from lidar_env.se2 import compose, relative, transform_points
-from lidar_env.world import World, segment_distances
+from lidar_env.world import World
 
 
 def _distance_to_world(world, points: np.ndarray) -> np.ndarray:
