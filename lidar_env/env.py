@@ -14,7 +14,8 @@ from numpy.typing import ArrayLike, NDArray
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
 from lidar_env.lidar import Lidar
-from lidar_env.traces import Trace, check_trace_name, project_onto_polyline
+from lidar_env.trace_geometry import Trace, project_onto_polyline
+from lidar_env.traces import check_trace_name
 from lidar_env.world import World
 from lidar_env.worlds import (
     PAPER_TRACES,
