@@ -10,12 +10,12 @@ from gymnasium.utils.env_checker import check_env
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents import PurePursuitDriver
 from lidar_env import se2
+from lidar_env.trace_geometry import WAYPOINT_SPACING
 from lidar_env.traces import (
     LOOP_ASPECT,
     LOOP_CORNER_RADIUS,
     OUT_AND_BACK_OFFSET,
     OUT_AND_BACK_RADIUS,
-    WAYPOINT_SPACING,
     Trace,
     build_trace,
 )

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from lidar_env.trace_geometry import WAYPOINT_SPACING
 from lidar_env.traces import (
     RIGHT_TURN_RADIUS,
     TRACE_NAMES,
-    WAYPOINT_SPACING,
     TraceFitError,
     build_trace,
     make_trace,
