@@ -6,21 +6,17 @@ front end's path, the smoothed path, loop edges and the truth (matplotlib,
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    from estimators.slam.graph_slam import GraphSlam
 
-
-def save_slam_figure(slam: GraphSlam, path: str | os.PathLike[str],
+def save_slam_figure(slam: Any, path: str | os.PathLike[str],
                      truth: NDArray[np.float64] | None = None) -> None:
-    """Save a picture of ``slam``'s corrected map (grey points), the front end's path
-    (dotted), the smoothed path, odometry edges and loop edges (red), and ``truth`` (N, 3)
-    poses if given."""
-
+    """Save a picture of ``slam``'s (a :class:`~estimators.slam.graph_slam.GraphSlam`)
+    corrected map (grey points), the front end's path (dotted), the smoothed path, odometry
+    edges and loop edges (red), and ``truth`` (N, 3) poses if given."""
     try:
         import matplotlib
 
