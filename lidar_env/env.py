@@ -14,32 +14,16 @@ from numpy.typing import ArrayLike, NDArray
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
 from lidar_env.lidar import Lidar
+from lidar_env.scenes import SceneCache, check_reset_options, check_start_pose
 from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.traces import check_trace_name
 from lidar_env.world import World
-from lidar_env.worlds import (
-    PAPER_TRACES,
-    Scene,
-    built_in_layout,
-    check_world_name,
-    make_scene,
-)
-
-#: Keys accepted in ``reset(options=...)``.
-RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
+from lidar_env.worlds import PAPER_TRACES, check_world_name
 
 #: [m] half-width of the arc window searched when tracking progress along the trace: far more
 #: than the car moves per step (0.15 m at default settings), far less than the spacing between
 #: zigzag legs, so progress never jumps to a neighbouring leg.
 PROGRESS_WINDOW = 2.0
-
-
-#: Fitted traces kept per env (built-in worlds only): every default start and a few custom ones.
-MAX_CACHED_SCENES = 32
-
-
-class StartPoseError(ValueError):
-    """The requested start pose puts the car inside or onto an obstacle."""
 
 
 class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
@@ -97,7 +81,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     The car stands at the trace's start pose: each world has a default start per trace seed;
     ``reset(options={"start": (x, y, heading)})`` overrides it (the trace is then fitted to
     the world from there). A start where the car's box touches or lies inside an obstacle
-    raises :class:`StartPoseError`.
+    raises :class:`~lidar_env.scenes.StartPoseError`.
 
     ## Episode End
 
@@ -178,7 +162,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._mounts = cfg.mounts_array
         self._sensor_poses = np.zeros((2, 3))
         self._world_aligned = cfg.scan_frame == "world"
-        self._scenes: dict[tuple[str, str, tuple[float, ...] | None], Scene] = {}
+        self._scenes = SceneCache()
         self.world: World | None = None
         self.trace: Trace | None = None
         self.car: Car | None = None
@@ -196,13 +180,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ValueError(
-                f"unknown reset option(s) {', '.join(map(repr, unknown))}: expected some of "
-                f"{', '.join(RESET_OPTIONS)}"
-            )
+        options = check_reset_options(options)
         world_name = check_world_name(options.get("world", self.world_name))
         trace_name = options.get("trace", self.trace_name)
         if trace_name is None:
@@ -210,8 +188,12 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         trace_name = check_trace_name(trace_name)
         start = options.get("start")
         if start is not None:
-            start = self._check_start(start, world_name)
-        scene = self._scene(world_name, trace_name, start)
+            start = check_start_pose(
+                start, world_name, self.config.car_length, self.config.car_width
+            )
+        scene = self._scenes.get(
+            world_name, trace_name, start, self.np_random, self.config.trace_clearance
+        )
         if self.world is not scene.world:
             self.car = Car(self.config.car_length, self.config.car_width,
                            scene.world.circles, scene.world.segments)
@@ -227,39 +209,6 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         if self.render_mode == "human":
             self.render()
         return observation, info
-
-    def _check_start(self, start: Any, world_name: str) -> tuple[float, float, float]:
-        pose = np.asarray(start, dtype=np.float64)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise ValueError(
-                f"options['start']: expected 3 finite numbers (x [m], y [m], heading [rad]), "
-                f"got {start!r}"
-            )
-        if world_name != "random":
-            world = built_in_layout(world_name).world
-            car = Car(self.config.car_length, self.config.car_width, world.circles, world.segments)
-            if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
-                x, y, heading = pose
-                raise StartPoseError(
-                    f"start pose ({x:g}, {y:g}, {heading:g}) puts the {self.config.car_length} m x "
-                    f"{self.config.car_width} m car into an obstacle of world {world_name!r}: "
-                    f"expected a pose where the car's box is clear"
-                )
-        return (float(pose[0]), float(pose[1]), float(pose[2]))
-
-    def _scene(
-        self, world_name: str, trace_name: str, start: tuple[float, float, float] | None
-    ) -> Scene:
-        """The world and fitted trace; built-in ones are cached (random worlds never are)."""
-        clearance = self.config.trace_clearance
-        if world_name == "random":
-            return make_scene(world_name, trace_name, self.np_random, clearance, start)
-        key = (world_name, trace_name, start)
-        if key not in self._scenes:
-            if len(self._scenes) >= MAX_CACHED_SCENES:
-                self._scenes.clear()
-            self._scenes[key] = make_scene(world_name, trace_name, None, clearance, start)
-        return self._scenes[key]
 
     def step(
         self, action: ArrayLike

@@ -1,0 +1,98 @@
+"""Which scene an episode of ``DualLidar-v0`` starts in: reset options, start-pose checks and
+the bounded cache of fitted scenes.
+
+A scene is a world and a trace fitted to it (:class:`lidar_env.worlds.Scene`). Poses are
+``(x [m], y [m], heading [rad])`` in the world frame; clearances and car sizes are metres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from lidar_env.car import Car
+from lidar_env.worlds import Scene, built_in_layout, make_scene
+
+#: Keys accepted in ``reset(options=...)``.
+RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
+
+#: Fitted traces kept per env (built-in worlds only): every default start and a few custom ones.
+MAX_CACHED_SCENES = 32
+
+
+class StartPoseError(ValueError):
+    """The requested start pose puts the car inside or onto an obstacle."""
+
+
+def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``options`` as a new dict, or a ``ValueError`` naming keys not in :data:`RESET_OPTIONS`."""
+    options = dict(options or {})
+    unknown = sorted(set(options) - set(RESET_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"unknown reset option(s) {', '.join(map(repr, unknown))}: expected some of "
+            f"{', '.join(RESET_OPTIONS)}"
+        )
+    return options
+
+
+def check_start_pose(
+    start: Any, world_name: str, car_length: float, car_width: float
+) -> tuple[float, float, float]:
+    """``start`` as a pose, checked to leave the car's box (``car_length`` x ``car_width`` [m])
+    clear of the obstacles of built-in world ``world_name`` (a ``random`` world is drawn around
+    its trace, so any start is accepted there).
+
+    Raises:
+        ValueError: ``start`` is not 3 finite numbers.
+        StartPoseError: the car would touch or lie inside an obstacle.
+    """
+    pose = np.asarray(start, dtype=np.float64)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise ValueError(
+            f"options['start']: expected 3 finite numbers (x [m], y [m], heading [rad]), "
+            f"got {start!r}"
+        )
+    if world_name != "random":
+        world = built_in_layout(world_name).world
+        car = Car(car_length, car_width, world.circles, world.segments)
+        if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
+            x, y, heading = pose
+            raise StartPoseError(
+                f"start pose ({x:g}, {y:g}, {heading:g}) puts the {car_length} m x "
+                f"{car_width} m car into an obstacle of world {world_name!r}: "
+                f"expected a pose where the car's box is clear"
+            )
+    return (float(pose[0]), float(pose[1]), float(pose[2]))
+
+
+class SceneCache:
+    """The world and fitted trace of each (world, trace, start) asked for.
+
+    Built-in scenes are kept, so resetting into one again reuses its fitted trace (at most
+    :data:`MAX_CACHED_SCENES`; the cache is emptied when full); random worlds are drawn anew
+    from the generator every time and never kept.
+    """
+
+    def __init__(self) -> None:
+        self._scenes: dict[tuple[str, str, tuple[float, ...] | None], Scene] = {}
+
+    def get(
+        self,
+        world_name: str,
+        trace_name: str,
+        start: tuple[float, float, float] | None,
+        rng: np.random.Generator,
+        clearance: float,
+    ) -> Scene:
+        """The scene, fitting the trace with ``clearance`` [m]; ``rng`` draws random worlds."""
+        if world_name == "random":
+            return make_scene(world_name, trace_name, rng, clearance, start)
+        key = (world_name, trace_name, start)
+        if key not in self._scenes:
+            if len(self._scenes) >= MAX_CACHED_SCENES:
+                self._scenes.clear()
+            self._scenes[key] = make_scene(world_name, trace_name, None, clearance, start)
+        return self._scenes[key]
