@@ -17,7 +17,7 @@ from gymnasium.utils.env_checker import check_env
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env import se2
 from lidar_env.car import Car
-from lidar_env.env import StartPoseError
+from lidar_env.scenes import StartPoseError
 from lidar_env.worlds import WORLD_NAMES, make_world
 
 NOISELESS = {"range_noise_std": 0.0}
