@@ -67,14 +67,13 @@ from estimators.leaderboard.matrix import (
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import RunInterrupted, RunSummary, SideRun, run_matrix
 from estimators.leaderboard.schema import DatabaseError
+from estimators.leaderboard.table_one import table_one, table_one_markdown
 from estimators.leaderboard.tables import (
     RANK_KEYS,
     current_records,
     leaderboard_markdown,
     map_ceiling_note,
     rank_table,
-    table_one,
-    table_one_markdown,
     write_csv,
 )
 from estimators.leaderboard.tasks import STAGES, EstimatorSpec, RealLog

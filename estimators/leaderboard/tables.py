@@ -1,6 +1,6 @@
 """The leaderboard's tables from stored traces: the ranking (:func:`rank_table`, mean ATE over the
-simulated scenarios, one column per group and the real-log relation error) and its Markdown,
-and the paper's Table I beside ours (:func:`table_one`, :func:`table_one_markdown`).
+simulated scenarios, one column per group and the real-log relation error) and its Markdown.
+The paper's Table I beside ours lives in :mod:`estimators.leaderboard.table_one`.
 """
 
 from __future__ import annotations
@@ -13,11 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from estimators.leaderboard.matrix import (
-    TABLE_I,
-    TABLE_I_FRAMES,
-    Group,
-)
+from estimators.leaderboard.matrix import Group
 from estimators.leaderboard.records import Scenario, TraceRecord, canonical_json
 from estimators.leaderboard.tasks import EstimatorSpec
 
@@ -150,69 +146,6 @@ def map_ceiling_note(records: dict[tuple[Scenario, str], TraceRecord]) -> str:
             mean = _mean([m.get(f"{key}_true_poses", math.nan) for m in per_scenario.values()])
             scores.append(f"{title} {_fmt(mean, 3)}")
     return f"\nMaps at the true poses (the mapper's ceiling): {', '.join(scores)}.\n"
-
-
-def _seed_metrics(runs: Sequence[Scenario], estimator: str,
-                  records: dict[tuple[Scenario, str], TraceRecord]) -> list[dict[str, float]]:
-    return [records[(s, estimator)].metrics for s in runs if (s, estimator) in records]
-
-
-def table_one(by_frame: Mapping[str, Mapping[tuple[str, str], Sequence[Scenario]]],
-              records: dict[tuple[Scenario, str], TraceRecord]) -> list[dict[str, Any]]:
-    """Table I: the paper's accuracy per case beside ours, for each scan frame of ``by_frame``
-    (``"world"``/``"sensor"`` -> (world, trace) -> the scenarios, one per seed): the mean and
-    std over seeds, the mean ATE, and, for the cases without pose-graph correlation, the
-    main-Lidar-only ``pc`` as well (NaN where nothing ran)."""
-    rows = []
-    for case in TABLE_I:
-        row: dict[str, Any] = {
-            "case": case.case, "area": case.area, "feature": case.feature,
-            "pose_graph": "yes" if case.pose_graph else "no",
-            "scenario": f"{case.world}+{case.trace}", "estimator": case.estimator,
-            "paper_accuracy_percent": case.paper_accuracy,
-        }
-        for frame in TABLE_I_FRAMES:
-            runs = by_frame.get(frame, {}).get((case.world, case.trace), [])
-            ours = _seed_metrics(runs, case.estimator, records)
-            accuracy = [m["accuracy_percent"] for m in ours]
-            main_only = [] if case.pose_graph else _seed_metrics(runs, "pc", records)
-            row.update({
-                f"ours_{frame}_accuracy_percent": _mean(accuracy),
-                f"ours_{frame}_std_percent": float(np.std(accuracy)) if ours else math.nan,
-                f"ours_{frame}_seeds": len(ours),
-                f"ours_{frame}_ate_m": _mean([m.get("ate_rmse_m", math.nan) for m in ours]),
-                f"pc_main_only_{frame}_accuracy_percent": _mean(
-                    [m["accuracy_percent"] for m in main_only]),
-            })
-        rows.append(row)
-    return rows
-
-
-def table_one_markdown(rows: Sequence[dict[str, Any]]) -> str:
-    """Table I as markdown, with a legend of the two scan frames."""
-    titles = list(TABLE_I_FRAMES.values())
-    header = ["case", "area", "feature", "pose-graph", "scenario", "estimator", "paper [%]",
-              *(f"ours, {title} [%] (mean ± std, seeds)" for title in titles),
-              f"ATE {' / '.join(titles)} [m]", f"pc main only, {' / '.join(titles)} [%]"]
-    body = []
-    for r in rows:
-        ours = [f"{_fmt(r[f'ours_{frame}_accuracy_percent'])} ± "
-                f"{_fmt(r[f'ours_{frame}_std_percent'])} ({r[f'ours_{frame}_seeds']})"
-                if r[f"ours_{frame}_seeds"] else "not run" for frame in TABLE_I_FRAMES]
-        ate = " / ".join(_fmt(r[f"ours_{frame}_ate_m"], 3) for frame in TABLE_I_FRAMES)
-        main_only = "" if r["pose_graph"] == "yes" else " / ".join(
-            _fmt(r[f"pc_main_only_{frame}_accuracy_percent"]) for frame in TABLE_I_FRAMES)
-        body.append([str(r["case"]), r["area"], r["feature"], r["pose_graph"], r["scenario"],
-                     r["estimator"], f"{r['paper_accuracy_percent']:.2f}", *ours, ate,
-                     main_only])
-    legend = (
-        "\nworld-aligned: the paper's setting, scans rotated into world axes (env "
-        "`scan_frame=\"world\"`): the translation-only phase correlation never sees a rotation. "
-        "sensor-frame: the scans as mounted Lidars give them (the leaderboard's scenarios), "
-        "where the paper's method cannot see the car turn. Accuracy = 100% - eq. 11, floored "
-        "at 0; ATE for context (eq. 11 ignores direction).\n"
-    )
-    return _markdown(header, body) + legend
 
 
 def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:

@@ -12,7 +12,7 @@ import pytest
 from estimators.base import SensorSetup
 from estimators.datasets.carmen import flaser_beam_angles
 from estimators.leaderboard import cli as leaderboard
-from estimators.leaderboard import matrix, tables
+from estimators.leaderboard import matrix, table_one
 from estimators.leaderboard.records import Scenario, TraceDataset, TraceRecord
 from estimators.leaderboard.tasks import EstimatorSpec
 from estimators.paths import SHARED_DATA
@@ -275,7 +275,7 @@ def test_table_one_reports_world_aligned_and_sensor_frame_beside_the_paper() -> 
             trace = TraceDataset(name, {}, np.zeros(1), np.zeros((1, 3)), np.zeros(1))
             records[(scenario, name)] = TraceRecord(0, scenario, trace, {
                 "accuracy_percent": value, "ate_rmse_m": 100.0 - value})
-    rows = tables.table_one(runs, records)
+    rows = table_one.table_one(runs, records)
     case_1, case_2 = rows[0], rows[1]
     assert case_1["ours_world_accuracy_percent"] == pytest.approx(92.0)
     assert case_1["ours_world_std_percent"] == pytest.approx(2.0)
@@ -285,7 +285,7 @@ def test_table_one_reports_world_aligned_and_sensor_frame_beside_the_paper() -> 
     assert math.isnan(case_1["pc_main_only_sensor_accuracy_percent"])
     assert case_2["ours_world_seeds"] == 2 and case_2["ours_sensor_seeds"] == 0
     assert all(r["ours_world_seeds"] == 0 for r in rows[2:])  # scenarios not in the run
-    table = tables.table_one_markdown(rows)
+    table = table_one.table_one_markdown(rows)
     assert ("| paper [%] | ours, world-aligned [%] (mean ± std, seeds) | ours, sensor-frame [%] "
             "(mean ± std, seeds) | ATE world-aligned / sensor-frame [m] |") in table
     assert "| pc_offset | 31.25 | 92.00 ± 2.00 (2) | 80.50 ± 0.50 (2) | 8.000 / 19.500 |" in table
