@@ -3,11 +3,13 @@
 Motion is integrated exactly: under a constant linear speed ``v`` [m/s] and yaw rate ``w``
 [rad/s] the car runs along a circular arc (a straight line when ``w = 0``), so no integration
 error accumulates however long the episode. The control step is split into ``substeps`` poses
-along that arc, and at each one the car's box is tested against every obstacle (circles and
-line segments) by a compiled kernel; the first touching substep ends the motion with the car
-left at the last free substep. Measured against stepping a pymunk body through the same
-substeps plus a shape query, this is exact and about 5x cheaper per control step (see
-``benchmarks/bench_env.py``); pymunk's own shape query stays the test oracle for the kernel.
+along that arc (more when the move is long: no corner of the box moves more than a quarter of
+its width between two checks, so it cannot jump over a wall), and at each one the car's box
+is tested against every obstacle (circles and line segments) by a compiled kernel; the first
+touching substep ends the motion with the car left at the last free substep. Measured against
+stepping a pymunk body through the same substeps plus a shape query, this is exact and about
+5x cheaper per control step (see ``benchmarks/bench_env.py``); pymunk's own shape query stays
+the test oracle for the kernel.
 
 The car's pymunk body (kinematic, one box shape) lives in the world's space so pymunk users
 see the car; :meth:`Car.sync_body` moves it to the current pose on demand.
@@ -22,8 +24,19 @@ import numpy as np
 import pymunk
 from numpy.typing import ArrayLike
 
+from lidar_env.errors import ConfigError
+
 #: ``collision_type`` of the car's pymunk shape.
 CAR_COLLISION_TYPE: int = 2
+
+#: [-] no point of the car's box moves more than this fraction of its smaller side between two
+#: collision checks, so it cannot jump over a (zero-thickness) wall: a box can only clear a
+#: wall by moving at least its width past it.
+MAX_STEP_FRACTION: float = 0.25
+
+#: [-] most collision checks one control step may need; a motion that needs more (a speed or a
+#: control step far beyond what a car does) is rejected rather than simulated for minutes.
+MAX_SUBSTEPS: int = 100_000
 
 
 @numba.njit(cache=True)
@@ -161,10 +174,43 @@ class Car:
         """Put the car at ``pose`` (x [m], y [m], heading [rad]) without a collision check."""
         self.pose[:] = np.asarray(pose, dtype=np.float64)
 
+    def substeps_for(self, speed: float, yaw_rate: float, duration: float, substeps: int) -> int:
+        """Collision checks for a ``duration`` [s] move: at least ``substeps``, and enough that
+        no corner of the box moves more than :data:`MAX_STEP_FRACTION` of its smaller side
+        between two checks (translation ``|speed| dt`` plus rotation ``|yaw_rate| dt`` times
+        the half diagonal).
+
+        Raises:
+            ConfigError: ``speed``, ``yaw_rate`` or ``duration`` is not finite, ``duration`` is
+                negative, or the move needs more than :data:`MAX_SUBSTEPS` checks.
+        """
+        for name, value in (("speed", speed), ("yaw_rate", yaw_rate), ("duration", duration)):
+            if not math.isfinite(value):
+                raise ConfigError(f"car {name}: expected a finite value, got {value!r}")
+        if duration < 0.0:
+            raise ConfigError(f"car duration: expected a value >= 0 [s], got {duration!r}")
+        half_diagonal = math.hypot(self.half_length, self.half_width)
+        corner_travel = (abs(speed) + abs(yaw_rate) * half_diagonal) * duration  # [m]
+        max_step = MAX_STEP_FRACTION * 2.0 * min(self.half_length, self.half_width)
+        needed = math.ceil(corner_travel / max_step) if max_step > 0.0 else int(substeps)
+        if needed > MAX_SUBSTEPS:
+            raise ConfigError(
+                f"car motion: speed {speed!r} m/s and yaw rate {yaw_rate!r} rad/s for "
+                f"{duration!r} s move a corner {corner_travel:.3g} m, which needs {needed} "
+                f"collision checks (at most {MAX_SUBSTEPS}); lower max_speed, max_yaw_rate or "
+                "control_dt"
+            )
+        return max(int(substeps), needed, 1)
+
     def drive(self, speed: float, yaw_rate: float, duration: float, substeps: int) -> bool:
-        """Drive ``duration`` [s] at ``speed`` [m/s] and ``yaw_rate`` [rad/s]; True on collision."""
+        """Drive ``duration`` [s] at ``speed`` [m/s] and ``yaw_rate`` [rad/s]; True on collision.
+
+        ``substeps`` is the least number of collision checks; more are made when the move is
+        long (see :meth:`substeps_for`), so the car never tunnels through a wall.
+        """
+        checks = self.substeps_for(speed, yaw_rate, duration, substeps)
         return drive_arc(
-            self.pose, speed, yaw_rate, duration, substeps,
+            self.pose, speed, yaw_rate, duration, checks,
             self.half_length, self.half_width, self.circles, self.segments,
         )
 
