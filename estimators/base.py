@@ -8,15 +8,21 @@ never the ground truth. Timing, metrics and files belong to the pipeline that dr
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-#: Observation keys of the main and the offset Lidar, in that order.
-LIDAR_KEYS: tuple[str, ...] = ("lidar_1", "lidar_2")
+from estimators.clock import check_time
+from lidar_env.errors import EstimatorInputError
+
+#: Observation keys ``lidar_1 .. lidar_8``; sensor ``k`` of a setup reads ``LIDAR_KEYS[k]``.
+LIDAR_KEYS: tuple[str, ...] = tuple(f"lidar_{k}" for k in range(1, 9))
+
+#: Most Lidars a :class:`SensorSetup` (and the env) carries.
+MAX_LIDARS: int = len(LIDAR_KEYS)
 
 
 def default_beam_angles(n_beams: int) -> NDArray[np.float64]:
@@ -24,44 +30,140 @@ def default_beam_angles(n_beams: int) -> NDArray[np.float64]:
     return 2.0 * np.pi * np.arange(n_beams) / n_beams
 
 
-@dataclass(frozen=True)
-class SensorSetup:
-    """What an estimator may know about the sensors: their mounts and beam geometry.
+@dataclass(frozen=True, eq=False)
+class Sensor:
+    """One planar Lidar as an estimator knows it.
 
     Attributes:
-        mounts: ``(K, 3)`` pose of each Lidar in the car frame (x [m] forward, y [m] left,
-            heading [rad]); row ``k`` belongs to observation key ``LIDAR_KEYS[k]``.
+        mount: ``(3,)`` pose in the car frame (x [m] forward, y [m] left, heading [rad]).
         beam_angles: ``(n,)`` beam directions [rad] in the sensor frame, CCW from forward.
         max_range: [m]; readings ``>= max_range`` (or non-finite) are "no return".
+        index: position in the setup (0 for ``lidar_1``), used to name it in errors.
+    """
+
+    mount: NDArray[np.float64]
+    beam_angles: NDArray[np.float64]
+    max_range: float
+    index: int = 0
+
+    def __post_init__(self) -> None:
+        name = f"sensor {self.index} ({LIDAR_KEYS[self.index]})" if (
+            0 <= self.index < MAX_LIDARS) else f"sensor {self.index}"
+        mount = np.asarray(self.mount, dtype=np.float64)
+        if mount.shape != (3,) or not np.all(np.isfinite(mount)):
+            raise EstimatorInputError(
+                f"mount of {name}: expected 3 finite numbers (x [m], y [m], heading [rad]), "
+                f"got {np.asarray(self.mount).tolist()!r}")
+        angles = np.asarray(self.beam_angles, dtype=np.float64)
+        if angles.ndim != 1 or len(angles) < 3:
+            raise EstimatorInputError(
+                f"beam_angles of {name}: expected a 1-D array of >= 3 angles [rad], "
+                f"got shape {angles.shape}")
+        if not np.all(np.isfinite(angles)):
+            bad = int(np.argmin(np.isfinite(angles)))
+            raise EstimatorInputError(f"beam_angles of {name}: expected finite angles [rad], "
+                                      f"got {angles[bad]} at beam {bad}")
+        max_range = self.max_range
+        if isinstance(max_range, bool) or not isinstance(max_range, (int, float, np.number)) or (
+                not np.isfinite(max_range) or max_range <= 0):
+            raise EstimatorInputError(
+                f"max_range of {name}: expected a positive finite number [m], got {max_range!r}")
+        object.__setattr__(self, "mount", mount)
+        object.__setattr__(self, "beam_angles", angles)
+        object.__setattr__(self, "max_range", float(max_range))
+
+    @property
+    def n_beams(self) -> int:
+        return len(self.beam_angles)
+
+
+@dataclass(frozen=True, init=False, eq=False)
+class SensorSetup:
+    """What an estimator may know about the sensors: K Lidars (1..8), each with its own mount,
+    beam geometry and max range.
+
+    Build it either from sensors, ``SensorSetup(sensors=(Sensor(mount, angles, max_range),
+    ...))``, or, when every Lidar shares one beam geometry (the env's default and a CARMEN
+    log), from bare arrays: ``SensorSetup(mounts (K, 3), beam_angles (n,), max_range)``.
+
+    Attributes:
+        sensors: one :class:`Sensor` per Lidar; sensor ``k`` reads observation key
+            ``LIDAR_KEYS[k]``.
         world_aligned: scans are rotated into world orientation (the paper's simplification:
             heading is then known and only translation is estimated).
     """
 
-    mounts: NDArray[np.float64]
-    beam_angles: NDArray[np.float64]
-    max_range: float
-    world_aligned: bool = False
+    sensors: tuple[Sensor, ...]
+    world_aligned: bool
 
-    def __post_init__(self) -> None:
-        mounts = np.atleast_2d(np.asarray(self.mounts, dtype=np.float64))
-        if mounts.ndim != 2 or mounts.shape[1] != 3 or len(mounts) not in (1, 2):
-            raise ValueError(f"mounts: expected shape (1, 3) or (2, 3), got {mounts.shape}")
-        angles = np.asarray(self.beam_angles, dtype=np.float64)
-        if angles.ndim != 1 or len(angles) < 3:
-            raise ValueError(f"beam_angles: expected a 1-D array of >= 3, got {angles.shape}")
-        if not np.isfinite(self.max_range) or self.max_range <= 0:
-            raise ValueError(f"max_range: expected a positive finite number, got {self.max_range}")
-        object.__setattr__(self, "mounts", mounts)
-        object.__setattr__(self, "beam_angles", angles)
-        object.__setattr__(self, "max_range", float(self.max_range))
+    def __init__(
+        self,
+        mounts: ArrayLike | None = None,
+        beam_angles: ArrayLike | None = None,
+        max_range: float | None = None,
+        world_aligned: bool = False,
+        *,
+        sensors: Sequence[Sensor] | None = None,
+    ) -> None:
+        if sensors is None:
+            sensors = _uniform_sensors(mounts, beam_angles, max_range)
+        elif mounts is not None or beam_angles is not None or max_range is not None:
+            raise EstimatorInputError(
+                "SensorSetup: expected either sensors= or (mounts, beam_angles, max_range), "
+                "got both")
+        sensors = tuple(sensors)
+        if not 1 <= len(sensors) <= MAX_LIDARS:
+            raise EstimatorInputError(
+                f"sensors: expected 1 to {MAX_LIDARS} Lidars, got {len(sensors)}")
+        checked = []
+        for k, sensor in enumerate(sensors):
+            if not isinstance(sensor, Sensor):
+                raise EstimatorInputError(
+                    f"sensors[{k}]: expected a Sensor, got {type(sensor).__name__}")
+            checked.append(sensor if sensor.index == k else
+                           Sensor(sensor.mount, sensor.beam_angles, sensor.max_range, k))
+        object.__setattr__(self, "sensors", tuple(checked))
+        object.__setattr__(self, "world_aligned", bool(world_aligned))
+        object.__setattr__(self, "_mounts", np.stack([s.mount for s in checked]))
 
     @property
     def n_lidars(self) -> int:
-        return len(self.mounts)
+        return len(self.sensors)
 
     @property
     def keys(self) -> tuple[str, ...]:
         return LIDAR_KEYS[: self.n_lidars]
+
+    @property
+    def mounts(self) -> NDArray[np.float64]:
+        """``(K, 3)`` pose of each Lidar in the car frame; row ``k`` reads ``keys[k]``."""
+        return self._mounts.copy()
+
+    @property
+    def uniform(self) -> bool:
+        """Every Lidar has the same beam angles and max range."""
+        first = self.sensors[0]
+        return all(s.max_range == first.max_range and np.array_equal(s.beam_angles,
+                                                                     first.beam_angles)
+                   for s in self.sensors[1:])
+
+    @property
+    def beam_angles(self) -> NDArray[np.float64]:
+        """``(n,)`` beam directions [rad] shared by every Lidar (an error if they differ)."""
+        self._require_uniform("beam_angles")
+        return self.sensors[0].beam_angles
+
+    @property
+    def max_range(self) -> float:
+        """[m] shared by every Lidar (an error if they differ)."""
+        self._require_uniform("max_range")
+        return self.sensors[0].max_range
+
+    def _require_uniform(self, name: str) -> None:
+        if not self.uniform:
+            raise EstimatorInputError(
+                f"setup.{name}: the {self.n_lidars} Lidars differ in beam geometry; "
+                f"expected per-sensor access, setup.sensors[k].{name}")
 
     @classmethod
     def from_env(cls, env: Any) -> SensorSetup:
@@ -80,13 +182,13 @@ class SensorSetup:
         Non-finite readings are a readable error, not a silent NaN in the estimate.
         """
         scans: dict[str, NDArray[np.float64]] = {}
-        for key in self.keys:
+        for key, sensor in zip(self.keys, self.sensors, strict=True):
             if key not in observation:
                 raise KeyError(f"observation lacks {key!r}: expected keys {', '.join(self.keys)}")
             scan = np.asarray(observation[key], dtype=np.float64)
-            if scan.shape != self.beam_angles.shape:
+            if scan.shape != sensor.beam_angles.shape:
                 raise ValueError(
-                    f"{key}: expected a scan of shape {self.beam_angles.shape}, got {scan.shape}"
+                    f"{key}: expected a scan of shape {sensor.beam_angles.shape}, got {scan.shape}"
                 )
             if not np.all(np.isfinite(scan)):
                 raise ValueError(f"{key}: scan holds NaN or inf; expected finite ranges [m]")
@@ -94,6 +196,20 @@ class SensorSetup:
                 raise ValueError(f"{key}: scan holds negative ranges; expected ranges >= 0 [m]")
             scans[key] = scan
         return scans
+
+
+def _uniform_sensors(
+    mounts: ArrayLike | None, beam_angles: ArrayLike | None, max_range: float | None
+) -> tuple[Sensor, ...]:
+    """One :class:`Sensor` per row of ``mounts`` (K, 3), all with the same beams and range."""
+    if mounts is None or beam_angles is None or max_range is None:
+        raise EstimatorInputError(
+            "SensorSetup: expected sensors= or all of mounts, beam_angles, max_range")
+    rows = np.atleast_2d(np.asarray(mounts, dtype=np.float64))
+    if rows.ndim != 2 or rows.shape[1] != 3 or not 1 <= len(rows) <= MAX_LIDARS:
+        raise EstimatorInputError(
+            f"mounts: expected shape (K, 3) with K in 1..{MAX_LIDARS}, got {rows.shape}")
+    return tuple(Sensor(row, beam_angles, max_range, k) for k, row in enumerate(rows))
 
 
 @dataclass
@@ -131,6 +247,7 @@ class Estimator(ABC):
         """Feed the scans taken at time ``t`` [s]; return the car pose estimate (3,)."""
         if self.setup is None:
             raise RuntimeError("call reset(setup, initial_pose) before update()")
+        t = check_time(t, self._times[-1] if self._times else None)
         scans = self.setup.check_observation(observation)
         if not self._poses:
             self._start(scans, t)
