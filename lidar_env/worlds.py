@@ -9,6 +9,11 @@
 * ``random``: rooms, walls, boxes and cylinders drawn from the reset's random generator
   around a trace generated first, so the trace is always collision free.
 
+``hallway`` and ``closed_to_open`` take a feature density [features per 10 m of wall] in their
+name: ``"hallway?feature_density=4&feature_seed=1"`` adds door recesses, pillars, corners and
+clutter along the walls, placed from the seed (:mod:`lidar_env.feature_worlds`); density 0 (the
+default) is the plain world, bit for bit.
+
 Every built-in world has a default start pose and length for each trace seed, placed so the
 full-size trace fits (tests check this; :func:`lidar_env.traces.make_trace` would shrink it
 otherwise). Coordinates are metres, world frame.
@@ -25,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.feature_worlds import add_features, feature_world_name, parse_world_name
 from lidar_env.polygons import segment_distances
 from lidar_env.traces import TRACE_NAMES, Trace, build_trace, check_trace_name, make_trace
 from lidar_env.world import World
@@ -39,6 +45,7 @@ class WorldLayout:
     world: World
     starts: Mapping[str, Pose]  # (x [m], y [m], heading [rad]) per trace seed
     lengths: Mapping[str, float]  # [m] trace length per trace seed
+    features: tuple[str, ...] = ()  # kinds of the wall features added (feature-density worlds)
 
 
 @dataclass(frozen=True)
@@ -49,19 +56,33 @@ class Scene:
     trace: Trace
 
 
+class _PaperTraces(dict):
+    """The paper trace per world name; a name with options (``"hallway?..."``) has its base's."""
+
+    def __missing__(self, key: Any) -> str:
+        if isinstance(key, str) and "?" in key:
+            return self[key.partition("?")[0]]
+        raise KeyError(key)
+
+
 #: The trace seed the paper drives in each world (Fig. 7 groups 1-3).
-PAPER_TRACES: dict[str, str] = {
+PAPER_TRACES: dict[str, str] = _PaperTraces({
     "open_cylinders": "right_turn",
     "hallway": "zigzag",
     "closed_to_open": "zigzag",
     "random": "zigzag",
-}
+})
 WORLD_NAMES: tuple[str, ...] = tuple(PAPER_TRACES)
 
 
 def check_world_name(name: Any) -> str:
-    """Return ``name`` if it is a world name, else raise a ``ValueError`` listing the names."""
-    if not isinstance(name, str) or name not in PAPER_TRACES:
+    """``name`` if it is a world name (a name with feature options in its canonical form,
+    :func:`~lidar_env.feature_worlds.feature_world_name`), else a ``ValueError`` listing the
+    names (a :class:`~lidar_env.errors.ConfigError` for bad options)."""
+    if isinstance(name, str) and "?" in name:
+        base, options = parse_world_name(name)
+        return feature_world_name(base, options.density, options.seed)
+    if not isinstance(name, str) or name not in WORLD_NAMES:
         raise ValueError(f"unknown world {name!r}: expected one of {', '.join(WORLD_NAMES)}")
     return name
 
@@ -118,12 +139,20 @@ def _open_cylinders(clearance: float) -> WorldLayout:
     return WorldLayout(world, starts, lengths)
 
 
+_HALLWAY_UPPER = [(0, 2.5), (8, 2.5), (11, 7), (29, 7), (32, 2.5), (40, 2.5)]
+#: [m] the hallway's closed wall outline.
+HALLWAY_OUTLINE = np.array(_HALLWAY_UPPER + [(x, -y) for x, y in reversed(_HALLWAY_UPPER)],
+                           dtype=float)
+#: [m] the closed-to-open world's wall outline: the corridor and the hall.
+CLOSED_TO_OPEN_OUTLINE = np.array(
+    [(0, -2.5), (0, 2.5), (14, 2.5), (14, 15), (40, 15), (40, -15), (14, -15), (14, -2.5)],
+    dtype=float,
+)
+
+
 def _hallway(clearance: float) -> WorldLayout:
     """A closed 40 m hallway: 5 m wide for its first and last 8 m, 14 m wide in the middle."""
-    upper = [(0, 2.5), (8, 2.5), (11, 7), (29, 7), (32, 2.5), (40, 2.5)]
-    lower = [(x, -y) for x, y in reversed(upper)]
-    outline = np.array(upper + lower, dtype=float)
-    world = World(segments=_polyline(outline, closed=True), name="hallway",
+    world = World(segments=_polyline(HALLWAY_OUTLINE, closed=True), name="hallway",
                   bounds=(-1.0, -8.0, 41.0, 8.0))
     # the loop circles the broad middle; out_and_back goes out through the narrow start, turns
     # around in the broad part and comes back through the narrow part 2 m to the left
@@ -137,10 +166,6 @@ def _hallway(clearance: float) -> WorldLayout:
 
 def _closed_to_open(clearance: float) -> WorldLayout:
     """A 5 m wide, 14 m long corridor opening into a 26 m x 30 m hall with cylinders and boxes."""
-    outline = np.array(
-        [(0, -2.5), (0, 2.5), (14, 2.5), (14, 15), (40, 15), (40, -15), (14, -15), (14, -2.5)],
-        dtype=float,
-    )
     # the loop circles a cylinder in the hall; out_and_back goes out of the corridor, turns
     # around at the hall's entrance and comes back through the corridor 2 m to the left
     starts = {"zigzag": (1.5, 0.0, 0.0), "straight": (1.5, 0.0, 0.0),
@@ -158,7 +183,7 @@ def _closed_to_open(clearance: float) -> WorldLayout:
              _box(34, 12, 1.5, 0.5, -0.2), _box(30, -12, 0.7, 1.2, 0.5)]
     world = World(
         circles=_keep_clear(circles, paths, clearance + 0.2),
-        segments=_polyline(outline, closed=True),
+        segments=_polyline(CLOSED_TO_OPEN_OUTLINE, closed=True),
         polygons=[b for b in boxes if np.min(World(polygons=[b]).clearance(np.vstack(paths)))
                   >= clearance + 0.2],
         name="closed_to_open",
@@ -178,12 +203,27 @@ _BUILT_IN: dict[str, Callable[[float], WorldLayout]] = {
 LAYOUT_CLEARANCE = 0.77
 
 
+_OUTLINES: dict[str, NDArray[np.float64]] = {
+    "hallway": HALLWAY_OUTLINE, "closed_to_open": CLOSED_TO_OPEN_OUTLINE,
+}
+
+
 @cache
 def built_in_layout(name: str) -> WorldLayout:
-    """The (cached, deterministic) layout of built-in world ``name``."""
-    if check_world_name(name) == "random":
+    """The (cached, deterministic) layout of built-in world ``name`` (with its feature options:
+    features placed clear of every default trace, so each still fits at full size)."""
+    name = check_world_name(name)
+    if name == "random":
         raise ValueError("world 'random' has no fixed layout: use make_scene with a generator")
-    return _BUILT_IN[name](LAYOUT_CLEARANCE)
+    base, options = parse_world_name(name)
+    layout = _BUILT_IN[base](LAYOUT_CLEARANCE)
+    if options.density == 0.0:
+        return layout
+    paths = np.vstack([build_trace(s, layout.starts[s], layout.lengths[s]).waypoints
+                       for s in TRACE_NAMES])
+    world, kinds = add_features(layout.world, _OUTLINES[base], options, paths,
+                                LAYOUT_CLEARANCE, name)
+    return WorldLayout(world, layout.starts, layout.lengths, kinds)
 
 
 # Random worlds: sizes [m] chosen so a random world looks like the built-in ones.
@@ -264,7 +304,8 @@ def make_scene(
     """World ``name`` with trace seed ``trace`` (default: the paper's) fitted into it.
 
     Args:
-        name: one of :data:`WORLD_NAMES`.
+        name: one of :data:`WORLD_NAMES`, or ``hallway``/``closed_to_open`` with feature options
+            (``"hallway?feature_density=4&feature_seed=1"``, :mod:`lidar_env.feature_worlds`).
         trace: one of the trace seeds, or ``None`` for :data:`PAPER_TRACES` ``[name]``.
         rng: the generator random worlds are drawn from (required for ``"random"``).
         clearance: [m] every trace waypoint keeps from obstacles.
