@@ -77,6 +77,7 @@ from estimators.leaderboard.tables import (
     write_csv,
 )
 from estimators.leaderboard.tasks import STAGES, EstimatorSpec, RealLog
+from estimators.leaderboard.warmup import warm_up
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
 
@@ -236,6 +237,10 @@ def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: li
     the worker pool is created here and shut down after); None if the run was interrupted."""
     executor = _executor(args)
     try:
+        if isinstance(executor, ProcessPoolExecutor) and (
+            seconds := warm_up(executor, tuple(spec.name for spec in specs))
+        ):
+            print(f"compiled the numba kernels in {seconds:.0f} s (cached: later runs skip it)")
         tasks = len(every) + len(world_aligned.scenarios) + len(logs) * len(specs)
         with _progress(tasks, "scenarios", not args.no_progress) as bar:
             return run_matrix(db, every, logs, specs, executor, side_runs=[world_aligned],

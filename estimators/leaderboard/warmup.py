@@ -1,0 +1,65 @@
+"""Compile the numba kernels once, before the worker pool runs the matrix.
+
+Every kernel is ``@njit(cache=True)``: the first process that calls it compiles it (tens of
+seconds for the ray caster on a 2-core machine) and writes the machine code beside the source,
+in ``__pycache__``; later processes load it in milliseconds. Left alone, each worker of a cold
+run compiles every kernel it touches, all of them twice over with two workers. Here two warm-up
+tasks run on the pool first, one compiling the env and mapping kernels, the other the
+estimators' (both record the same few-step scenario first, so the ray caster is the only kernel
+compiled twice), and a marker keyed by the source digest skips the warm-up once this source has
+been compiled. One worker (no pool) or a Dask cluster (whose workers cache elsewhere) gain
+nothing from it and skip it.
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from estimators.leaderboard.recording import map_reference, record, replay, score_map
+from estimators.leaderboard.records import Scenario, package_version
+from estimators.paths import PROJECT_ROOT
+
+#: A short drive past cylinders: every kernel of a real scenario runs on it, in a few steps.
+WARMUP_SCENARIO = Scenario("open_cylinders", "straight", 0, config={"max_episode_time": 0.5})
+
+
+def marker_path(version: str | None = None) -> Path:
+    """The file whose presence says the kernels of this source are compiled and cached."""
+    digest = (version or package_version()).rsplit(".", 1)[-1]
+    return PROJECT_ROOT / "estimators" / "leaderboard" / "__pycache__" / f"warm-{digest}"
+
+
+def warm_env_and_mapping() -> None:
+    """Compile the simulator's and the mapper's kernels (ray casting, car, map reference)."""
+    dataset = record(WARMUP_SCENARIO)
+    reference = map_reference(dataset)
+    if reference is not None:
+        score_map(reference, dataset.poses, dataset)
+
+
+def warm_estimators(names: tuple[str, ...]) -> None:
+    """Compile the kernels of the named estimators by running each over a short drive."""
+    dataset = record(WARMUP_SCENARIO)
+    for name in names:
+        replay(dataset, name)
+
+
+def warm_up(executor: ProcessPoolExecutor, estimators: tuple[str, ...]) -> float:
+    """Compile the kernels on two of ``executor``'s workers unless the marker says they are
+    cached; returns the wall time spent [s]. A failure here is left to the real tasks, which
+    report it per scenario and estimator (and the marker is not written)."""
+    marker = marker_path()
+    if marker.exists():
+        return 0.0
+    started = time.perf_counter()
+    jobs = [executor.submit(warm_env_and_mapping), executor.submit(warm_estimators, estimators)]
+    try:
+        for job in jobs:
+            job.result()
+    except Exception:  # noqa: BLE001 - reported by the task that meets it again
+        return time.perf_counter() - started
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.touch()
+    return time.perf_counter() - started
