@@ -81,7 +81,12 @@ def lock_mismatches(pyproject: Path, lock: Path) -> list[str]:
     """Human-readable disagreements between ``pyproject`` and ``lock``; empty when in step."""
     wanted = direct_requirements(pyproject)
     pins, from_pyproject = locked_pins(lock)
-    problems = []
+    problems = [
+        f"{lock.name}:{number}: {line.strip()!r} pins a local path, which installs a copy of "
+        "that folder in every clone; only exact versions belong in the lock"
+        for number, line in enumerate(lock.read_text().splitlines(), 1)
+        if " @ " in line and not line.lstrip().startswith("#")
+    ]
     for name, requirement in sorted(wanted.items()):
         if name not in pins:
             problems.append(f"{requirement} is in {pyproject.name} but not pinned in {lock.name}")

@@ -53,6 +53,15 @@ def test_a_pin_for_a_dependency_pyproject_dropped_is_named(tmp_path: Path) -> No
     assert any("tqdm" in p and "no longer asks" in p for p in problems), problems
 
 
+def test_a_path_pinned_line_is_named(tmp_path: Path) -> None:
+    """pip-compile pins the project's self-reference as ``duallidar @ file:///<checkout>``:
+    left in, every clone would install a copy of the folder the lock was made in."""
+    lock = tmp_path / "requirements.lock"
+    lock.write_text((ROOT / "requirements.lock").read_text() + "duallidar @ file:///work/x\n")
+    [problem] = check_lock.lock_mismatches(ROOT / "pyproject.toml", lock)
+    assert "local path" in problem and "duallidar @ file:///work/x" in problem
+
+
 @pytest.mark.parametrize("script", ["setup.sh", "lock.sh"])
 def test_set_up_scripts_install_from_the_lock_with_pip(script: str) -> None:
     text = (ROOT / "scripts" / script).read_text()
