@@ -1,7 +1,9 @@
-"""Run any registered estimator over a CARMEN log and score it with the relations metric.
+"""Run any registered estimator over a recording and score it with the relations metric.
 
-The pipeline owns the loop, the timing and the metric; the estimator sees only the scans
-(``{"lidar_1": ranges}``) and the sensor geometry, never the odometry or the logged poses.
+A recording is a single-Lidar CARMEN log or a K-Lidar :class:`Recording` (a ROS bag). The
+pipeline owns the loop, the timing and the metric; the estimator sees only the scans
+(``{"lidar_1": ranges, ..., "lidar_K": ranges}``) and the sensor geometry, never the odometry
+or the logged poses.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from numpy.typing import NDArray
 
 from estimators.base import LIDAR_KEYS, Estimator, SensorSetup
 from estimators.datasets.carmen import CarmenLog
+from estimators.datasets.recording import Recording
 from estimators.evaluation.relations import (
     RelationErrors,
     Relations,
@@ -74,14 +77,18 @@ class LogRun:
 
 def run_on_log(
     estimator: Estimator,
-    log: CarmenLog,
+    log: CarmenLog | Recording,
     clock: str = "ipc",
     limit: int | None = None,
     setup: SensorSetup | None = None,
 ) -> LogRun:
-    """Feed the first ``limit`` scans of ``log`` (all when None) to ``estimator``, timestamped
-    on ``clock`` (``"ipc"`` for Kümmerle's relation files, ``"logger"`` for ``*-corrected``
-    logs); the first scan is the origin."""
+    """Feed the first ``limit`` scans of ``log`` (all when None) to ``estimator``; the first
+    scan is the origin. A CARMEN log is timestamped on ``clock`` (``"ipc"`` for Kümmerle's
+    relation files, ``"logger"`` for ``*-corrected`` logs); a :class:`Recording` (K Lidars)
+    on its own header stamps, with its own setup unless ``setup`` overrides it (e.g.
+    self-calibrated mounts)."""
+    if isinstance(log, Recording):
+        return _run_on_recording(estimator, log, limit, setup)
     setup = setup_from_log(log) if setup is None else setup
     if setup.n_lidars != 1:
         raise ValueError(f"setup: expected one Lidar for a CARMEN log, got {setup.n_lidars}")
@@ -94,6 +101,22 @@ def run_on_log(
         estimator.update({LIDAR_KEYS[0]: scan.ranges}, float(t))
     elapsed = time.perf_counter() - start
     return LogRun(times, estimator.trajectory, elapsed / max(len(scans), 1))
+
+
+def _run_on_recording(estimator: Estimator, recording: Recording, limit: int | None,
+                      setup: SensorSetup | None) -> LogRun:
+    setup = recording.setup if setup is None else setup
+    if setup.n_lidars != recording.setup.n_lidars:
+        raise ValueError(f"setup: expected {recording.setup.n_lidars} Lidars for "
+                         f"{recording.source}, got {setup.n_lidars}")
+    count = len(recording) if limit is None else min(limit, len(recording))
+    times = recording.times[:count]
+    estimator.reset(setup, np.zeros(3))
+    start = time.perf_counter()
+    for observation, t in zip(recording.observations(count), times, strict=True):
+        estimator.update(observation, float(t))
+    elapsed = time.perf_counter() - start
+    return LogRun(times, estimator.trajectory, elapsed / max(count, 1))
 
 
 def score_relations(
