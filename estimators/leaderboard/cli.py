@@ -62,6 +62,7 @@ from estimators.leaderboard.matrix import (
     PAPER_ESTIMATORS,
     Group,
     build_groups,
+    side_scenarios,
     table_one_scenarios,
 )
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
@@ -305,7 +306,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     logs = _real_logs(args)
     table_i_runs = table_one_scenarios(groups, scenarios, specs)
     world_aligned = SideRun(
-        tuple(s for runs in table_i_runs["world"].values() for s in runs),
+        side_scenarios(table_i_runs),
         tuple(spec for spec in specs if spec.name in PAPER_ESTIMATORS))
     every = [s for group in groups for s in scenarios[group.name]]
     summary = _run_on_executor(args, db, every, logs, specs, world_aligned)
