@@ -36,6 +36,7 @@ from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
     scans_to_car_points,
 )
+from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.se2 import compose, transform_points, wrap_angle
 
 
@@ -225,8 +226,11 @@ class ICPEstimator(Estimator):
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)
         increment = np.zeros(3)
-        if len(current) >= 3 and self._previous is not None and len(self._previous) >= 2:
+        # too few points on either side: no update (a fit of 3 points can land metres away),
+        # and the last scan with enough points stays the reference
+        if len(current) < MIN_MATCH_RETURNS:
+            return compose(self.pose, increment)
+        if self._previous is not None and len(self._previous) >= MIN_MATCH_RETURNS:
             increment = match_scans(self._previous, current, increment, self.params).pose
-        if len(current) >= 2:
-            self._previous = current
+        self._previous = current
         return compose(self.pose, increment)

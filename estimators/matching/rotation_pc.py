@@ -39,6 +39,7 @@ from estimators.matching.curve_refinement import (
 )
 from estimators.matching.rotation import heading_change, log_polar_spectrum
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
+from estimators.paper.pc import MIN_MATCH_RETURNS
 from estimators.paper.phase_correlation import ImageSpectrum, image_spectrum, phase_correlate
 from estimators.paper.scan_image import (
     DEFAULT_SIZE,
@@ -115,6 +116,20 @@ class ScanMatch:
     confidence: float
 
 
+def too_few_returns(earlier: PreparedScan, later: PreparedScan) -> bool:
+    """Either scan holds fewer than ``MIN_MATCH_RETURNS`` returns: nothing to match (a
+    correlation or a fit would put the few points anywhere), so the match reports the prior
+    (or no motion) at ``MIN_CONFIDENCE``."""
+    return min(len(earlier.points), len(later.points)) < MIN_MATCH_RETURNS
+
+
+def unmeasured_match(prior: ArrayLike | None) -> ScanMatch:
+    """The answer of a match the scans cannot make: the ``prior`` (3,) if any, else no motion,
+    at ``MIN_CONFIDENCE``."""
+    pose = np.zeros(3) if prior is None else np.asarray(prior, dtype=np.float64).copy()
+    return ScanMatch(pose, MIN_CONFIDENCE)
+
+
 @dataclass(frozen=True)
 class ScanMatcher:
     """Rotation-aware phase correlation between two sensor-frame scans.
@@ -177,6 +192,8 @@ class ScanMatcher:
         candidates (without it the range profiles choose for full-turn scans, else the smaller
         turn wins).
         """
+        if too_few_returns(earlier, later):
+            return unmeasured_match(prior)
         profiles = None
         if prior is None and _full_turn(earlier.beam_angles, later.beam_angles):
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
@@ -208,6 +225,8 @@ class ScanMatcher:
         the later sensor's frame (see :func:`refine_on_curves`).
         """
         prior = None if prior is None else np.asarray(prior, dtype=np.float64)
+        if too_few_returns(earlier, later):
+            return unmeasured_match(prior)
         correlated = self.correlate(earlier, later, prior)
         if earlier.reference is None or len(later.points) < 3:
             return correlated
@@ -230,6 +249,8 @@ class ScanMatcher:
         fits equally good within ``QUALITY_TOLERANCE`` the one nearest ``prior`` (which holds
         about ``pivot``).
         Needs a matcher with ``icp_iterations > 0``."""
+        if too_few_returns(earlier, later):
+            return unmeasured_match(prior)
         if earlier.reference is None:
             raise ValueError("refine: expected a matcher with icp_iterations > 0, got 0")
         refined = [
@@ -277,6 +298,30 @@ def require_sensor_frame(setup: SensorSetup, estimator: str) -> None:
             f"{estimator}: expected sensor-frame scans (scan_frame='sensor'), got world-aligned "
             "scans; the paper's estimators (pc, pc_pg) take those"
         )
+
+
+#: A constant-velocity prediction is trusted over at most this many typical scan intervals...
+PREDICTION_GAP_FACTOR = 10.0
+#: ... or this long [s], whichever is longer (so an irregular clock's short intervals do not
+#: make every ordinary scan a "gap").
+MIN_PREDICTION_HORIZON = 1.0
+
+
+def prediction_horizon(intervals: ArrayLike) -> float:
+    """The longest gap [s] a constant-velocity prediction may extrapolate over: the larger of
+    ``PREDICTION_GAP_FACTOR`` times the median of the recent scan ``intervals`` [s] (positive
+    ones; none seen: 0) and ``MIN_PREDICTION_HORIZON``."""
+    intervals = np.asarray(intervals, dtype=np.float64).ravel()
+    intervals = intervals[np.isfinite(intervals) & (intervals > 0)]
+    typical = float(np.median(intervals)) if len(intervals) else 0.0
+    return max(PREDICTION_GAP_FACTOR * typical, MIN_PREDICTION_HORIZON)
+
+
+def within_prediction_horizon(dt: float, intervals: ArrayLike) -> bool:
+    """True when a constant-velocity prediction over ``dt`` [s] is within what the velocity
+    measured over ``intervals`` [s] can tell (:func:`prediction_horizon`); False for a clock
+    gap past it (the estimator then predicts no motion and uses its weak default prior)."""
+    return 0.0 < dt <= prediction_horizon(intervals)
 
 
 def constant_velocity(last_motion: FloatArray, last_dt: float, dt: float) -> FloatArray:
@@ -339,7 +384,8 @@ class RotationPhaseCorrelation(Estimator):
         current = self._matcher.prepare(scans[self.setup.keys[self.lidar]], self.setup.beam_angles)
         dt = t - self._times[-1]
         prior = None
-        if self._last_motion is not None:
+        # past the prediction horizon (a clock gap) the last velocity says nothing: no prior
+        if self._last_motion is not None and within_prediction_horizon(dt, [self._last_dt]):
             prior = constant_velocity(self._last_motion, self._last_dt, dt)
         match = self._matcher.match(self._previous, current, prior)
         self._previous = current

@@ -33,7 +33,11 @@ from estimators.matching.rotation_pc import (
     refinement_starts,
     require_sensor_frame,
 )
-from estimators.odometry.motion_prior import clock_jitter, prediction_information
+from estimators.odometry.motion_prior import (
+    clock_jitter,
+    prediction_information,
+    within_prediction_horizon,
+)
 from estimators.odometry.sensor_graph import (
     SensorEdge,
     fuse_car_motion,
@@ -223,7 +227,9 @@ class FusionEstimator(Estimator):
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
-        step = self._velocity * dt
+        # past the prediction horizon (a clock gap) the velocity says nothing: no prior
+        predicted = within_prediction_horizon(dt, self._intervals)
+        step = self._velocity * dt if predicted else np.zeros(3)
         guess = relative(latest.pose, compose(self.pose, step))
         correlated = self._matcher.correlate(
             latest.scans[0], current[0], relative(mounts[0], compose(guess, mounts[0]))
@@ -237,7 +243,7 @@ class FusionEstimator(Estimator):
         if abs(wrap_angle(turn - step[2])) < PRIOR_SIGMA[2]:
             step = np.append(rotate(np.array([0.5 * (turn - step[2])]), step[None, :2])[0], turn)
             guess = relative(latest.pose, compose(self.pose, step))
-        information = self._prediction_information(dt)
+        information = self._prediction_information(dt, predicted)
         edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
         start = compose(compose(mounts[0], edges[0].pose), inverse(mounts[0]))
@@ -251,13 +257,14 @@ class FusionEstimator(Estimator):
         self._update_velocity(relative(self.pose, pose), dt)
         return pose
 
-    def _prediction_information(self, dt: float) -> FloatArray:
+    def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:
         """The prediction's information over ``dt`` [s]
         (:func:`estimators.odometry.motion_prior.prediction_information`), with the clock's
-        jitter the median deviation of the last ``CLOCK_HISTORY`` intervals from their median."""
+        jitter the median deviation of the last ``CLOCK_HISTORY`` intervals from their median;
+        the weak default prior when nothing was ``predicted`` (a clock gap)."""
         if dt > 0:
             self._intervals.append(dt)
-        if not dt > 0 or len(self._intervals) < 5:
+        if not predicted or not dt > 0 or len(self._intervals) < 5:
             # Until a few intervals are seen, neither the clock nor the velocity is known (and
             # a clock that does not run forward predicts nothing).
             return PRIOR_INFORMATION

@@ -5,6 +5,12 @@ Over a scan interval ``dt`` the prediction misses the car's position by about ``
 acceleration ``a``, plus ``speed * jitter`` when the clock's stamps wander (a scan stamped early
 or late has moved further or less than its interval says). :func:`prediction_information`
 turns that into the weight of the prior relative to one return's.
+
+A prediction is only as good as the velocity it extrapolates, which was measured over the
+recent scan intervals: over a clock gap far longer than those (a dropped sensor, a paused
+log) the car may have stopped, turned or driven anywhere, so :func:`within_prediction_horizon`
+(defined beside :func:`estimators.matching.rotation_pc.constant_velocity`, the matching
+layer's own prediction) says when an estimator must fall back to "no prior" instead.
 """
 
 from __future__ import annotations
@@ -13,8 +19,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
+from estimators.matching.rotation_pc import prediction_horizon, within_prediction_horizon
+from lidar_env.errors import EstimatorInputError
 
 FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "clock_jitter",
+    "prediction_horizon",
+    "prediction_information",
+    "prediction_sigma",
+    "within_prediction_horizon",
+]
 
 #: The prediction's position is never trusted to better than this [m] per scan (about a
 #: registration's own precision at 1 cm range noise), however fast and regular the scans.
@@ -58,8 +74,8 @@ def prediction_information(dt: float, speed: float = 0.0, jitter: float = 0.0) -
     keeps the step from following the noise of a handful of returns.
     """
     if not dt > 0:
-        raise ValueError(f"dt: expected a positive scan interval [s], got {dt}")
+        raise EstimatorInputError(f"dt: expected a positive scan interval [s], got {dt}")
     if not (speed >= 0 and jitter >= 0):
-        raise ValueError(f"speed and jitter: expected values >= 0, got {speed}, {jitter}")
+        raise EstimatorInputError(f"speed and jitter: expected values >= 0, got {speed}, {jitter}")
     sigma = prediction_sigma(dt, speed, jitter, PREDICTION_ACCELERATION, PRIOR_SIGMA[0])
     return (RANGE_NOISE / np.array([sigma, sigma, PRIOR_SIGMA[2]])) ** 2

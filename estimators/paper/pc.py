@@ -38,6 +38,11 @@ from estimators.paper.scan_image import (
 
 Scans = dict[str, NDArray[np.float64]]
 
+#: Fewest returns (readings in (0, max_range)) a scan must hold to be matched: with fewer, a
+#: correlation or a fit is free to put the few points anywhere (3 returns made ``pc_offset``
+#: jump 9.6 m), so the step reports no motion and the last good scan stays the reference.
+MIN_MATCH_RETURNS = 10
+
 
 def _rotation(angle: float) -> NDArray[np.float64]:
     c, s = np.cos(angle), np.sin(angle)
@@ -105,6 +110,14 @@ class _ImageCorrelationEstimator(Estimator):
         shift = phase_correlate(past, present, subpixel=self.subpixel).shift
         return -pixel_shift_to_metres(shift, self._pixel_size)
 
+    def _enough_returns(self, *scans: NDArray[np.float64]) -> bool:
+        """Every scan holds at least ``MIN_MATCH_RETURNS`` returns."""
+        assert self.setup is not None
+        limit = self.setup.max_range
+        return all(
+            np.count_nonzero((scan > 0) & (scan < limit)) >= MIN_MATCH_RETURNS for scan in scans
+        )
+
     def _advance(self, motion: NDArray[np.float64], axes_heading: float) -> NDArray[np.float64]:
         """Add a translation given in image axes to the car position; return the car pose."""
         self._position = self._position + _rotation(axes_heading) @ motion
@@ -142,11 +155,15 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
 
     def _start(self, scans: Scans, t: float) -> None:
         self._past = self._spectrum(scans[self._key])
+        self._past_usable = self._enough_returns(scans[self._key])
 
     def _step(self, scans: Scans, t: float) -> NDArray[np.float64]:
+        if not self._enough_returns(scans[self._key]):
+            return self._advance(np.zeros(2), self._axes_heading)  # no update
         present = self._spectrum(scans[self._key])
-        motion = self._sensor_motion(self._past, present)
-        self._past = present
+        # after a scan too sparse to match, the first good one is the new reference
+        motion = self._sensor_motion(self._past, present) if self._past_usable else np.zeros(2)
+        self._past, self._past_usable = present, True
         return self._advance(motion, self._axes_heading)
 
 
@@ -184,12 +201,19 @@ class PoseGraphCorrelationOdometry(_ImageCorrelationEstimator):
         )
 
     def _start(self, scans: Scans, t: float) -> None:
+        assert self.setup is not None
         self._past_main, self._past_offset = self._spectra(scans)
+        self._past_usable = self._enough_returns(*(scans[key] for key in self.setup.keys))
 
     def _step(self, scans: Scans, t: float) -> NDArray[np.float64]:
+        assert self.setup is not None
+        if not self._enough_returns(*(scans[key] for key in self.setup.keys)):
+            return self._advance(np.zeros(2), self._axes_heading)  # no update
         main, offset = self._spectra(scans)
-        xi14 = self._sensor_motion(self._past_main, offset)  # P1 -> P4
-        xi32 = self._sensor_motion(main, self._past_offset)  # P3 -> P2
-        motion = pose_graph_correlation(xi14, xi32, self._offset, self._offset).motion  # eq. 10
-        self._past_main, self._past_offset = main, offset
+        motion = np.zeros(2)  # after a scan too sparse to match: the new reference
+        if self._past_usable:
+            xi14 = self._sensor_motion(self._past_main, offset)  # P1 -> P4
+            xi32 = self._sensor_motion(main, self._past_offset)  # P3 -> P2
+            motion = pose_graph_correlation(xi14, xi32, self._offset, self._offset).motion  # eq. 10
+        self._past_main, self._past_offset, self._past_usable = main, offset, True
         return self._advance(motion, self._axes_heading)
