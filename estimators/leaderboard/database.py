@@ -36,7 +36,9 @@ poses and metrics. An interrupted run therefore leaves only complete datasets, a
 UNIQUE constraints make a re-run skip what is stored instead of duplicating it. A file that is
 not SQLite, is corrupt, belongs to another program or has another schema version is refused
 with a specific error before anything is written to it (:mod:`estimators.leaderboard.schema`).
-The dataclasses stored are :mod:`estimators.leaderboard.records`.
+Each dataset and trace carries a SHA-256 checksum verified on read
+(:mod:`estimators.leaderboard.checksums`). The dataclasses stored are
+:mod:`estimators.leaderboard.records`.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import LIDAR_KEYS, SensorSetup
+from estimators.leaderboard import checksums
 from estimators.leaderboard.records import (
     Scenario,
     SensorDataset,
@@ -109,6 +112,7 @@ class ExperimentDatabase:
                     self._conn.execute(
                         "INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,)
                     )
+            self._conn.execute(checksums.CREATE_CHECKSUMS)
         except sqlite3.OperationalError as error:
             raise DatabaseLocationError(f"cannot open {self.path} for writing: {error}") from error
 
@@ -200,6 +204,7 @@ class ExperimentDatabase:
                     for step in range(len(dataset))
                 ),
             )
+            checksums.store(conn, "sensor_dataset", scenario_id)
         return True
 
     def load_sensor_dataset(self, scenario: Scenario) -> SensorDataset:
@@ -211,6 +216,8 @@ class ExperimentDatabase:
         ).fetchone()
         if header is None:
             raise KeyError(f"no sensor dataset recorded for scenario {scenario.label}")
+        assert scenario_id is not None
+        checksums.verify(self._conn, self.path, "sensor_dataset", scenario_id, scenario.label)
         n_steps, n_beams, max_range, world_aligned, mounts, angles, env_config, world = header
         setup = SensorSetup(np.array(json.loads(mounts), dtype=np.float64),
                             np.frombuffer(angles, dtype="<f8").copy(), max_range,
@@ -309,6 +316,7 @@ class ExperimentDatabase:
             ((trace_id, name, None if value is None else float(value))
              for name, value in metrics.items()),
         )
+        checksums.store(conn, "trace", trace_id)
         return trace_id
 
     def traces(self, scenario: Scenario | None = None, *,
@@ -335,6 +343,8 @@ class ExperimentDatabase:
             estimator, params, version = row[7:]
             table = np.empty((0, 5))
             if poses:
+                checksums.verify(self._conn, self.path, "trace", trace_id,
+                                 f"{estimator} on {world}/{trace_name}/seed {seed}")
                 table = np.array(self._conn.execute(
                     "SELECT time, x, y, heading, ms FROM trace_poses WHERE trace_id = ? "
                     "ORDER BY step", (trace_id,),

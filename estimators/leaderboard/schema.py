@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import sqlite3
 import tempfile
+from functools import cache
 from pathlib import Path
+
+from lidar_env.errors import DatabaseError
 
 #: The schema this module reads and writes (see the module docstring).
 SCHEMA_VERSION = 1
@@ -85,10 +88,6 @@ CREATE TABLE results (
 """
 
 
-class DatabaseError(Exception):
-    """Base class of the experiment database's errors."""
-
-
 class NotADatabaseError(DatabaseError):
     """The file is not an SQLite database at all."""
 
@@ -103,6 +102,10 @@ class ForeignDatabaseError(DatabaseError):
 
 class SchemaVersionError(DatabaseError):
     """The database was written with another schema version."""
+
+
+class SchemaMismatchError(DatabaseError):
+    """The file states our schema version but lacks a table or column that version has."""
 
 
 class DatabaseLocationError(DatabaseError):
@@ -172,6 +175,41 @@ def _inspect(conn: sqlite3.Connection, path: Path, verify: bool) -> None:
                 f"{SCHEMA_VERSION}; left untouched: use another --db path or the duallidar "
                 "version that wrote it"
             )
+        _check_tables(conn, path)
+
+
+@cache
+def expected_columns() -> dict[str, tuple[str, ...]]:
+    """Table name -> its column names, as :data:`_SCHEMA` lays them out."""
+    conn = sqlite3.connect(":memory:")
+    try:
+        conn.executescript(_SCHEMA)
+        return {table: _columns(conn, table) for (table,) in conn.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table'")}
+    finally:
+        conn.close()
+
+
+def _columns(conn: sqlite3.Connection, table: str) -> tuple[str, ...]:
+    return tuple(row[1] for row in conn.execute(f"PRAGMA table_info('{table}')"))
+
+
+def _check_tables(conn: sqlite3.Connection, path: Path) -> None:
+    """Every table of the schema is there with every one of its columns (extra ones may be)."""
+    problems = []
+    for table, columns in expected_columns().items():
+        present = _columns(conn, table)
+        if not present:
+            problems.append(f"table {table} is missing")
+            continue
+        missing = [column for column in columns if column not in present]
+        if missing:
+            problems.append(f"table {table} lacks column(s) {', '.join(missing)}")
+    if problems:
+        raise SchemaMismatchError(
+            f"{path} claims schema version {SCHEMA_VERSION} but {'; '.join(problems)}; left "
+            "untouched: it was edited by hand or by another program"
+        )
 
 def check_writable(path: Path) -> None:
     """The file ``path`` (if present) and its directory (for the journal) must accept writes."""
