@@ -54,7 +54,7 @@ from typing import Any
 
 from agents.driver import DRIVERS
 from estimators.leaderboard.database import ExperimentDatabase
-from estimators.leaderboard.figures import draw_figure_8, draw_map_figure
+from estimators.leaderboard.headline import annotate_rows, board_markdown
 from estimators.leaderboard.matrix import (
     DEFAULT_NOISE,
     DEFAULT_SEEDS,
@@ -65,6 +65,7 @@ from estimators.leaderboard.matrix import (
     side_scenarios,
     table_one_scenarios,
 )
+from estimators.leaderboard.publish import draw_all, publish_report
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import RunInterrupted, RunSummary, SideRun, run_matrix
 from estimators.leaderboard.schema import DatabaseError
@@ -72,7 +73,6 @@ from estimators.leaderboard.table_one import table_one, table_one_markdown
 from estimators.leaderboard.tables import (
     RANK_KEYS,
     current_records,
-    leaderboard_markdown,
     map_ceiling_note,
     rank_table,
     write_csv,
@@ -190,6 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     parser = _parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # the report's command line
     _check_names(parser, "world", args.worlds or [], WORLD_NAMES)
     _check_names(parser, "trace", args.traces or [], TRACE_NAMES)
     estimator_names = args.estimators or names()
@@ -267,8 +268,9 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
                       if logs and (reason := spec.not_applicable(logs[0].n_lidars))}
     rows = rank_table(groups, scenarios, specs, records, real, RANK_KEYS[args.rank_by],
                       not_applicable)
+    rows = annotate_rows(rows, groups, scenarios, records, RANK_KEYS[args.rank_by])
     out: Path = args.out
-    table = leaderboard_markdown(rows, groups, "ACES" if real else None)
+    table = board_markdown(rows, groups, "ACES" if real else None, args.rank_by)
     table += map_ceiling_note(records)
     case_rows = table_one(table_i_runs, records)
     written = [out / "leaderboard.md", out / "leaderboard.csv", out / "results.csv"]
@@ -318,12 +320,11 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     out: Path = args.out
     written, rows = _write_tables(args, groups, scenarios, specs, records, logs, table_i_runs)
     try:
-        written += draw_figure_8(db, groups, scenarios, records, specs, out)
-        written += draw_map_figure(db, groups, scenarios, records,
-                                   [row["estimator"] for row in rows], out)
+        written += draw_all(db, groups, scenarios, records, specs, rows, logs, out)
     except ImportError as error:
-        print(f"note: Fig. 8 skipped ({error}); install the plots extra: "
+        print(f"note: figures skipped ({error}); install the plots extra: "
               "pip install 'duallidar[plots]'")
+    written.append(publish_report(out, written, vars(args), args.argv))
     if args.tum:
         written.append(export_tum_files(db, records, out / "tum"))
     failures = summary.failures

@@ -1,0 +1,133 @@
+"""The leaderboard as a reader sees it: the ranked rows of
+:func:`estimators.leaderboard.tables.rank_table` with their spread over seeds and tie marks
+(:func:`annotate_rows`), and the Markdown of the headline table (rank, estimator, accuracy,
+ATE, heading error, drift, ms/step, real-log error), the per-group tables and the map-score
+table after it (:func:`board_markdown`). Every simulated figure is mean ± std over seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from estimators.leaderboard.matrix import Group
+from estimators.leaderboard.ranking import (
+    ALPHA,
+    TEST_NOTE,
+    mark_ties,
+    paired_p_value,
+    per_scenario_values,
+    seed_spread,
+    tied_ranks,
+)
+from estimators.leaderboard.records import Scenario, TraceRecord
+from estimators.leaderboard.tables import METRIC_COLUMNS, REAL_METRIC, _fmt, _markdown
+
+#: The headline's simulated metrics: (metric, column title, decimals).
+HEADLINE_METRICS: tuple[tuple[str, str, int], ...] = (
+    ("accuracy_percent", "eq.-11 accuracy [%]", 1),
+    ("ate_rmse_m", "ATE [m]", 3),
+    ("heading_rmse_deg", "heading RMSE [deg]", 2),
+    ("drift_percent", "drift [%]", 1),
+    ("ms_per_step", "ms/step", 2),
+)
+#: The per-group tables' metrics (ms/step is a property of the estimator, not of the group).
+GROUP_METRICS = HEADLINE_METRICS[:4]
+MAP_METRICS: tuple[tuple[str, str, int], ...] = tuple(
+    (key, title, 3) for key, title, _ in METRIC_COLUMNS if key.startswith(("map_", "cylinder_")))
+
+
+def annotate_rows(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
+                  scenarios: Mapping[str, Sequence[Scenario]],
+                  records: Mapping[tuple[Scenario, str], TraceRecord],
+                  rank_key: str) -> list[dict[str, Any]]:
+    """Copies of ``rows`` (best first) with, per metric, ``<metric>_std`` over seeds (and per
+    group ``<group> <metric>`` and ``_std``), ``seeds``, ``rank`` (``"=k"`` for a tie with the
+    row above) and ``tie_p`` (the neighbour test's p-value, NaN for the first row)."""
+    every = [s for group in groups for s in scenarios[group.name]]
+    names = [row["estimator"] for row in rows]
+    values = per_scenario_values(every, names, rank_key, records)
+    ties = mark_ties(names, values)
+    annotated = []
+    for index, (row, label) in enumerate(zip(rows, tied_ranks(ties), strict=True)):
+        new = dict(row)
+        for key, _, _ in METRIC_COLUMNS:
+            spread = seed_spread(every, row["estimator"], key, records)
+            new[f"{key}_std"] = spread.std
+            new["seeds"] = max(new.get("seeds", 0), spread.seeds)
+        for group in groups:
+            for key, _, _ in GROUP_METRICS:
+                spread = seed_spread(scenarios[group.name], row["estimator"], key, records)
+                new[f"{group.name} {key}"] = spread.mean
+                new[f"{group.name} {key}_std"] = spread.std
+                new[f"{group.name} runs"] = spread.runs
+        new["rank"] = label
+        new["tie_p"] = math.nan if index == 0 else paired_p_value(values[names[index - 1]],
+                                                                  values[row["estimator"]])
+        annotated.append(new)
+    return annotated
+
+
+def _cell(row: Mapping[str, Any], key: str, digits: int, prefix: str = "") -> str:
+    mean = row.get(f"{prefix}{key}", math.nan)
+    if mean is None or not math.isfinite(mean):
+        return "n/a"
+    std = row.get(f"{prefix}{key}_std", math.nan)
+    return f"{mean:.{digits}f} ± {std:.{digits}f}" if math.isfinite(std) else f"{mean:.{digits}f}"
+
+
+def _name(row: Mapping[str, Any]) -> str:
+    if row["scenarios"] < row["scenarios_run"]:  # means over fewer scenarios: say so
+        return f"{row['estimator']} (scored on {row['scenarios']} of {row['scenarios_run']})"
+    return str(row["estimator"])
+
+
+def headline_markdown(rows: Sequence[Mapping[str, Any]], real_name: str | None) -> str:
+    """The headline table (≤ 8 columns) of :func:`annotate_rows`' rows."""
+    header = ["#", "estimator", *(title for _, title, _ in HEADLINE_METRICS)]
+    if real_name:
+        header.append(f"{real_name} rel. error [m]")
+    body = []
+    for row in rows:
+        cells = [row["rank"], _name(row)]
+        cells += [_cell(row, key, digits) for key, _, digits in HEADLINE_METRICS]
+        if real_name:
+            note = row.get("real_note")
+            cells.append(f"n/a ({note})" if note else _fmt(row.get(REAL_METRIC, math.nan), 3))
+        body.append(cells)
+    return _markdown(header, body)
+
+
+def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
+    """One group's table: the headline order, its accuracy, ATE, heading and drift."""
+    header = ["#", "estimator", *(title for _, title, _ in GROUP_METRICS), "runs"]
+    body = [[row["rank"], str(row["estimator"]),
+             *(_cell(row, key, digits, f"{group.name} ") for key, _, digits in GROUP_METRICS),
+             str(row.get(f"{group.name} runs", 0))] for row in rows]
+    return _markdown(header, body)
+
+
+def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The map scores of the estimators' poses, mean ± std over seeds."""
+    header = ["#", "estimator", *(title for _, title, _ in MAP_METRICS)]
+    body = [[row["rank"], str(row["estimator"]),
+             *(_cell(row, key, digits) for key, _, digits in MAP_METRICS)] for row in rows]
+    return _markdown(header, body)
+
+
+def board_markdown(rows: Sequence[Mapping[str, Any]], groups: Sequence[Group],
+                   real_name: str | None, rank_by: str) -> str:
+    """The headline table with its notes, then one table per group and the map table."""
+    runs = max((row["scenarios_run"] for row in rows), default=0)
+    seeds = max((row.get("seeds", 0) for row in rows), default=0)
+    lines = [f"Simulated figures: mean ± std over {seeds} seed(s) of each seed's mean over "
+             f"{len(groups)} group(s) ({runs} simulated runs per estimator); ranked by "
+             f"{rank_by}." + (f" {real_name}: one run of the real log, mean relation "
+                              "translation error." if real_name else ""), "",
+             headline_markdown(rows, real_name),
+             TEST_NOTE.format(metric=rank_by, n=runs, alpha=ALPHA), ""]
+    for group in groups:
+        lines += [f"### {group.name} (mean ± std over seeds)", "", group_markdown(rows, group)]
+    lines += ["### Maps at the estimated poses (mean ± std over seeds)", "", map_markdown(rows)]
+    return "\n".join(lines)
