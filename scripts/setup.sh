@@ -6,6 +6,20 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
+# The leaderboard report's test renders report.html in a headless browser: Debian's chromium,
+# installed quietly when missing; without apt-get (or when it fails) one line says so and that
+# test skips.
+if ! command -v chromium >/dev/null 2>&1; then
+    apt=(env DEBIAN_FRONTEND=noninteractive apt-get -qq -y)
+    [ "$(id -u)" = 0 ] || apt=(sudo -n "${apt[@]}")
+    if command -v apt-get >/dev/null 2>&1 && { "${apt[@]}" install chromium >/dev/null 2>&1 \
+            || { "${apt[@]}" update >/dev/null 2>&1 \
+                 && "${apt[@]}" install chromium >/dev/null 2>&1; }; }; then
+        echo "set-up: installed chromium (headless browser for the report test)"
+    else
+        echo "set-up: chromium not installed (no apt-get, or it failed): the report's browser test skips"
+    fi
+fi
 stamp=.venv/.setup-stamp
 wanted="$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)"
 if [ -x .venv/bin/python ] && [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ]; then
