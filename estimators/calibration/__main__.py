@@ -1,0 +1,100 @@
+"""``python -m estimators.calibration``: calibrate the Lidar mounts of a drive and print them.
+
+Examples::
+
+    python -m estimators.calibration --world hallway --trace zigzag --seed 0
+    python -m estimators.calibration --bag drive.bag --guess -0.4 0.1 15
+
+A simulated drive (``--world``/``--trace``/``--seed``, ``--config`` JSON env overrides) is
+recorded with the scripted driver; a ROS bag (``--bag``, ``--topics``) is read with
+:func:`estimators.datasets.load_bag`. ``--guess x y heading_deg`` (one triple per Lidar 2..K,
+in Lidar 1's frame) starts the calibration; for a bag it replaces the bag's tf mounts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from estimators.calibration.self_calibration import NoOverlapWarning, calibrate
+from lidar_env.errors import DualLidarError
+from lidar_env.se2 import compose, relative
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m estimators.calibration",
+                                     description="Estimate Lidars 2..K's mounts from a drive.")
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--bag", help="ROS 1 .bag, ROS 2 .db3/.mcap file or bag directory")
+    source.add_argument("--world", help="simulate a drive in this world (with --trace)")
+    parser.add_argument("--trace", default="zigzag", help="trace of the simulated drive")
+    parser.add_argument("--seed", type=int, default=0, help="env seed of the simulated drive")
+    parser.add_argument("--config", default="{}", help="env config overrides as JSON")
+    parser.add_argument("--topics", nargs="+", help="LaserScan topics, Lidar 1 first")
+    parser.add_argument("--guess", nargs="+", type=float, metavar="V",
+                        help="x [m] y [m] heading [deg] of each of Lidars 2..K in Lidar 1")
+    parser.add_argument("--estimator", default="lidar_odometry",
+                        help="registered estimator for each Lidar's own odometry")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="motion only: skip aligning overlapping scans")
+    return parser
+
+
+def _guess(values: Sequence[float] | None) -> np.ndarray | None:
+    if values is None:
+        return None
+    if len(values) % 3:
+        raise DualLidarError(f"--guess: expected triples x y heading_deg, got {len(values)} "
+                             "numbers")
+    rows = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+    rows[:, 2] = np.radians(rows[:, 2])
+    return rows
+
+
+def _recording(args: argparse.Namespace, guess: np.ndarray | None):
+    if args.bag:
+        from estimators.datasets import load_bag
+
+        mounts = None if guess is None else np.vstack([np.zeros(3), guess])
+        return load_bag(args.bag, args.topics, mounts=mounts)
+    from estimators.leaderboard.recording import record
+    from estimators.leaderboard.records import Scenario
+
+    return record(Scenario(args.world, args.trace, args.seed, config=json.loads(args.config)))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        guess = _guess(args.guess)
+        recording = _recording(args, guess)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", NoOverlapWarning)
+            calibration = calibrate(recording, guess, estimator=args.estimator,
+                                    refine=not args.no_refine)
+    except (DualLidarError, FileNotFoundError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    for warning in caught:
+        print(f"warning: {warning.message}", file=sys.stderr)
+    setup = recording.setup
+    print(f"{len(recording.times)} scans of {setup.n_lidars} Lidars")
+    for estimate, configured in zip(calibration.mounts, setup.mounts[1:], strict=True):
+        print(estimate.describe())
+        stated = relative(setup.mounts[0], configured)
+        print(f"  configured: x {stated[0]:+.4f} m, y {stated[1]:+.4f} m, heading "
+              f"{np.degrees(stated[2]):+.4f} deg")
+        if not estimate.unobservable:
+            car = compose(setup.mounts[0], estimate.value)
+            print(f"  in the car frame (lidar_1 as configured): x {car[0]:+.4f} m, y "
+                  f"{car[1]:+.4f} m, heading {np.degrees(car[2]):+.4f} deg")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
