@@ -47,6 +47,7 @@ from estimators.leaderboard.tasks import (
     ScenarioTask,
     run_task,
 )
+from estimators.leaderboard.workers import stop_workers
 
 
 class FutureLike(Protocol):
@@ -61,6 +62,15 @@ class ExecutorLike(Protocol):
 
 class RunInterrupted(RuntimeError):
     """The executor failed (e.g. a worker process died); committed scenarios are kept."""
+
+
+class RunCancelled(KeyboardInterrupt):
+    """Ctrl-C during a run: the scenarios finished so far are committed, those in flight are
+    not. The message is the one line the command line prints (then it exits 130)."""
+
+    def __init__(self, stored: int) -> None:
+        super().__init__(f"interrupted; {stored} scenarios stored; re-run to resume")
+        self.stored = stored
 
 
 @dataclass(frozen=True)
@@ -86,6 +96,7 @@ class RunSummary:
     seconds: float = 0.0  # wall time of the call
     stage_seconds: dict[str, float] = field(default_factory=dict)  # worker time per stage
     cpu_seconds: float = 0.0  # workers' CPU time over all tasks: the run's work, whatever load
+    committed: int = 0  # scenario outcomes committed by this run
 
 
 def _pending_task(db: ExperimentDatabase, scenario: Scenario,
@@ -113,6 +124,7 @@ def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummar
     for stage, seconds in outcome.seconds.items():
         summary.stage_seconds[stage] = summary.stage_seconds.get(stage, 0.0) + seconds
     summary.cpu_seconds += outcome.cpu_seconds
+    summary.committed += 1
 
 
 def _first_done(pending: set[Any]) -> set[Any]:
@@ -238,14 +250,19 @@ def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
     if max_in_flight < 1:
         raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
     start = time.perf_counter()
-    if executor is None:
-        for task in todo:
-            outcome = run_task(task)
-            _commit(db, outcome, summary)
-            if on_done is not None:
-                on_done(outcome.scenario)
-    else:
-        _run_on(executor, todo, db, summary, max_in_flight, on_done)
+    try:
+        if executor is None:
+            for task in todo:
+                outcome = run_task(task)
+                _commit(db, outcome, summary)
+                if on_done is not None:
+                    on_done(outcome.scenario)
+        else:
+            _run_on(executor, todo, db, summary, max_in_flight, on_done)
+    except KeyboardInterrupt:
+        # each commit is one transaction, so what is stored is whole; stop the workers now
+        stop_workers(executor)
+        raise RunCancelled(summary.committed) from None
     summary.seconds = time.perf_counter() - start
     return summary
 
