@@ -67,7 +67,13 @@ from estimators.leaderboard.matrix import (
 )
 from estimators.leaderboard.publish import draw_all, publish_report
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
-from estimators.leaderboard.runner import RunInterrupted, RunSummary, SideRun, run_matrix
+from estimators.leaderboard.runner import (
+    RunCancelled,
+    RunInterrupted,
+    RunSummary,
+    SideRun,
+    run_matrix,
+)
 from estimators.leaderboard.schema import DatabaseError
 from estimators.leaderboard.table_one import table_one, table_one_markdown
 from estimators.leaderboard.tables import (
@@ -79,6 +85,7 @@ from estimators.leaderboard.tables import (
 )
 from estimators.leaderboard.tasks import STAGES, EstimatorSpec, RealLog
 from estimators.leaderboard.warmup import warm_up
+from estimators.leaderboard.workers import process_pool
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
 
@@ -161,7 +168,7 @@ def _executor(args: argparse.Namespace) -> Any:
         from distributed import Client
 
         return Client(args.scheduler)
-    return ProcessPoolExecutor(args.workers) if args.workers > 1 else None
+    return process_pool(args.workers) if args.workers > 1 else None
 
 
 def export_tum_files(db: ExperimentDatabase, records: dict[tuple[Scenario, str], TraceRecord],
@@ -199,6 +206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("no estimators are registered")
     if args.workers < 1:
         parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
+    if bad_seeds := [seed for seed in args.seeds if not 0 <= seed < 2**32]:
+        parser.error(f"--seeds: expected integers in 0 .. 2**32 - 1 (env seeds), got {bad_seeds}")
     if not math.isfinite(args.noise) or args.noise < 0:
         parser.error(f"--noise: expected a range noise std >= 0 [m], got {args.noise}")
     if args.scheduler:
@@ -215,9 +224,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OutputDirectoryError, DatabaseError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    with db:
-        return _run(args, db, build_groups(args.worlds, args.traces),
-                    [EstimatorSpec(name) for name in estimator_names], start)
+    try:
+        with db:
+            return _run(args, db, build_groups(args.worlds, args.traces),
+                        [EstimatorSpec(name) for name in estimator_names], start)
+    except KeyboardInterrupt as error:  # Ctrl-C: one line, not a traceback; 130 = 128 + SIGINT
+        print(error if isinstance(error, RunCancelled) else "interrupted; re-run to resume",
+              file=sys.stderr)
+        return 130
 
 
 def _real_logs(args: argparse.Namespace) -> list[RealLog]:
