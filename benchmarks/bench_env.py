@@ -109,7 +109,7 @@ def breakdown(world: str) -> dict[str, float]:
             pymunk_car_step(env, config.physics_substeps), number=500
         ),
         "dual scan, exact": best_microseconds(
-            lambda: cast_rays(unwrapped.world, poses, lidar.beam_angles, config.max_range)
+            lambda: cast_rays(unwrapped.world, poses, lidar.beam_angles[0], config.max_range)
         ),
         f"2 x {config.n_beams} Gaussian draws": best_microseconds(
             lambda: rng.standard_normal((2, config.n_beams))

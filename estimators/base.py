@@ -169,12 +169,9 @@ class SensorSetup:
     def from_env(cls, env: Any) -> SensorSetup:
         """Read the sensor geometry of a ``DualLidar-v0`` env (wrapped or not)."""
         config = env.unwrapped.config
-        return cls(
-            mounts=np.asarray(config.lidar_mounts, dtype=np.float64),
-            beam_angles=default_beam_angles(config.n_beams),
-            max_range=config.max_range,
-            world_aligned=config.scan_frame == "world",
-        )
+        sensors = [Sensor(lidar.mount, lidar.beam_angles, lidar.max_range, k)
+                   for k, lidar in enumerate(config.lidars)]
+        return cls(sensors=sensors, world_aligned=config.scan_frame == "world")
 
     def check_observation(self, observation: Mapping[str, Any]) -> dict[str, NDArray[np.float64]]:
         """Validate the scans of one observation; return them as float64 arrays.

@@ -14,12 +14,19 @@ from typing import Any
 
 import numpy as np
 
+from lidar_env.errors import ConfigError
+from lidar_env.lidar_config import LidarConfig, check_lidars
+
 #: Valid values of :attr:`EnvConfig.scan_frame`.
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
+#: Keys of earlier versions, now set per Lidar in ``lidars``.
+MOVED_TO_LIDARS: tuple[str, ...] = ("lidar_mounts", "n_beams", "max_range")
 
-def _default_mounts() -> tuple[tuple[float, float, float], ...]:
-    return ((0.25, 0.0, 0.0), (-0.25, 0.0, 0.0))
+
+def _default_lidars() -> tuple[LidarConfig, ...]:
+    """The paper's two 360-degree Lidars, 0.5 m apart on the car's axis."""
+    return (LidarConfig((0.25, 0.0, 0.0)), LidarConfig((-0.25, 0.0, 0.0), where="lidars[1]"))
 
 
 @dataclass(frozen=True)
@@ -35,7 +42,11 @@ class EnvConfig:
           tightest turn at full speed has a 1 m radius.
         * car 0.8 m x 0.5 m with the two Lidars 0.5 m apart on its axis (the paper's "unchangeable
           offset"), 360 beams over 360 degrees and 10 m range (the paper's 360 readings per round).
-        * ``range_noise_std`` 0.01 m: the typical 1 sigma of a cheap time-of-flight Lidar.
+          ``lidars`` holds 1 to 8 Lidars, each a :class:`~lidar_env.lidar_config.LidarConfig` or
+          a dict ``{"mount": (x, y, heading), "n_beams", "fov", "max_range",
+          "range_noise_std", "dropout_prob"}``; mounts lie within the car's half-diagonal.
+        * ``range_noise_std`` 0.01 m: the typical 1 sigma of a cheap time-of-flight Lidar; it and
+          ``dropout_prob`` apply to every Lidar that does not set its own.
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)
@@ -44,10 +55,8 @@ class EnvConfig:
     max_yaw_rate: float = 1.5  # [rad/s] action[1] = +-1 maps to +-max_yaw_rate (CCW positive)
     car_length: float = 0.8  # [m] along the car's x (forward) axis
     car_width: float = 0.5  # [m] along the car's y (left) axis
-    # (2, 3) pose of lidar_1 and lidar_2 in the car frame: x [m] forward, y [m] left, heading [rad]
-    lidar_mounts: tuple[tuple[float, float, float], ...] = field(default_factory=_default_mounts)
-    n_beams: int = 360  # [-] beams per scan, evenly spread over 360 degrees
-    max_range: float = 10.0  # [m] a beam that hits nothing reads exactly max_range
+    # lidar_1 .. lidar_K: mount (x [m] forward, y [m] left, heading [rad]), beams, fov, range
+    lidars: tuple[LidarConfig, ...] = field(default_factory=_default_lidars)
     range_noise_std: float = 0.01  # [m] std of the Gaussian noise added to each hit
     dropout_prob: float = 0.0  # [-] probability that a beam reads max_range regardless
     scan_frame: str = "sensor"  # "sensor": beam 0 along the sensor's forward axis; "world": +x
@@ -56,6 +65,7 @@ class EnvConfig:
     cross_track_penalty: float = 0.1  # [1/s] reward -= this * |cross-track error [m]| * dt
     goal_tolerance: float = 0.3  # [m] the trace is done within this arc length of its end
     trace_margin: float = 0.3  # [m] free space kept beyond the car's half-diagonal along a trace
+    map_resolution: float = 0.05  # [m/px] pixel size of a world given as an array or image
 
     def __post_init__(self) -> None:
         positive = {
@@ -64,13 +74,13 @@ class EnvConfig:
             "max_yaw_rate": self.max_yaw_rate,
             "car_length": self.car_length,
             "car_width": self.car_width,
-            "max_range": self.max_range,
             "max_episode_time": self.max_episode_time,
             "goal_tolerance": self.goal_tolerance,
+            "map_resolution": self.map_resolution,
         }
         for name, value in positive.items():
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name}: expected a positive finite number, got {value!r}")
+                raise ConfigError(f"{name}: expected a positive finite number, got {value!r}")
         non_negative = {
             "range_noise_std": self.range_noise_std,
             "collision_penalty": self.collision_penalty,
@@ -79,28 +89,20 @@ class EnvConfig:
         }
         for name, value in non_negative.items():
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
-        for name, value, low in (("physics_substeps", self.physics_substeps, 1),
-                                 ("n_beams", self.n_beams, 3)):
+                raise ConfigError(f"{name}: expected a finite number >= 0, got {value!r}")
+        for name, value, low in (("physics_substeps", self.physics_substeps, 1),):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+                raise ConfigError(f"{name}: expected an integer >= {low}, got {value!r}")
         if not isinstance(self.dropout_prob, (int, float)) or not 0 <= self.dropout_prob < 1:
-            raise ValueError(
+            raise ConfigError(
                 f"dropout_prob: expected a number in [0, 1), got {self.dropout_prob!r}"
             )
         if self.scan_frame not in SCAN_FRAMES:
-            raise ValueError(
+            raise ConfigError(
                 f"scan_frame: expected one of {', '.join(SCAN_FRAMES)}, got {self.scan_frame!r}"
             )
-        mounts = np.asarray(self.lidar_mounts, dtype=np.float64)
-        if mounts.shape != (2, 3) or not np.all(np.isfinite(mounts)):
-            raise ValueError(
-                f"lidar_mounts: expected (2, 3) finite car-frame poses (x, y, heading), "
-                f"got shape {mounts.shape}"
-            )
-        object.__setattr__(self, "lidar_mounts", tuple(tuple(float(v) for v in m) for m in mounts))
-        for name in ("physics_substeps", "n_beams"):
-            object.__setattr__(self, name, int(getattr(self, name)))
+        object.__setattr__(self, "lidars", check_lidars(self.lidars, self.car_half_diagonal))
+        object.__setattr__(self, "physics_substeps", int(self.physics_substeps))
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:
@@ -113,10 +115,16 @@ class EnvConfig:
         return cls().replace(**dict(mapping or {}))
 
     def replace(self, **changes: Any) -> EnvConfig:
-        """A copy with ``changes`` applied; an unknown key raises ``ValueError`` naming all keys."""
+        """A copy with ``changes`` applied; an unknown key raises ``ConfigError`` naming them."""
+        moved = sorted(set(changes) & set(MOVED_TO_LIDARS))
+        if moved:
+            raise ConfigError(
+                f"config key(s) {', '.join(map(repr, moved))} moved into 'lidars': expected "
+                "config={'lidars': [{'mount': (x, y, heading), 'n_beams': 360, 'fov': 2 pi, "
+                "'max_range': 10.0}, ...]}, one dict per Lidar")
         unknown = sorted(set(changes) - set(self.keys()))
         if unknown:
-            raise ValueError(
+            raise ConfigError(
                 f"unknown config key(s) {', '.join(map(repr, unknown))}: expected some of "
                 f"{', '.join(self.keys())}"
             )
@@ -124,12 +132,49 @@ class EnvConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """The config as a plain dict (round-trips through :meth:`from_dict`)."""
-        return dataclasses.asdict(self)
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {**fields, "lidars": [lidar.to_dict() for lidar in self.lidars]}
+
+    @property
+    def n_lidars(self) -> int:
+        return len(self.lidars)
 
     @property
     def mounts_array(self) -> np.ndarray:
-        """``(2, 3)`` float64 Lidar mounts in the car frame."""
-        return np.asarray(self.lidar_mounts, dtype=np.float64)
+        """``(K, 3)`` float64 Lidar mounts in the car frame, row ``k`` for ``lidar_{k+1}``."""
+        return np.array([lidar.mount for lidar in self.lidars], dtype=np.float64)
+
+    @property
+    def lidar_mounts(self) -> tuple[tuple[float, float, float], ...]:
+        """The mounts of :attr:`mounts_array` as tuples."""
+        return tuple(lidar.mount for lidar in self.lidars)
+
+    @property
+    def n_beams(self) -> int:
+        """Beams per scan shared by every Lidar (a ``ConfigError`` if they differ)."""
+        return self._shared("n_beams")
+
+    @property
+    def max_range(self) -> float:
+        """[m] shared by every Lidar (a ``ConfigError`` if they differ)."""
+        return self._shared("max_range")
+
+    def _shared(self, name: str) -> Any:
+        values = {getattr(lidar, name) for lidar in self.lidars}
+        if len(values) != 1:
+            raise ConfigError(f"config.{name}: the Lidars differ ({sorted(values)}); "
+                              f"expected per-Lidar access, config.lidars[k].{name}")
+        return values.pop()
+
+    def noise_std(self, k: int) -> float:
+        """[m] range noise of Lidar ``k``: its own, else :attr:`range_noise_std`."""
+        own = self.lidars[k].range_noise_std
+        return self.range_noise_std if own is None else own
+
+    def dropout(self, k: int) -> float:
+        """Dropout probability of Lidar ``k``: its own, else :attr:`dropout_prob`."""
+        own = self.lidars[k].dropout_prob
+        return self.dropout_prob if own is None else own
 
     @property
     def car_half_diagonal(self) -> float:

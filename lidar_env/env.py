@@ -13,12 +13,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
-from lidar_env.lidar import Lidar
-from lidar_env.scenes import SceneCache, check_reset_options, check_start_pose
+from lidar_env.lidar_layout import LidarLayout
+from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.traces import check_trace_name
+from lidar_env.user_worlds import resolve_world
 from lidar_env.world import World
-from lidar_env.worlds import PAPER_TRACES, check_world_name
 
 #: [m] half-width of the arc window searched when tracking progress along the trace: far more
 #: than the car moves per step (0.15 m at default settings), far less than the spacing between
@@ -55,18 +55,24 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     ## Observation Space
 
-    ``Dict`` of two ``Box(0, max_range, (n_beams,), float32)`` scans (defaults 10 m, 360):
+    ``Dict`` of one ``Box(0, max_range_k, (n_beams_k,), float32)`` scan per Lidar of
+    ``config["lidars"]`` (1 to 8; default two 360-beam, 360-degree, 10 m Lidars):
 
-    | Key       | Sensor                 | Beam 0 points along        | Angle of beam i     | Unit |
-    |-----------|------------------------|----------------------------|---------------------|------|
-    | "lidar_1" | main, mount row 0      | sensor's forward axis (*)  | 2 pi i / n, CCW     | m    |
-    | "lidar_2" | offset, mount row 1    | sensor's forward axis (*)  | 2 pi i / n, CCW     | m    |
+    | Key       | Sensor          | Length    | Beam 0 points at (*)            | Angles | Unit |
+    |-----------|-----------------|-----------|---------------------------------|--------|------|
+    | "lidar_1" | ``lidars[0]``   | n_beams_1 | forward (fov = 2 pi), else at   | CCW    | m    |
+    |           | (main)          |           | -fov / 2 from forward           |        |      |
+    | "lidar_2" | ``lidars[1]``   | n_beams_2 | as above                        | CCW    | m    |
+    | ...       | up to "lidar_8" |           |                                 |        |      |
 
-    Each value is the range [m] from that sensor's centre to the first obstacle along the beam,
-    in [0, max_range]. A beam that hits nothing within ``max_range`` (or drops out, probability
+    Beams spread evenly over the Lidar's ``fov``, centred on its forward axis: a full turn has
+    beam i at 2 pi i / n; a narrower Lidar has beam i at -fov / 2 + fov i / (n - 1), so a
+    270-degree Lidar's beam 0 points at -135 degrees and its last beam at +135 degrees. Each
+    value is the range [m] from that sensor's centre to the first obstacle along the beam, in
+    [0, max_range]. A beam that hits nothing within ``max_range`` (or drops out, probability
     ``dropout_prob``) reads exactly ``max_range``. Hits carry Gaussian noise of std
     ``range_noise_std`` (0.01 m), clipped to [0, max_range). (*) With ``scan_frame="world"``
-    beam i instead points at world angle 2 pi i / n (the paper's simplification, as if the
+    the beam angles are measured from world +x instead (the paper's simplification, as if the
     heading were known); the ranges are then cast exactly along those world directions, not
     interpolated from a sensor-frame scan.
 
@@ -78,10 +84,11 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     ## Starting State
 
-    The car stands at the trace's start pose: each world has a default start per trace seed;
-    ``reset(options={"start": (x, y, heading)})`` overrides it (the trace is then fitted to
-    the world from there). A start where the car's box touches or lies inside an obstacle
-    raises :class:`~lidar_env.scenes.StartPoseError`.
+    The car stands at the trace's start pose: each built-in world has a default start per trace
+    seed; a user world starts at its free point of largest clearance near the map's centre
+    (:mod:`lidar_env.user_worlds`). ``reset(options={"start": (x, y, heading)})`` overrides it
+    (the trace is then fitted to the world from there). A start where the car's box touches or
+    lies inside an obstacle, or outside the map, raises :class:`~lidar_env.scenes.StartPoseError`.
 
     ## Episode End
 
@@ -96,7 +103,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     | Key                 | Meaning                                                 | Unit      |
     |---------------------|---------------------------------------------------------|-----------|
     | "pose"              | true car pose (x, y, heading), float64 (3,), world     | m, m, rad |
-    | "lidar_poses"       | true world poses of lidar_1 and lidar_2, float64 (2,3)  | m, m, rad |
+    | "lidar_poses"       | true world poses of lidar_1 .. lidar_K, float64 (K, 3) | m, m, rad |
     | "time"              | time since reset                                        | s         |
     | "progress"          | arc position / trace length, in [0, 1] (*)              | -         |
     | "arc_position"      | arc length of the car's projection onto the trace (*)   | m         |
@@ -112,10 +119,14 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     | Argument    | Default          | Meaning                                                  |
     |-------------|------------------|----------------------------------------------------------|
-    | world       | "open_cylinders" | "open_cylinders", "hallway", "closed_to_open", "random"  |
+    | world       | "open_cylinders" | "open_cylinders", "hallway", "closed_to_open", "random"; |
+    |             |                  | a World; a 2-D array (0 free, > 0 obstacle, pixel size   |
+    |             |                  | config map_resolution, 0.05 m); an image path; a ROS     |
+    |             |                  | map_server YAML path (:mod:`lidar_env.ros_map`)          |
     | trace       | None             | "straight", "right_turn", "zigzag", "loop",              |
     |             |                  | "out_and_back"; None: the world's paper trace            |
-    |             |                  | (right_turn, zigzag, zigzag, zigzag)                     |
+    |             |                  | (right_turn, zigzag, zigzag, zigzag; straight in a user  |
+    |             |                  | world)                                                   |
     | config      | None             | an :class:`EnvConfig` or a dict of its fields            |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
 
@@ -135,12 +146,11 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     def __init__(
         self,
-        world: str = "open_cylinders",
+        world: str | World | Any = "open_cylinders",
         trace: str | None = None,
         config: EnvConfig | Mapping[str, Any] | None = None,
         render_mode: str | None = None,
     ) -> None:
-        self.world_name = check_world_name(world)
         self.trace_name = None if trace is None else check_trace_name(trace)
         if isinstance(config, EnvConfig):
             self.config = config
@@ -155,12 +165,19 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             )
         self.render_mode = render_mode
         cfg = self.config
-        scan_box = spaces.Box(0.0, cfg.max_range, (cfg.n_beams,), np.float32)
-        self.observation_space = spaces.Dict({"lidar_1": scan_box, "lidar_2": scan_box})
+        self._world_arg = resolve_world(world, cfg.map_resolution)
+        self.world_name = (self._world_arg if isinstance(self._world_arg, str)
+                           else self._world_arg.name)
+        self.lidar_keys = tuple(f"lidar_{k + 1}" for k in range(cfg.n_lidars))
+        self.observation_space = spaces.Dict({
+            key: spaces.Box(0.0, lidar.max_range, (lidar.n_beams,), np.float32)
+            for key, lidar in zip(self.lidar_keys, cfg.lidars, strict=True)
+        })
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.lidar = Lidar(cfg.n_beams, cfg.max_range, cfg.range_noise_std, cfg.dropout_prob)
+        self.lidar = LidarLayout(cfg.lidars, [cfg.noise_std(k) for k in range(cfg.n_lidars)],
+                                 [cfg.dropout(k) for k in range(cfg.n_lidars)])
         self._mounts = cfg.mounts_array
-        self._sensor_poses = np.zeros((2, 3))
+        self._sensor_poses = np.zeros((cfg.n_lidars, 3))
         self._world_aligned = cfg.scan_frame == "world"
         self._scenes = SceneCache()
         self.world: World | None = None
@@ -171,7 +188,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._renderer: Any = None
         self._trajectories: dict[str, NDArray[np.float64]] = {}
         self._render_map: Any = None
-        self._last_scans: NDArray[np.float32] | None = None
+        self._last_scans: list[NDArray[np.float32]] | None = None
         self._time = 0.0
         self._arc = 0.0
 
@@ -181,19 +198,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         super().reset(seed=seed)
         options = check_reset_options(options)
-        world_name = check_world_name(options.get("world", self.world_name))
-        trace_name = options.get("trace", self.trace_name)
-        if trace_name is None:
-            trace_name = PAPER_TRACES[world_name]
-        trace_name = check_trace_name(trace_name)
-        start = options.get("start")
-        if start is not None:
-            start = check_start_pose(
-                start, world_name, self.config.car_length, self.config.car_width
-            )
-        scene = self._scenes.get(
-            world_name, trace_name, start, self.np_random, self.config.trace_clearance
-        )
+        scene = self._scenes.for_episode(options, self._world_arg, self.trace_name,
+                                         self.config, self.np_random)
         if self.world is not scene.world:
             self.car = Car(self.config.car_length, self.config.car_width,
                            scene.world.circles, scene.world.segments)
@@ -258,10 +264,10 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         cast_from = self._sensor_poses
         if self._world_aligned:
             cast_from = self._sensor_poses.copy()
-            cast_from[:, 2] = 0.0  # beam i along world angle 2 pi i / n
+            cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
         scans = self.lidar.scan(self.world, cast_from, self.np_random)
         self._last_scans = scans
-        return {"lidar_1": scans[0], "lidar_2": scans[1]}
+        return dict(zip(self.lidar_keys, scans, strict=True))
 
     def _info(self, arc: float, cross_track: float, collision: bool) -> dict[str, Any]:
         assert self.car is not None and self.trace is not None
@@ -352,8 +358,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             car_size=(self.config.car_length, self.config.car_width),
             sensor_poses=self._sensor_poses,
             scans=self._last_scans,
-            beam_angles=self.lidar.beam_angles,
-            max_range=self.config.max_range,
+            beam_angles=list(self.lidar.beam_angles),
+            max_range=[lidar.max_range for lidar in self.config.lidars],
             world_aligned=self._world_aligned,
             trace=self.trace.waypoints if self.trace is not None else None,
             trajectories=self._trajectories,

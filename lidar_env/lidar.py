@@ -38,7 +38,7 @@ Geometry = World | tuple[ArrayLike, ArrayLike]
 _NO_DRAWS = np.empty((0, 0))
 
 
-def _as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
+def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
     """``sensor_poses`` as a contiguous float64 ``(K, 3)`` array (a single pose becomes K = 1)."""
     poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
     if poses.ndim == 1:
@@ -50,7 +50,7 @@ def _as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
     return poses
 
 
-def _as_world(world_or_arrays: Geometry) -> tuple[World, int]:
+def as_world(world_or_arrays: Geometry) -> tuple[World, int]:
     """The world to scan and the index of its first polygon edge in ``world.segments``."""
     if isinstance(world_or_arrays, World):
         return world_or_arrays, len(world_or_arrays.walls)
@@ -90,8 +90,8 @@ def cast_rays(
         >>> cast_rays(world, [0.0, 0.0, 0.0], np.array([0.0, np.pi / 2]), 10.0)
         array([[ 4., 10.]])
     """
-    world, first_polygon_edge = _as_world(world_or_arrays)
-    poses = _as_poses(sensor_poses)
+    world, first_polygon_edge = as_world(world_or_arrays)
+    poses = as_poses(sensor_poses)
     angles = np.asarray(beam_angles, dtype=np.float64)
     if angles.ndim != 1:
         raise ValueError(
@@ -118,7 +118,7 @@ def pymunk_cast_rays(
     import pymunk
 
     every_shape = pymunk.ShapeFilter()
-    poses = _as_poses(sensor_poses)
+    poses = as_poses(sensor_poses)
     angles = np.asarray(beam_angles, dtype=np.float64)
     out = np.full((len(poses), len(angles)), float(max_range))
     for k, (x, y, heading) in enumerate(poses):
@@ -194,8 +194,8 @@ class Lidar:
         normals, then all ``K x n`` uniforms), so the stream consumed depends only on the shape;
         a noiseless Lidar consumes none. Every call returns a new array.
         """
-        world, first_polygon_edge = _as_world(world)
-        poses = _as_poses(sensor_poses)
+        world, first_polygon_edge = as_world(world)
+        poses = as_poses(sensor_poses)
         shape = (poses.shape[0], self.n_beams)
         # Drawn by numpy from the caller's generator (numba would take it only at a cost of
         # several microseconds per call), then applied in the same compiled pass as the cast.

@@ -249,6 +249,56 @@ def _scan_one(
 
 
 @njit(cache=True, fastmath=False)
+def cast_sensor(
+    ranges: NDArray[np.float64],
+    pose: tuple[float, float, float],
+    circles: NDArray[np.float64],
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
+    scratch: tuple,
+    stamp: int,
+    beams: tuple,
+    max_range: float,
+) -> None:
+    """Fill ``ranges`` (n,) with the exact ranges of one sensor at world ``pose``.
+
+    ``scratch`` is ``(circle_seen, segment_seen, circle_ids, segment_ids)``, int64 arrays as
+    long as ``circles`` and ``segments``; ``stamp`` (>= 1) must differ between the sensors of
+    one call, so each gathers its candidates afresh without clearing ``seen``.
+    """
+    ox, oy, heading = pose
+    if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
+        raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
+    circle_seen, segment_seen, circle_ids, segment_ids = scratch
+    if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -stamp):
+        ranges[:] = 0.0
+        return
+    # Only primitives in the grid cells that overlap the sensor's range box can be seen.
+    columns = (grid_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
+               grid_cell(ox + max_range, grid.x0, grid.cell, grid.nx))
+    rows = (grid_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
+            grid_cell(oy + max_range, grid.y0, grid.cell, grid.ny))
+    n_circles = _gather(grid.circle_start, grid.circle_ids, columns, rows, grid.nx,
+                        circle_seen, stamp, circle_ids)
+    n_segments = _gather(grid.segment_start, grid.segment_ids, columns, rows, grid.nx,
+                         segment_seen, stamp, segment_ids)
+    sorted_angles, order, step, cos_beam, sin_beam = beams
+    _scan_one(ranges, ox, oy, heading, circles, segments, circle_ids[:n_circles],
+              segment_ids[:n_segments], sorted_angles, order, step, cos_beam, sin_beam,
+              max_range)
+
+
+@njit(cache=True, fastmath=False)
+def new_scratch(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> tuple:
+    """The work arrays of :func:`cast_sensor` for one call over several sensors."""
+    return (np.zeros(circles.shape[0], dtype=np.int64),
+            np.zeros(segments.shape[0], dtype=np.int64),
+            np.empty(circles.shape[0], dtype=np.int64),
+            np.empty(segments.shape[0], dtype=np.int64))
+
+
+@njit(cache=True, fastmath=False)
 def cast_rays_kernel(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
@@ -258,45 +308,13 @@ def cast_rays_kernel(
     beams: tuple,
     max_range: float,
 ) -> NDArray[np.float64]:
-    sorted_angles, order, step, cos_beam, sin_beam = beams
-    out = np.empty((sensor_poses.shape[0], cos_beam.shape[0]))
-    circle_seen = np.zeros(circles.shape[0], dtype=np.int64)
-    segment_seen = np.zeros(segments.shape[0], dtype=np.int64)
-    circle_ids = np.empty(circles.shape[0], dtype=np.int64)
-    segment_ids = np.empty(segments.shape[0], dtype=np.int64)
+    """``(K, n)`` exact ranges of sensors at ``sensor_poses`` that share one beam set."""
+    out = np.empty((sensor_poses.shape[0], beams[3].shape[0]))
+    scratch = new_scratch(circles, segments)
     for k in range(sensor_poses.shape[0]):
-        ox, oy = sensor_poses[k, 0], sensor_poses[k, 1]
-        for i in range(3):
-            if not math.isfinite(sensor_poses[k, i]):
-                raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
-        if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -(k + 1)):
-            out[k] = 0.0
-            continue
-        # Only primitives in the grid cells that overlap the sensor's range box can be seen.
-        columns = (grid_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
-                   grid_cell(ox + max_range, grid.x0, grid.cell, grid.nx))
-        rows = (grid_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
-                grid_cell(oy + max_range, grid.y0, grid.cell, grid.ny))
-        n_circles = _gather(grid.circle_start, grid.circle_ids, columns, rows, grid.nx,
-                            circle_seen, k + 1, circle_ids)
-        n_segments = _gather(grid.segment_start, grid.segment_ids, columns, rows, grid.nx,
-                             segment_seen, k + 1, segment_ids)
-        _scan_one(
-            out[k],
-            ox,
-            oy,
-            sensor_poses[k, 2],
-            circles,
-            segments,
-            circle_ids[:n_circles],
-            segment_ids[:n_segments],
-            sorted_angles,
-            order,
-            step,
-            cos_beam,
-            sin_beam,
-            max_range,
-        )
+        pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2])
+        cast_sensor(out[k], pose, circles, segments, first_polygon_edge, grid, scratch, k + 1,
+                    beams, max_range)
     return out
 
 

@@ -208,7 +208,7 @@ class Renderer:
         sensor_poses: ArrayLike,
         scans: ArrayLike,
         beam_angles: ArrayLike,
-        max_range: float | None = None,
+        max_range: float | Sequence[float] | None = None,
         world_aligned: bool = False,
         trace: ArrayLike | None = None,
         trajectories: Mapping[str, ArrayLike] | None = None,
@@ -223,7 +223,8 @@ class Renderer:
             scans: ``(K, n)`` ranges [m]; readings ``>= max_range`` (default: the largest
                 reading) are not drawn.
             beam_angles: ``(n,)`` [rad] from each sensor's forward axis (from world +x if
-                ``world_aligned``).
+                ``world_aligned``); or, for Lidars of their own beams, a list of K arrays, with
+                ``scans`` a list of K scans and ``max_range`` a number or a list of K.
             trace: ``(M, 2)`` waypoints [m] to draw under everything else.
             trajectories: ``{name: (N, 2 or 3) poses [m]}``, each in its own colour.
             occupancy: an occupancy map to blend over the world, under everything else
@@ -238,12 +239,16 @@ class Renderer:
             colour = TRAJECTORY_COLOURS[i % len(TRAJECTORY_COLOURS)]
             self._polyline(frame, np.asarray(path, dtype=np.float64)[:, :2], colour, 2)
         poses = np.asarray(sensor_poses, dtype=np.float64).reshape(-1, 3)
-        ranges = np.asarray(scans, dtype=np.float64).reshape(len(poses), -1)
-        limit = float(np.max(ranges)) if max_range is None else max_range
-        angles = np.asarray(beam_angles, dtype=np.float64)
+        per_sensor = isinstance(beam_angles, (list, tuple))  # K Lidars of their own beams
+        ranges = ([np.asarray(scan, dtype=np.float64) for scan in scans] if per_sensor else
+                  np.asarray(scans, dtype=np.float64).reshape(len(poses), -1))
+        limits = (list(max_range) if isinstance(max_range, (list, tuple)) else
+                  [float(np.max(np.concatenate([np.ravel(r) for r in ranges])))
+                   if max_range is None else max_range] * len(poses))
         for k, pose in enumerate(poses):
+            angles = np.asarray(beam_angles[k] if per_sensor else beam_angles, dtype=np.float64)
             heading = 0.0 if world_aligned else pose[2]
-            hit = ranges[k] < limit
+            hit = ranges[k] < limits[k]
             direction = angles[hit] + heading
             points = pose[:2] + ranges[k][hit, None] * np.stack(
                 [np.cos(direction), np.sin(direction)], axis=1

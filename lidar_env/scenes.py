@@ -13,10 +13,16 @@ from typing import Any
 import numpy as np
 
 from lidar_env.car import Car
-from lidar_env.worlds import Scene, built_in_layout, make_scene
+from lidar_env.traces import check_trace_name
+from lidar_env.user_worlds import resolve_world, user_scene
+from lidar_env.world import World
+from lidar_env.worlds import PAPER_TRACES, Scene, built_in_layout, make_scene
 
 #: Keys accepted in ``reset(options=...)``.
 RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
+
+#: Trace seed driven in a user world when none is given.
+USER_WORLD_TRACE = "straight"
 
 #: Fitted traces kept per env (built-in worlds only): every default start and a few custom ones.
 MAX_CACHED_SCENES = 32
@@ -68,6 +74,25 @@ def check_start_pose(
     return (float(pose[0]), float(pose[1]), float(pose[2]))
 
 
+def check_user_start(start: Any, world: World, car: Car) -> tuple[float, float, float]:
+    """``start`` as a pose inside ``world``'s bounds with the car's box clear of obstacles."""
+    pose = np.asarray(start, dtype=np.float64)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"options['start']: expected 3 finite numbers (x [m], y [m], heading "
+                         f"[rad]), got {start!r}")
+    x, y, heading = (float(v) for v in pose)
+    xmin, ymin, xmax, ymax = world.bounds
+    if not (xmin < x < xmax and ymin < y < ymax):
+        raise StartPoseError(f"start pose ({x:g}, {y:g}, {heading:g}) is outside the map "
+                             f"{world.name!r}: expected x in ({xmin:g}, {xmax:g}) and y in "
+                             f"({ymin:g}, {ymax:g})")
+    if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
+        raise StartPoseError(f"start pose ({x:g}, {y:g}, {heading:g}) puts the car into an "
+                             f"obstacle of world {world.name!r}: expected a pose where the car's "
+                             "box is clear")
+    return x, y, heading
+
+
 class SceneCache:
     """The world and fitted trace of each (world, trace, start) asked for.
 
@@ -77,7 +102,49 @@ class SceneCache:
     """
 
     def __init__(self) -> None:
-        self._scenes: dict[tuple[str, str, tuple[float, ...] | None], Scene] = {}
+        self._scenes: dict[tuple[Any, str, tuple[float, ...] | None], Scene] = {}
+
+    def for_episode(
+        self,
+        options: Mapping[str, Any],
+        world_arg: Any,
+        trace_name: str | None,
+        config: Any,
+        rng: np.random.Generator,
+    ) -> Scene:
+        """The scene of one episode: ``options`` (checked) over the env's ``world_arg`` (a
+        built-in name or a World) and ``trace_name``; ``config`` an ``EnvConfig``."""
+
+        world = (resolve_world(options["world"], config.map_resolution) if "world" in options
+                 else world_arg)
+        trace_name = options.get("trace", trace_name)
+        start = options.get("start")
+        if not isinstance(world, str):  # a user world: no built-in starts
+            trace_name = check_trace_name(USER_WORLD_TRACE if trace_name is None else trace_name)
+            if start is not None:
+                car = Car(config.car_length, config.car_width, world.circles, world.segments)
+                start = check_user_start(start, world, car)
+            return self.get_user(world, trace_name, start, config.trace_clearance)
+        trace_name = check_trace_name(PAPER_TRACES[world] if trace_name is None else trace_name)
+        if start is not None:
+            start = check_start_pose(start, world, config.car_length, config.car_width)
+        return self.get(world, trace_name, start, rng, config.trace_clearance)
+
+    def get_user(
+        self,
+        world: Any,
+        trace_name: str,
+        start: tuple[float, float, float] | None,
+        clearance: float,
+    ) -> Scene:
+        """The scene of a user :class:`~lidar_env.world.World`, cached per world object."""
+        key = (("world", id(world)), trace_name, start)
+        cached = self._scenes.get(key)
+        if cached is None or cached.world is not world:  # an id reused by a new object
+            if len(self._scenes) >= MAX_CACHED_SCENES:
+                self._scenes.clear()
+            self._scenes[key] = cached = user_scene(world, trace_name, start, clearance)
+        return cached
 
     def get(
         self,

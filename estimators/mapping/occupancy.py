@@ -316,8 +316,15 @@ class OccupancyGrid:
         pose ``car_pose`` (3,) [m, m, rad]: each Lidar at car pose ⊕ its mount. This is the
         online use: call it every step with the estimator's latest pose."""
         scans = setup.check_observation(observation)
-        self.integrate(np.stack([scans[key] for key in setup.keys]), setup.beam_angles,
-                       sensor_poses(car_pose, setup)[0], setup.max_range)
+        poses = sensor_poses(car_pose, setup)[0]
+        if setup.uniform:
+            self.integrate(np.stack([scans[key] for key in setup.keys]), setup.beam_angles,
+                           poses, setup.max_range)
+            return
+        for key, sensor, pose in zip(setup.keys, setup.sensors, poses, strict=True):
+            # Lidars of their own beams: one update each (a cell may change once per Lidar)
+            self.integrate(scans[key][None, :], sensor.beam_angles, pose[None, :],
+                           sensor.max_range)
 
     def probabilities(self) -> NDArray[np.float64]:
         """``(rows, cols)`` occupancy probability of each cell; 0.5 = never observed."""
@@ -371,7 +378,7 @@ def from_estimator_run(
     """The map built from ``observations[k]`` (scans keyed by ``setup.keys``) taken at car pose
     ``trajectory[k]`` (N, 3), e.g. an estimator's ``trajectory`` and the scans it was fed.
 
-    ``bounds`` default to the trajectory's extent plus ``setup.max_range`` on every side, which
+    ``bounds`` default to the trajectory's extent plus the largest max range on every side, which
     holds every return. ``grid_params`` go to :class:`OccupancyGrid` (``p_hit``, ...)."""
     trajectory = np.asarray(trajectory, dtype=np.float64)
     if trajectory.ndim != 2 or trajectory.shape[1] != 3:
@@ -381,7 +388,8 @@ def from_estimator_run(
                          f"got {len(observations)}")
     poses = sensor_poses(trajectory, setup)
     if bounds is None:
-        bounds = bounds_around(poses[..., :2].reshape(-1, 2), setup.max_range)
+        reach = max(sensor.max_range for sensor in setup.sensors)
+        bounds = bounds_around(poses[..., :2].reshape(-1, 2), reach)
     grid = OccupancyGrid(bounds, resolution, **grid_params)
     for observation, car_pose in zip(observations, trajectory, strict=True):
         grid.integrate_observation(observation, car_pose, setup)

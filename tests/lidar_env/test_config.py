@@ -6,6 +6,7 @@ import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env.config import EnvConfig
+from lidar_env.errors import ConfigError
 
 
 def test_defaults_match_the_documented_car_and_sensors():
@@ -20,16 +21,19 @@ def test_defaults_match_the_documented_car_and_sensors():
 
 
 def test_from_dict_round_trips_and_replace_keeps_the_original():
-    mounts = [[0.3, 0.1, 0.0], [-0.3, 0, 0]]
-    config = EnvConfig.from_dict({"max_range": 8.0, "lidar_mounts": mounts})
+    lidars = [{"mount": [0.3, 0.1, 0.0], "max_range": 8.0},
+              {"mount": (-0.3, 0, 0), "max_range": 8.0, "fov": np.pi, "range_noise_std": 0.0}]
+    config = EnvConfig.from_dict({"lidars": lidars})
     assert EnvConfig.from_dict(config.to_dict()) == config
     changed = config.replace(range_noise_std=0.0)
     assert changed.range_noise_std == 0.0 and config.range_noise_std == 0.01
     assert changed.lidar_mounts == ((0.3, 0.1, 0.0), (-0.3, 0.0, 0.0))
+    assert config.noise_std(0) == 0.01 and config.noise_std(1) == 0.0  # own value wins
+    assert config.max_range == 8.0 and config.lidars[1].fov == pytest.approx(np.pi)
 
 
 def test_unknown_keys_are_named_with_the_valid_ones():
-    with pytest.raises(ValueError, match=r"unknown config key\(s\) 'max_rnage'.*max_range"):
+    with pytest.raises(ValueError, match=r"unknown config key\(s\) 'max_rnage'.*lidars"):
         EnvConfig.from_dict({"max_rnage": 5.0})
     with pytest.raises(ValueError, match="'speed'.*control_dt"):
         EnvConfig().replace(speed=1.0)
@@ -40,28 +44,45 @@ def test_unknown_keys_are_named_with_the_valid_ones():
     [
         ("control_dt", 0.0, "control_dt: expected a positive finite number, got 0.0"),
         ("control_dt", float("nan"), "control_dt: expected a positive finite number"),
-        ("max_range", -1.0, "max_range: expected a positive finite number"),
         ("physics_substeps", 0, r"physics_substeps: expected an integer >= 1, got 0"),
         ("physics_substeps", 2.5, r"physics_substeps: expected an integer >= 1, got 2.5"),
-        ("n_beams", 2, r"n_beams: expected an integer >= 3, got 2"),
         ("range_noise_std", -0.1, r"range_noise_std: expected a finite number >= 0"),
         ("dropout_prob", 1.0, r"dropout_prob: expected a number in \[0, 1\), got 1.0"),
         ("scan_frame", "car", "scan_frame: expected one of sensor, world, got 'car'"),
-        ("lidar_mounts", [[0, 0, 0]], r"lidar_mounts: expected \(2, 3\).*got shape \(1, 3\)"),
-        ("lidar_mounts", [[0, 0, 0], [0, np.inf, 0]], r"lidar_mounts: expected \(2, 3\) finite"),
+        ("lidars", [], r"lidars: expected 1 to 8 Lidars, got 0"),
+        ("lidars", [{"mount": (0, 0, 0)}] * 9, r"lidars: expected 1 to 8 Lidars, got 9"),
+        ("lidars", {"mount": (0, 0, 0)}, r"lidars: expected a list of 1 to 8 dicts, got dict"),
+        ("lidars", [{"mount": (0, 0, 0), "fvo": 1.0}], r"lidars\[0\]: unknown key\(s\) 'fvo'"),
+        ("lidars", [{"n_beams": 90}], r"lidars\[0\]: expected a 'mount'"),
+        ("lidars", [{"mount": (0, 0, 0)}, {"mount": (0, 0, 0), "fov": 0.0}],
+         r"lidars\[1\].fov: expected a field of view in \(0, 2 pi\]"),
+        ("lidars", [{"mount": (0, 0, 0), "fov": 7.0}], r"lidars\[0\].fov: expected"),
+        ("lidars", [{"mount": (0, 0, 0), "n_beams": 2}], r"lidars\[0\].n_beams: expected an int"),
+        ("lidars", [{"mount": (0, 0, 0), "max_range": -1.0}], r"lidars\[0\].max_range: expected"),
+        ("lidars", [{"mount": (0, np.inf, 0)}], r"lidars\[0\].mount: expected 3 finite numbers"),
+        ("lidars", [{"mount": (0, 0)}], r"lidars\[0\].mount: expected 3 finite numbers"),
+        ("lidars", [{"mount": (2.0, 0, 0)}], r"lidars\[0\].mount: \(2, 0\) lies 2.000 m .*reach"),
+        ("lidars", [{"mount": (0, 0, 0), "dropout_prob": 1.0}], r"lidars\[0\].dropout_prob"),
+        ("lidar_mounts", [[0, 0, 0]], r"'lidar_mounts' moved into 'lidars'"),
+        ("n_beams", 90, r"'n_beams' moved into 'lidars'"),
+        ("max_range", 8.0, r"'max_range' moved into 'lidars'"),
     ],
 )
 def test_bad_values_raise_readable_errors(key, value, message):
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(ConfigError, match=message):
         EnvConfig.from_dict({key: value})
 
 
 def test_gym_make_takes_a_config_dict_and_rebuilds_spaces():
-    env = gym.make("DualLidar-v0", config={"n_beams": 90, "max_range": 6.0})
+    lidars = [{"mount": (0.25, 0, 0), "n_beams": 90, "max_range": 6.0},
+              {"mount": (-0.25, 0, 0), "n_beams": 45, "fov": np.pi, "max_range": 4.0}]
+    env = gym.make("DualLidar-v0", config={"lidars": lidars})
     box = env.observation_space["lidar_1"]
     assert box.shape == (90,) and box.high.max() == pytest.approx(6.0)
+    assert env.observation_space["lidar_2"].shape == (45,)
     observation, _ = env.reset(seed=0)
-    assert observation["lidar_2"].shape == (90,) and observation["lidar_2"].max() <= 6.0
+    assert observation["lidar_2"].shape == (45,) and observation["lidar_2"].max() <= 4.0
+    assert observation in env.observation_space
     with pytest.raises(ValueError, match="unknown config key"):
         gym.make("DualLidar-v0", config={"beams": 90})
     with pytest.raises(TypeError, match="config: expected an EnvConfig or a dict, got list"):

@@ -121,7 +121,8 @@ def test_observation_matches_pymunk_ray_queries_from_the_reported_lidar_poses():
 
 
 def test_info_lidar_poses_are_the_mounts_composed_with_the_car_pose():
-    env = gym.make("DualLidar-v0", config={"lidar_mounts": [[0.3, 0.1, 0.2], [-0.2, 0, -0.1]]})
+    env = gym.make("DualLidar-v0", config={"lidars": [{"mount": [0.3, 0.1, 0.2]},
+                                                      {"mount": [-0.2, 0, -0.1]}]})
     env.reset(seed=0)
     *_, info = env.step(np.array([1.0, 1.0], dtype=np.float32))
     mounts = env.unwrapped.config.mounts_array

@@ -1,0 +1,160 @@
+"""One Lidar of the env's layout (``EnvConfig.lidars``): its mount, beams, range and noise.
+
+Beam geometry: ``n_beams`` beams spread evenly over ``fov`` [rad], centred on the sensor's
+forward axis, angle growing CCW. A full turn (``fov = 2 pi``) has beam ``i`` at ``2 pi i / n``
+(beam 0 forward, no beam doubled at +-pi); a narrower Lidar has beam 0 at ``-fov / 2`` and the
+last beam at ``+fov / 2`` (``-fov / 2 + fov i / (n - 1)``, as a ROS ``LaserScan`` from
+``angle_min`` to ``angle_max``): a 270-degree Lidar's beam 0 points at -135 degrees.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lidar_env.errors import ConfigError
+
+#: Most Lidars one car carries.
+MAX_LIDARS = 8
+#: [rad] a ``fov`` this close to 2 pi is a full turn.
+_FULL_TURN_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """One planar Lidar on the car (frozen; units in the field comments).
+
+    ``range_noise_std`` and ``dropout_prob`` left ``None`` take the env config's values of
+    the same name (0.01 m and 0), so one setting changes the noise of every Lidar.
+    """
+
+    mount: tuple[float, float, float]  # x [m] forward, y [m] left, heading [rad] in the car frame
+    n_beams: int = 360  # [-] beams per scan
+    fov: float = 2.0 * math.pi  # [rad] field of view, in (0, 2 pi], centred on the forward axis
+    max_range: float = 10.0  # [m] a beam that hits nothing reads exactly max_range
+    range_noise_std: float | None = None  # [m] std of the Gaussian noise added to each hit
+    dropout_prob: float | None = None  # [-] probability that a beam reads max_range regardless
+    where: str = dataclasses.field(default="lidars[0]", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        w = self.where
+        mount = np.asarray(self.mount, dtype=np.float64) if _is_numeric(self.mount) else None
+        if mount is None or mount.shape != (3,) or not np.all(np.isfinite(mount)):
+            raise ConfigError(f"{w}.mount: expected 3 finite numbers (x [m], y [m], heading "
+                              f"[rad]) in the car frame, got {self.mount!r}")
+        n = self.n_beams
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3:
+            raise ConfigError(f"{w}.n_beams: expected an integer >= 3, got {n!r}")
+        if not _finite(self.fov) or not 0 < self.fov <= 2 * math.pi + _FULL_TURN_TOLERANCE:
+            raise ConfigError(f"{w}.fov: expected a field of view in (0, 2 pi] [rad], "
+                              f"got {self.fov!r}")
+        if not _finite(self.max_range) or self.max_range <= 0:
+            raise ConfigError(f"{w}.max_range: expected a positive finite number [m], "
+                              f"got {self.max_range!r}")
+        noise = self.range_noise_std
+        if noise is not None and (not _finite(noise) or noise < 0):
+            raise ConfigError(f"{w}.range_noise_std: expected a finite number >= 0 [m] or None, "
+                              f"got {noise!r}")
+        drop = self.dropout_prob
+        if drop is not None and (not _finite(drop) or not 0 <= drop < 1):
+            raise ConfigError(f"{w}.dropout_prob: expected a number in [0, 1) or None, "
+                              f"got {drop!r}")
+        object.__setattr__(self, "mount", tuple(float(v) for v in mount))
+        object.__setattr__(self, "n_beams", int(n))
+        object.__setattr__(self, "fov", float(self.fov))
+        object.__setattr__(self, "max_range", float(self.max_range))
+        for name in ("range_noise_std", "dropout_prob"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, float(getattr(self, name)))
+
+    @classmethod
+    def from_value(cls, value: Any, index: int) -> LidarConfig:
+        """A ``LidarConfig`` or a dict of its fields (unknown keys named) as ``lidars[index]``."""
+        where = f"lidars[{index}]"
+        if isinstance(value, LidarConfig):
+            return dataclasses.replace(value, where=where)
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{where}: expected a dict of {', '.join(LIDAR_KEYS)}, "
+                              f"got {type(value).__name__}")
+        unknown = sorted(set(value) - set(LIDAR_KEYS))
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}: "
+                              f"expected some of {', '.join(LIDAR_KEYS)}")
+        if "mount" not in value:
+            raise ConfigError(f"{where}: expected a 'mount' (x [m], y [m], heading [rad])")
+        return cls(**dict(value), where=where)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as a plain dict (round-trips through :meth:`from_value`)."""
+        return {key: getattr(self, key) for key in LIDAR_KEYS}
+
+    @property
+    def full_turn(self) -> bool:
+        """The beams cover the whole circle (``fov`` = 2 pi)."""
+        return self.fov >= 2 * math.pi - _FULL_TURN_TOLERANCE
+
+    @cached_property
+    def beam_angles(self) -> NDArray[np.float64]:
+        """``(n_beams,)`` beam directions [rad] in the sensor frame (see the module docstring)."""
+        return self.beam_offset + self.sweep_angles
+
+    @property
+    def beam_offset(self) -> float:
+        """[rad] direction of beam 0 from the sensor's forward axis: 0 or ``-fov / 2``."""
+        return 0.0 if self.full_turn else -0.5 * self.fov
+
+    @cached_property
+    def sweep_angles(self) -> NDArray[np.float64]:
+        """``(n_beams,)`` beam directions [rad] from beam 0, in ``[0, fov]``, read-only."""
+        n = self.n_beams
+        if self.full_turn:
+            angles = 2.0 * math.pi * np.arange(n) / n
+        else:
+            angles = self.fov * np.arange(n) / (n - 1)
+        angles.flags.writeable = False
+        return angles
+
+
+#: Keys of one entry of ``EnvConfig.lidars``.
+LIDAR_KEYS: tuple[str, ...] = tuple(
+    f.name for f in dataclasses.fields(LidarConfig) if f.name != "where"
+)
+
+
+def check_lidars(value: Any, reach: float) -> tuple[LidarConfig, ...]:
+    """``value`` (1 to :data:`MAX_LIDARS` dicts or ``LidarConfig``) as checked configs whose
+    mounts lie within ``reach`` [m] of the car's centre."""
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__"):
+        raise ConfigError(f"lidars: expected a list of 1 to {MAX_LIDARS} dicts, "
+                          f"got {type(value).__name__}")
+    if not 1 <= len(value) <= MAX_LIDARS:
+        raise ConfigError(f"lidars: expected 1 to {MAX_LIDARS} Lidars, got {len(value)}")
+    lidars = tuple(LidarConfig.from_value(item, k) for k, item in enumerate(value))
+    for lidar in lidars:
+        x, y, _ = lidar.mount
+        if math.hypot(x, y) > reach + 1e-12:
+            raise ConfigError(
+                f"{lidar.where}.mount: ({x:g}, {y:g}) lies {math.hypot(x, y):.3f} m from the "
+                f"car's centre, outside its reach: expected within the car's half-diagonal "
+                f"{reach:.3f} m")
+    return lidars
+
+
+def _finite(value: Any) -> bool:
+    return (not isinstance(value, bool) and isinstance(value, (int, float, np.number))
+            and math.isfinite(value))
+
+
+def _is_numeric(value: Any) -> bool:
+    try:
+        np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return True
