@@ -4,11 +4,16 @@ Examples::
 
     python -m estimators.calibration --world hallway --trace zigzag --seed 0
     python -m estimators.calibration --bag drive.bag --guess -0.4 0.1 15
+    python -m estimators.calibration --world hallway --trace loop --mount-error 0.03 0.04 3 \
+        --compare pc_fusion lidar_odometry
 
 A simulated drive (``--world``/``--trace``/``--seed``, ``--config`` JSON env overrides) is
 recorded with the scripted driver; a ROS bag (``--bag``, ``--topics``) is read with
 :func:`estimators.datasets.load_bag`. ``--guess x y heading_deg`` (one triple per Lidar 2..K,
 in Lidar 1's frame) starts the calibration; for a bag it replaces the bag's tf mounts.
+``--compare`` (simulated drives) scores estimators with the true mounts, with Lidar 2's mount
+wrong by ``--mount-error dx dy dheading_deg``, and with the mounts self-calibrated from the
+wrong ones (:func:`estimators.calibration.comparison.compare_mounts`).
 """
 
 from __future__ import annotations
@@ -42,7 +47,25 @@ def _parser() -> argparse.ArgumentParser:
                         help="registered estimator for each Lidar's own odometry")
     parser.add_argument("--no-refine", action="store_true",
                         help="motion only: skip aligning overlapping scans")
+    parser.add_argument("--compare", nargs="+", metavar="ESTIMATOR",
+                        help="simulated drive: score these with true, wrong, calibrated mounts")
+    parser.add_argument("--mount-error", nargs=3, type=float, default=(0.03, 0.04, 3.0),
+                        metavar=("DX", "DY", "DEG"),
+                        help="error of Lidar 2's configured mount for --compare [m m deg]")
     return parser
+
+
+def _compare(args: argparse.Namespace, recording) -> int:
+    from estimators.calibration.comparison import compare_mounts, comparison_table
+
+    dx, dy, degrees = args.mount_error
+    results = compare_mounts(recording, (dx, dy, np.radians(degrees)), args.compare)
+    print(comparison_table(results))
+    mount = results["calibrated"]["_mount"]
+    print(f"calibrated lidar_2 mount (car frame): x {mount['x']:+.4f} m, y {mount['y']:+.4f} m, "
+          f"heading {np.degrees(mount['heading']):+.4f} deg; true "
+          + ", ".join(f"{v:+.4f}" for v in recording.setup.mounts[1]))
+    return 0
 
 
 def _guess(values: Sequence[float] | None) -> np.ndarray | None:
@@ -73,6 +96,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         guess = _guess(args.guess)
         recording = _recording(args, guess)
+        if args.compare:
+            if args.bag:
+                raise DualLidarError("--compare: expected a simulated drive (--world), whose "
+                                     "true poses score the runs; a bag has none")
+            return _compare(args, recording)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", NoOverlapWarning)
             calibration = calibrate(recording, guess, estimator=args.estimator,
