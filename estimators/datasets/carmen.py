@@ -12,7 +12,10 @@ Supported messages (one per line, fields separated by white space)::
 Lines starting with ``#`` and blank lines are comments. Any other message type (``RLASER``,
 ``NEFF``, ``SYNC``, ``TRUEPOS``, ...) is not parsed but *counted* in
 :attr:`CarmenLog.unknown_messages`, so nothing is dropped silently. A truncated or
-malformed line of a supported type raises :class:`CarmenFormatError` naming the line.
+malformed line of a supported type (a beam count below 2, a negative range, a non-finite
+number, ``PARAM robot_frontlaser_offset`` that is not a finite number) and corrupt or
+truncated ``.gz``/``.bz2`` data raise :class:`CarmenFormatError` (a
+:class:`~lidar_env.errors.LogFormatError`) naming the file and line.
 
 Beam geometry of ``FLASER`` (which carries none): CARMEN's front laser covers a 180 degree
 field of view starting at -90 degrees, ``n`` beams at ``180 / n`` degrees apart when ``n``
@@ -30,6 +33,7 @@ from __future__ import annotations
 import bz2
 import gzip
 import io
+import zlib
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -38,13 +42,18 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from lidar_env.errors import ConfigError, LogFormatError
 from lidar_env.se2 import relative
 
 #: Messages this module parses; any other message name is counted, not parsed.
 PARSED_MESSAGES: tuple[str, ...] = ("FLASER", "ROBOTLASER1", "ODOM", "PARAM")
 
 
-class CarmenFormatError(ValueError):
+#: ``PARAM`` values that must be numbers (checked on their own line, not where they are used).
+NUMERIC_PARAMS: tuple[str, ...] = ("robot_frontlaser_offset",)
+
+
+class CarmenFormatError(LogFormatError):
     """A line of a CARMEN log that does not follow its message's documented layout."""
 
     def __init__(self, source: str, line_number: int, reason: str) -> None:
@@ -111,7 +120,7 @@ class CarmenLog:
             return np.array([s.timestamp for s in self.scans], dtype=np.float64)
         if clock == "logger":
             return np.array([s.logger_timestamp for s in self.scans], dtype=np.float64)
-        raise ValueError(f"unknown clock {clock!r}: expected one of ipc, logger")
+        raise ConfigError(f"unknown clock {clock!r}: expected one of ipc, logger")
 
     def logged_poses(self) -> NDArray[np.float64]:
         """``(N, 3)`` robot poses logged with the scans (odometry, or SLAM output in a
@@ -134,7 +143,7 @@ def open_text(path: str | Path) -> io.TextIOBase:
 def flaser_beam_angles(n_beams: int) -> NDArray[np.float64]:
     """Beam directions [rad] of an ``n``-beam ``FLASER`` scan (see the module docstring)."""
     if n_beams < 2:
-        raise ValueError(f"n_beams: expected at least 2 beams, got {n_beams}")
+        raise LogFormatError(f"n_beams: expected at least 2 beams, got {n_beams}")
     step = np.pi / (n_beams - 1 if n_beams % 2 else n_beams)
     return -np.pi / 2 + step * np.arange(n_beams)
 
@@ -159,6 +168,24 @@ def _count(token: str, what: str, source: str, line_number: int) -> int:
     return int(token)
 
 
+def _beam_count(token: str, what: str, source: str, line_number: int) -> int:
+    n = _count(token, what, source, line_number)
+    if n < 2:
+        raise CarmenFormatError(source, line_number, f"{what}: expected at least 2 beams, got {n}")
+    return n
+
+
+def _ranges(tokens: list[str], what: str, source: str, line_number: int) -> NDArray[np.float64]:
+    ranges = _floats(tokens, what, source, line_number)
+    negative = np.flatnonzero(ranges < 0)
+    if len(negative):
+        raise CarmenFormatError(
+            source, line_number, f"{what}: expected ranges >= 0 [m], got "
+            f"{float(ranges[negative[0]])!r} at beam {int(negative[0])}"
+        )
+    return ranges
+
+
 def _check_length(fields: list[str], expected: int, message: str, source: str, number: int) -> None:
     if len(fields) != expected:
         raise CarmenFormatError(
@@ -174,9 +201,9 @@ def _parse_flaser(
 ) -> LaserScan:
     if len(fields) < 2:
         raise CarmenFormatError(source, number, "FLASER: missing the beam count")
-    n = _count(fields[1], "FLASER beam count", source, number)
+    n = _beam_count(fields[1], "FLASER beam count", source, number)
     _check_length(fields, 2 + n + 6 + 3, "FLASER", source, number)
-    ranges = _floats(fields[2 : 2 + n], "FLASER ranges", source, number)
+    ranges = _ranges(fields[2 : 2 + n], "FLASER ranges", source, number)
     tail = _floats(fields[2 + n : 2 + n + 7] + fields[-1:], "FLASER poses/time", source, number)
     return LaserScan(
         ranges=ranges,
@@ -195,12 +222,12 @@ def _parse_robotlaser(fields: list[str], source: str, number: int) -> LaserScan:
     if len(fields) < 9:
         raise CarmenFormatError(source, number, "ROBOTLASER1: truncated header")
     header = _floats(fields[1:8], "ROBOTLASER1 header", source, number)
-    n = _count(fields[8], "ROBOTLASER1 beam count", source, number)
+    n = _beam_count(fields[8], "ROBOTLASER1 beam count", source, number)
     if len(fields) < 10 + n:
         raise CarmenFormatError(source, number, "ROBOTLASER1: truncated before the remissions")
     n_remissions = _count(fields[9 + n], "ROBOTLASER1 remission count", source, number)
     _check_length(fields, 10 + n + n_remissions + 11 + 3, "ROBOTLASER1", source, number)
-    ranges = _floats(fields[9 : 9 + n], "ROBOTLASER1 ranges", source, number)
+    ranges = _ranges(fields[9 : 9 + n], "ROBOTLASER1 ranges", source, number)
     rest = 10 + n + n_remissions
     tail = _floats(fields[rest : rest + 12] + fields[-1:], "ROBOTLASER1 tail", source, number)
     _, start_angle, _, resolution, max_range = header[:5]
@@ -233,12 +260,24 @@ def _parse_odom(fields: list[str], source: str, number: int) -> Odometry:
 
 
 def iter_lines(path: str | Path) -> Iterator[tuple[int, list[str]]]:
-    """``(line_number, fields)`` of every non-comment, non-blank line."""
-    with open_text(path) as text:
-        for number, line in enumerate(text, start=1):
-            fields = line.split()
-            if fields and not fields[0].startswith("#"):
-                yield number, fields
+    """``(line_number, fields)`` of every non-comment, non-blank line.
+
+    Raises:
+        CarmenFormatError: the compressed data is corrupt or truncated (naming the line it
+            broke off after).
+    """
+    number = 0
+    try:
+        with open_text(path) as text:
+            for number, line in enumerate(text, start=1):
+                fields = line.split()
+                if fields and not fields[0].startswith("#"):
+                    yield number, fields
+    except (OSError, EOFError, zlib.error) as error:  # gzip.BadGzipFile is an OSError
+        raise CarmenFormatError(
+            str(path), number + 1,
+            f"corrupt or truncated compressed data ({type(error).__name__}: {error})",
+        ) from error
 
 
 def load_log(path: str | Path) -> CarmenLog:
@@ -259,6 +298,8 @@ def load_log(path: str | Path) -> CarmenLog:
         elif name == "PARAM":
             if len(fields) < 3:
                 raise CarmenFormatError(log.source, number, "PARAM: expected a name and a value")
+            if fields[1] in NUMERIC_PARAMS:
+                _floats(fields[2:3], f"PARAM {fields[1]}", log.source, number)
             log.params[fields[1]] = fields[2]
         else:
             log.unknown_messages[name] += 1

@@ -20,13 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.slam.pose_graph import PoseGraph
+from lidar_env.errors import DualLidarError, LogFormatError
 from lidar_env.se2 import compose
 
 _FIELDS = {"VERTEX_SE2": 5, "EDGE_SE2": 12}  # words per line, tag included
 _UPPER = np.triu_indices(3)
 
 
-class G2oFormatError(ValueError):
+class G2oFormatError(LogFormatError):
     """A g2o file that cannot be read; the message names the file and line."""
 
 
@@ -40,14 +41,15 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
     """
     path = Path(path)
     vertices: dict[int, NDArray[np.float64]] = {}
+    vertex_lines: dict[int, int] = {}
     edges: list[tuple[int, int, int, NDArray[np.float64], NDArray[np.float64]]] = []
-    with path.open() as stream:
-        for line_no, line in enumerate(stream, start=1):
-            words = line.split("#", 1)[0].split()
+    with path.open("rb") as stream:
+        for line_no, raw in enumerate(stream, start=1):
+            where = f"{path}:{line_no}"
+            words = _data_words(raw, where)
             if not words:
                 continue
             tag = words[0]
-            where = f"{path}:{line_no}"
             if tag not in _FIELDS:
                 raise G2oFormatError(
                     f"{where}: unknown tag {tag!r}; expected one of {', '.join(_FIELDS)}"
@@ -67,6 +69,7 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 if ids[0] in vertices:
                     raise G2oFormatError(f"{where}: vertex {ids[0]} defined twice")
                 vertices[ids[0]] = values
+                vertex_lines[ids[0]] = line_no
             else:
                 info = np.zeros((3, 3))
                 info[_UPPER] = values[3:]
@@ -77,7 +80,11 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
         vertices = _compose_odometry(path, edges)
     graph = PoseGraph()
     for node_id, pose in vertices.items():
-        graph.add_node(pose, node_id)
+        try:
+            graph.add_node(pose, node_id)
+        except DualLidarError as err:
+            where = f"{path}:{vertex_lines[node_id]}" if node_id in vertex_lines else str(path)
+            raise G2oFormatError(f"{where}: VERTEX_SE2 {node_id}: {err}") from None
     for line_no, i, j, z, info in edges:
         where = f"{path}:{line_no}"
         for node_id in (i, j):
@@ -85,9 +92,22 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 raise G2oFormatError(f"{where}: EDGE_SE2 refers to undefined vertex {node_id}")
         try:
             graph.add_edge(graph.index_of(i), graph.index_of(j), z, info)
-        except ValueError as err:
+        except DualLidarError as err:
             raise G2oFormatError(f"{where}: {err}") from None
     return graph
+
+
+def _data_words(raw: bytes, where: str) -> list[str]:
+    """The words of one line before its ``#`` comment (a comment may hold any bytes; the data
+    must be UTF-8)."""
+    data = raw.split(b"#", 1)[0]
+    try:
+        return data.decode("utf-8").split()
+    except UnicodeDecodeError as err:
+        raise G2oFormatError(
+            f"{where}: expected UTF-8 text, got byte 0x{data[err.start]:02x} at column "
+            f"{err.start + 1}"
+        ) from None
 
 
 def _compose_odometry(

@@ -24,13 +24,32 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, inverse
 
 Loss = Literal["linear", "huber", "cauchy"]
 LOSSES: tuple[str, ...] = ("linear", "huber", "cauchy")
 
 
-class DisconnectedGraphError(ValueError):
+#: [m] largest accepted |x|, |y| of a node pose or an edge measurement: a million km, far past
+#: any map, yet far enough from float overflow that squared residuals stay finite (poses at
+#: 1e200 made the solver's factorisation "exactly singular").
+MAX_COORDINATE = 1e9
+#: Accepted eigenvalues of an edge information matrix [1/m^2, 1/rad^2]: outside these an edge
+#: either says nothing (1e-300 left the poses unmoved with ``converged=True``) or overflows.
+MIN_INFORMATION, MAX_INFORMATION = 1e-9, 1e15
+#: Node ids are stored as int64 (and written to g2o files as such).
+ID_RANGE = (-(2**63), 2**63 - 1)
+
+
+def _check_coordinates(what: str, pose: NDArray[np.float64]) -> None:
+    """``pose`` (x [m], y [m], ...) lies within ``MAX_COORDINATE`` of the origin."""
+    if np.max(np.abs(pose[:2])) > MAX_COORDINATE:
+        raise EstimatorInputError(
+            f"{what}: expected |x|, |y| <= {MAX_COORDINATE:g} m, got {pose.tolist()}")
+
+
+class DisconnectedGraphError(EstimatorInputError):
     """The graph falls apart into pieces whose relative placement nothing constrains."""
 
 
@@ -55,10 +74,14 @@ class PoseGraph:
         """Add a node at ``pose`` (x [m], y [m], heading [rad]); return its index."""
         pose_arr = np.asarray(pose, dtype=np.float64)
         if pose_arr.shape != (3,) or not np.all(np.isfinite(pose_arr)):
-            raise ValueError(f"node pose: expected 3 finite numbers (x, y, heading), got {pose}")
+            raise EstimatorInputError(
+                f"node pose: expected 3 finite numbers (x, y, heading), got {pose}")
+        _check_coordinates("node pose", pose_arr)
         node_id = len(self._ids) if node_id is None else int(node_id)
+        if not ID_RANGE[0] <= node_id <= ID_RANGE[1]:
+            raise EstimatorInputError(f"node id: expected a 64-bit integer, got {node_id}")
         if node_id in self._index_of:
-            raise ValueError(f"node id {node_id} is already in the graph")
+            raise EstimatorInputError(f"node id {node_id} is already in the graph")
         self._index_of[node_id] = len(self._ids)
         self._ids.append(node_id)
         self._poses.append(pose_arr.copy())
@@ -82,19 +105,27 @@ class PoseGraph:
             if not 0 <= int(index) < n:
                 raise IndexError(f"edge node {name}={index}: expected a node index in [0, {n})")
         if int(i) == int(j):
-            raise ValueError(f"edge {i}->{j}: expected two different nodes")
+            raise EstimatorInputError(f"edge {i}->{j}: expected two different nodes")
         z = np.asarray(measurement, dtype=np.float64)
         if z.shape != (3,) or not np.all(np.isfinite(z)):
-            raise ValueError(f"edge measurement: expected 3 finite numbers, got {measurement}")
+            raise EstimatorInputError(
+                f"edge measurement: expected 3 finite numbers, got {measurement}")
+        _check_coordinates(f"edge {i}->{j} measurement", z)
         omega = np.asarray(information, dtype=np.float64)
         if omega.shape != (3, 3) or not np.allclose(omega, omega.T):
-            raise ValueError(f"edge information: expected a symmetric 3x3 matrix, got {omega}")
+            raise EstimatorInputError(
+                f"edge information: expected a symmetric 3x3 matrix, got {omega}")
         try:
             np.linalg.cholesky(omega)
         except np.linalg.LinAlgError:
-            raise ValueError(
+            raise EstimatorInputError(
                 f"edge {i}->{j} information: expected a positive-definite matrix, got {omega}"
             ) from None
+        eigenvalues = np.linalg.eigvalsh(omega)
+        if eigenvalues[0] < MIN_INFORMATION or eigenvalues[-1] > MAX_INFORMATION:
+            raise EstimatorInputError(
+                f"edge {i}->{j} information: expected eigenvalues in [{MIN_INFORMATION:g}, "
+                f"{MAX_INFORMATION:g}], got {eigenvalues[0]:.3g} .. {eigenvalues[-1]:.3g}")
         self._edge_nodes.append((int(i), int(j)))
         self._measurements.append(z.copy())
         self._information.append(omega.copy())
@@ -119,7 +150,8 @@ class PoseGraph:
     def poses(self, poses: ArrayLike) -> None:
         arr = np.asarray(poses, dtype=np.float64)
         if arr.shape != (self.n_nodes, 3) or not np.all(np.isfinite(arr)):
-            raise ValueError(f"poses: expected finite ({self.n_nodes}, 3), got {arr.shape}")
+            raise EstimatorInputError(
+                f"poses: expected finite ({self.n_nodes}, 3), got {arr.shape}")
         self._poses = [p.copy() for p in arr]
 
     def set_pose(self, index: int, pose: ArrayLike) -> None:
@@ -257,10 +289,12 @@ def chain_covariance(poses: ArrayLike, covariances: ArrayLike, correlated: bool 
     poses = np.asarray(poses, dtype=np.float64)
     covariances = np.asarray(covariances, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) < 1:
-        raise ValueError(f"chain poses: expected shape (n+1 >= 1, 3), got {poses.shape}")
+        raise EstimatorInputError(
+            f"chain poses: expected shape (n+1 >= 1, 3), got {poses.shape}")
     if covariances.shape != (len(poses) - 1, 3, 3):
-        raise ValueError(f"chain covariances: expected shape ({len(poses) - 1}, 3, 3) for "
-                         f"{len(poses)} poses, got {covariances.shape}")
+        raise EstimatorInputError(
+            f"chain covariances: expected shape ({len(poses) - 1}, 3, 3) for "
+            f"{len(poses)} poses, got {covariances.shape}")
     ends = poses[1:]
     lever = poses[-1, :2] - ends[:, :2]
     c, s = np.cos(ends[:, 2]), np.sin(ends[:, 2])
@@ -287,7 +321,7 @@ def robust_rho(
     ``c^2 log(1 + s / c^2)``.
     """
     if loss not in LOSSES:
-        raise ValueError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
+        raise ConfigError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
     if loss == "linear":
         return s, np.ones_like(s)
     c2 = scale * scale

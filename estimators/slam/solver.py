@@ -17,6 +17,7 @@ from scipy.optimize import least_squares
 from scipy.sparse.linalg import splu
 
 from estimators.slam.pose_graph import LOSSES, Loss, PoseGraph, edge_residuals, robust_rho
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
 Solver = Literal["lm", "scipy"]
@@ -151,21 +152,21 @@ def optimize(
             Only the ``lm`` solver honours it.
     """
     if solver not in SOLVERS:
-        raise ValueError(f"unknown solver {solver!r}: expected one of {', '.join(SOLVERS)}")
+        raise ConfigError(f"unknown solver {solver!r}: expected one of {', '.join(SOLVERS)}")
     if loss not in LOSSES:
-        raise ValueError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
+        raise ConfigError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
     if not loss_scale > 0:
-        raise ValueError(f"loss_scale: expected a positive Mahalanobis distance, got {loss_scale}")
+        raise ConfigError(f"loss_scale: expected a positive Mahalanobis distance, got {loss_scale}")
     if graph.n_nodes == 0:
-        raise ValueError("pose graph is empty: expected at least one node")
+        raise EstimatorInputError("pose graph is empty: expected at least one node")
     if not 0 <= fixed < graph.n_nodes:
         raise IndexError(f"fixed={fixed}: expected a node index in [0, {graph.n_nodes})")
     graph.check_connected()
     if robust_edges is not None:
         robust_edges = np.asarray(robust_edges, dtype=bool)
         if robust_edges.shape != (graph.n_edges,):
-            raise ValueError(f"robust_edges: expected a boolean mask of shape ({graph.n_edges},),"
-                             f" got {robust_edges.shape}")
+            raise ConfigError(f"robust_edges: expected a boolean mask of shape ({graph.n_edges},),"
+                            f" got {robust_edges.shape}")
     start = time.perf_counter()
     initial_cost = graph.cost(loss=loss, loss_scale=loss_scale, robust_edges=robust_edges)
     if graph.n_nodes == 1 or graph.n_edges == 0:
