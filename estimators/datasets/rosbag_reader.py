@@ -121,11 +121,15 @@ def _scan_topic(reader: Any, connections: list[Any], source: str, topic: str) ->
                      low, high)
 
 
+def yaw(q: Any) -> float:
+    """The yaw [rad] (rotation about +z, in [-pi, pi)) of a ``geometry_msgs/Quaternion``."""
+    angle = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return float(wrap_angle(angle))
+
+
 def _planar(transform: Any) -> NDArray[np.float64]:
     """A ``geometry_msgs/Transform`` projected on the plane: (x [m], y [m], yaw [rad])."""
-    q = transform.rotation
-    yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    return np.array([transform.translation.x, transform.translation.y, wrap_angle(yaw)])
+    return np.array([transform.translation.x, transform.translation.y, yaw(transform.rotation)])
 
 
 def static_transforms(reader: Any) -> dict[str, tuple[str, NDArray[np.float64]]]:
@@ -275,10 +279,8 @@ def _truth_stream(reader: Any, topic: str, source: str) -> tuple[NDArray, NDArra
     for connection, _, raw in reader.messages(connections=connections):
         message = reader.deserialize(raw, connection.msgtype)
         pose = message.pose.pose if hasattr(message.pose, "pose") else message.pose
-        q = pose.orientation
-        yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         stamps.append(stamp_seconds(message.header.stamp))
-        poses.append((pose.position.x, pose.position.y, wrap_angle(yaw)))
+        poses.append((pose.position.x, pose.position.y, yaw(pose.orientation)))
     return np.array(stamps), np.array(poses, dtype=np.float64).reshape(-1, 3)
 
 
