@@ -9,6 +9,7 @@ import pytest
 
 from estimators.base import Sensor, SensorSetup
 from estimators.calibration import (
+    InconsistentMotionWarning,
     NoOverlapWarning,
     UnobservableMountError,
     calibrate,
@@ -118,3 +119,12 @@ def test_the_command_line_prints_the_mounts(capsys) -> None:
     assert "lidar_2 in lidar_1: x -0.50" in out and "[scan alignment]" in out
     assert main(["--bag", "/nonexistent/drive.bag"]) == 2
     assert "ROS bag not found" in capsys.readouterr().err
+
+
+def test_unsynchronised_lidars_warn_that_the_motions_disagree() -> None:
+    """Lidar 2's scans 0.5 s late: the two odometries no longer turn together."""
+    dataset = record(Scenario("hallway", "zigzag", 0, config={"max_episode_time": 25.0}))
+    late = {"lidar_1": dataset.scans["lidar_1"][5:], "lidar_2": dataset.scans["lidar_2"][:-5]}
+    shifted = Recording("late", dataset.setup, dataset.times[5:], late, ("/a", "/b"), ("a", "b"))
+    with pytest.warns(InconsistentMotionWarning, match="lidar_2: its own odometry turns unlike"):
+        calibrate(shifted, refine=False)
