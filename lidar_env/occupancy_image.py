@@ -13,10 +13,14 @@ from __future__ import annotations
 import os
 
 import numpy as np
-import pymunk
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import MapError
 from lidar_env.polygons import signed_area
+
+#: Largest occupancy image :func:`read_occupancy` accepts [pixels]: 2000 x 2000, the size
+#: ``World.from_image`` documents (beyond it tracing needs minutes and gigabytes).
+MAX_IMAGE_PIXELS = 4_000_000
 
 
 def read_occupancy(image: ArrayLike | str | os.PathLike) -> NDArray[np.bool_]:
@@ -32,50 +36,115 @@ def read_occupancy(image: ArrayLike | str | os.PathLike) -> NDArray[np.bool_]:
         except (UnidentifiedImageError, OSError, SyntaxError) as error:
             if isinstance(error, FileNotFoundError):
                 raise
-            raise ValueError(
+            raise MapError(
                 f"image: expected a readable image file, got {image!s}: {error}"
             ) from error
     else:
         array = np.asarray(image)
     if array.ndim != 2:
-        raise ValueError(f"image: expected a 2-D occupancy array, got shape {array.shape}")
+        raise MapError(f"image: expected a 2-D occupancy array, got shape {array.shape}")
     if array.size == 0:
-        raise ValueError(f"image: expected a non-empty image, got shape {array.shape}")
+        raise MapError(f"image: expected a non-empty image, got shape {array.shape}")
+    if array.size > MAX_IMAGE_PIXELS:
+        raise MapError(
+            f"image: expected at most {MAX_IMAGE_PIXELS} pixels (2000 x 2000), got "
+            f"{array.shape[0]} x {array.shape[1]}; downsample it or split the map"
+        )
+    if np.iscomplexobj(array):
+        raise MapError("image: expected real pixel values, got complex ones")
     if array.dtype == bool:
         occupied = array.copy()
     else:
         if not np.issubdtype(array.dtype, np.number):
-            raise ValueError(f"image: expected numeric pixel values, got dtype {array.dtype}")
+            raise MapError(f"image: expected numeric pixel values, got dtype {array.dtype}")
         values = array.astype(np.float64)
         if not np.all(np.isfinite(values)) or np.any(values < 0):
-            raise ValueError("image: expected finite pixel values >= 0 (0 = free, > 0 = obstacle)")
+            raise MapError("image: expected finite pixel values >= 0 (0 = free, > 0 = obstacle)")
         occupied = values > 0
     if occupied.all():
-        raise ValueError(f"image: expected some free (0) pixels, got all {array.size} occupied")
+        raise MapError(f"image: expected some free (0) pixels, got all {array.size} occupied")
     return occupied
+
+
+#: Edge directions 0 east (+x), 1 north (+y), 2 west, 3 south (a left turn is +1 mod 4), as
+#: steps (di, dj) in array index space (row i grows downwards).
+_STEP = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]])
+
+
+def boundary_loops(occupied: NDArray[np.bool_]) -> list[NDArray[np.float64]]:
+    """Closed outlines along pixel edges, obstacle on the left, corners only; pixels, origin
+    at the image's bottom-left corner. Diagonal neighbours stay separate loops.
+
+    Vectorised: every occupied/free pixel-edge pair is a directed unit edge, and each edge's
+    successor is the edge leaving its end point that turns most to the left; only walking the
+    loops is a Python loop, one step per edge. Linear in the image size, where pymunk's
+    ``march_hard`` joins segments by searching its open polylines (quadratic on speckle:
+    150 s for 1000 x 1000 px of 5 % noise).
+    """
+    height, width = occupied.shape
+    o = np.pad(occupied, 1)
+    cols = width + 3  # lattice points per row of the padded image
+    starts, dirs = [], []
+    # bottom edges (free below): east from (i+1, j); top (free above): west from (i, j+1);
+    # right (free right): north from (i+1, j+1); left (free left): south from (i, j)
+    # each mask index (i, j) -> the lattice point its edge starts at, (i + di, j + dj)
+    for mask, (di, dj), d in (
+        (o[:-1, :] & ~o[1:, :], (1, 0), 0),  # pixel (i, j), free below: east along its bottom
+        (o[1:, :] & ~o[:-1, :], (1, 1), 2),  # pixel (i+1, j), free above: west along its top
+        (o[:, :-1] & ~o[:, 1:], (1, 1), 1),  # pixel (i, j), free right: north along its right
+        (o[:, 1:] & ~o[:, :-1], (0, 1), 3),  # pixel (i, j+1), free left: south along its left
+    ):
+        i, j = np.nonzero(mask)
+        starts.append((i + di) * cols + (j + dj))
+        dirs.append(np.full(len(i), d))
+    start = np.concatenate(starts)
+    direction = np.concatenate(dirs)
+    if len(start) == 0:
+        return []
+    step = _STEP[direction]
+    end = start + step[:, 0] * cols + step[:, 1]
+    vertices, start_id = np.unique(start, return_inverse=True)
+    table = np.full((len(vertices), 4), -1, dtype=np.int64)
+    table[start_id, direction] = np.arange(len(start))
+    end_id = np.searchsorted(vertices, end)
+    nxt = np.full(len(start), -1, dtype=np.int64)
+    for turn in (3, 0, 1):  # right, straight, left: the last written (left) wins
+        candidate = table[end_id, (direction + turn) % 4]
+        nxt = np.where(candidate >= 0, candidate, nxt)
+    loops = []
+    seen = np.zeros(len(start), dtype=bool)
+    for first in range(len(start)):
+        if seen[first]:
+            continue
+        cycle = [first]
+        seen[first] = True
+        k = nxt[first]
+        while k != first:
+            seen[k] = True
+            cycle.append(k)
+            k = nxt[k]
+        edges = np.array(cycle)
+        turns = direction[edges] != direction[np.roll(edges, 1)]
+        corners = start[edges[turns]]
+        i, j = np.divmod(corners, cols)
+        loops.append(np.column_stack([j - 1, height + 1 - i]).astype(np.float64))
+    return loops
 
 
 def trace_outlines(occupied: NDArray[np.bool_], tolerance: float) -> list[NDArray[np.float64]]:
     """Closed outlines ``(k, 2)`` [pixels, origin at the bottom-left corner] of the occupied
-    pixels, traced by pymunk's marching squares and simplified by Douglas-Peucker."""
+    pixels, along pixel edges (:func:`boundary_loops`), simplified by Douglas-Peucker
+    (``pymunk.autogeometry.simplify_curves``) within ``tolerance`` [pixels]."""
     from pymunk import autogeometry
 
-    height, width = occupied.shape
-    # One free pixel of padding closes outlines that touch the image border.
-    padded = np.pad(occupied, 1).astype(float).tolist()
-
-    def sample(point: tuple[float, float]) -> float:
-        # Samples sit on pixel centres (c + 0.5, H - 1 - r + 0.5) in padded index space.
-        return padded[int(height + 1.0 - point[1])][int(point[0] + 1.0)]
-
-    box = pymunk.BB(-0.5, -0.5, width + 0.5, height + 0.5)
-    polylines = autogeometry.march_hard(box, width + 2, height + 2, 0.5, sample)
     loops = []
-    for line in polylines:
-        simplified = autogeometry.simplify_curves(line, tolerance) if tolerance > 0 else line
-        loop = np.array([(v.x, v.y) for v in simplified])
-        if len(loop) > 1 and np.array_equal(loop[0], loop[-1]):
-            loop = loop[:-1]
+    for loop in boundary_loops(occupied):
+        if tolerance > 0:
+            closed = [(float(x), float(y)) for x, y in loop]
+            simplified = autogeometry.simplify_curves([*closed, closed[0]], tolerance)
+            loop = np.array([(v.x, v.y) for v in simplified])
+            if len(loop) > 1 and np.array_equal(loop[0], loop[-1]):
+                loop = loop[:-1]
         if len(loop) >= 3 and abs(signed_area(loop)) > 0:
             loops.append(loop)
     return loops

@@ -13,36 +13,89 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import MapError
+
+
+def as_float_array(values: ArrayLike, what: str, shape: str) -> NDArray[np.float64]:
+    """``values`` as float64, or a :class:`MapError` naming ``what`` (strings, ragged nesting,
+    complex numbers, None) that says the ``shape`` expected."""
+    try:
+        if np.iscomplexobj(values):
+            raise MapError(f"{what}: expected real numbers of shape {shape}, got complex values")
+        return np.asarray(values, dtype=np.float64)
+    except MapError:
+        raise
+    except (TypeError, ValueError) as error:
+        raise MapError(
+            f"{what}: expected numbers of shape {shape}, got {str(values)[:60]!r} ({error})"
+        ) from None
+
 
 def as_rows(values: ArrayLike, width: int, what: str) -> NDArray[np.float64]:
     """``values`` as a finite float64 ``(N, width)`` array (empty input gives ``(0, width)``)."""
-    array = np.asarray(values, dtype=np.float64)
+    array = as_float_array(values, what, f"(N, {width})")
     if array.size == 0:
         return np.zeros((0, width))
     if array.ndim == 1 and array.shape[0] == width:
         array = array[None, :]
     if array.ndim != 2 or array.shape[1] != width:
-        raise ValueError(f"{what}: expected shape (N, {width}), got {array.shape}")
+        raise MapError(f"{what}: expected shape (N, {width}), got {array.shape}")
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"{what}: expected finite values, got NaN or inf")
+        raise MapError(f"{what}: expected finite values, got NaN or inf")
     return array
 
 
 def as_polygon(vertices: ArrayLike, index: int) -> NDArray[np.float64]:
     """One polygon as ``(k, 2)`` float64 with k >= 3 distinct vertices, closing vertex dropped."""
-    polygon = np.asarray(vertices, dtype=np.float64)
+    polygon = as_float_array(vertices, f"polygons[{index}]", "(k, 2)")
     if polygon.ndim != 2 or polygon.shape[1] != 2:
-        raise ValueError(f"polygons[{index}]: expected shape (k, 2), got {polygon.shape}")
+        raise MapError(f"polygons[{index}]: expected shape (k, 2), got {polygon.shape}")
     if not np.all(np.isfinite(polygon)):
-        raise ValueError(f"polygons[{index}]: expected finite vertices, got NaN or inf")
+        raise MapError(f"polygons[{index}]: expected finite vertices, got NaN or inf")
     # Drop repeated consecutive vertices (including a closing copy of the first): they would
     # make zero-length edges.
     polygon = polygon[np.any(polygon != np.roll(polygon, 1, axis=0), axis=1)].copy()
     if len(polygon) < 3:
-        raise ValueError(f"polygons[{index}]: expected >= 3 distinct vertices, got {len(polygon)}")
+        raise MapError(f"polygons[{index}]: expected >= 3 distinct vertices, got {len(polygon)}")
+    crossing = first_crossing(polygon_edges(polygon))
+    if crossing is not None:
+        raise MapError(
+            f"polygons[{index}]: expected a simple polygon, got edges {crossing[0]} and "
+            f"{crossing[1]} crossing (a self-intersecting outline such as a bowtie or a "
+            "pentagram has no consistent inside: split it into simple polygons)"
+        )
     if abs(signed_area(polygon)) <= 0.0:
-        raise ValueError(f"polygons[{index}]: expected a non-zero area, got collinear vertices")
+        raise MapError(f"polygons[{index}]: expected a non-zero area, got collinear vertices")
     return polygon
+
+
+def first_crossing(edges: NDArray[np.float64], block: int = 256) -> tuple[int, int] | None:
+    """The first pair ``(i, j)`` of non-adjacent ``edges`` ``(k, 4)`` of one closed outline
+    that cross properly (touching at a point does not count), or None. Vectorised in blocks
+    of ``block`` edges against all later ones: O(k^2) work, O(block k) memory."""
+    k = len(edges)
+    a, b = edges[:, 0:2], edges[:, 2:4]
+    for start in range(0, k, block):
+        i = np.arange(start, min(start + block, k))[:, None]
+        j = np.arange(k)[None, :]
+        candidate = (j > i + 1) & ~((i == 0) & (j == k - 1))  # not itself, not neighbours
+        if not candidate.any():
+            continue
+        p, r = a[i[:, 0]][:, None, :], (b - a)[i[:, 0]][:, None, :]
+        q, s = a[None, :, :], (b - a)[None, :, :]
+        d1 = _cross(r, q - p)
+        d2 = _cross(r, q + s - p)
+        d3 = _cross(s, p - q)
+        d4 = _cross(s, p + r - q)
+        hits = candidate & (d1 * d2 < 0) & (d3 * d4 < 0)
+        if hits.any():
+            row, col = np.argwhere(hits)[0]
+            return int(i[row, 0]), int(col)
+    return None
+
+
+def _cross(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
 def signed_area(polygon: NDArray[np.float64]) -> float:

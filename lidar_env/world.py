@@ -11,6 +11,7 @@ polygons when you mean a union.
 
 from __future__ import annotations
 
+import numbers
 import os
 from collections.abc import Sequence
 from functools import cached_property
@@ -20,9 +21,22 @@ import numpy as np
 import pymunk
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import MapError
 from lidar_env.occupancy_image import PixelGrid, read_occupancy, trace_outlines
 from lidar_env.polygons import as_polygon, as_rows, convex_pieces, even_odd_inside, polygon_edges
 from lidar_env.primitive_grid import PrimitiveGrid, build_grid, point_queries
+
+#: [m] margin either side of a flat default bounding box (a world of one straight wall).
+FLAT_BOUNDS_MARGIN = 0.5
+
+
+def _check_resolution(resolution: object) -> None:
+    """A pixel size must be a real number (a string such as ``"0.05"`` is named, not mangled)."""
+    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
+        raise MapError(
+            f"resolution: expected a positive pixel size [m], got {type(resolution).__name__} "
+            f"{resolution!r}"
+        )
 
 #: ``collision_type`` of every static obstacle shape added by :meth:`World.build_space`.
 OBSTACLE_COLLISION_TYPE: int = 1
@@ -64,18 +78,18 @@ class World:
         self.circles = as_rows(circles, 3, "circles").copy()
         if np.any(self.circles[:, 2] <= 0):
             bad = int(np.argmax(self.circles[:, 2] <= 0))
-            raise ValueError(
+            raise MapError(
                 f"circles[{bad}]: expected a positive radius, got {self.circles[bad, 2]}"
             )
         self.walls = as_rows(segments, 4, "segments").copy()
         lengths = np.hypot(*(self.walls[:, 2:4] - self.walls[:, 0:2]).T)
         if np.any(lengths <= 0):
             bad = int(np.argmax(lengths <= 0))
-            raise ValueError(
+            raise MapError(
                 f"segments[{bad}]: expected two distinct end points, got {self.walls[bad]}"
             )
         if isinstance(polygons, np.ndarray) and polygons.ndim == 2:
-            raise ValueError(
+            raise MapError(
                 f"polygons: expected a sequence of (k, 2) arrays, got one array {polygons.shape}; "
                 "wrap a single polygon in a list"
             )
@@ -109,15 +123,19 @@ class World:
             corners.append(self.segments[:, 2:4])
             points = np.vstack(corners)
             if len(points) == 0:
-                raise ValueError(
+                raise MapError(
                     "bounds: expected (xmin, ymin, xmax, ymax) for a world without obstacles"
                 )
             lo, hi = points.min(axis=0), points.max(axis=0)
+            # a world of one straight wall (or of collinear ones) spans no area: give the
+            # flat axis a margin so the box can be drawn and rasterised
+            flat = hi - lo <= 0
+            lo, hi = lo - flat * FLAT_BOUNDS_MARGIN, hi + flat * FLAT_BOUNDS_MARGIN
             return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
         box = np.asarray(bounds, dtype=np.float64)
         ordered = box.shape == (4,) and box[0] < box[2] and box[1] < box[3]
         if not (ordered and np.all(np.isfinite(box))):
-            raise ValueError(
+            raise MapError(
                 f"bounds: expected finite (xmin, ymin, xmax, ymax) with xmin < xmax and "
                 f"ymin < ymax, got {bounds}"
             )
@@ -153,7 +171,7 @@ class World:
 
         Args:
             image: 2-D array, or path to an image file read as greyscale (PNG, PGM, ...);
-                0 = free, > 0 = obstacle (the paper's world-map convention). Up to ~2000 x 2000.
+                0 = free, > 0 = obstacle (the paper's world-map convention). At most 2000 x 2000.
             resolution: pixel size [m].
             origin: world ``(x, y)`` [m] of the bottom-left corner of the image. Row 0 is the
                 top (max y): pixel ``(r, c)`` covers ``x in origin_x + [c, c+1) * res`` and
@@ -162,19 +180,23 @@ class World:
             tolerance: Douglas-Peucker simplification [pixels] of the traced staircase
                 outlines, in ``[0, 0.5]``; 0.5 keeps every outline within half a pixel.
 
-        The outlines come from ``pymunk.autogeometry.march_hard`` on pixel centres, so they run
-        along pixel edges before simplification; outlines of free regions enclosed by obstacles
-        become holes by the even-odd rule. The world's bounds are the image extent. Tracing
-        calls back into Python once per pixel: about 5 s for 2000 x 2000 pixels.
+        The outlines run along pixel edges (:func:`~lidar_env.occupancy_image.boundary_loops`,
+        vectorised, linear in the image size) before simplification; diagonal neighbours stay
+        separate polygons touching at a corner, and outlines of free regions enclosed by
+        obstacles become holes by the even-odd rule. The world's bounds are the image extent.
+        An image over :data:`~lidar_env.occupancy_image.MAX_IMAGE_PIXELS` (2000 x 2000) is a
+        :class:`~lidar_env.errors.MapError`. 1000 x 1000 px of 5 % speckle (45,000 polygons)
+        takes about 10 s of CPU here (``benchmarks/bench_from_image.py``).
         """
         if name is None:
             name = Path(image).stem if isinstance(image, (str, os.PathLike)) else "image"
         pixels = read_occupancy(image)
+        _check_resolution(resolution)
         if not (np.isfinite(resolution) and resolution > 0):
-            raise ValueError(f"resolution: expected a positive pixel size [m], got {resolution}")
+            raise MapError(f"resolution: expected a positive pixel size [m], got {resolution}")
         ox, oy = as_rows(origin, 2, "origin")[0]
         if not 0.0 <= tolerance <= 0.5:
-            raise ValueError(f"tolerance: expected a value in [0, 0.5] pixels, got {tolerance}")
+            raise MapError(f"tolerance: expected a value in [0, 0.5] pixels, got {tolerance}")
         height, width = pixels.shape
         loops = trace_outlines(pixels, tolerance)
         polygons = [np.asarray(loop) * resolution + (ox, oy) for loop in loops]
@@ -191,13 +213,14 @@ class World:
         occupied when its centre is inside a circle or polygon (even-odd) or it holds a circle
         centre, or a wall passes through it (walls are drawn at least one pixel wide).
         """
+        _check_resolution(resolution)
         if not (np.isfinite(resolution) and resolution > 0):
-            raise ValueError(f"resolution: expected a positive pixel size [m], got {resolution}")
+            raise MapError(f"resolution: expected a positive pixel size [m], got {resolution}")
         xmin, ymin, xmax, ymax = self._check_bounds(self.bounds if bounds is None else bounds)
         width = max(1, int(np.ceil((xmax - xmin) / resolution - 1e-9)))
         height = max(1, int(np.ceil((ymax - ymin) / resolution - 1e-9)))
         if width * height > 50_000_000:
-            raise ValueError(
+            raise MapError(
                 f"to_image: expected at most 5e7 pixels, got {height} x {width}; "
                 "use a coarser resolution or smaller bounds"
             )
