@@ -1,6 +1,10 @@
 """Speed of the dual-Lidar kernel against a per-beam pymunk ray-query loop on the same poses.
 
-Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 10 s).
+Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 20 s).
+
+Then other layouts (issue 15): 1, 2 and 4 Lidars of 360 degrees, and 1 x 180, 2 x 270 and
+4 x 90 degrees, every scan of a car in one :meth:`lidar_env.lidar_layout.LidarLayout.scan`
+call (the env's whole sensor model, float32 readings), against pymunk per beam. Target: >= 80x.
 
 The worlds are built inline and bracket the built-in ones: 40 cylinders + 100 free-standing
 walls, and 80 + 220, inside a 40 m x 40 m boundary (144 and 304 primitives), in which a 10 m
@@ -21,10 +25,22 @@ import numpy as np
 import pymunk
 
 from lidar_env.lidar import Lidar, cast_rays, pymunk_cast_rays
+from lidar_env.lidar_config import LidarConfig
+from lidar_env.lidar_layout import LidarLayout
 from lidar_env.se2 import compose
 from lidar_env.world import World
 
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
+#: Other layouts (issue 15): K Lidars of their own fov, cast in one call by LidarLayout.scan.
+LAYOUTS: dict[str, list[LidarConfig]] = {
+    **{f"{k} x 360 deg": [LidarConfig((0.25 - 0.5 * j / max(k - 1, 1), 0.0, 0.0))
+                          for j in range(k)] for k in (1, 2, 4)},
+    "1 x 180 deg front": [LidarConfig((0.35, 0.0, 0.0), 181, np.pi)],
+    "2 x 270 deg corners": [LidarConfig((0.35, 0.2, np.pi / 4), 271, 1.5 * np.pi),
+                            LidarConfig((-0.35, -0.2, -0.75 * np.pi), 271, 1.5 * np.pi)],
+    "4 x 90 deg corners": [LidarConfig((sx * 0.35, sy * 0.2, np.arctan2(sy, sx)), 91, np.pi / 2)
+                           for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))],
+}
 
 
 def representative_world(rng: np.random.Generator, n_circles: int, n_walls: int) -> World:
@@ -127,6 +143,35 @@ def bench_world(world: World, sensors: np.ndarray, lidar: Lidar) -> None:
           f"   (max |difference| {worst:.1e} m)")
 
 
+def bench_layout(world: World, cars: np.ndarray, name: str, lidars: list[LidarConfig]) -> None:
+    """Time :meth:`LidarLayout.scan` (all K scans in one call, noiseless) against pymunk's
+    per-beam queries for each Lidar, on the same car poses; print one line."""
+    layout = LidarLayout(lidars, [0.0] * len(lidars), [0.0] * len(lidars))
+    sensors = np.stack([compose(cars, np.array(lidar.mount)) for lidar in lidars], axis=1)
+    clear = np.all(world.clearance(sensors[..., :2].reshape(-1, 2)).reshape(len(cars), -1) > 0.05,
+                   axis=1)
+    sensors = sensors[clear]
+    rng = np.random.default_rng(0)
+    layout.scan(world, sensors[0], rng)  # compile (or load the numba cache)
+    repeats = 5
+    cpu = time.process_time()
+    for _ in range(repeats):
+        scans = [layout.scan(world, poses, rng) for poses in sensors]
+    kernel_cpu = (time.process_time() - cpu) / (repeats * len(sensors)) * 1e6
+    space = world.build_space()
+    count = max(1, len(sensors) // 10)
+    cpu = time.process_time()
+    reference = [[pymunk_cast_rays(space, poses[k], lidar.beam_angles, lidar.max_range)[0]
+                  for k, lidar in enumerate(lidars)] for poses in sensors[:count]]
+    pymunk_cpu = (time.process_time() - cpu) / count * 1e6
+    worst = max(np.max(np.abs(a - b)) for got, want in zip(scans, reference, strict=False)
+                for a, b in zip(got, want, strict=True))
+    beams = sum(lidar.n_beams for lidar in lidars)
+    print(f"{name:<22} {beams:5d} beams  kernel {kernel_cpu:8.1f} us  pymunk {pymunk_cpu:9.1f} us"
+          f"  speed-up {pymunk_cpu / kernel_cpu:5.0f}x CPU  (max |difference| {worst:.1e} m,"
+          f" float32 readings)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=300, help="car poses (dual scans) to time")
@@ -141,6 +186,14 @@ def main() -> None:
         bench_world(world, free_sensor_poses(world, rng, args.poses), lidar)
     world = occupancy_map_world(rng)
     bench_world(world, free_sensor_poses(world, rng, args.poses), lidar)
+    print("\nother layouts, all K scans in one LidarLayout.scan call, on the 80 + 220 world and "
+          "the occupancy map:")
+    dense = representative_world(np.random.default_rng(args.seed + 1), 80, 220)
+    for scanned in (dense, world):
+        cars = free_sensor_poses(scanned, rng, args.poses)[:, 0, :]  # lidar_1 poses as cars
+        print(f"world: {len(scanned.circles)} circles + {len(scanned.segments)} segments")
+        for name, lidars in LAYOUTS.items():
+            bench_layout(scanned, cars, name, lidars)
 
 if __name__ == "__main__":
     main()

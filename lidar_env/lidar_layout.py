@@ -92,6 +92,10 @@ class LidarLayout:
         self.dropout_prob = np.asarray(dropout_prob, dtype=np.float64).reshape(k)
         self.mounts = np.array([lidar.mount for lidar in self.lidars], dtype=np.float64)
         self.sizes = tuple(lidar.n_beams for lidar in self.lidars)
+        ends = np.cumsum(self.sizes).tolist()
+        self._slices = tuple(zip([0, *ends[:-1]], ends, strict=True))
+        self._noisy = bool(np.any(self.noise_std > 0))
+        self._dropping = bool(np.any(self.dropout_prob > 0))
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -133,10 +137,10 @@ class LidarLayout:
                              f"got {len(poses)}")
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-        total = sum(self.sizes)
-        gaussians = rng.standard_normal(total) if np.any(self.noise_std > 0) else _NO_DRAWS
-        uniforms = rng.random(total) if np.any(self.dropout_prob > 0) else _NO_DRAWS
+        total = self._slices[-1][1]
+        gaussians = rng.standard_normal(total) if self._noisy else _NO_DRAWS
+        uniforms = rng.random(total) if self._dropping else _NO_DRAWS
         beams, params = self._packed
         packed = scan_layout_kernel(world.circles, world.segments, first_polygon_edge,
                                     world.grid, poses, beams, params, gaussians, uniforms)
-        return np.split(packed, np.cumsum(self.sizes)[:-1])
+        return [packed[a:b] for a, b in self._slices]

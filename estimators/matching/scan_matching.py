@@ -4,7 +4,7 @@ Frames: a scan's points are first in the sensor frame (x forward, y left), then 
 the car frame through the sensor's mount; the estimators map them into the world frame with
 the car pose. Distances are in metres, angles in radians.
 
-Two Lidars are merged by mapping both scans into the car frame through their known mounts;
+K Lidars are merged by mapping every scan into the car frame through its known mount;
 the result is one point set, as if from a single sensor at the car's origin.
 """
 
@@ -54,11 +54,13 @@ def scans_to_car_points(
     setup: SensorSetup,
     min_range: float = DEFAULT_MIN_RANGE,
 ) -> NDArray[np.float64]:
-    """All Lidars' hits ``(M, 2)`` [m] merged in the car frame through the known mounts."""
+    """All Lidars' hits ``(M, 2)`` [m] merged in the car frame through the known mounts, each
+    scan read with its own sensor's beam angles and max range."""
     return np.concatenate(
         [
-            scan_to_points(scans[key], setup.beam_angles, setup.max_range, mount, min_range)
-            for key, mount in zip(setup.keys, setup.mounts, strict=True)
+            scan_to_points(scans[key], sensor.beam_angles, sensor.max_range, sensor.mount,
+                           min_range)
+            for key, sensor in zip(setup.keys, setup.sensors, strict=True)
         ]
     )
 

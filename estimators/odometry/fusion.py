@@ -43,6 +43,7 @@ from estimators.odometry.sensor_graph import (
     fuse_car_motion,
     optimize_poses,
 )
+from lidar_env.errors import EstimatorInputError
 from lidar_env.se2 import compose, inverse, relative, rotate, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -144,9 +145,13 @@ class FusionEstimator(Estimator):
     def _reset_state(self) -> None:
         assert self.setup is not None
         require_sensor_frame(self.setup, type(self).__name__)
-        self._matcher = ScanMatcher(
-            self.setup.max_range, self.image_size, self.resolution, self.icp_iterations
-        )
+        ranges = sorted({sensor.max_range for sensor in self.setup.sensors})
+        if len(ranges) != 1:
+            raise EstimatorInputError(
+                f"{type(self).__name__}: expected Lidars of one max range (the scan images "
+                f"share one geometry), got max ranges {ranges} [m]")
+        self._matcher = ScanMatcher(ranges[0], self.image_size, self.resolution,
+                                    self.icp_iterations)
         self._keyframes = []
         self._edges = []
         self._n_keyframes = 0
@@ -156,9 +161,8 @@ class FusionEstimator(Estimator):
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
-        return tuple(
-            self._matcher.prepare(scans[k], self.setup.beam_angles) for k in self.setup.keys
-        )
+        return tuple(self._matcher.prepare(scans[key], sensor.beam_angles)
+                     for key, sensor in zip(self.setup.keys, self.setup.sensors, strict=True))
 
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
         self._add_keyframe(_Keyframe(self._initial_pose.copy(), self._prepare(scans)))

@@ -1,11 +1,13 @@
 """Two-Lidar fusion: the four-node graph (paper Fig. 4) and windowed pose graphs by weighted
 least squares. Oracle: edges generated from known car poses and mounts."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
 import estimators
-from estimators.base import LIDAR_KEYS, SensorSetup, default_beam_angles
+import lidar_env  # noqa: F401  (registers DualLidar-v0)
+from estimators.base import LIDAR_KEYS, Sensor, SensorSetup, default_beam_angles
 from estimators.evaluation.metrics import evaluate
 from estimators.matching.rotation_pc import motion_from_sensor_match
 from estimators.odometry.sensor_graph import (
@@ -14,6 +16,7 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
     predict_edges,
 )
+from lidar_env.errors import EstimatorInputError
 from lidar_env.lidar import Lidar
 from lidar_env.se2 import compose, relative
 from lidar_env.world import World
@@ -159,7 +162,7 @@ def test_fusion_estimator_follows_a_curve_to_millimetres_per_step(n_lidars, wind
 
 def test_fusion_estimator_standing_still_does_not_drift() -> None:
     setup, observations, truth = drive_in_room(30, np.zeros(3))
-    estimator = estimators.make("pc_fusion")
+    estimator = estimators.estimators.make("pc_fusion")
     estimator.reset(setup, truth[0])
     for k, observation in enumerate(observations):
         estimator.update(observation, 0.1 * k)
@@ -206,10 +209,29 @@ def test_featureless_corridor_is_crossed_at_the_speed_measured_before_it(weave, 
     # carried 55 times), and with a prediction that bent a weaving car's path, the along-track
     # error grew by 0.16 m straight and by 1 m weaving on this drive.
     setup, observations, truth = drive_through_corridor(weave, seed=1)
-    estimator = estimators.make("pc_fusion")
+    estimator = estimators.estimators.make("pc_fusion")
     estimator.reset(setup, truth[0])
     for k, observation in enumerate(observations):
         estimator.update(observation, 0.1 * k)
     along = estimator.trajectory[:, 0] - truth[:, 0]
     entry = np.argmax(truth[:, 0] > 13.0)
     assert abs(along[-1] - along[entry]) < limit
+
+
+def test_fusion_refuses_lidars_of_different_max_ranges_and_runs_three_270_degree_ones() -> None:
+    wide = np.linspace(-0.75 * np.pi, 0.75 * np.pi, 271)
+    mounts = [(0.35, 0.2, np.pi / 4), (-0.35, -0.2, -0.75 * np.pi), (0.0, 0.2, np.pi / 2)]
+    mixed = SensorSetup(sensors=[Sensor(mounts[0], wide, 10.0), Sensor(mounts[1], wide, 6.0)])
+    with pytest.raises(EstimatorInputError, match=r"one max range.*\[6.0, 10.0\]"):
+        estimators.make("pc_fusion").reset(mixed)
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn", config={
+        "lidars": [{"mount": m, "fov": 1.5 * np.pi, "n_beams": 271} for m in mounts]})
+    observation, info = env.reset(seed=0)
+    estimator = estimators.make("pc_fusion")
+    estimator.reset(SensorSetup.from_env(env), info["pose"])
+    estimator.update(observation, info["time"])
+    for _ in range(15):
+        observation, *_, info = env.step(np.array([0.8, -0.3], dtype=np.float32))
+        estimator.update(observation, info["time"])
+    end = relative(info["pose"], estimator.pose)
+    assert np.hypot(end[0], end[1]) < 0.03 and abs(end[2]) < np.radians(0.5)

@@ -51,6 +51,51 @@ def test_both_lidars_merge_onto_the_world_through_their_mounts():
     assert np.max(_distance_to_world(env.unwrapped.world, rear)) < 1e-3
 
 
+CORNER_LIDARS = [
+    {"mount": (0.35, 0.2, np.pi / 4), "fov": 1.5 * np.pi, "n_beams": 271, "max_range": 10.0},
+    {"mount": (-0.35, -0.2, -0.75 * np.pi), "fov": 1.5 * np.pi, "n_beams": 271, "max_range": 6.0},
+    {"mount": (0.4, 0.0, 0.0), "fov": np.pi, "n_beams": 91, "max_range": 15.0},
+]
+
+
+def test_lidars_of_their_own_geometry_merge_onto_the_world():
+    config = {"range_noise_std": 0.0, "lidars": CORNER_LIDARS}
+    env = gym.make("DualLidar-v0", world="closed_to_open", config=config)
+    observation, info = env.reset(seed=1)
+    setup = SensorSetup.from_env(env)
+    points = transform_points(info["pose"], scans_to_car_points(observation, setup))
+    pairs = list(zip(setup.keys, setup.sensors, strict=True))
+    hits = sum(int(np.sum(observation[k] < s.max_range)) for k, s in pairs)
+    assert len(points) > 100 and len(points) <= hits
+    assert np.max(_distance_to_world(env.unwrapped.world, points)) < 1e-3
+    for k in range(3):  # each Lidar alone lands on the world through its own mount and beams
+        alone = {key: (observation[key] if j == k else np.full(s.n_beams, s.max_range))
+                 for j, (key, s) in enumerate(pairs)}
+        part = transform_points(info["pose"], scans_to_car_points(alone, setup))
+        assert len(part) > 10
+        assert np.max(_distance_to_world(env.unwrapped.world, part)) < 1e-3
+
+
+def test_lidar_odometry_tracks_a_car_with_two_270_degree_corner_lidars():
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
+                   config={"range_noise_std": 0.01, "lidars": CORNER_LIDARS[:2]})
+    observation, info = env.reset(seed=0)
+    driver = PurePursuitDriver()
+    driver.reset(env)
+    estimator = make("lidar_odometry")
+    estimator.reset(SensorSetup.from_env(env), info["pose"])
+    estimator.update(observation, info["time"])
+    truth, path = [info["pose"]], 0.0
+    for _ in range(60):
+        observation, *_, info = env.step(driver.act(observation, info))
+        estimator.update(observation, info["time"])
+        path += float(np.hypot(*(info["pose"][:2] - truth[-1][:2])))
+        truth.append(info["pose"])
+    end = relative(truth[-1], estimator.pose)
+    assert path > 5.0
+    assert np.hypot(end[0], end[1]) < 0.005 * path and abs(end[2]) < np.radians(0.5)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("world", "trace"), [("open_cylinders", "right_turn")])
 def test_drift_on_the_simulated_car_stays_small(world: str, trace: str):
