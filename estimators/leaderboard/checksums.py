@@ -60,7 +60,7 @@ def digest(conn: sqlite3.Connection, kind: Kind, key: int) -> str:
     return sha.hexdigest()
 
 
-def store(conn: sqlite3.Connection, kind: Kind, key: int) -> None:
+def store_checksum(conn: sqlite3.Connection, kind: Kind, key: int) -> None:
     """Record the checksum of dataset ``kind`` ``key`` (inside the transaction that wrote it)."""
     conn.execute(
         "INSERT OR REPLACE INTO checksums (kind, key, sha256) VALUES (?, ?, ?)",
@@ -68,7 +68,7 @@ def store(conn: sqlite3.Connection, kind: Kind, key: int) -> None:
     )
 
 
-def verify(conn: sqlite3.Connection, path: Path, kind: Kind, key: int, label: str) -> None:
+def verify_checksum(conn: sqlite3.Connection, path: Path, kind: Kind, key: int, label: str) -> None:
     """Raise :class:`CorruptDatabaseError` naming the rows of ``kind`` ``key`` (``label``
     describes them) when they no longer match their stored checksum, or cannot be read."""
     rows = "sensor_datasets/sensor_steps rows of scenario_id" if kind == "sensor_dataset" else (

@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import LIDAR_KEYS, SensorSetup
-from estimators.leaderboard import checksums
+from estimators.leaderboard.checksums import CREATE_CHECKSUMS, store_checksum, verify_checksum
 from estimators.leaderboard.records import (
     Scenario,
     SensorDataset,
@@ -112,7 +112,7 @@ class ExperimentDatabase:
                     self._conn.execute(
                         "INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,)
                     )
-            self._conn.execute(checksums.CREATE_CHECKSUMS)
+            self._conn.execute(CREATE_CHECKSUMS)
         except sqlite3.OperationalError as error:
             raise DatabaseLocationError(f"cannot open {self.path} for writing: {error}") from error
 
@@ -204,7 +204,7 @@ class ExperimentDatabase:
                     for step in range(len(dataset))
                 ),
             )
-            checksums.store(conn, "sensor_dataset", scenario_id)
+            store_checksum(conn, "sensor_dataset", scenario_id)
         return True
 
     def load_sensor_dataset(self, scenario: Scenario) -> SensorDataset:
@@ -217,7 +217,7 @@ class ExperimentDatabase:
         if header is None:
             raise KeyError(f"no sensor dataset recorded for scenario {scenario.label}")
         assert scenario_id is not None
-        checksums.verify(self._conn, self.path, "sensor_dataset", scenario_id, scenario.label)
+        verify_checksum(self._conn, self.path, "sensor_dataset", scenario_id, scenario.label)
         n_steps, n_beams, max_range, world_aligned, mounts, angles, env_config, world = header
         setup = SensorSetup(np.array(json.loads(mounts), dtype=np.float64),
                             np.frombuffer(angles, dtype="<f8").copy(), max_range,
@@ -316,7 +316,7 @@ class ExperimentDatabase:
             ((trace_id, name, None if value is None else float(value))
              for name, value in metrics.items()),
         )
-        checksums.store(conn, "trace", trace_id)
+        store_checksum(conn, "trace", trace_id)
         return trace_id
 
     def traces(self, scenario: Scenario | None = None, *,
@@ -343,8 +343,8 @@ class ExperimentDatabase:
             estimator, params, version = row[7:]
             table = np.empty((0, 5))
             if poses:
-                checksums.verify(self._conn, self.path, "trace", trace_id,
-                                 f"{estimator} on {world}/{trace_name}/seed {seed}")
+                verify_checksum(self._conn, self.path, "trace", trace_id,
+                                f"{estimator} on {world}/{trace_name}/seed {seed}")
                 table = np.array(self._conn.execute(
                     "SELECT time, x, y, heading, ms FROM trace_poses WHERE trace_id = ? "
                     "ORDER BY step", (trace_id,),
