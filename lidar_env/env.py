@@ -17,6 +17,7 @@ from lidar_env.lidar_layout import LidarLayout
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.traces import check_trace_name
+from lidar_env.user_traces import check_waypoints
 from lidar_env.user_worlds import resolve_world
 from lidar_env.world import World
 
@@ -126,7 +127,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     | trace       | None             | "straight", "right_turn", "zigzag", "loop",              |
     |             |                  | "out_and_back"; None: the world's paper trace            |
     |             |                  | (right_turn, zigzag, zigzag, zigzag; straight in a user  |
-    |             |                  | world)                                                   |
+    |             |                  | world); or a route: (N, 2) waypoints [m] or a Trace,     |
+    |             |                  | checked for clearance and rounded (lidar_env.user_traces)|
     | config      | None             | an :class:`EnvConfig` or a dict of its fields            |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
 
@@ -147,11 +149,12 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     def __init__(
         self,
         world: str | World | Any = "open_cylinders",
-        trace: str | None = None,
+        trace: str | ArrayLike | Trace | None = None,
         config: EnvConfig | Mapping[str, Any] | None = None,
         render_mode: str | None = None,
     ) -> None:
-        self.trace_name = None if trace is None else check_trace_name(trace)
+        self.trace_name = trace if trace is None or isinstance(trace, Trace) else (
+            check_trace_name(trace) if isinstance(trace, str) else check_waypoints(trace))
         if isinstance(config, EnvConfig):
             self.config = config
         elif config is None or isinstance(config, Mapping):

@@ -13,7 +13,10 @@ from typing import Any
 import numpy as np
 
 from lidar_env.car import Car
+from lidar_env.errors import ConfigError
+from lidar_env.trace_geometry import Trace
 from lidar_env.traces import check_trace_name
+from lidar_env.user_traces import check_waypoints, user_trace
 from lidar_env.user_worlds import resolve_world, user_scene
 from lidar_env.world import World
 from lidar_env.worlds import PAPER_TRACES, Scene, built_in_layout, make_scene
@@ -119,6 +122,8 @@ class SceneCache:
                  else world_arg)
         trace_name = options.get("trace", trace_name)
         start = options.get("start")
+        if trace_name is not None and not isinstance(trace_name, str):  # the user's route
+            return self.get_route(world, trace_name, start, config)
         if not isinstance(world, str):  # a user world: no built-in starts
             trace_name = check_trace_name(USER_WORLD_TRACE if trace_name is None else trace_name)
             if start is not None:
@@ -129,6 +134,29 @@ class SceneCache:
         if start is not None:
             start = check_start_pose(start, world, config.car_length, config.car_width)
         return self.get(world, trace_name, start, rng, config.trace_clearance)
+
+    def get_route(self, world: Any, route: Any, start: Any, config: Any) -> Scene:
+        """The scene of a user route (waypoints or a Trace) in ``world`` (a built-in name or
+        a World), cached per world object and route."""
+        if start is not None:
+            raise ConfigError("options['start']: a waypoint route starts at its first "
+                              "waypoint; expected no start with it")
+        if isinstance(world, str):
+            if world == "random":
+                raise ConfigError("trace: a waypoint route needs a fixed world; 'random' is "
+                                  "drawn around a trace seed")
+            world = built_in_layout(world).world
+        route_key = route if isinstance(route, Trace) else check_waypoints(route).tobytes()
+        key = (("route", id(world)), route_key, None)
+        cached = self._scenes.get(key)
+        if cached is None or cached.world is not world:
+            trace = user_trace(route, world, config.trace_clearance)
+            car = Car(config.car_length, config.car_width, world.circles, world.segments)
+            check_user_start(trace.start_pose, world, car)
+            if len(self._scenes) >= MAX_CACHED_SCENES:
+                self._scenes.clear()
+            self._scenes[key] = cached = Scene(world, trace)
+        return cached
 
     def get_user(
         self,
