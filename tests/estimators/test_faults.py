@@ -27,16 +27,20 @@ STEPS = 15
 TRANSLATION_ONLY = ("pc", "pc_offset", "pc_pg")
 
 
-@pytest.fixture(scope="module")
-def drive():
+def hallway_drive(steps: int = STEPS):
     """A 10 Hz drive along the hallway: the setup and (observation, true pose) per scan."""
     env = gym.make("DualLidar-v0", world="hallway")
     observation, info = env.reset(seed=0)
     frames = [(observation, info["pose"].copy())]
-    for _ in range(STEPS):
+    for _ in range(steps):
         observation, _, _, _, info = env.step(np.array([0.8, 0.2]))
         frames.append((observation, info["pose"].copy()))
     return SensorSetup.from_env(env), frames
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return hallway_drive()
 
 
 def run(name, setup, frames, times):

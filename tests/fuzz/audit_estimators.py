@@ -7,26 +7,14 @@ too few returns (not a test; run by hand; categories as in :mod:`tests.fuzz.audi
 import math
 import sys
 
-import gymnasium as gym
 import numpy as np
 
 import estimators
 import lidar_env  # noqa: F401
-from estimators import SensorSetup
 from lidar_env.errors import DualLidarError
+from tests.estimators.test_faults import hallway_drive
 
-
-def rollout(n=15):
-    env = gym.make("DualLidar-v0", world="hallway")
-    obs, info = env.reset(seed=0)
-    frames = [(obs, info["pose"].copy())]
-    for _ in range(n):
-        obs, r, te, tr, info = env.step(np.array([0.8, 0.2]))
-        frames.append((obs, info["pose"].copy()))
-    return SensorSetup.from_env(env), frames
-
-
-setup, frames = rollout()
+setup, frames = hallway_drive()
 counts = {}
 
 

@@ -51,11 +51,16 @@ def mutated(draw, lines):
     return "\n".join(lines) + "\n"
 
 
+def read_text(tmp_path_factory, text, reader):
+    """``reader`` of a fresh file holding ``text``, or None for a named error."""
+    path = tmp_path_factory.mktemp("fuzz") / "input"
+    path.write_bytes(text.encode("utf-8", "surrogatepass"))
+    return named_or_result(lambda: reader(path))
+
+
 @given(text=mutated(CARMEN))
 def test_carmen_lines_are_named_or_read_correctly(tmp_path_factory, text):
-    path = tmp_path_factory.mktemp("carmen") / "log.clf"
-    path.write_bytes(text.encode("utf-8", "surrogatepass"))
-    log = named_or_result(lambda: load_log(path))
+    log = read_text(tmp_path_factory, text, load_log)
     if log is None:
         return
     for scan in log.scans:
@@ -66,9 +71,7 @@ def test_carmen_lines_are_named_or_read_correctly(tmp_path_factory, text):
 
 @given(text=mutated(G2O))
 def test_g2o_lines_are_named_or_optimised_to_finite_poses(tmp_path_factory, text):
-    path = tmp_path_factory.mktemp("g2o") / "graph.g2o"
-    path.write_bytes(text.encode("utf-8", "surrogatepass"))
-    graph = named_or_result(lambda: read_g2o(path))
+    graph = read_text(tmp_path_factory, text, read_g2o)
     if graph is None:
         return
     result = named_or_result(lambda: optimize(graph))
