@@ -1,4 +1,5 @@
-"""duallidar's environment: a car with two planar Lidars in a 2-D pymunk world.
+"""duallidar's environment: a car with planar Lidars (two by default, 1 to 8) in a 2-D pymunk
+world, built-in or the user's own (a World, an image, a ROS map_server map).
 
 ``import lidar_env`` registers ``DualLidar-v0`` (also reachable as
 ``gym.make("lidar_env:DualLidar-v0")`` without importing first).
@@ -8,6 +9,8 @@ import gymnasium
 
 from lidar_env.config import EnvConfig
 from lidar_env.env import DualLidarEnv
+from lidar_env.lidar_config import LidarConfig
+from lidar_env.ros_map import load_ros_map, save_ros_map
 from lidar_env.traces import TRACE_NAMES, Trace, make_trace
 from lidar_env.world import World
 from lidar_env.worlds import WORLD_NAMES, make_world
@@ -20,8 +23,11 @@ __all__ = [
     "WORLD_NAMES",
     "DualLidarEnv",
     "EnvConfig",
+    "LidarConfig",
     "Trace",
     "World",
+    "load_ros_map",
     "make_trace",
     "make_world",
+    "save_ros_map",
 ]
