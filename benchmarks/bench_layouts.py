@@ -25,14 +25,10 @@ import argparse
 import math
 import platform
 
-import gymnasium as gym
-import numpy as np
-from bench_synthetic import NOISE, Recording, replay
+from bench_synthetic import NOISE, record, replay
 
 import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
-from agents.scripted import PurePursuitDriver
-from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
 
 WIDE, HALF, QUARTER = 1.5 * math.pi, math.pi, 0.5 * math.pi
@@ -45,27 +41,6 @@ LAYOUTS: dict[str, list[dict]] = {
     "paper": [{"mount": (0.25, 0.0, 0.0)}, {"mount": (-0.25, 0.0, 0.0)}],
 }
 GROUPS = (("open_cylinders", "right_turn"), ("hallway", "zigzag"), ("closed_to_open", "zigzag"))
-
-
-def record(world: str, trace: str, lidars: list[dict], seed: int,
-           max_steps: int | None) -> Recording:
-    """Drive ``trace`` in ``world`` with layout ``lidars``; keep scans and ground truth."""
-    env = gym.make("DualLidar-v0", world=world, trace=trace,
-                   config={"scan_frame": "sensor", "range_noise_std": NOISE, "lidars": lidars})
-    driver = PurePursuitDriver()
-    observation, info = env.reset(seed=seed)
-    driver.reset(env)
-    observations, times, truth = [observation], [float(info["time"])], [info["pose"]]
-    done = False
-    while not done and (max_steps is None or len(observations) <= max_steps):
-        observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
-        observations.append(observation)
-        times.append(float(info["time"]))
-        truth.append(info["pose"])
-        done = terminated or truncated
-    setup = SensorSetup.from_env(env)
-    env.close()
-    return Recording(setup, observations, times, np.array(truth, dtype=np.float64))
 
 
 def main() -> None:
@@ -84,7 +59,7 @@ def main() -> None:
           f"{'drift [%]':>9}")
     for layout in args.layouts:
         for world, trace in GROUPS:
-            recording = record(world, trace, LAYOUTS[layout], args.seed, args.max_steps)
+            recording = record(world, trace, args.seed, args.max_steps, NOISE, LAYOUTS[layout])
             for name in args.estimators:
                 row = f"{layout:<8} {world + '+' + trace:<28} {name:<15}"
                 needed = estimators.make(name).min_lidars

@@ -56,15 +56,17 @@ class Recording:
 
 
 def record(
-    world: str, trace: str, seed: int, max_steps: int | None, noise: float = NOISE
+    world: str, trace: str, seed: int, max_steps: int | None, noise: float = NOISE,
+    lidars: list[dict] | None = None,
 ) -> Recording:
-    """Drive ``trace`` in ``world`` with pure pursuit, ``noise`` [m] of range noise (1 sigma);
-    keep scans and ground truth."""
+    """Drive ``trace`` in ``world`` with pure pursuit, ``noise`` [m] of range noise (1 sigma),
+    and the env's ``lidars`` layout if given; keep scans and ground truth."""
+    layout = {} if lidars is None else {"lidars": lidars}
     env = gym.make(
         "DualLidar-v0",
         world=world,
         trace=trace,
-        config={"scan_frame": "sensor", "range_noise_std": noise},
+        config={"scan_frame": "sensor", "range_noise_std": noise, **layout},
     )
     driver = PurePursuitDriver()
     observation, info = env.reset(seed=seed)

@@ -7,7 +7,7 @@ A scene is a world and a trace fitted to it (:class:`lidar_env.worlds.Scene`). P
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -147,15 +147,23 @@ class SceneCache:
                                   "drawn around a trace seed")
             world = built_in_layout(world).world
         route_key = route if isinstance(route, Trace) else check_waypoints(route).tobytes()
-        key = (("route", id(world)), route_key, None)
-        cached = self._scenes.get(key)
-        if cached is None or cached.world is not world:
+
+        def fit() -> Scene:
             trace = user_trace(route, world, config.trace_clearance)
             car = Car(config.car_length, config.car_width, world.circles, world.segments)
             check_user_start(trace.start_pose, world, car)
+            return Scene(world, trace)
+
+        return self._cached((("route", id(world)), route_key, None), world, fit)
+
+    def _cached(self, key: tuple, world: Any, fit: Callable[[], Scene]) -> Scene:
+        """The scene under ``key``, fitted by ``fit()`` unless cached for this very ``world``
+        object (an id can be reused by a new one)."""
+        cached = self._scenes.get(key)
+        if cached is None or cached.world is not world:
             if len(self._scenes) >= MAX_CACHED_SCENES:
                 self._scenes.clear()
-            self._scenes[key] = cached = Scene(world, trace)
+            self._scenes[key] = cached = fit()
         return cached
 
     def get_user(
@@ -166,13 +174,8 @@ class SceneCache:
         clearance: float,
     ) -> Scene:
         """The scene of a user :class:`~lidar_env.world.World`, cached per world object."""
-        key = (("world", id(world)), trace_name, start)
-        cached = self._scenes.get(key)
-        if cached is None or cached.world is not world:  # an id reused by a new object
-            if len(self._scenes) >= MAX_CACHED_SCENES:
-                self._scenes.clear()
-            self._scenes[key] = cached = user_scene(world, trace_name, start, clearance)
-        return cached
+        return self._cached((("world", id(world)), trace_name, start), world,
+                            lambda: user_scene(world, trace_name, start, clearance))
 
     def get(
         self,

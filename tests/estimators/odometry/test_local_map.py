@@ -79,27 +79,15 @@ def test_lidars_of_their_own_geometry_merge_onto_the_world():
 def test_lidar_odometry_tracks_a_car_with_two_270_degree_corner_lidars():
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
                    config={"range_noise_std": 0.01, "lidars": CORNER_LIDARS[:2]})
-    observation, info = env.reset(seed=0)
-    driver = PurePursuitDriver()
-    driver.reset(env)
-    estimator = make("lidar_odometry")
-    estimator.reset(SensorSetup.from_env(env), info["pose"])
-    estimator.update(observation, info["time"])
-    truth, path = [info["pose"]], 0.0
-    for _ in range(60):
-        observation, *_, info = env.step(driver.act(observation, info))
-        estimator.update(observation, info["time"])
-        path += float(np.hypot(*(info["pose"][:2] - truth[-1][:2])))
-        truth.append(info["pose"])
+    truth, estimator = _drive_with_odometry(env, max_steps=60)
+    path = np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))
     end = relative(truth[-1], estimator.pose)
     assert path > 5.0
     assert np.hypot(end[0], end[1]) < 0.005 * path and abs(end[2]) < np.radians(0.5)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("world", "trace"), [("open_cylinders", "right_turn")])
-def test_drift_on_the_simulated_car_stays_small(world: str, trace: str):
-    env = gym.make("DualLidar-v0", world=world, trace=trace, config={"range_noise_std": 0.01})
+def _drive_with_odometry(env, max_steps: int | None = None):
+    """True poses (N, 3) of a scripted drive and the ``lidar_odometry`` that followed it."""
     observation, info = env.reset(seed=0)
     driver = PurePursuitDriver()
     driver.reset(env)
@@ -108,11 +96,18 @@ def test_drift_on_the_simulated_car_stays_small(world: str, trace: str):
     estimator.update(observation, info["time"])
     truth = [info["pose"]]
     terminated = truncated = False
-    while not (terminated or truncated):
+    while not (terminated or truncated) and (max_steps is None or len(truth) <= max_steps):
         observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
         estimator.update(observation, info["time"])
         truth.append(info["pose"])
-    truth = np.array(truth)
+    return np.array(truth), estimator
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("world", "trace"), [("open_cylinders", "right_turn")])
+def test_drift_on_the_simulated_car_stays_small(world: str, trace: str):
+    env = gym.make("DualLidar-v0", world=world, trace=trace, config={"range_noise_std": 0.01})
+    truth, estimator = _drive_with_odometry(env)
     travelled = np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))
     end = relative(truth[-1], estimator.pose)
     assert travelled > 10.0
