@@ -5,8 +5,9 @@ ICP of Lidar k's scan onto Lidar 1's scan (:func:`estimators.matching.icp.regist
 the pose of Lidar k in Lidar 1's frame, the mount itself, at every step where their views
 overlap. The per-step measurements are combined by their ICP information (``J^T W J / s^2`` of
 the point-to-line residuals), after dropping steps whose match explains too few points or lies
-far from the others; the reported 1-sigma is the larger of the information's and the spread's
-(steps share the same walls, so their errors are not independent). A direction the walls do
+far from the others; the reported 1-sigma is the larger of the information's and the
+batch-means error over time blocks (steps share the same walls, so their errors are not
+independent). A direction the walls do
 not constrain (a long featureless corridor) shows as a parameter without information.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Sensor
-from estimators.calibration.hand_eye import DEFAULT_MAX_STD, PARAMETERS
+from estimators.calibration.hand_eye import DEFAULT_MAX_STD, PARAMETERS, batch_standard_error
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import (
     PointToLineReference,
@@ -36,6 +37,8 @@ MIN_QUALITY = 0.4
 MIN_STEPS = 5
 #: Steps further than this many robust sigmas from the median are dropped.
 OUTLIER_SIGMAS = 4.0
+#: Time blocks whose mean alignments give the batch-means standard error.
+BATCHES = 6
 #: ICP settings: the defaults, with room to converge from a start tens of cm off.
 ALIGNMENT_ICP = ICPParams(max_iterations=50)
 
@@ -128,9 +131,8 @@ def _combine(poses: NDArray, informations: NDArray, start: NDArray, limits: NDAr
     mount = mount + free @ (free.T @ start)
     info_std = np.sqrt(np.where(np.diag(inverse) > 0, np.diag(inverse), np.inf))
     info_std[np.any(np.abs(free) > 1e-6, axis=1)] = np.inf
-    spread_std = poses.std(axis=0) / np.sqrt(max(len(poses) - 1, 1)) if len(poses) > 1 \
-        else np.full(3, np.inf)
-    std = np.maximum(info_std, spread_std)
+    batches = [batch.mean(axis=0) for batch in np.array_split(poses, min(BATCHES, len(poses)))]
+    std = np.maximum(info_std, batch_standard_error(batches, mount))
     unknown = std > limits
     return Alignment(np.where(unknown, start, mount), np.where(unknown, np.inf, std),
                      tuple(p for p, u in zip(PARAMETERS, unknown, strict=True) if u),

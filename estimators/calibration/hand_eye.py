@@ -143,6 +143,38 @@ def solve_hand_eye(
         intervals=len(a))
 
 
+def batch_standard_error(samples: ArrayLike, center: ArrayLike) -> NDArray[np.float64]:
+    """``(3,)`` standard error [m, m, rad] of a mean from ``(B, 3)`` solutions over B disjoint
+    time blocks of one drive (batch means): unlike the residuals' sigma it keeps the errors
+    that are correlated within a block (odometry drift, the same walls seen step after step).
+    Headings are taken relative to ``center``; a robust spread (1.4826 MAD) lets one bad block
+    pass; ``inf`` with fewer than 3 blocks."""
+    samples = np.asarray(samples, dtype=np.float64).reshape(-1, 3)
+    if len(samples) < 3:
+        return np.full(3, np.inf)
+    offsets = samples - np.asarray(center, dtype=np.float64)
+    offsets[:, 2] = wrap_angle(offsets[:, 2])
+    spread = 1.4826 * np.median(np.abs(offsets - np.median(offsets, axis=0)), axis=0)
+    return spread / np.sqrt(len(samples) - 1)
+
+
+def block_solutions(poses_1: ArrayLike, poses_k: ArrayLike, guess: ArrayLike, blocks: int = 6,
+                    windows: tuple[int, ...] = DEFAULT_WINDOWS) -> NDArray[np.float64]:
+    """``(B', 3)`` hand-eye mounts from each of ``blocks`` contiguous stretches of the two
+    trajectories (``(N, 3)`` each); stretches too short or without the rotation to observe
+    the whole mount are left out."""
+    solutions = []
+    for index in np.array_split(np.arange(len(poses_1)), blocks):
+        if len(index) < max(windows) + 3:
+            continue
+        a = interval_motions(np.asarray(poses_1)[index], windows)
+        b = interval_motions(np.asarray(poses_k)[index], windows)
+        solution = solve_hand_eye(a, b, guess)
+        if not solution.unobservable:
+            solutions.append(solution.mount)
+    return np.array(solutions, dtype=np.float64).reshape(-1, 3)
+
+
 def _damped_solve(normal: NDArray, gradient: NDArray) -> NDArray:
     """Solve ``normal d = gradient``; directions without information get no step."""
     values, vectors = np.linalg.eigh(normal)

@@ -14,6 +14,7 @@ The car frame stays the user's: Lidar 1 keeps its configured mount, and
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -28,6 +29,8 @@ from estimators.calibration.hand_eye import (
     DEFAULT_WINDOWS,
     PARAMETERS,
     HandEyeSolution,
+    batch_standard_error,
+    block_solutions,
     interval_motions,
     solve_hand_eye,
 )
@@ -166,6 +169,8 @@ def calibrate(
         key = setup.keys[k]
         solution = solve_hand_eye(motions_1, interval_motions(odometry[key], windows),
                                   guesses[k - 1], max_std)
+        solution = _with_block_spread(solution, odometry[setup.keys[0]], odometry[key],
+                                      windows, np.asarray(max_std, dtype=np.float64))
         if solution.yaw_mismatch_rms > MAX_YAW_MISMATCH:
             warnings.warn(
                 f"{key}: its own odometry turns unlike lidar_1's (yaw increments differ by "
@@ -184,6 +189,22 @@ def calibrate(
                     NoOverlapWarning, stacklevel=2)
         estimates.append(_merge(key, solution, alignment))
     return Calibration(tuple(estimates), odometry)
+
+
+def _with_block_spread(solution: HandEyeSolution, poses_1: NDArray, poses_k: NDArray,
+                       windows: tuple[int, ...], limits: NDArray) -> HandEyeSolution:
+    """The solution with each 1-sigma raised to the batch-means error of per-block solutions
+    (the residuals' sigma treats overlapping motion pairs as independent: too small)."""
+    if solution.unobservable:
+        return solution
+    blocks = block_solutions(poses_1, poses_k, solution.mount, windows=windows)
+    if len(blocks) < 3:
+        return solution
+    std = np.maximum(solution.std, batch_standard_error(blocks, solution.mount))
+    unknown = std > limits
+    return dataclasses.replace(
+        solution, std=np.where(unknown, np.inf, std),
+        unobservable=tuple(p for p, u in zip(PARAMETERS, unknown, strict=True) if u))
 
 
 def _guesses(setup: SensorSetup, guess: ArrayLike | None) -> NDArray[np.float64]:
