@@ -50,49 +50,46 @@ def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
 def check_start_pose(
     start: Any, world_name: str, car_length: float, car_width: float
 ) -> tuple[float, float, float]:
-    """``start`` as a pose, checked to leave the car's box (``car_length`` x ``car_width`` [m])
-    clear of the obstacles of built-in world ``world_name`` (a ``random`` world is drawn around
-    its trace, so any start is accepted there).
-
-    Raises:
-        ValueError: ``start`` is not 3 finite numbers.
-        StartPoseError: the car would touch or lie inside an obstacle.
-    """
-    pose = np.asarray(start, dtype=np.float64)
-    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise ValueError(
-            f"options['start']: expected 3 finite numbers (x [m], y [m], heading [rad]), "
-            f"got {start!r}"
-        )
-    if world_name != "random":
-        world = built_in_layout(world_name).world
-        car = Car(car_length, car_width, world.circles, world.segments)
-        if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
-            x, y, heading = pose
-            raise StartPoseError(
-                f"start pose ({x:g}, {y:g}, {heading:g}) puts the {car_length} m x "
-                f"{car_width} m car into an obstacle of world {world_name!r}: "
-                f"expected a pose where the car's box is clear"
-            )
-    return (float(pose[0]), float(pose[1]), float(pose[2]))
+    """``start`` as a pose, checked to lie inside built-in world ``world_name`` with the car's
+    box (``car_length`` x ``car_width`` [m]) clear of its obstacles (a ``random`` world is
+    drawn around its trace, so any start is accepted there); see :func:`check_user_start`."""
+    if world_name == "random":
+        return _as_pose(start)
+    world = built_in_layout(world_name).world
+    return check_user_start(start, world, car_length, car_width, world_name)
 
 
-def check_user_start(start: Any, world: World, car: Car) -> tuple[float, float, float]:
-    """``start`` as a pose inside ``world``'s bounds with the car's box clear of obstacles."""
+def _as_pose(start: Any) -> tuple[float, float, float]:
     pose = np.asarray(start, dtype=np.float64)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
         raise ValueError(f"options['start']: expected 3 finite numbers (x [m], y [m], heading "
                          f"[rad]), got {start!r}")
-    x, y, heading = (float(v) for v in pose)
+    return float(pose[0]), float(pose[1]), float(pose[2])
+
+
+def check_user_start(
+    start: Any, world: World, car_length: float, car_width: float, name: str | None = None
+) -> tuple[float, float, float]:
+    """``start`` as a pose inside ``world``'s bounds with the car's box (``car_length`` x
+    ``car_width`` [m]) clear of its obstacles.
+
+    Raises:
+        ValueError: ``start`` is not 3 finite numbers.
+        StartPoseError: the pose is outside the map, or the car would touch or lie inside an
+            obstacle.
+    """
+    x, y, heading = _as_pose(start)
+    name = world.name if name is None else name
     xmin, ymin, xmax, ymax = world.bounds
     if not (xmin < x < xmax and ymin < y < ymax):
         raise StartPoseError(f"start pose ({x:g}, {y:g}, {heading:g}) is outside the map "
-                             f"{world.name!r}: expected x in ({xmin:g}, {xmax:g}) and y in "
+                             f"{name!r}: expected x in ({xmin:g}, {xmax:g}) and y in "
                              f"({ymin:g}, {ymax:g})")
-    if car.collides_at(pose) or world.contains(pose[None, :2])[0]:
-        raise StartPoseError(f"start pose ({x:g}, {y:g}, {heading:g}) puts the car into an "
-                             f"obstacle of world {world.name!r}: expected a pose where the car's "
-                             "box is clear")
+    car = Car(car_length, car_width, world.circles, world.segments)
+    if car.collides_at(np.array([x, y, heading])) or world.contains(np.array([[x, y]]))[0]:
+        raise StartPoseError(f"start pose ({x:g}, {y:g}, {heading:g}) puts the {car_length} m x "
+                             f"{car_width} m car into an obstacle of world {name!r}: expected a "
+                             "pose where the car's box is clear")
     return x, y, heading
 
 
@@ -127,8 +124,7 @@ class SceneCache:
         if not isinstance(world, str):  # a user world: no built-in starts
             trace_name = check_trace_name(USER_WORLD_TRACE if trace_name is None else trace_name)
             if start is not None:
-                car = Car(config.car_length, config.car_width, world.circles, world.segments)
-                start = check_user_start(start, world, car)
+                start = check_user_start(start, world, config.car_length, config.car_width)
             return self.get_user(world, trace_name, start, config.trace_clearance)
         trace_name = check_trace_name(PAPER_TRACES[world] if trace_name is None else trace_name)
         if start is not None:
@@ -150,8 +146,7 @@ class SceneCache:
 
         def fit() -> Scene:
             trace = user_trace(route, world, config.trace_clearance)
-            car = Car(config.car_length, config.car_width, world.circles, world.segments)
-            check_user_start(trace.start_pose, world, car)
+            check_user_start(trace.start_pose, world, config.car_length, config.car_width)
             return Scene(world, trace)
 
         return self._cached((("route", id(world)), route_key, None), world, fit)

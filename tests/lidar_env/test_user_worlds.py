@@ -124,3 +124,10 @@ def test_bad_worlds_and_starts_raise_readable_errors(tmp_path):
         env.reset(options={"start": (6.0, 5.0, 0.0)})
     _, info = env.reset(options={"start": (3.0, 8.0, 0.0)})
     np.testing.assert_allclose(info["pose"], (3.0, 8.0, 0.0))
+
+
+def test_a_start_outside_a_built_in_world_is_named():
+    env = gym.make("DualLidar-v0", world="hallway")
+    with pytest.raises(StartPoseError, match=r"start pose \(90, 0, 0\) is outside the map "
+                                             r"'hallway'"):
+        env.reset(options={"start": (90.0, 0.0, 0.0)})
