@@ -1,4 +1,5 @@
-"""``DualLidar-v0``: a car with two planar Lidars driving along a trace through a 2-D world."""
+"""``DualLidar-v0``: a car with planar Lidars (two by default) driving along a trace through a
+2-D world."""
 
 from __future__ import annotations
 
@@ -28,20 +29,22 @@ PROGRESS_WINDOW = 2.0
 
 
 class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
-    """A car with two planar Lidars drives along a trace through a 2-D world.
+    """A car with planar Lidars (two by default) drives along a trace through a 2-D world.
 
     ## Description
 
     The setting of the paper "Obstacles Detection and Motion Estimation by Using Multiple Lidar
     Sensors Data" (sections III.A-B, IV): a box-shaped car (0.8 m x 0.5 m) moves as a unicycle
-    through a world of static obstacles (cylinders, walls, polygons; a pymunk ``Space``). Two
-    Lidars sit on the car at a fixed offset ("the main and the offset sensor"; by default
-    0.25 m ahead of and 0.25 m behind the car's centre on its axis). Each control step both
-    take one exact 360-beam scan. The task is to follow a *trace* (a waypoint path from a start
-    pose: ``straight``, ``right_turn`` or ``zigzag``, the paper's "strict, right-turn, zigzag"
-    seeds; or, to test loop closure, ``loop``, a closed circuit driven once round, and
-    ``out_and_back``, which turns around and comes back beside its outward lane) to its end;
-    the ground-truth poses in ``info`` are what Lidar-only motion estimators are scored against.
+    through a world of static obstacles (cylinders, walls, polygons; a pymunk ``Space``). By
+    default two Lidars sit on the car at a fixed offset ("the main and the offset sensor";
+    0.25 m ahead of and 0.25 m behind the car's centre on its axis); ``config["lidars"]``
+    sets 1 to 8 of any mount, field of view, beam count and range. Each control step every
+    Lidar takes one exact scan (by default 360 beams). The task is to follow a *trace* (a
+    waypoint path from a start pose: ``straight``, ``right_turn`` or ``zigzag``, the paper's
+    "strict, right-turn, zigzag" seeds; or, to test loop closure, ``loop``, a closed circuit
+    driven once round, and ``out_and_back``, which turns around and comes back beside its
+    outward lane; or the user's own waypoints) to its end; the ground-truth poses in ``info``
+    are what Lidar-only motion estimators are scored against.
 
     ## Action Space
 
