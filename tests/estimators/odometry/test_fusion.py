@@ -162,7 +162,7 @@ def test_fusion_estimator_follows_a_curve_to_millimetres_per_step(n_lidars, wind
 
 def test_fusion_estimator_standing_still_does_not_drift() -> None:
     setup, observations, truth = drive_in_room(30, np.zeros(3))
-    estimator = estimators.estimators.make("pc_fusion")
+    estimator = estimators.make("pc_fusion")
     estimator.reset(setup, truth[0])
     for k, observation in enumerate(observations):
         estimator.update(observation, 0.1 * k)
@@ -209,7 +209,7 @@ def test_featureless_corridor_is_crossed_at_the_speed_measured_before_it(weave, 
     # carried 55 times), and with a prediction that bent a weaving car's path, the along-track
     # error grew by 0.16 m straight and by 1 m weaving on this drive.
     setup, observations, truth = drive_through_corridor(weave, seed=1)
-    estimator = estimators.estimators.make("pc_fusion")
+    estimator = estimators.make("pc_fusion")
     estimator.reset(setup, truth[0])
     for k, observation in enumerate(observations):
         estimator.update(observation, 0.1 * k)
