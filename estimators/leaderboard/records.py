@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
 from estimators.paths import PROJECT_ROOT
+from lidar_env.errors import DatabaseError
 
 #: The packages whose code makes a trace (hashed into :func:`package_version`).
 SOURCE_PACKAGES = ("agents", "estimators", "lidar_env")
@@ -128,20 +129,20 @@ class SensorDataset:
     def __post_init__(self) -> None:
         n = len(self.times)
         if n < 1:
-            raise ValueError("a sensor dataset needs at least one step, got 0")
+            raise DatabaseError("a sensor dataset needs at least one step, got 0")
         k, n_beams = self.setup.n_lidars, len(self.setup.beam_angles)
         if set(self.scans) != set(self.setup.keys):
-            raise ValueError(f"scans: expected keys {self.setup.keys}, got {tuple(self.scans)}")
+            raise DatabaseError(f"scans: expected keys {self.setup.keys}, got {tuple(self.scans)}")
         for key, scan in self.scans.items():
             if scan.shape != (n, n_beams) or scan.dtype != np.float32:
-                raise ValueError(
+                raise DatabaseError(
                     f"scans[{key!r}]: expected float32 ({n}, {n_beams}), "
                     f"got {scan.dtype} {scan.shape}"
                 )
         if self.poses.shape != (n, 3):
-            raise ValueError(f"poses: expected shape ({n}, 3), got {self.poses.shape}")
+            raise DatabaseError(f"poses: expected shape ({n}, 3), got {self.poses.shape}")
         if self.lidar_poses.shape != (n, k, 3):
-            raise ValueError(
+            raise DatabaseError(
                 f"lidar_poses: expected shape ({n}, {k}, 3), got {self.lidar_poses.shape}"
             )
 
@@ -174,7 +175,7 @@ class TraceDataset:
     def __post_init__(self) -> None:
         n = len(self.times)
         if self.poses.shape != (n, 3) or self.step_ms.shape != (n,):
-            raise ValueError(
+            raise DatabaseError(
                 f"a trace of {n} times needs poses ({n}, 3) and step_ms ({n},), "
                 f"got {self.poses.shape} and {self.step_ms.shape}"
             )

@@ -48,6 +48,7 @@ from estimators.leaderboard.tasks import (
     run_task,
 )
 from estimators.leaderboard.workers import stop_workers
+from lidar_env.errors import ConfigError
 
 
 class FutureLike(Protocol):
@@ -248,7 +249,7 @@ def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
              on_done: Callable[[Scenario], None] | None) -> RunSummary:
     """Run ``todo`` (here or on ``executor``), committing each outcome."""
     if max_in_flight < 1:
-        raise ValueError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
+        raise ConfigError(f"max_in_flight: expected an integer >= 1, got {max_in_flight}")
     start = time.perf_counter()
     try:
         if executor is None:

@@ -37,6 +37,7 @@ from estimators.matching.scan_matching import (
     scans_to_car_points,
 )
 from estimators.paper.pc import MIN_MATCH_RETURNS
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, transform_points, wrap_angle
 
 
@@ -66,15 +67,15 @@ class ICPParams:
 
     def __post_init__(self) -> None:
         if self.max_iterations < 1:
-            raise ValueError(f"max_iterations: expected >= 1, got {self.max_iterations}")
+            raise ConfigError(f"max_iterations: expected >= 1, got {self.max_iterations}")
         for name in ("max_correspondence_distance", "loss_scale", "inlier_distance"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: expected a positive distance [m], got "
+                raise ConfigError(f"{name}: expected a positive distance [m], got "
                                  f"{getattr(self, name)}")
         if not 0 < self.trim_ratio <= 1:
-            raise ValueError(f"trim_ratio: expected a share in (0, 1], got {self.trim_ratio}")
+            raise ConfigError(f"trim_ratio: expected a share in (0, 1], got {self.trim_ratio}")
         if self.loss not in LOSSES:
-            raise ValueError(f"unknown loss {self.loss!r}: expected one of {', '.join(LOSSES)}")
+            raise ConfigError(f"unknown loss {self.loss!r}: expected one of {', '.join(LOSSES)}")
 
 
 @dataclass(frozen=True)
@@ -106,10 +107,11 @@ def register(
     """
     query_points = np.asarray(query_points, dtype=np.float64)
     if query_points.ndim != 2 or query_points.shape[1] != 2:
-        raise ValueError(f"query points: expected shape (M, 2), got {query_points.shape}")
+        raise EstimatorInputError(f"query points: expected shape (M, 2), got {query_points.shape}")
     pose = np.asarray(initial_guess, dtype=np.float64).copy()
     if pose.shape != (3,):
-        raise ValueError(f"initial_guess: expected a pose (x, y, heading), got shape {pose.shape}")
+        raise EstimatorInputError(
+            f"initial_guess: expected a pose (x, y, heading), got shape {pose.shape}")
     information = None if prior_information is None else np.asarray(prior_information, float)
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     converged = False

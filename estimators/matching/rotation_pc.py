@@ -47,6 +47,7 @@ from estimators.paper.scan_image import (
     pixel_shift_to_metres,
     scan_to_image,
 )
+from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, inverse
 
 FloatArray = NDArray[np.float64]
@@ -154,7 +155,7 @@ class ScanMatcher:
         if isinstance(self.icp_iterations, bool) or not (
             isinstance(self.icp_iterations, (int, np.integer)) and self.icp_iterations >= 0
         ):
-            raise ValueError(
+            raise ConfigError(
                 f"icp_iterations: expected an integer >= 0, got {self.icp_iterations!r}"
             )
 
@@ -252,7 +253,7 @@ class ScanMatcher:
         if too_few_returns(earlier, later):
             return unmeasured_match(prior)
         if earlier.reference is None:
-            raise ValueError("refine: expected a matcher with icp_iterations > 0, got 0")
+            raise ConfigError("refine: expected a matcher with icp_iterations > 0, got 0")
         refined = [
             refine_on_curves(
                 earlier.reference,
@@ -294,7 +295,7 @@ def require_sensor_frame(setup: SensorSetup, estimator: str) -> None:
     they estimate the heading change from the scans' rotation, and each sensor's pose is the
     car's pose composed with its mount."""
     if setup.world_aligned:
-        raise ValueError(
+        raise ConfigError(
             f"{estimator}: expected sensor-frame scans (scan_frame='sensor'), got world-aligned "
             "scans; the paper's estimators (pc, pc_pg) take those"
         )
@@ -367,7 +368,7 @@ class RotationPhaseCorrelation(Estimator):
     def _checked_setup(self) -> SensorSetup:
         assert self.setup is not None
         if isinstance(self.lidar, bool) or self.lidar not in range(self.setup.n_lidars):
-            raise ValueError(
+            raise ConfigError(
                 f"lidar: expected an index in 0..{self.setup.n_lidars - 1} "
                 f"({', '.join(self.setup.keys)}), got {self.lidar!r}"
             )

@@ -35,6 +35,7 @@ from estimators.paper.scan_image import (
     pixel_shift_to_metres,
     scan_to_image,
 )
+from lidar_env.errors import ConfigError, EstimatorInputError
 
 Scans = dict[str, NDArray[np.float64]]
 
@@ -141,13 +142,13 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.lidar not in (0, 1):
-            raise ValueError(f"lidar: expected 0 (main) or 1 (offset), got {self.lidar!r}")
+            raise ConfigError(f"lidar: expected 0 (main) or 1 (offset), got {self.lidar!r}")
 
     def _reset_state(self) -> None:
         super()._reset_state()
         assert self.setup is not None
         if self.lidar >= self.setup.n_lidars:
-            raise ValueError(
+            raise EstimatorInputError(
                 f"lidar {self.lidar} requested but the setup has {self.setup.n_lidars} Lidar(s)"
             )
         self._key = self.setup.keys[self.lidar]
@@ -182,7 +183,7 @@ class PoseGraphCorrelationOdometry(_ImageCorrelationEstimator):
         super()._reset_state()
         assert self.setup is not None
         if self.setup.n_lidars != 2:
-            raise ValueError(f"pc_pg needs 2 Lidars, the setup has {self.setup.n_lidars}")
+            raise EstimatorInputError(f"pc_pg needs 2 Lidars, the setup has {self.setup.n_lidars}")
         main, offset = self.setup.mounts
         self._axes_heading = self._image_axes_heading(0)
         if self.setup.world_aligned:
