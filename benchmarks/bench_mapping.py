@@ -242,37 +242,53 @@ def main() -> None:
 
 def map_aces(estimators: list[str], path: Path) -> Path:
     """Maps of the whole ACES log at 0.1 m: at the SLAM poses of ``aces-corrected`` (pseudo
-    truth, its keyframes only) and at each estimator's poses, each in its own first-pose frame."""
+    truth, its keyframes only, in its first pose's frame) and at each estimator's poses, moved
+    into that frame by the least-squares SE(2) fit to the pseudo truth at the same (logger)
+    times, so that the maps can be compared by eye; with an occupancy colour bar and the
+    trajectories (pseudo truth in black)."""
     from estimators.datasets.carmen import load_log
     from estimators.datasets.real_log import run_on_log, setup_from_log
+    from estimators.leaderboard.alignment import align_to_reference
+    from estimators.leaderboard.figures import draw_occupancy_panels
+    from estimators.mapping.map_figure import _panel_image
     from lidar_env.se2 import relative
 
     radish = SHARED_DATA / "radish"
     if not radish.is_dir():
         raise FileNotFoundError(f"expected the Radish logs in {radish}")
+    reference = load_log(radish / "aces-corrected.log.gz")
+    truth = relative(reference.logged_poses()[0], reference.logged_poses())
+    runs = {"truth": (reference, truth)}
+    log = load_log(radish / "aces.clf.bz2")
+    for name in estimators:
+        start = time.perf_counter()
+        try:
+            poses = run_on_log(make(name), log).poses
+        except ValueError as error:  # e.g. an estimator that needs two Lidars
+            print(f"  aces {name}: skipped ({error})")
+            continue
+        fit = align_to_reference(log.scan_times("logger")[:len(poses)], poses,
+                                 reference.scan_times("logger"), truth)
+        print(f"  aces {name}: {len(poses)} scans in {time.perf_counter() - start:.0f} s; "
+              f"aligned to the pseudo truth (turned {np.degrees(fit.transform[2]):+.1f} deg, "
+              f"RMS residual {fit.residual_m:.2f} m over {fit.matched} keyframes)")
+        runs[name] = (log, fit.poses)
+    bounds = bounds_around(np.concatenate([p[:, :2] for _, p in runs.values()]), 8.0)
     panels = {}
-    for name, log_file in [("SLAM (aces-corrected)", "aces-corrected.log.gz"),
-                           *((name, "aces.clf.bz2") for name in estimators)]:
-        log = load_log(radish / log_file)
-        setup = setup_from_log(log)
-        if log_file == "aces.clf.bz2":
-            start = time.perf_counter()
-            try:
-                poses = run_on_log(make(name), log).poses
-            except ValueError as error:  # e.g. an estimator that needs two Lidars
-                print(f"  aces {name}: skipped ({error})")
-                continue
-            print(f"  aces {name}: {len(poses)} scans in {time.perf_counter() - start:.0f} s")
-        else:
-            poses = relative(log.logged_poses()[0], log.logged_poses())
-        observations = [{setup.keys[0]: scan.ranges} for scan in log.scans]
-        grid = from_estimator_run(poses, observations, setup, resolution=0.1,
-                                  bounds=bounds_around(poses[:, :2], 8.0))
+    for name, (source, poses) in runs.items():
+        setup = setup_from_log(source)
+        observations = [{setup.keys[0]: scan.ranges} for scan in source.scans[:len(poses)]]
+        grid = from_estimator_run(poses, observations, setup, resolution=0.1, bounds=bounds)
         agreement = return_agreement(grid, poses, observations, setup)
         print(f"  aces {name}: return agreement {agreement:.3f} at one-cell tolerance")
-        panels[f"{name} (agreement {agreement:.2f})"] = grid
-    return save_map_figure(path, panels, title="ACES (Radish), whole log, 0.1 m cells")
-
+        title = "pseudo truth: SLAM (aces-corrected)" if name == "truth" else f"at {name} poses"
+        panels[f"{title} (agreement {agreement:.2f})"] = _panel_image(grid, None)
+    trajectories = {name: poses for name, (_, poses) in runs.items()}
+    drawn = draw_occupancy_panels(
+        panels, bounds, trajectories, path=path,
+        title="ACES (Radish), whole log, 0.1 m cells: maps at the pseudo-truth poses and at "
+              "each estimator's poses, aligned to the pseudo truth by a least-squares SE(2) fit")
+    return drawn[0]
 
 if __name__ == "__main__":
     main()

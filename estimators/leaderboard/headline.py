@@ -100,8 +100,9 @@ def headline_markdown(rows: Sequence[Mapping[str, Any]], real_name: str | None) 
 
 
 def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
-    """One group's table: the headline order, its accuracy, ATE, heading and drift."""
-    header = ["#", "estimator", *(title for _, title, _ in GROUP_METRICS), "runs"]
+    """One group's table: the headline's order and ranks (``overall #``), the group's
+    accuracy, ATE, heading and drift."""
+    header = ["overall #", "estimator", *(title for _, title, _ in GROUP_METRICS), "runs"]
     body = [[row["rank"], str(row["estimator"]),
              *(_cell(row, key, digits, f"{group.name} ") for key, _, digits in GROUP_METRICS),
              str(row.get(f"{group.name} runs", 0))] for row in rows]
@@ -110,7 +111,7 @@ def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
 
 def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
     """The map scores of the estimators' poses, mean ± std over seeds."""
-    header = ["#", "estimator", *(title for _, title, _ in MAP_METRICS)]
+    header = ["overall #", "estimator", *(title for _, title, _ in MAP_METRICS)]
     body = [[row["rank"], str(row["estimator"]),
              *(_cell(row, key, digits) for key, _, digits in MAP_METRICS)] for row in rows]
     return _markdown(header, body)

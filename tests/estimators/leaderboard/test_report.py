@@ -120,3 +120,28 @@ def test_sorting_a_column_orders_its_rows_by_value(tmp_path: Path) -> None:
     report.write_text(page)
     dom = browse(report, tmp_path / "profile", "--dump-dom")
     assert "<title>zero,lidar_odometry,slam</title>" in dom  # descending after two clicks
+
+
+@pytest.mark.slow
+def test_a_leaderboard_run_writes_every_figure_and_a_report_that_renders(tmp_path: Path) -> None:
+    from PIL import Image
+
+    from estimators.leaderboard import cli as leaderboard
+
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "board"
+    assert leaderboard.main(["--worlds", "hallway", "--traces", "straight", "--seeds", "0",
+                             "--estimators", "zero", "pc", "--workers", "1", "--no-progress",
+                             "--no-real", "--out", str(out)]) == 0
+    figures = sorted(out.glob("*.png"))
+    assert {p.name for p in figures} == {"fig8_lidar_image.png", "fig8_traces.png", "maps.png",
+                                        "segment_errors.png", "speed_accuracy.png"}
+    for png in figures:
+        with Image.open(png) as image:
+            assert min(image.info["dpi"]) >= 150 and min(image.size) > 300, png.name
+        assert png.with_suffix(".svg").read_text().lstrip().startswith("<?xml"), png.name
+    page = (out / "report.html").read_text()
+    assert page.count("data:image/png;base64,") == len(figures)
+    assert "--estimators zero pc" in page and "|---|" not in page  # every table converted
+    dom = browse(out / "report.html", tmp_path / "profile", "--dump-dom")
+    assert 'data-broken-images="0"' in dom and "<td>zero</td>" in dom
