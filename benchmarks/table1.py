@@ -1,7 +1,10 @@
 """The paper's Table I on DualLidar-v0: eq.-11 accuracy, ATE, drift and ms/step per estimator.
 
 Run: ``python benchmarks/table1.py [--seed 0] [--frames world sensor] [--tum-dir DIR]
-[--plot table1.png]`` (the plot, like the paper's Fig. 8, needs matplotlib).
+[--plot table1.png] [--feature-density 0]`` (the plot, like the paper's Fig. 8, needs
+matplotlib). ``--feature-density`` [features per 10 m of wall] adds door recesses, pillars,
+corners and clutter to the two closed areas, placed from the seed
+(:mod:`lidar_env.feature_worlds`; ``benchmarks/table1_sweep.py`` sweeps it).
 
 Three surroundings as in the paper (section IV.B): a right turn in ``open_cylinders``, a
 zigzag in ``hallway`` and in ``closed_to_open``; one seeded episode each, 1 cm range noise,
@@ -30,6 +33,7 @@ from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
 from estimators.evaluation.tum import write_tum
+from lidar_env.feature_worlds import FEATURE_WORLDS, feature_world_name
 
 #: (world, trace, {estimator: Table I case and accuracy [%]})
 GROUPS = (
@@ -69,17 +73,22 @@ def main() -> None:
     parser.add_argument("--frames", nargs="+", default=["world", "sensor"])
     parser.add_argument("--tum-dir", type=Path, help="write truth and estimates as TUM files")
     parser.add_argument("--plot", type=Path, help="save true and estimated paths to this image")
+    parser.add_argument("--feature-density", type=float, default=0.0,
+                        help="features per 10 m of wall in the closed areas (default 0: bare)")
     args = parser.parse_args()
     paths: dict[tuple[str, str], dict[str, np.ndarray]] = {}
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"load average {os.getloadavg()[0]:.1f}; seed {args.seed}, noise {RANGE_NOISE} m")
+          f"load average {os.getloadavg()[0]:.1f}; seed {args.seed}, noise {RANGE_NOISE} m, "
+          f"{args.feature_density:g} features per 10 m of wall in the closed areas")
     header = (f"{'frame':6s} {'world':15s} {'trace':10s} {'estimator':9s} {'case':>4s} "
               f"{'paper%':>7s} {'acc%':>6s} {'eq11%':>7s} {'ATE m':>7s} {'drift%':>7s} "
               f"{'head°':>6s} {'dist m':>7s} {'ms/step':>8s}")
     print(header)
     for scan_frame in args.frames:
         for world, trace, paper in GROUPS:
-            env, observations, times, truth = record_episode(world, trace, scan_frame, args.seed)
+            name = (feature_world_name(world, args.feature_density, args.seed)
+                    if world in FEATURE_WORLDS else world)
+            env, observations, times, truth = record_episode(name, trace, scan_frame, args.seed)
             setup = SensorSetup.from_env(env)
             paths[scan_frame, world] = {"truth": truth}
             if args.tum_dir:
