@@ -15,7 +15,7 @@ MAX_LINES = 400
 #: estimators' subpackages from the bottom up: each may import only those before it (and
 #: ``base``, ``registry``, ``paths``, which every layer may use).
 LAYERS = ("paper", "matching", "odometry", "slam", "mapping", "evaluation", "datasets",
-          "leaderboard")
+          "leaderboard", "calibration")
 SHARED = {"estimators", "estimators.base", "estimators.registry", "estimators.paths"}
 
 
