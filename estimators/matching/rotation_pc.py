@@ -301,21 +301,19 @@ def require_sensor_frame(setup: SensorSetup, estimator: str) -> None:
         )
 
 
-#: A constant-velocity prediction is trusted over at most this many typical scan intervals...
+#: A constant-velocity prediction is trusted over at most this many typical scan intervals
+#: (the intervals its velocity was measured over); past that it says nothing.
 PREDICTION_GAP_FACTOR = 10.0
-#: ... or this long [s], whichever is longer (so an irregular clock's short intervals do not
-#: make every ordinary scan a "gap").
-MIN_PREDICTION_HORIZON = 1.0
 
 
 def prediction_horizon(intervals: ArrayLike) -> float:
-    """The longest gap [s] a constant-velocity prediction may extrapolate over: the larger of
+    """The longest gap [s] a constant-velocity prediction may extrapolate over:
     ``PREDICTION_GAP_FACTOR`` times the median of the recent scan ``intervals`` [s] (positive
-    ones; none seen: 0) and ``MIN_PREDICTION_HORIZON``."""
+    ones; none seen: 0, no prediction)."""
     intervals = np.asarray(intervals, dtype=np.float64).ravel()
     intervals = intervals[np.isfinite(intervals) & (intervals > 0)]
     typical = float(np.median(intervals)) if len(intervals) else 0.0
-    return max(PREDICTION_GAP_FACTOR * typical, MIN_PREDICTION_HORIZON)
+    return PREDICTION_GAP_FACTOR * typical
 
 
 def within_prediction_horizon(dt: float, intervals: ArrayLike) -> bool:

@@ -103,7 +103,9 @@ def test_a_clock_gap_does_not_extrapolate_the_velocity(drive, name, gap):
 def test_the_prediction_horizon_follows_the_clock():
     assert prediction_horizon([0.1] * 20) == pytest.approx(1.0)
     assert prediction_horizon([2.0, 3.0, 4.0]) == pytest.approx(30.0)
-    assert prediction_horizon([]) == pytest.approx(1.0)
+    assert prediction_horizon([]) == 0.0  # no interval seen: no velocity to extrapolate
+    # a velocity measured over 15 ms says nothing about a 1 s gap
+    assert not within_prediction_horizon(1.0, [0.015625])
     assert within_prediction_horizon(0.1, [0.1])
     assert not within_prediction_horizon(60.0, [0.1])
     assert not within_prediction_horizon(0.0, [0.1])
