@@ -1,5 +1,6 @@
 """The leaderboard's tables from stored traces: the ranking (:func:`rank_table`, mean ATE over the
-simulated scenarios, one column per group and the real-log relation error) and its Markdown.
+simulated scenarios, one column per group and the real-log relation error); its Markdown, with
+the spread over seeds and the tie marks, is :mod:`estimators.leaderboard.headline`.
 The paper's Table I beside ours lives in :mod:`estimators.leaderboard.table_one`.
 """
 
@@ -108,29 +109,6 @@ def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cells) + " |" for cells in body]
     return "\n".join(lines) + "\n"
-
-
-def leaderboard_markdown(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
-                         real_name: str | None) -> str:
-    header = ["#", "estimator", *(title for _, title, _ in METRIC_COLUMNS)]
-    header += [f"{g.name}: acc % / ATE m" for g in groups]
-    if real_name:
-        header.append(f"{real_name} rel. error [m]")
-    body = []
-    for rank, row in enumerate(rows, 1):
-        name = row["estimator"]
-        if row["scenarios"] < row["scenarios_run"]:  # means over fewer scenarios: say so
-            name += f" (scored on {row['scenarios']} of {row['scenarios_run']})"
-        cells = [str(rank), name]
-        cells += [_fmt(row[key], 1 if key.endswith("percent") else 3) for key, _, _ in
-                  METRIC_COLUMNS]
-        cells += [f"{_fmt(row[f'{g.name} accuracy_percent'], 1)} / "
-                  f"{_fmt(row[f'{g.name} ate_rmse_m'], 3)}" for g in groups]
-        if real_name:
-            note = row.get("real_note")
-            cells.append(f"n/a ({note})" if note else _fmt(row.get(REAL_METRIC, math.nan), 3))
-        body.append(cells)
-    return _markdown(header, body)
 
 
 def map_ceiling_note(records: dict[tuple[Scenario, str], TraceRecord]) -> str:
