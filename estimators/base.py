@@ -180,17 +180,26 @@ class SensorSetup:
         """
         scans: dict[str, NDArray[np.float64]] = {}
         for key, sensor in zip(self.keys, self.sensors, strict=True):
-            if key not in observation:
-                raise KeyError(f"observation lacks {key!r}: expected keys {', '.join(self.keys)}")
-            scan = np.asarray(observation[key], dtype=np.float64)
+            if not isinstance(observation, Mapping) or key not in observation:
+                raise EstimatorInputError(
+                    f"observation lacks {key!r}: expected a mapping with keys "
+                    f"{', '.join(self.keys)}, got {type(observation).__name__}")
+            try:
+                scan = np.asarray(observation[key], dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise EstimatorInputError(
+                    f"{key}: expected an array of ranges [m], got {observation[key]!r:.60}"
+                ) from error
             if scan.shape != sensor.beam_angles.shape:
-                raise ValueError(
+                raise EstimatorInputError(
                     f"{key}: expected a scan of shape {sensor.beam_angles.shape}, got {scan.shape}"
                 )
             if not np.all(np.isfinite(scan)):
-                raise ValueError(f"{key}: scan holds NaN or inf; expected finite ranges [m]")
+                raise EstimatorInputError(
+                    f"{key}: scan holds NaN or inf; expected finite ranges [m]")
             if np.any(scan < 0):
-                raise ValueError(f"{key}: scan holds negative ranges; expected ranges >= 0 [m]")
+                raise EstimatorInputError(
+                    f"{key}: scan holds negative ranges; expected ranges >= 0 [m]")
             scans[key] = scan
         return scans
 

@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
+from lidar_env.errors import ConfigError, ResetNeededError
 from lidar_env.lidar_layout import LidarLayout
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
@@ -26,6 +27,24 @@ from lidar_env.world import World
 #: than the car moves per step (0.15 m at default settings), far less than the spacing between
 #: zigzag legs, so progress never jumps to a neighbouring leg.
 PROGRESS_WINDOW = 2.0
+
+
+def _checked_action(action: ArrayLike) -> tuple[float, float]:
+    """(throttle, steer) of an action, or a :class:`ConfigError` naming what was wrong."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ConfigError(
+            f"action: expected 2 numbers (speed, yaw rate) in [-1, 1], got {action!r:.60}"
+        ) from error
+    if a.shape != (2,):
+        raise ConfigError(
+            f"action: expected shape (2,) (speed, yaw rate) in [-1, 1], got shape {a.shape}"
+        )
+    throttle, steer = float(a[0]), float(a[1])
+    if not (math.isfinite(throttle) and math.isfinite(steer)):
+        raise ConfigError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+    return throttle, steer
 
 
 class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
@@ -101,6 +120,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     so standing at the start does not count);
     2. the car's box touches an obstacle (it is stopped at the last free physics substep).
     Truncation: 3. the episode time reaches ``max_episode_time`` (120 s).
+    After either, ``step()`` raises :class:`~lidar_env.errors.ResetNeededError` until
+    ``reset()`` (Gymnasium leaves stepping on undefined; the car must not drive on unnoticed).
 
     ## Info
 
@@ -165,7 +186,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         else:
             raise TypeError(f"config: expected an EnvConfig or a dict, got {type(config).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
+            raise ConfigError(
                 f"render_mode: expected one of {', '.join(self.metadata['render_modes'])} or "
                 f"None, got {render_mode!r}"
             )
@@ -197,6 +218,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self._last_scans: list[NDArray[np.float32]] | None = None
         self._time = 0.0
         self._arc = 0.0
+        self._episode_over = False
 
     # ------------------------------------------------------------------ episode
     def reset(
@@ -214,6 +236,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self.car.place(self.trace.start_pose)
         self._time = 0.0
         self._arc = 0.0
+        self._episode_over = False
         self._trajectories = {}
         self._render_map = None
         observation = self._observe()
@@ -227,14 +250,10 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
         if self.car is None or self.trace is None:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action)
-        if a.shape != (2,):
-            raise ValueError(
-                f"action: expected shape (2,) (speed, yaw rate) in [-1, 1], got shape {a.shape}"
-            )
-        throttle, steer = float(a[0]), float(a[1])
-        if not (math.isfinite(throttle) and math.isfinite(steer)):
-            raise ValueError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
+        if self._episode_over:
+            raise ResetNeededError(
+                "step() after the episode ended (terminated or truncated): call reset() first")
+        throttle, steer = _checked_action(action)
         cfg = self.config
         speed = min(max(throttle, -1.0), 1.0) * cfg.max_speed
         yaw_rate = min(max(steer, -1.0), 1.0) * cfg.max_yaw_rate
@@ -249,6 +268,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         truncated = not terminated and self._time >= cfg.max_episode_time - 1e-9
         observation = self._observe()
         info = self._info(arc, cross_track, collision)
+        self._episode_over = terminated or truncated
         if self.render_mode == "human":
             self.render()
         return observation, reward, terminated, truncated, info
@@ -322,7 +342,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         for name, poses in trajectories.items():
             array = np.asarray(poses, dtype=np.float64)
             if array.ndim != 2 or array.shape[1] not in (2, 3):
-                raise ValueError(
+                raise ConfigError(
                     f"trajectory {name!r}: expected shape (N, 2) or (N, 3), got {array.shape}"
                 )
             checked[str(name)] = array[:, :2].copy()

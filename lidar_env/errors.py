@@ -24,6 +24,11 @@ class ConfigError(DualLidarError):
     """An env config, reset option, action, or an estimator's or tool's parameter is invalid."""
 
 
+class ResetNeededError(DualLidarError):
+    """``step()`` was called after the episode ended; Gymnasium leaves that undefined, we
+    refuse it so that a car never drives on past a wall or the goal unnoticed."""
+
+
 class MapError(DualLidarError):
     """A world, map image, ROS map, obstacle geometry or trace cannot be built as asked."""
 

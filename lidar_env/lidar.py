@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError
 from lidar_env.ray_casting import beam_geometry, cast_rays_kernel, scan_kernel
 from lidar_env.world import World
 
@@ -44,7 +45,7 @@ def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
     if poses.ndim == 1:
         poses = poses[None, :]
     if poses.ndim != 2 or poses.shape[1] != 3:
-        raise ValueError(
+        raise ConfigError(
             f"sensor_poses: expected finite (K, 3) poses (x, y, heading), got shape {poses.shape}"
         )
     return poses
@@ -94,12 +95,12 @@ def cast_rays(
     poses = as_poses(sensor_poses)
     angles = np.asarray(beam_angles, dtype=np.float64)
     if angles.ndim != 1:
-        raise ValueError(
+        raise ConfigError(
             f"beam_angles: expected a non-empty finite 1-D array [rad], got shape {angles.shape}"
         )
     max_range = float(max_range)
     if not (math.isfinite(max_range) and max_range > 0):
-        raise ValueError(f"max_range: expected a positive finite number [m], got {max_range}")
+        raise ConfigError(f"max_range: expected a positive finite number [m], got {max_range}")
     beams = beam_geometry(angles.tobytes())
     # The kernel itself rejects non-finite poses: checking here would cost more than a scan.
     return cast_rays_kernel(
@@ -150,15 +151,15 @@ class Lidar:
 
     def __post_init__(self) -> None:
         if isinstance(self.n_beams, bool) or int(self.n_beams) != self.n_beams or self.n_beams < 1:
-            raise ValueError(f"n_beams: expected a positive integer, got {self.n_beams!r}")
+            raise ConfigError(f"n_beams: expected a positive integer, got {self.n_beams!r}")
         if not (np.isfinite(self.max_range) and self.max_range > 0):
-            raise ValueError(
+            raise ConfigError(
                 f"max_range: expected a positive finite number [m], got {self.max_range}"
             )
         if not (np.isfinite(self.noise_std) and self.noise_std >= 0):
-            raise ValueError(f"noise_std: expected a finite number >= 0 [m], got {self.noise_std}")
+            raise ConfigError(f"noise_std: expected a finite number >= 0 [m], got {self.noise_std}")
         if not 0.0 <= self.dropout_prob <= 1.0:
-            raise ValueError(
+            raise ConfigError(
                 f"dropout_prob: expected a probability in [0, 1], got {self.dropout_prob}"
             )
         object.__setattr__(self, "n_beams", int(self.n_beams))

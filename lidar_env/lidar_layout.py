@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError
 from lidar_env.lidar import Geometry, as_poses, as_world
 from lidar_env.lidar_config import LidarConfig
 from lidar_env.primitive_grid import PrimitiveGrid
@@ -133,7 +134,7 @@ class LidarLayout:
         world, first_polygon_edge = as_world(world)
         poses = as_poses(sensor_poses)
         if len(poses) != len(self.lidars):
-            raise ValueError(f"sensor_poses: expected {len(self.lidars)} poses (one per Lidar), "
+            raise ConfigError(f"sensor_poses: expected {len(self.lidars)} poses (one per Lidar), "
                              f"got {len(poses)}")
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from lidar_env.errors import ConfigError
 from lidar_env.primitive_grid import PrimitiveGrid, grid_cell, odd_crossings, segment_distance2
 
 #: Extra angle [rad] each subtended interval is widened by. It covers the error of
@@ -269,7 +270,7 @@ def cast_sensor(
     """
     ox, oy, heading = pose
     if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
-        raise ValueError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
+        raise ConfigError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
     circle_seen, segment_seen, circle_ids, segment_ids = scratch
     if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -stamp):
         ranges[:] = 0.0
@@ -366,7 +367,7 @@ def beam_geometry(angle_bytes: bytes) -> tuple:
     """
     angles = np.frombuffer(angle_bytes, dtype=np.float64)
     if len(angles) == 0 or not np.all(np.isfinite(angles)):
-        raise ValueError(
+        raise ConfigError(
             f"beam_angles: expected a non-empty finite 1-D array [rad], got {angles}"
         )
     sorted_angles, order, step = _beam_order(angles)

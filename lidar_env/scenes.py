@@ -40,7 +40,7 @@ def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     options = dict(options or {})
     unknown = sorted(set(options) - set(RESET_OPTIONS))
     if unknown:
-        raise ValueError(
+        raise ConfigError(
             f"unknown reset option(s) {', '.join(map(repr, unknown))}: expected some of "
             f"{', '.join(RESET_OPTIONS)}"
         )
@@ -60,10 +60,13 @@ def check_start_pose(
 
 
 def _as_pose(start: Any) -> tuple[float, float, float]:
-    pose = np.asarray(start, dtype=np.float64)
+    expected = "options['start']: expected 3 finite numbers (x [m], y [m], heading [rad]), got"
+    try:
+        pose = np.asarray(start, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ConfigError(f"{expected} {start!r}") from error
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise ValueError(f"options['start']: expected 3 finite numbers (x [m], y [m], heading "
-                         f"[rad]), got {start!r}")
+        raise ConfigError(f"{expected} {start!r}")
     return float(pose[0]), float(pose[1]), float(pose[2])
 
 
@@ -74,7 +77,7 @@ def check_user_start(
     ``car_width`` [m]) clear of its obstacles.
 
     Raises:
-        ValueError: ``start`` is not 3 finite numbers.
+        ConfigError: ``start`` is not 3 finite numbers.
         StartPoseError: the pose is outside the map, or the car would touch or lie inside an
             obstacle.
     """

@@ -15,6 +15,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import MapError
+
 #: (arc length [m], curvature [1/m], positive = turning left / CCW) of one piece of a seed.
 Piece = tuple[float, float]
 
@@ -157,7 +159,7 @@ class Trace:
     ) -> None:
         waypoints = np.ascontiguousarray(waypoints, dtype=np.float64)
         if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) < 2:
-            raise ValueError(f"waypoints: expected shape (M >= 2, 2), got {waypoints.shape}")
+            raise MapError(f"waypoints: expected shape (M >= 2, 2), got {waypoints.shape}")
         self.seed = seed
         self.waypoints = waypoints
         self.headings = np.asarray(headings, dtype=np.float64)
@@ -166,7 +168,7 @@ class Trace:
         self.closed = closed
         gap = float(np.hypot(*(waypoints[-1] - waypoints[0])))
         if closed and gap > CLOSURE_TOLERANCE:
-            raise ValueError(
+            raise MapError(
                 f"closed trace {seed!r}: expected the last waypoint to meet the first (within "
                 f"{CLOSURE_TOLERANCE:g} m), got a gap of {gap:.6g} m"
             )

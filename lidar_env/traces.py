@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, MapError
 from lidar_env.trace_geometry import Piece, Trace, integrate_pieces
 
 #: Scales tried, in order, when a trace does not fit its world: bends shrink before the length.
@@ -29,7 +30,7 @@ BEND_SCALES: tuple[float, ...] = (1.0, 0.75, 0.5)
 #: Shortest trace [m] :func:`make_trace` accepts before giving up.
 MIN_TRACE_LENGTH = 2.0
 
-class TraceFitError(ValueError):
+class TraceFitError(MapError):
     """No shrunken version of a trace keeps the required clearance in its world."""
 
 
@@ -155,7 +156,7 @@ TRACE_NAMES: tuple[str, ...] = tuple(TRACE_SEEDS)
 def check_trace_name(name: Any) -> str:
     """Return ``name`` if it is a trace seed, else raise a ``ValueError`` listing the seeds."""
     if not isinstance(name, str) or name not in TRACE_SEEDS:
-        raise ValueError(f"unknown trace {name!r}: expected one of {', '.join(TRACE_NAMES)}")
+        raise ConfigError(f"unknown trace {name!r}: expected one of {', '.join(TRACE_NAMES)}")
     return name
 
 
@@ -166,9 +167,9 @@ def build_trace(
     spec = TRACE_SEEDS[check_trace_name(seed)]
     pose = np.asarray(start_pose, dtype=np.float64)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise ValueError(f"start_pose: expected 3 finite numbers (x, y, heading), got {pose}")
+        raise ConfigError(f"start_pose: expected 3 finite numbers (x, y, heading), got {pose}")
     if not math.isfinite(length) or length <= 0:
-        raise ValueError(f"length: expected a positive trace length [m], got {length!r}")
+        raise ConfigError(f"length: expected a positive trace length [m], got {length!r}")
     points, headings = integrate_pieces(pose, spec.pieces(length, bend_scale))
     return Trace(seed, points, headings, spec.closed)
 

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError
 from lidar_env.feature_worlds import add_features, feature_world_name, parse_world_name
 from lidar_env.polygons import segment_distances
 from lidar_env.traces import TRACE_NAMES, Trace, build_trace, check_trace_name, make_trace
@@ -83,7 +84,7 @@ def check_world_name(name: Any) -> str:
         base, options = parse_world_name(name)
         return feature_world_name(base, options.density, options.seed)
     if not isinstance(name, str) or name not in WORLD_NAMES:
-        raise ValueError(f"unknown world {name!r}: expected one of {', '.join(WORLD_NAMES)}")
+        raise ConfigError(f"unknown world {name!r}: expected one of {', '.join(WORLD_NAMES)}")
     return name
 
 
@@ -214,7 +215,7 @@ def built_in_layout(name: str) -> WorldLayout:
     features placed clear of every default trace, so each still fits at full size)."""
     name = check_world_name(name)
     if name == "random":
-        raise ValueError("world 'random' has no fixed layout: use make_scene with a generator")
+        raise ConfigError("world 'random' has no fixed layout: use make_scene with a generator")
     base, options = parse_world_name(name)
     layout = _BUILT_IN[base](LAYOUT_CLEARANCE)
     if options.density == 0.0:

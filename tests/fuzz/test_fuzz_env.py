@@ -1,7 +1,7 @@
 """Fuzz: env configs, reset options and actions, through the public Gymnasium API only.
 
-Defects found in files of another owner (the env and its config) are ``xfail(strict=True)``
-with the defect named; see the issue-18 report."""
+Each property: a named project error (a DualLidarError) or a finite result, never another
+exception."""
 
 from __future__ import annotations
 
@@ -29,9 +29,6 @@ def finite_step(env, action) -> None:
         assert np.all(np.isfinite(scan)), key
 
 
-@pytest.mark.xfail(strict=True, reason="issue 18, lidar_env/traces.py (not mine): "
-                   "config={'car_length': 3.0} raises TraceFitError, a bare ValueError subclass "
-                   "outside the DualLidarError hierarchy (it should derive from MapError)")
 @settings(max_examples=scaled(15))
 @example(config={"car_length": 3.0})
 @given(config=st.dictionaries(st.sampled_from(KEYS), values, max_size=2))
@@ -60,8 +57,6 @@ def env():
     return environment
 
 
-@pytest.mark.xfail(strict=True, reason="issue 18 item 11, lidar_env/env.py (not mine): a "
-                   "string action raises numpy's bare ValueError/TypeError, not a ConfigError")
 @settings(max_examples=scaled(30))
 @example(action=["a", None])
 @given(action=actions)
@@ -78,8 +73,6 @@ options = st.dictionaries(
 )
 
 
-@pytest.mark.xfail(strict=True, reason="issue 18 item 11, lidar_env/scenes.py (not mine): "
-                   "reset(options={'start': 'origin'}) raises a bare error, not a named one")
 @settings(max_examples=scaled(15))
 @example(reset_options={"start": "origin"})
 @given(reset_options=options)

@@ -78,10 +78,6 @@ bad_scans = st.one_of(
 )
 
 
-@pytest.mark.xfail(strict=True, reason="issue 18 item 11, estimators/base.py "
-                   "SensorSetup.check_observation (not mine): a missing key, a wrong shape, a "
-                   "string scan or NaN/negative ranges raise bare KeyError/ValueError, not "
-                   "EstimatorInputError")
 @settings(max_examples=scaled(20))
 @example(scan="scan")
 @given(scan=bad_scans)

@@ -262,3 +262,27 @@ def test_space_holds_the_obstacles_and_the_car_at_its_pose():
     assert tuple(kinematic[0].position) == tuple(info["pose"][:2])
     assert kinematic[0].angle == info["pose"][2]
     assert len(space.static_body.shapes) >= len(world.circles) + len(world.segments)
+
+
+def test_stepping_after_the_episode_ended_is_refused_until_reset() -> None:
+    from lidar_env.errors import ResetNeededError
+
+    env = gym.make("DualLidar-v0", world="hallway", config={"max_episode_time": 0.2})
+    env.reset(seed=0)
+    forward = np.array([1.0, 0.0], dtype=np.float32)
+    assert env.step(forward)[3] is False
+    assert env.step(forward)[3] is True  # truncated at 0.2 s
+    with pytest.raises(ResetNeededError, match="call reset"):
+        env.unwrapped.step(forward)
+    env.reset(seed=0)
+    assert np.all(np.isfinite(env.step(forward)[4]["pose"]))
+
+
+@pytest.mark.parametrize("action", ["forward", ["a", None], None, [1.0, 2.0, 3.0]])
+def test_bad_actions_are_a_config_error_naming_the_action(action) -> None:
+    from lidar_env.errors import ConfigError
+
+    env = gym.make("DualLidar-v0", world="hallway")
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="action: expected"):
+        env.unwrapped.step(action)
