@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -12,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.actions import checked_action
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
 from lidar_env.errors import ConfigError, ResetNeededError
@@ -28,23 +28,6 @@ from lidar_env.world import World
 #: zigzag legs, so progress never jumps to a neighbouring leg.
 PROGRESS_WINDOW = 2.0
 
-
-def _checked_action(action: ArrayLike) -> tuple[float, float]:
-    """(throttle, steer) of an action, or a :class:`ConfigError` naming what was wrong."""
-    try:
-        a = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ConfigError(
-            f"action: expected 2 numbers (speed, yaw rate) in [-1, 1], got {action!r:.60}"
-        ) from error
-    if a.shape != (2,):
-        raise ConfigError(
-            f"action: expected shape (2,) (speed, yaw rate) in [-1, 1], got shape {a.shape}"
-        )
-    throttle, steer = float(a[0]), float(a[1])
-    if not (math.isfinite(throttle) and math.isfinite(steer)):
-        raise ConfigError(f"action: expected finite values in [-1, 1], got {a.tolist()}")
-    return throttle, steer
 
 
 class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
@@ -253,7 +236,7 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         if self._episode_over:
             raise ResetNeededError(
                 "step() after the episode ended (terminated or truncated): call reset() first")
-        throttle, steer = _checked_action(action)
+        throttle, steer = checked_action(action)
         cfg = self.config
         speed = min(max(throttle, -1.0), 1.0) * cfg.max_speed
         yaw_rate = min(max(steer, -1.0), 1.0) * cfg.max_yaw_rate
