@@ -1,7 +1,7 @@
 """Table I against feature density: the paper's method and ours in the closed areas, from bare
 walls to walls as rich in edges as the open area.
 
-Run: ``python -m benchmarks.table1_sweep [--densities 0 1 2 4 8] [--seeds 0 1 2]
+Run: ``python -m benchmarks.table1_sweep [--densities 0 0.5 1 2 4 8] [--seeds 0 1 2]
 [--workers 2] [--db leaderboard/table1_sweep.sqlite] [--figure docs/table1_sweep.png]``
 (the figure needs matplotlib; an SVG is written beside the PNG).
 
@@ -46,7 +46,7 @@ from lidar_env.feature_worlds import feature_world_name
 #: The two closed areas of Table I (the open area has its features already).
 AREAS: tuple[str, ...] = ("hallway", "closed_to_open")
 TRACE = "zigzag"
-DENSITIES: tuple[float, ...] = (0.0, 1.0, 2.0, 4.0, 8.0)
+DENSITIES: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)
 SEEDS: tuple[int, ...] = (0, 1, 2)
 ESTIMATORS: tuple[str, ...] = ("pc", "pc_offset", "pc_pg", "lidar_odometry")
 COLOURS = {"pc": "tab:green", "pc_offset": "tab:brown", "pc_pg": "tab:blue",
