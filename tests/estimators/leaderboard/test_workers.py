@@ -64,7 +64,11 @@ def test_ctrl_c_prints_one_line_exits_130_and_keeps_finished_scenarios(tmp_path,
     run = subprocess.Popen([sys.executable, "-m", "estimators.leaderboard", *argv], cwd=ROOT,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            env={**os.environ, "PYTHONPATH": str(ROOT)},
-                           start_new_session=True)  # its own process group, as a terminal's
+                           start_new_session=True,  # its own process group, as a terminal's
+                           # A shell runs background jobs with SIGINT ignored, and Python keeps an
+                           # inherited SIG_IGN: give the run the terminal's default, as Ctrl-C
+                           # would find it.
+                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     db_path = out / "experiments.sqlite"
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and run.poll() is None:
