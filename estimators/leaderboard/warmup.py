@@ -18,16 +18,16 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from estimators.leaderboard.recording import map_reference, record, replay, score_map
-from estimators.leaderboard.records import Scenario, package_version
+from estimators.leaderboard.records import Scenario, source_digest
 from estimators.paths import PROJECT_ROOT
 
 #: A short drive past cylinders: every kernel of a real scenario runs on it, in a few steps.
 WARMUP_SCENARIO = Scenario("open_cylinders", "straight", 0, config={"max_episode_time": 0.5})
 
 
-def marker_path(version: str | None = None) -> Path:
+def marker_path() -> Path:
     """The file whose presence says the kernels of this source are compiled and cached."""
-    digest = (version or package_version()).rsplit(".", 1)[-1]
+    digest = source_digest(PROJECT_ROOT)
     return PROJECT_ROOT / "estimators" / "leaderboard" / "__pycache__" / f"warm-{digest}"
 
 

@@ -1,0 +1,51 @@
+"""The compile warm-up runs once per source: two tasks on the pool, then a marker skips it."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future
+
+import pytest
+
+from estimators.leaderboard import warmup
+
+
+class RecordingPool:
+    """Runs nothing; records what was submitted and fails when told to."""
+
+    def __init__(self, fail: bool = False) -> None:
+        self.submitted: list[object] = []
+        self.fail = fail
+
+    def submit(self, fn, *args):
+        self.submitted.append(fn)
+        future: Future = Future()
+        if self.fail:
+            future.set_exception(RuntimeError("a kernel did not compile"))
+        else:
+            future.set_result(None)
+        return future
+
+
+@pytest.fixture
+def marker(tmp_path, monkeypatch):
+    path = tmp_path / "__pycache__" / "warm-abc"
+    monkeypatch.setattr(warmup, "marker_path", lambda: path)
+    return path
+
+
+def test_a_cold_source_is_warmed_by_two_parallel_tasks_then_marked(marker) -> None:
+    pool = RecordingPool()
+    warmup.warm_up(pool, ("icp",))
+    assert pool.submitted == [warmup.warm_env_and_mapping, warmup.warm_estimators]
+    assert marker.exists()
+    again = RecordingPool()
+    assert warmup.warm_up(again, ("icp",)) == 0.0 and again.submitted == []
+
+
+def test_a_failed_warm_up_leaves_no_marker(marker) -> None:
+    warmup.warm_up(RecordingPool(fail=True), ("icp",))
+    assert not marker.exists()
+
+
+def test_the_marker_follows_the_source_digest() -> None:
+    assert warmup.marker_path().name == f"warm-{warmup.source_digest(warmup.PROJECT_ROOT)}"
