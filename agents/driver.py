@@ -10,6 +10,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from lidar_env.errors import ConfigError
+
 
 @runtime_checkable
 class Driver(Protocol):
@@ -34,9 +36,24 @@ DRIVERS: dict[str, str] = {
 }
 
 
-def make_driver(name: str) -> Driver:
-    """A fresh driver by name: ``scripted`` (pure pursuit) or ``sb3`` (the shipped PPO policy)."""
+def make_driver(name: str, pose_source: str = "true") -> Driver:
+    """A fresh driver by name: ``scripted`` (pure pursuit) or ``sb3`` (the shipped PPO policy).
+
+    ``pose_source`` is where the driver takes the car's pose from: ``"true"`` (the env's
+    ``info["pose"]``) or the name of an estimator (``estimators.registry.names()``) that runs
+    online on the scans (:class:`agents.pose_source.EstimatedPoseDriver`).
+    """
     if name not in DRIVERS:
-        raise ValueError(f"unknown driver {name!r}: expected one of {', '.join(sorted(DRIVERS))}")
+        raise ConfigError(
+            f"unknown driver {name!r}: expected one of {', '.join(sorted(DRIVERS))}")
+    if pose_source != "true":
+        from agents.pose_source import check_pose_source
+
+        check_pose_source(pose_source)  # before loading a model
     module_name, class_name = DRIVERS[name].split(":")
-    return getattr(importlib.import_module(module_name), class_name)()
+    driver = getattr(importlib.import_module(module_name), class_name)()
+    if pose_source == "true":
+        return driver
+    from agents.pose_source import EstimatedPoseDriver
+
+    return EstimatedPoseDriver(driver, pose_source)

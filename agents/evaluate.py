@@ -1,11 +1,14 @@
-"""Score drivers on trace seeds: success rate, cross-track error, time to finish.
+"""Score drivers on trace seeds: success rate, cross-track error, end-point error, time.
 
     python -m agents.evaluate --episodes 50 --drivers scripted sb3
+    python -m agents.evaluate --episodes 10 --pose-sources true lidar_odometry slam
 
 An episode succeeds when the car reaches the trace's end without touching an obstacle and
 before the time limit. Each (world, trace, episode) uses reset seed ``base_seed + episode``;
 ``random`` worlds are drawn from that seed, so with a ``base_seed`` other than the training
-one (training evaluates on seeds >= 10000 of its own stream) they are unseen worlds.
+one (training evaluates on seeds >= 10000 of its own stream) they are unseen worlds. With a
+pose source other than ``true`` the driver steers by an estimator's poses
+(:mod:`agents.pose_source`); the scores always use the env's ground truth.
 """
 
 from __future__ import annotations
@@ -25,18 +28,30 @@ TRACE_SEEDS = ("straight", "right_turn", "zigzag")
 
 
 @dataclass(frozen=True)
+class Episode:
+    """One driven episode, scored against the env's ground truth."""
+
+    success: bool  # reached the trace's end without a collision, in time
+    cross_track_error: float  # [m] mean |cross-track error| of the true pose over all steps
+    end_point_error: float  # [m] |estimated - true| final position (0 on the true pose)
+    time: float  # [s] episode duration
+    collided: bool
+
+
+@dataclass(frozen=True)
 class DrivingScore:
     """Aggregate of several episodes of one driver on one (world, trace)."""
 
     episodes: int
     success_rate: float  # [-] fraction of episodes finished without collision
     cross_track_error: float  # [m] mean |cross-track error| over all steps
+    end_point_error: float  # [m] mean over episodes of the final position estimate's error
     time_to_finish: float  # [s] mean over successful episodes (nan if none)
     collisions: int
 
 
-def drive_episode(env: gym.Env, driver: Driver, seed: int) -> tuple[bool, float, float, bool]:
-    """One episode: (success, mean |cross-track error| [m], time [s], collided)."""
+def drive_episode(env: gym.Env, driver: Driver, seed: int) -> Episode:
+    """Drive one episode of ``env`` (reset with ``seed``) with ``driver``."""
     observation, info = env.reset(seed=seed)
     driver.reset(env)
     errors = []
@@ -44,8 +59,11 @@ def drive_episode(env: gym.Env, driver: Driver, seed: int) -> tuple[bool, float,
     while not (terminated or truncated):
         observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
         errors.append(abs(info["cross_track_error"]))
+    estimate = getattr(driver, "last_estimate", None)
+    end_error = 0.0 if estimate is None else float(np.hypot(*(estimate[:2] - info["pose"][:2])))
     collided = bool(info["collision"])
-    return terminated and not collided, float(np.mean(errors)), float(info["time"]), collided
+    return Episode(terminated and not collided, float(np.mean(errors)), end_error,
+                   float(info["time"]), collided)
 
 
 def evaluate(
@@ -55,37 +73,43 @@ def evaluate(
     env = gym.make("DualLidar-v0", world=world, trace=trace)
     runs = [drive_episode(env, driver, base_seed + k) for k in range(episodes)]
     env.close()
-    success = np.array([r[0] for r in runs])
-    times = np.array([r[2] for r in runs])
+    success = np.array([r.success for r in runs])
+    times = np.array([r.time for r in runs])
     return DrivingScore(
         episodes=episodes,
         success_rate=float(success.mean()),
-        cross_track_error=float(np.mean([r[1] for r in runs])),
+        cross_track_error=float(np.mean([r.cross_track_error for r in runs])),
+        end_point_error=float(np.mean([r.end_point_error for r in runs])),
         time_to_finish=float(times[success].mean()) if success.any() else float("nan"),
-        collisions=int(sum(r[3] for r in runs)),
+        collisions=int(sum(r.collided for r in runs)),
     )
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--drivers", nargs="+", default=list(DRIVERS), choices=list(DRIVERS))
+    parser.add_argument("--pose-sources", nargs="+", default=["true"],
+                        help="true (the env's pose) and/or estimator names to steer by")
     parser.add_argument("--worlds", nargs="+", default=[*BUILT_IN_WORLDS, "random"])
     parser.add_argument("--traces", nargs="+", default=list(TRACE_SEEDS))
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--base-seed", type=int, default=1_000_000)
     args = parser.parse_args(argv)
-    print("| driver | world | trace | success | cross-track [m] | time [s] | collisions |")
-    print("|---|---|---|---|---|---|---|")
+    print("| driver | pose | world | trace | success | cross-track [m] | end-point [m] | "
+          "time [s] | collisions |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name in args.drivers:
-        driver = make_driver(name)
-        for world in args.worlds:
-            for trace in args.traces:
-                s = evaluate(driver, world, trace, args.episodes, args.base_seed)
-                print(
-                    f"| {name} | {world} | {trace} | {100 * s.success_rate:.0f}% | "
-                    f"{s.cross_track_error:.3f} | {s.time_to_finish:.1f} | {s.collisions} |",
-                    flush=True,
-                )
+        for source in args.pose_sources:
+            driver = make_driver(name, pose_source=source)
+            for world in args.worlds:
+                for trace in args.traces:
+                    s = evaluate(driver, world, trace, args.episodes, args.base_seed)
+                    print(
+                        f"| {name} | {source} | {world} | {trace} | {100 * s.success_rate:.0f}% | "
+                        f"{s.cross_track_error:.3f} | {s.end_point_error:.3f} | "
+                        f"{s.time_to_finish:.1f} | {s.collisions} |",
+                        flush=True,
+                    )
 
 
 if __name__ == "__main__":

@@ -80,9 +80,9 @@ def test_short_training_run_saves_and_reloads(tmp_path) -> None:
 @pytest.mark.parametrize("trace", ["straight", "right_turn", "zigzag"])
 def test_shipped_model_completes_each_trace_seed(trace: str) -> None:
     env = gym.make("DualLidar-v0", world="open_cylinders", trace=trace)
-    success, cross_track, _, collided = drive_episode(env, SB3Driver(), seed=0)
-    assert success and not collided
-    assert cross_track < 0.3
+    episode = drive_episode(env, SB3Driver(), seed=0)
+    assert episode.success and not episode.collided
+    assert episode.cross_track_error < 0.3
 
 
 @pytest.mark.skipif(not SHIPPED_MODEL.is_file(), reason="no shipped model")

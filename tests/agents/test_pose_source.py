@@ -1,0 +1,64 @@
+"""Drivers steering by an estimator's poses instead of the env's ground truth."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import lidar_env  # noqa: F401 - registers DualLidar-v0
+from agents.driver import make_driver
+from agents.evaluate import drive_episode
+from agents.pose_source import EstimatedPoseDriver
+from agents.scripted import PurePursuitDriver
+from lidar_env.errors import ConfigError
+
+
+class _Recorder(PurePursuitDriver):
+    """Pure pursuit that keeps the ``info`` it is given."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[dict[str, Any]] = []
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> np.ndarray:
+        self.seen.append(dict(info))
+        return super().act(observation, info)
+
+
+def test_a_pose_source_naming_no_estimator_lists_the_valid_ones() -> None:
+    with pytest.raises(ConfigError, match=r"pose_source: expected one of true, .*lidar_odometry"):
+        make_driver("scripted", pose_source="gps")
+
+
+def test_the_driver_sees_the_estimate_and_no_ground_truth() -> None:
+    env = gym.make("DualLidar-v0", world="hallway", trace="straight",
+                   config={"max_episode_time": 3.0})
+    inner = _Recorder()
+    driver = EstimatedPoseDriver(inner, "lidar_odometry")
+    observation, info = env.reset(seed=3)
+    driver.reset(env)
+    truths = []
+    for _ in range(20):
+        action = driver.act(observation, info)
+        truths.append(info["pose"])
+        observation, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated)
+    assert all(set(seen) == {"pose", "time"} for seen in inner.seen)
+    estimates = np.array([seen["pose"] for seen in inner.seen])
+    np.testing.assert_array_equal(estimates[0], env.unwrapped.trace.start_pose)
+    assert not np.array_equal(estimates[1:], np.array(truths)[1:])  # not the truth, copied
+    np.testing.assert_allclose(estimates[:, :2], np.array(truths)[:, :2], atol=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source", ["lidar_odometry", "slam"])
+def test_the_scripted_driver_finishes_a_paper_trace_on_estimated_poses(source: str) -> None:
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn")
+    episode = drive_episode(env, make_driver("scripted", pose_source=source), seed=1)
+    assert episode.success and not episode.collided
+    assert episode.cross_track_error < 0.05
+    assert 0.0 < episode.end_point_error < 0.2
