@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.driver import Driver
+from agents.interface import Driver
 from estimators import registry
 from estimators.base import Estimator, SensorSetup
 from lidar_env.errors import ConfigError
