@@ -16,7 +16,8 @@ from lidar_env.world import World
 from lidar_env.worlds import WORLD_NAMES, make_world
 
 if "DualLidar-v0" not in gymnasium.registry:
-    gymnasium.register("DualLidar-v0", entry_point="lidar_env.env:DualLidarEnv")
+    gymnasium.register("DualLidar-v0", entry_point="lidar_env.env:DualLidarEnv",
+                       vector_entry_point="lidar_env.vector.env:DualLidarVectorEnv")
 
 __all__ = [
     "TRACE_NAMES",

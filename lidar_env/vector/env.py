@@ -1,0 +1,273 @@
+"""``DualLidarVectorEnv``: N ``DualLidar-v0`` cars stepped in one compiled call, reached through
+``gym.make_vec("DualLidar-v0", num_envs=N, vectorization_mode="vector_entry_point")``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import ArrayLike, NDArray
+
+from lidar_env.car import MAX_SUBSTEPS, Car
+from lidar_env.config import EnvConfig
+from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
+from lidar_env.errors import ConfigError
+from lidar_env.scenes import SceneCache, check_reset_options
+from lidar_env.trace_geometry import Trace, project_onto_polyline
+from lidar_env.vector.kernel import collision_checks, observe_envs, step_envs
+from lidar_env.vector.slots import SceneSlots
+from lidar_env.world import World
+
+#: Keys of every step's and reset's info, in the single env's order.
+INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_position",
+                              "cross_track_error", "collision")
+
+Observation = dict[str, NDArray[np.float32]]
+
+
+class DualLidarVectorEnv(VectorEnv):
+    """``num_envs`` independent ``DualLidar-v0`` episodes, stepped together.
+
+    Each sub-env behaves bit for bit like one :class:`~lidar_env.env.DualLidarEnv` built with
+    the same ``world``, ``trace`` and ``config`` and reset with the same seed, inside a
+    ``gymnasium.vector.SyncVectorEnv``: same observations, rewards, terminations,
+    truncations and infos (see that class for their meaning and units). Observations are a
+    ``Dict`` of ``(num_envs, n_beams_k)`` float32 scans, actions a ``(num_envs, 2)`` Box in
+    [-1, 1], infos a dict of ``(num_envs, ...)`` arrays each with its ``_key`` mask, as
+    ``SyncVectorEnv`` batches them.
+
+    Autoreset (``metadata["autoreset_mode"]``) is Gymnasium's ``NEXT_STEP``: the step after a
+    sub-env terminates or truncates resets it (its action is ignored) and returns its reset
+    observation and info with reward 0 and no termination or truncation.
+    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (or ``seed=[s_0, ...]``);
+    ``options`` (world, trace, start, as for the single env) apply to every sub-env reset,
+    and ``options["reset_mask"]`` (bool ``(num_envs,)``) resets only those sub-envs.
+
+    Differences from ``SyncVectorEnv``: a bad action raises before any sub-env moves (it stops
+    at the bad sub-env); no rendering (``render_mode`` must be None); moving obstacles are not
+    batched yet (``config["moving_obstacles"] > 0`` raises a ``ConfigError``).
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        world: str | World | Any = "open_cylinders",
+        trace: str | ArrayLike | Trace | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
+                or num_envs < 1:
+            raise ConfigError(f"num_envs: expected an integer >= 1, got {num_envs!r}")
+        if render_mode is not None:
+            raise ConfigError(f"render_mode: the batched env does not render (not batched "
+                              f"yet); expected None, got {render_mode!r}; render a single "
+                              "DualLidar-v0 or use vectorization_mode='sync'")
+        single = DualLidarEnv(world, trace, config)  # checks world, trace and config alike
+        movers = getattr(single.config, "moving_obstacles", 0)
+        if movers:
+            raise ConfigError(f"moving_obstacles: not batched yet; the batched env expected 0, "
+                              f"got {movers!r}; use vectorization_mode='sync' for moving "
+                              "obstacles")
+        self.num_envs = int(num_envs)
+        self.render_mode = None
+        self.config = cfg = single.config
+        self.single_observation_space = single.observation_space
+        self.single_action_space = single.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.lidar_keys = single.lidar_keys
+        self._world_arg, self._trace_arg = single._world_arg, single.trace_name
+        self._scenes = SceneCache()
+        self._slots = SceneSlots(self.num_envs)
+        self._car = Car(cfg.car_length, cfg.car_width, np.empty((0, 3)), np.empty((0, 4)))
+        layout = single.lidar
+        beams, params = layout._packed
+        self._sensors = (cfg.mounts_array, cfg.scan_frame == "world",
+                         bool(np.any(layout.noise_std > 0)), bool(np.any(layout.dropout_prob > 0)),
+                         beams, params)
+        ends = np.cumsum(layout.sizes)
+        self._beam_slices = tuple(zip(ends - np.asarray(layout.sizes), ends, strict=True))
+        self._constants = np.array([
+            cfg.control_dt, self._car.half_length, self._car.half_width,
+            cfg.cross_track_penalty, cfg.collision_penalty, cfg.goal_tolerance,
+            cfg.max_episode_time - 1e-9, PROGRESS_WINDOW], dtype=np.float64)
+        n, k = self.num_envs, cfg.n_lidars
+        self._pose = np.zeros((n, 3))
+        self._sensor_poses = np.zeros((n, k, 3))
+        self._time = np.zeros(n)
+        self._arc = np.zeros(n)
+        self._cross_track = np.zeros(n)
+        self._collision = np.zeros(n, dtype=np.bool_)
+        self._scans = np.zeros((n, int(ends[-1])), dtype=np.float32)
+        self._rewards = np.zeros(n)
+        self._terminations = np.zeros(n, dtype=np.bool_)
+        self._truncations = np.zeros(n, dtype=np.bool_)
+        self._autoreset_envs = np.zeros(n, dtype=np.bool_)
+        self._started = False
+
+    @property
+    def worlds(self) -> list[World | None]:
+        """Each sub-env's current :class:`~lidar_env.world.World`."""
+        return list(self._slots.worlds)
+
+    @property
+    def traces(self) -> list[Trace | None]:
+        """Each sub-env's current :class:`~lidar_env.traces.Trace`."""
+        return list(self._slots.traces)
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> tuple[Observation, dict[str, Any]]:
+        seeds = self._seeds(seed)
+        options = dict(options or {})
+        mask = self._reset_mask(options.pop("reset_mask", None))
+        if isinstance(seed, int):
+            super().reset(seed=seed)
+        envs = np.flatnonzero(mask)
+        for i in envs:
+            self._reset_env(int(i), seeds[i], options)
+        self._observe(envs)
+        self._terminations[mask] = False
+        self._truncations[mask] = False
+        self._autoreset_envs[mask] = False
+        self._started = True
+        return self._observation(), self._infos(mask)
+
+    def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            return [int(seed) + i for i in range(self.num_envs)]
+        if isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != self.num_envs:
+                raise ConfigError(f"seed: expected {self.num_envs} seeds (one per sub-env), got "
+                                  f"{len(seed)}")
+            return list(seed)
+        raise ConfigError(f"seed: expected an int, a list of {self.num_envs} or None, got "
+                          f"{seed!r}")
+
+    def _reset_mask(self, mask: Any) -> NDArray[np.bool_]:
+        if mask is None:
+            return np.ones(self.num_envs, dtype=np.bool_)
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ \
+                or mask.shape != (self.num_envs,) or not mask.any():
+            raise ConfigError(f"options['reset_mask']: expected a bool numpy array of shape "
+                              f"({self.num_envs},) with at least one True, got {mask!r:.80}")
+        if not self._started:
+            raise ConfigError("options['reset_mask']: the first reset() must reset every "
+                              "sub-env; expected no reset_mask")
+        return mask
+
+    def _reset_env(self, i: int, seed: int | None, options: Mapping[str, Any]) -> None:
+        """Sub-env ``i``'s reset (``DualLidarEnv.reset`` up to its scans, which
+        :meth:`_observe` takes for all reset sub-envs at once)."""
+        slots = self._slots
+        if seed is not None or slots.generators[i] is None:
+            slots.set_generator(i, seeding.np_random(seed)[0])
+        rng = slots.generators[i]
+        checked = check_reset_options(options)
+        scene = self._scenes.for_episode(checked, self._world_arg, self._trace_arg, self.config,
+                                         rng)
+        slots.set(i, scene.world, scene.trace)
+        trace = scene.trace
+        self._pose[i] = trace.start_pose
+        self._time[i] = 0.0
+        self._collision[i] = False
+        arc, cross_track = project_onto_polyline(trace.waypoints, trace.arc, self._pose[i, 0],
+                                                 self._pose[i, 1], 0.0, PROGRESS_WINDOW,
+                                                 trace.closed)
+        self._arc[i], self._cross_track[i] = arc, cross_track
+
+    def _observe(self, envs: NDArray[np.int64]) -> None:
+        if len(envs):
+            observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
+                         self._slots.scene, self._slots.rngs, self._sensors)
+
+    # ------------------------------------------------------------------ step
+    def step(
+        self, actions: ArrayLike
+    ) -> tuple[Observation, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_],
+               dict[str, Any]]:
+        if not self._started:
+            raise gym.error.ResetNeeded("Cannot call step() before calling reset()")
+        resetting = self._autoreset_envs.copy()
+        stepping = np.flatnonzero(~resetting)
+        speed, yaw_rate, checks = self._motion(actions, stepping)
+        for i in np.flatnonzero(resetting):
+            self._reset_env(int(i), None, {})
+        self._observe(np.flatnonzero(resetting))
+        self._rewards[resetting] = 0.0
+        self._terminations[resetting] = False
+        self._truncations[resetting] = False
+        if len(stepping):
+            state = (self._pose, self._sensor_poses, self._time, self._arc, self._cross_track,
+                     self._collision, self._scans)
+            outcome = (self._rewards, self._terminations, self._truncations)
+            step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
+                      self._slots.rngs, self._sensors, self._constants)
+        self._autoreset_envs = self._terminations | self._truncations
+        return (self._observation(), self._rewards.copy(), self._terminations.copy(),
+                self._truncations.copy(), self._infos(None))
+
+    def _motion(
+        self, actions: ArrayLike, stepping: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+        """Speed [m/s], yaw rate [rad/s] and collision checks per sub-env, or a ConfigError
+        naming a bad action (only the rows of ``stepping`` sub-envs are used)."""
+        expected = f"actions: expected shape ({self.num_envs}, 2) (speed, yaw rate per sub-env)"
+        try:
+            a = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise ConfigError(f"{expected} of numbers in [-1, 1], got {actions!r:.60}") from error
+        if a.shape != (self.num_envs, 2):
+            raise ConfigError(f"{expected}, got shape {a.shape}")
+        used = a[stepping]
+        if not np.all(np.isfinite(used)):
+            row = int(stepping[np.flatnonzero(~np.isfinite(used).all(axis=1))[0]])
+            raise ConfigError(f"actions[{row}]: expected finite values in [-1, 1], got "
+                              f"{a[row].tolist()}")
+        cfg = self.config
+        speed = np.clip(a[:, 0], -1.0, 1.0) * cfg.max_speed
+        yaw_rate = np.clip(a[:, 1], -1.0, 1.0) * cfg.max_yaw_rate
+        needed = collision_checks(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
+                                  self._car.half_length, self._car.half_width)
+        too_many = np.flatnonzero(needed[stepping] > MAX_SUBSTEPS)
+        if len(too_many):  # the single car's own check words the error
+            j = int(stepping[too_many[0]])
+            self._car.substeps_for(float(speed[j]), float(yaw_rate[j]), cfg.control_dt,
+                                   cfg.physics_substeps)
+        # rows of resetting sub-envs may hold anything: keep them castable, they are not used
+        checks = np.minimum(np.nan_to_num(needed, nan=1.0), MAX_SUBSTEPS).astype(np.int64)
+        return speed, yaw_rate, checks
+
+    # ------------------------------------------------------------------ outputs
+    def _observation(self) -> Observation:
+        return {key: self._scans[:, a:b].copy()
+                for key, (a, b) in zip(self.lidar_keys, self._beam_slices, strict=True)}
+
+    def _infos(self, mask: NDArray[np.bool_] | None) -> dict[str, Any]:
+        """The infos of every sub-env (``mask`` None) or of the ``mask`` ones, batched like
+        ``SyncVectorEnv`` does (zeros and a False ``_key`` where a sub-env has none)."""
+        values = (self._pose, self._sensor_poses, self._time, self._arc / self._slots.length,
+                  self._arc, self._cross_track, self._collision)
+        infos: dict[str, Any] = {}
+        for key, value in zip(INFO_KEYS, values, strict=True):
+            array = np.array(value)
+            if mask is None:
+                infos[key], infos[f"_{key}"] = array, np.ones(self.num_envs, dtype=np.bool_)
+            else:
+                array[~mask] = 0
+                infos[key], infos[f"_{key}"] = array, mask.copy()
+        return infos

@@ -1,0 +1,129 @@
+"""The compiled step of N ``DualLidar-v0`` cars: motion, collision, progress, reward, episode
+end and every Lidar's noisy scan, for all stepped envs in one numba call.
+
+Every per-env quantity is a row of an ``(N, ...)`` array; each env's scene (obstacles, their
+grid, its trace) and random generator are items of numba typed lists (:mod:`.slots`). The math
+is the single env's own compiled functions, called in its order: :func:`lidar_env.car.drive_arc`
+for the motion and collision, :func:`lidar_env.trace_geometry.project_onto_polyline` for the
+progress, :func:`lidar_env.car.mount_poses` and
+:func:`lidar_env.lidar_layout.scan_layout_kernel` for the scans. Each env draws its noise from
+its own ``numpy.random.Generator`` inside the kernel (numba draws bit-identically to numpy and
+advances the same state), so an env's stream is the one a single env seeded alike would use.
+
+Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from lidar_env.car import MAX_STEP_FRACTION, drive_arc, mount_poses
+from lidar_env.lidar_layout import scan_layout_kernel
+from lidar_env.trace_geometry import project_onto_polyline
+
+
+@njit(cache=True)
+def observe_envs(
+    envs: NDArray[np.int64],
+    pose: NDArray[np.float64],
+    sensor_poses: NDArray[np.float64],
+    scans: NDArray[np.float32],
+    scene: tuple,
+    rngs: object,
+    sensors: tuple,
+) -> None:
+    """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
+
+    ``sensor_poses`` (N, K, 3) receives the Lidars' world poses. ``scene`` is
+    ``(circles, segments, first_polygon_edge, grids, waypoints, arc, closed, length)`` (lists
+    and (N,) arrays, see :class:`~lidar_env.vector.slots.SceneSlots`); ``rngs`` a typed list of
+    N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
+    with ``beams`` and ``params`` as :func:`~lidar_env.lidar_layout.scan_layout_kernel` takes
+    them. Draws per env: a standard normal per beam if any Lidar is noisy, then a uniform per
+    beam if any drops out (the order of :meth:`lidar_env.lidar_layout.LidarLayout.scan`).
+    """
+    circles, segments, first_edge, grids = scene[0], scene[1], scene[2], scene[3]
+    mounts, world_aligned, noisy, dropping, beams, params = sensors
+    total = scans.shape[1]
+    none = np.empty(0)
+    for i in envs:
+        mount_poses(pose[i], mounts, sensor_poses[i])
+        cast_from = sensor_poses[i].copy()
+        if world_aligned:
+            cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
+        rng = rngs[i]
+        gaussians = rng.standard_normal(total) if noisy else none
+        uniforms = rng.random(total) if dropping else none
+        scans[i] = scan_layout_kernel(circles[i], segments[i], first_edge[i], grids[i],
+                                      cast_from, beams, params, gaussians, uniforms)
+
+
+@njit(cache=True)
+def step_envs(
+    envs: NDArray[np.int64],
+    speed: NDArray[np.float64],
+    yaw_rate: NDArray[np.float64],
+    checks: NDArray[np.int64],
+    state: tuple,
+    outcome: tuple,
+    scene: tuple,
+    rngs: object,
+    sensors: tuple,
+    constants: NDArray[np.float64],
+) -> None:
+    """One control step of the cars of ``envs`` (the single env's ``step`` after its action
+    check), in place.
+
+    ``speed`` [m/s], ``yaw_rate`` [rad/s] and ``checks`` (collision checks) are (N,) per env.
+    ``state`` is ``(pose (N, 3), sensor_poses (N, K, 3), time (N,), arc (N,), cross_track
+    (N,), collision (N,), scans (N, total))``; ``outcome`` ``(reward, terminated, truncated)``
+    (N,) each. ``constants``: control_dt [s], car half length and half width [m],
+    cross_track_penalty [1/s], collision_penalty, goal_tolerance [m], the truncation time
+    [s] (``max_episode_time - 1e-9``), the progress window [m].
+    """
+    pose, sensor_poses, time, arc, cross_track, collision, scans = state
+    reward, terminated, truncated = outcome
+    circles, segments, waypoints, trace_arc = scene[0], scene[1], scene[4], scene[5]
+    closed, length = scene[6], scene[7]
+    dt, half_length, half_width = constants[0], constants[1], constants[2]
+    cross_penalty, collision_penalty, goal_tolerance = constants[3], constants[4], constants[5]
+    time_limit, window = constants[6], constants[7]
+    for i in envs:
+        hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length, half_width,
+                        circles[i], segments[i])
+        time[i] += dt
+        previous = arc[i]
+        position, error = project_onto_polyline(waypoints[i], trace_arc[i], pose[i, 0],
+                                                pose[i, 1], previous, window, closed[i])
+        arc[i] = position
+        cross_track[i] = error
+        collision[i] = hit
+        r = position - previous - cross_penalty * abs(error) * dt
+        if hit:
+            r -= collision_penalty
+        reward[i] = r
+        done = hit or position >= length[i] - goal_tolerance
+        terminated[i] = done
+        truncated[i] = not done and time[i] >= time_limit
+    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors)
+
+
+def collision_checks(
+    speed: NDArray[np.float64],
+    yaw_rate: NDArray[np.float64],
+    duration: float,
+    substeps: int,
+    half_length: float,
+    half_width: float,
+) -> NDArray[np.float64]:
+    """Collision checks per env for a ``duration`` [s] move, as floats: the count of
+    :meth:`lidar_env.car.Car.substeps_for` over arrays (the same float operations, so the same
+    counts), before its :data:`~lidar_env.car.MAX_SUBSTEPS` check, which the caller makes."""
+    half_diagonal = math.hypot(half_length, half_width)
+    corner_travel = (np.abs(speed) + np.abs(yaw_rate) * half_diagonal) * duration  # [m]
+    max_step = MAX_STEP_FRACTION * 2.0 * min(half_length, half_width)
+    return np.maximum(np.ceil(corner_travel / max_step), float(max(int(substeps), 1)))

@@ -1,0 +1,106 @@
+"""Each env's scene and random generator, laid out for the compiled step of
+:mod:`lidar_env.vector.kernel`.
+
+Env ``i``'s obstacles, their :class:`~lidar_env.primitive_grid.PrimitiveGrid`, its trace and its
+generator are item ``i`` of numba typed lists; the scalars (first polygon edge, closed trace,
+trace length [m]) are ``(N,)`` arrays. Items are views of the World's and Trace's own arrays
+(made read-only, so every item has one numba type), never copies: N envs in one built-in world
+hold one copy of it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numba import typed
+from numpy.typing import DTypeLike, NDArray
+
+from lidar_env.primitive_grid import PrimitiveGrid
+from lidar_env.trace_geometry import Trace
+from lidar_env.world import World
+
+
+def _read_only(array: Any, dtype: DTypeLike, columns: int | None = None) -> NDArray:
+    """A read-only, C-contiguous view (a copy only if the dtype or layout differs)."""
+    view = np.ascontiguousarray(array, dtype=dtype)
+    view = view.reshape(-1, columns) if columns is not None else view.view()
+    view.flags.writeable = False
+    return view
+
+
+def _kernel_grid(grid: PrimitiveGrid) -> PrimitiveGrid:
+    """``grid`` with Python scalars and read-only int64 arrays: one numba type for all envs."""
+    return PrimitiveGrid(float(grid.x0), float(grid.y0), float(grid.cell), int(grid.nx),
+                         int(grid.ny), *(_read_only(a, np.int64) for a in grid[5:]))
+
+
+class SceneSlots:
+    """The scenes and generators of ``n`` envs, as the kernel reads them (``.scene``, ``.rngs``).
+
+    The typed lists are filled at the first :meth:`set` (every item a copy of that scene,
+    until each env's own is set), so all ``n`` envs must be set before the kernel runs.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.worlds: list[World | None] = [None] * n
+        self.traces: list[Trace | None] = [None] * n
+        self.generators: list[np.random.Generator | None] = [None] * n
+        self.first_edge = np.zeros(n, dtype=np.int64)
+        self.closed = np.zeros(n, dtype=np.bool_)
+        self.length = np.ones(n, dtype=np.float64)  # [m]
+        self._lists: tuple[Any, ...] | None = None
+        self._rngs: Any = None
+
+    def set(self, i: int, world: World, trace: Trace) -> None:
+        """Env ``i`` now drives ``trace`` in ``world``."""
+        if self.worlds[i] is world and self.traces[i] is trace:
+            return
+        items = (_read_only(world.circles, np.float64, 3),
+                 _read_only(world.segments, np.float64, 4),
+                 _kernel_grid(world.grid),
+                 _read_only(trace.waypoints, np.float64, 2),
+                 _read_only(trace.arc, np.float64))
+        if self._lists is None:
+            self._lists = tuple(typed.List([item] * self.n) for item in items)
+        else:
+            for values, item in zip(self._lists, items, strict=True):
+                values[i] = item
+        self.worlds[i], self.traces[i] = world, trace
+        self.first_edge[i] = len(world.walls)
+        self.closed[i] = trace.closed
+        self.length[i] = trace.length
+
+    def set_generator(self, i: int, rng: np.random.Generator) -> None:
+        """Env ``i`` draws from ``rng`` (the kernel advances its state, as numpy would)."""
+        if self._rngs is None:
+            self._rngs = typed.List([rng] * self.n)
+        else:
+            self._rngs[i] = rng
+        self.generators[i] = rng
+
+    @property
+    def scene(self) -> tuple:
+        """``(circles, segments, first_polygon_edge, grids, waypoints, arc, closed, length)``."""
+        assert self._lists is not None, "set every env's scene first"
+        circles, segments, grids, waypoints, arc = self._lists
+        return (circles, segments, self.first_edge, grids, waypoints, arc, self.closed,
+                self.length)
+
+    @property
+    def rngs(self) -> Any:
+        """The typed list of the N generators."""
+        assert self._rngs is not None, "set every env's generator first"
+        return self._rngs
+
+    def nbytes(self) -> int:
+        """Bytes of the per-env arrays, counting each distinct world and trace once."""
+        seen: dict[int, int] = {}
+        for world, trace in zip(self.worlds, self.traces, strict=True):
+            if world is not None:
+                seen[id(world)] = (world.circles.nbytes + world.segments.nbytes
+                                   + sum(a.nbytes for a in world.grid[5:]))
+            if trace is not None:
+                seen[id(trace)] = trace.waypoints.nbytes + trace.arc.nbytes + trace.headings.nbytes
+        return sum(seen.values()) + self.first_edge.nbytes + self.closed.nbytes + self.length.nbytes
