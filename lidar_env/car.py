@@ -132,6 +132,48 @@ def drive_arc(
 
 
 @numba.njit(cache=True)
+def drive_arc_among_movers(
+    pose: np.ndarray,
+    speed: float,
+    yaw_rate: float,
+    duration: float,
+    substeps: int,
+    half_length: float,
+    half_width: float,
+    circles: np.ndarray,
+    segments: np.ndarray,
+    movers: np.ndarray,
+    mover_velocities: np.ndarray,
+) -> bool:
+    """:func:`drive_arc` among moving circles too: ``movers`` (M, 3) x, y, radius [m] at the
+    start of the move, each going at ``mover_velocities`` (M, 2) [m/s] during it; at each
+    substep the box is tested against the statics and the movers where they are then."""
+    x0, y0, h0 = pose[0], pose[1], pose[2]
+    moved = movers.copy()
+    no_segments = np.empty((0, 4))
+    for k in range(1, substeps + 1):
+        t = duration * k / substeps
+        h = h0 + yaw_rate * t
+        if abs(yaw_rate) < 1e-9:
+            x = x0 + speed * t * math.cos(h0)
+            y = y0 + speed * t * math.sin(h0)
+        else:
+            radius = speed / yaw_rate
+            x = x0 + radius * (math.sin(h) - math.sin(h0))
+            y = y0 - radius * (math.cos(h) - math.cos(h0))
+        for i in range(movers.shape[0]):
+            moved[i, 0] = movers[i, 0] + mover_velocities[i, 0] * t
+            moved[i, 1] = movers[i, 1] + mover_velocities[i, 1] * t
+        if (box_touches_obstacles(x, y, h, half_length, half_width, circles, segments)
+                or box_touches_obstacles(x, y, h, half_length, half_width, moved,
+                                         no_segments)):
+            return True
+        pose[0], pose[1] = x, y
+        pose[2] = (h + math.pi) % (2.0 * math.pi) - math.pi
+    return False
+
+
+@numba.njit(cache=True)
 def mount_poses(pose: np.ndarray, mounts: np.ndarray, out: np.ndarray) -> None:
     """World poses of sensors ``mounts`` (K, 3, car frame) on a car at ``pose`` into ``out``."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
@@ -174,11 +216,12 @@ class Car:
         """Put the car at ``pose`` (x [m], y [m], heading [rad]) without a collision check."""
         self.pose[:] = np.asarray(pose, dtype=np.float64)
 
-    def substeps_for(self, speed: float, yaw_rate: float, duration: float, substeps: int) -> int:
+    def substeps_for(self, speed: float, yaw_rate: float, duration: float, substeps: int,
+                     other_speed: float = 0.0) -> int:
         """Collision checks for a ``duration`` [s] move: at least ``substeps``, and enough that
         no corner of the box moves more than :data:`MAX_STEP_FRACTION` of its smaller side
         between two checks (translation ``|speed| dt`` plus rotation ``|yaw_rate| dt`` times
-        the half diagonal).
+        the half diagonal, plus ``other_speed`` [m/s] x dt of the fastest mover, if any).
 
         Raises:
             ConfigError: ``speed``, ``yaw_rate`` or ``duration`` is not finite, ``duration`` is
@@ -191,6 +234,8 @@ class Car:
             raise ConfigError(f"car duration: expected a value >= 0 [s], got {duration!r}")
         half_diagonal = math.hypot(self.half_length, self.half_width)
         corner_travel = (abs(speed) + abs(yaw_rate) * half_diagonal) * duration  # [m]
+        if other_speed > 0.0:  # relative to the fastest mover
+            corner_travel += other_speed * duration
         max_step = MAX_STEP_FRACTION * 2.0 * min(self.half_length, self.half_width)
         needed = math.ceil(corner_travel / max_step) if max_step > 0.0 else int(substeps)
         if needed > MAX_SUBSTEPS:
@@ -202,12 +247,26 @@ class Car:
             )
         return max(int(substeps), needed, 1)
 
-    def drive(self, speed: float, yaw_rate: float, duration: float, substeps: int) -> bool:
+    def drive(
+        self, speed: float, yaw_rate: float, duration: float, substeps: int,
+        movers: np.ndarray | None = None, mover_velocities: np.ndarray | None = None,
+    ) -> bool:
         """Drive ``duration`` [s] at ``speed`` [m/s] and ``yaw_rate`` [rad/s]; True on collision.
 
         ``substeps`` is the least number of collision checks; more are made when the move is
-        long (see :meth:`substeps_for`), so the car never tunnels through a wall.
+        long (see :meth:`substeps_for`), so the car never tunnels through a wall. ``movers``
+        (M, 3: x, y, radius [m] at the start) moving at ``mover_velocities`` (M, 2) [m/s]
+        during the move are checked at every substep where they are then
+        (:func:`drive_arc_among_movers`).
         """
+        if movers is not None and len(movers) > 0:
+            velocities = np.ascontiguousarray(mover_velocities, dtype=np.float64).reshape(-1, 2)
+            fastest = float(np.sqrt(np.max(np.sum(velocities**2, axis=1))))
+            checks = self.substeps_for(speed, yaw_rate, duration, substeps, fastest)
+            return drive_arc_among_movers(
+                self.pose, speed, yaw_rate, duration, checks, self.half_length,
+                self.half_width, self.circles, self.segments,
+                np.ascontiguousarray(movers, dtype=np.float64), velocities)
         checks = self.substeps_for(speed, yaw_rate, duration, substeps)
         return drive_arc(
             self.pose, speed, yaw_rate, duration, checks,

@@ -20,6 +20,9 @@ from lidar_env.lidar_config import LidarConfig, check_lidars
 #: Valid values of :attr:`EnvConfig.scan_frame`.
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
+#: Most moving obstacles an env may hold (each costs a little per step and per beam).
+MAX_MOVERS = 256
+
 #: Keys of earlier versions, now set per Lidar in ``lidars``.
 MOVED_TO_LIDARS: tuple[str, ...] = ("lidar_mounts", "n_beams", "max_range")
 
@@ -47,6 +50,10 @@ class EnvConfig:
           "range_noise_std", "dropout_prob"}``; mounts lie within the car's half-diagonal.
         * ``range_noise_std`` 0.01 m: the typical 1 sigma of a cheap time-of-flight Lidar; it and
           ``dropout_prob`` apply to every Lidar that does not set its own.
+        * ``moving_obstacles`` 0: no movers, so every result without them stays as it was. Movers
+          (:mod:`lidar_env.movers`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
+          person's shoulders) walking at a speed drawn from ``mover_speed_range`` 0.5-1.5 m/s
+          (slow to brisk walking), placed at least ``mover_clearance`` 1 m from the car.
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)
@@ -66,6 +73,10 @@ class EnvConfig:
     goal_tolerance: float = 0.3  # [m] the trace is done within this arc length of its end
     trace_margin: float = 0.3  # [m] free space kept beyond the car's half-diagonal along a trace
     map_resolution: float = 0.05  # [m/px] pixel size of a world given as an array or image
+    moving_obstacles: int = 0  # [-] pedestrians walking through the world (0 to MAX_MOVERS)
+    mover_radius: float = 0.25  # [m] radius of each moving circle
+    mover_speed_range: tuple[float, float] = (0.5, 1.5)  # [m/s] (min, max) of a mover's speed
+    mover_clearance: float = 1.0  # [m] least gap between a mover and the car's box at reset
 
     def __post_init__(self) -> None:
         positive = {
@@ -77,6 +88,7 @@ class EnvConfig:
             "max_episode_time": self.max_episode_time,
             "goal_tolerance": self.goal_tolerance,
             "map_resolution": self.map_resolution,
+            "mover_radius": self.mover_radius,
         }
         for name, value in positive.items():
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
@@ -86,6 +98,7 @@ class EnvConfig:
             "collision_penalty": self.collision_penalty,
             "cross_track_penalty": self.cross_track_penalty,
             "trace_margin": self.trace_margin,
+            "mover_clearance": self.mover_clearance,
         }
         for name, value in non_negative.items():
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
@@ -101,8 +114,15 @@ class EnvConfig:
             raise ConfigError(
                 f"scan_frame: expected one of {', '.join(SCAN_FRAMES)}, got {self.scan_frame!r}"
             )
+        movers = self.moving_obstacles
+        if (isinstance(movers, bool) or not isinstance(movers, (int, np.integer))
+                or not 0 <= movers <= MAX_MOVERS):
+            raise ConfigError(f"moving_obstacles: expected an integer in [0, {MAX_MOVERS}], "
+                              f"got {movers!r}")
+        object.__setattr__(self, "mover_speed_range", _speed_range(self.mover_speed_range))
         object.__setattr__(self, "lidars", check_lidars(self.lidars, self.car_half_diagonal))
         object.__setattr__(self, "physics_substeps", int(self.physics_substeps))
+        object.__setattr__(self, "moving_obstacles", int(movers))
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:
@@ -133,7 +153,8 @@ class EnvConfig:
     def to_dict(self) -> dict[str, Any]:
         """The config as a plain dict (round-trips through :meth:`from_dict`)."""
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return {**fields, "lidars": [lidar.to_dict() for lidar in self.lidars]}
+        return {**fields, "lidars": [lidar.to_dict() for lidar in self.lidars],
+                "mover_speed_range": list(self.mover_speed_range)}
 
     @property
     def n_lidars(self) -> int:
@@ -185,3 +206,20 @@ class EnvConfig:
     def trace_clearance(self) -> float:
         """[m] clearance every trace waypoint keeps from obstacles: half-diagonal + margin."""
         return self.car_half_diagonal + self.trace_margin
+
+
+def _speed_range(value: Any) -> tuple[float, float]:
+    """``value`` as (min, max) [m/s] with 0 <= min <= max, both finite."""
+    expected = "mover_speed_range: expected (min, max) [m/s] with 0 <= min <= max"
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ConfigError(f"{expected}, got {value!r}")
+    numbers = []
+    for v in value:
+        numeric = not isinstance(v, bool) and isinstance(v, (int, float, np.number))
+        if not numeric or not math.isfinite(v):
+            raise ConfigError(f"{expected}, got {value!r}")
+        numbers.append(float(v))
+    low, high = numbers
+    if low < 0 or low > high:
+        raise ConfigError(f"{expected}, got min {low:g} and max {high:g}")
+    return low, high

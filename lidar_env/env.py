@@ -14,8 +14,10 @@ from numpy.typing import ArrayLike, NDArray
 from lidar_env.actions import checked_action
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
+from lidar_env.env_views import EnvViews
 from lidar_env.errors import ConfigError, ResetNeededError
 from lidar_env.lidar_layout import LidarLayout
+from lidar_env.movers import Crowd
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.traces import check_trace_name
@@ -29,8 +31,7 @@ from lidar_env.world import World
 PROGRESS_WINDOW = 2.0
 
 
-
-class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
+class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     """A car with planar Lidars (two by default) drives along a trace through a 2-D world.
 
     ## Description
@@ -46,7 +47,10 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     "strict, right-turn, zigzag" seeds; or, to test loop closure, ``loop``, a closed circuit
     driven once round, and ``out_and_back``, which turns around and comes back beside its
     outward lane; or the user's own waypoints) to its end; the ground-truth poses in ``info``
-    are what Lidar-only motion estimators are scored against.
+    are what Lidar-only motion estimators are scored against. With
+    ``config["moving_obstacles"]`` M > 0, M pedestrians (circles of ``mover_radius``) walk
+    between random free waypoints at their own speeds (:mod:`lidar_env.movers`): the Lidars
+    see them exactly and touching one ends the episode like a wall.
 
     ## Action Space
 
@@ -95,13 +99,18 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     (:mod:`lidar_env.user_worlds`). ``reset(options={"start": (x, y, heading)})`` overrides it
     (the trace is then fitted to the world from there). A start where the car's box touches or
     lies inside an obstacle, or outside the map, raises :class:`~lidar_env.scenes.StartPoseError`.
+    Movers (if any) are placed at random free points from which they can walk straight to the
+    trace, at least ``mover_clearance`` (1 m) from the car's box; a world too crowded for all of
+    them raises a ``ConfigError`` saying how many fit.
 
     ## Episode End
 
     Termination: 1. the car is within ``goal_tolerance`` (0.3 m) of arc from the trace's end
     (on a ``loop``: it has driven the whole lap but ``goal_tolerance``, counted along the lap,
     so standing at the start does not count);
-    2. the car's box touches an obstacle (it is stopped at the last free physics substep).
+    2. the car's box touches an obstacle or a mover (it is stopped at the last free physics
+    substep; movers move during the substeps too, in a straight line at the velocity they hold
+    over the step).
     Truncation: 3. the episode time reaches ``max_episode_time`` (120 s).
     After either, ``step()`` raises :class:`~lidar_env.errors.ResetNeededError` until
     ``reset()`` (Gymnasium leaves stepping on undefined; the car must not drive on unnoticed).
@@ -116,7 +125,9 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
     | "progress"          | arc position / trace length, in [0, 1] (*)              | -         |
     | "arc_position"      | arc length of the car's projection onto the trace (*)   | m         |
     | "cross_track_error" | signed distance from the trace, positive = left of it   | m         |
-    | "collision"         | the car touched an obstacle this step                   | -         |
+    | "collision"         | the car touched an obstacle (or a mover) this step      | -         |
+    | "moving_obstacles"  | movers' x, y, vx, vy, radius, float64 (M, 5), world;   | m, m/s, m |
+    |                     | (0, 5) without movers; velocity held over the last step |           |
 
     Progress is tracked locally (within 2 m of arc of the previous step's), so it cannot jump
     to a neighbouring leg of a zigzag. (*) On a closed trace (``loop``) it is the distance
@@ -141,8 +152,11 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
 
     ``reset(seed=..., options={"world": ..., "trace": ..., "start": (x, y, heading)})``
     changes the world, trace or start pose for that episode only. A ``random`` world is drawn
-    from the env's ``np_random`` at every reset, as are range noise and dropouts.
-    ``env.unwrapped.space`` is the pymunk ``Space`` (obstacles and the car's kinematic body),
+    from the env's ``np_random`` at every reset, as are range noise, dropouts and the movers
+    (their places and speeds at reset, their waypoints during the episode; none without movers,
+    so M = 0 leaves every random stream as before).
+    ``env.unwrapped.space`` is the pymunk ``Space`` (obstacles, the car's and movers' kinematic
+    bodies), ``.crowd`` the :class:`~lidar_env.movers.Crowd` (None without movers),
     ``.world`` the :class:`~lidar_env.world.World`, ``.trace`` the active
     :class:`~lidar_env.traces.Trace`, ``.config`` the :class:`EnvConfig`.
 
@@ -195,6 +209,9 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self.car: Car | None = None
         self._space: Any = None
         self._space_world: World | None = None
+        self._space_movers: list = []
+        self.crowd = (Crowd(cfg.moving_obstacles, cfg.mover_radius, cfg.mover_speed_range)
+                      if cfg.moving_obstacles else None)
         self._renderer: Any = None
         self._trajectories: dict[str, NDArray[np.float64]] = {}
         self._render_map: Any = None
@@ -217,6 +234,10 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         self.world, self.trace = scene.world, scene.trace
         assert self.car is not None
         self.car.place(self.trace.start_pose)
+        if self.crowd is not None:
+            self.crowd.spawn(self.world, self.trace.waypoints,
+                             (*self.trace.start_pose, self.car.half_length, self.car.half_width),
+                             self.config.mover_clearance, self.np_random)
         self._time = 0.0
         self._arc = 0.0
         self._episode_over = False
@@ -240,7 +261,13 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         cfg = self.config
         speed = min(max(throttle, -1.0), 1.0) * cfg.max_speed
         yaw_rate = min(max(steer, -1.0), 1.0) * cfg.max_yaw_rate
-        collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
+        if self.crowd is None:
+            collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
+        else:  # movers first (their waypoint draws), then the car among them
+            start = self.crowd.circles
+            self.crowd.step(self.world, cfg.control_dt, self.np_random)
+            collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
+                                       start, self.crowd.velocities)
         self._time += cfg.control_dt
         previous_arc = self._arc
         arc, cross_track = self._progress()
@@ -274,7 +301,8 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
         if self._world_aligned:
             cast_from = self._sensor_poses.copy()
             cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
-        scans = self.lidar.scan(self.world, cast_from, self.np_random)
+        movers = None if self.crowd is None else self.crowd.circles
+        scans = self.lidar.scan(self.world, cast_from, self.np_random, movers)
         self._last_scans = scans
         return dict(zip(self.lidar_keys, scans, strict=True))
 
@@ -288,98 +316,5 @@ class DualLidarEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]])
             "arc_position": arc,
             "cross_track_error": cross_track,
             "collision": collision,
+            "moving_obstacles": np.zeros((0, 5)) if self.crowd is None else self.crowd.state,
         }
-
-    # ------------------------------------------------------------------ pymunk
-    @property
-    def space(self) -> Any:
-        """The pymunk ``Space``: the world's static obstacles plus the car's kinematic box.
-
-        Built on first access for each world; the car's body is moved to the current pose on
-        every access (the simulation itself does not need pymunk; see :mod:`lidar_env.car`).
-        """
-        if self.world is None or self.car is None:
-            raise RuntimeError("call reset() before reading space")
-        if self._space is None or self._space_world is not self.world:
-            self._space = self.world.build_space()
-            self._space_world = self.world
-            self.car.add_to_space(self._space)
-        self.car.sync_body()
-        return self._space
-
-    def __getstate__(self) -> dict[str, Any]:
-        # the pymunk space and the pygame window are rebuilt on demand after unpickling
-        state = self.__dict__.copy()
-        state["_space"] = None
-        state["_space_world"] = None
-        state["_renderer"] = None
-        return state
-
-    # ------------------------------------------------------------------ rendering
-    def set_render_trajectories(self, trajectories: Mapping[str, ArrayLike]) -> None:
-        """Trajectories to draw, ``{name: (N, 2) or (N, 3) world-frame poses [m]}``.
-
-        Cleared at every reset.
-        """
-        checked = {}
-        for name, poses in trajectories.items():
-            array = np.asarray(poses, dtype=np.float64)
-            if array.ndim != 2 or array.shape[1] not in (2, 3):
-                raise ConfigError(
-                    f"trajectory {name!r}: expected shape (N, 2) or (N, 3), got {array.shape}"
-                )
-            checked[str(name)] = array[:, :2].copy()
-        self._trajectories = checked
-
-    def set_render_map(self, grid: Any) -> None:
-        """An occupancy map to draw under the trajectories, or ``None`` for none: anything with
-        ``bounds``, ``resolution`` and ``probabilities()``
-        (:class:`lidar_env.rendering.OccupancyMap`, e.g. an
-        ``estimators.mapping.occupancy.OccupancyGrid``; the env imports no estimator).
-        The env builds no map itself: a user (or the scoring wrapper) builds one from the scans
-        at its estimated poses. The grid is kept by reference, so cells integrated into it
-        later show in the next frame. Cleared at every reset.
-        """
-        from lidar_env.rendering import OccupancyMap
-
-        if grid is not None and not isinstance(grid, OccupancyMap):
-            raise TypeError("render map: expected an estimators.mapping.occupancy.OccupancyGrid or "
-                            f"None, got {type(grid).__name__}")
-        self._render_map = grid
-
-    def render(self) -> NDArray[np.uint8] | None:
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' "
-                "to gym.make"
-            )
-            return None
-        if self.car is None or self._last_scans is None:
-            raise RuntimeError("call reset() before render()")
-        from lidar_env.rendering import Renderer, show_in_window
-
-        if self._renderer is None or self._renderer.world is not self.world:
-            window = self._renderer.window if self._renderer is not None else None
-            self._renderer = Renderer(self.world)
-            self._renderer.window = window
-        frame = self._renderer.draw(
-            car_pose=self.car.pose,
-            car_size=(self.config.car_length, self.config.car_width),
-            sensor_poses=self._sensor_poses,
-            scans=self._last_scans,
-            beam_angles=list(self.lidar.beam_angles),
-            max_range=[lidar.max_range for lidar in self.config.lidars],
-            world_aligned=self._world_aligned,
-            trace=self.trace.waypoints if self.trace is not None else None,
-            trajectories=self._trajectories,
-            occupancy=self._render_map,
-        )
-        if self.render_mode == "rgb_array":
-            return frame
-        show_in_window(self._renderer, frame, self.metadata["render_fps"])
-        return None
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None

@@ -15,6 +15,7 @@ the same scans bit for bit.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from functools import cached_property
 
@@ -26,9 +27,58 @@ from lidar_env.errors import ConfigError
 from lidar_env.lidar import Geometry, as_poses, as_world
 from lidar_env.lidar_config import LidarConfig
 from lidar_env.primitive_grid import PrimitiveGrid
-from lidar_env.ray_casting import beam_geometry, cast_sensor, new_scratch
+from lidar_env.ray_casting import (
+    _beam_span,
+    _bearing,
+    _circle_hit,
+    _wrap_positive,
+    beam_geometry,
+    cast_sensor,
+    new_scratch,
+)
 
 _NO_DRAWS = np.empty(0)
+
+
+@njit(cache=True, fastmath=False)
+def cast_movers(
+    ranges: NDArray[np.float64],
+    pose: tuple[float, float, float],
+    movers: NDArray[np.float64],
+    beams: tuple,
+    max_range: float,
+) -> None:
+    """Lower ``ranges`` (n,) of one sensor at world ``pose`` to the exact hits on the moving
+    circles ``movers`` (M, 3: x, y, radius [m]); all 0 when the sensor is inside one.
+
+    ``beams`` is ``(sorted_angles, order, step, cos, sin)`` as for
+    :func:`lidar_env.ray_casting.cast_sensor`. Each circle updates only the beams within the
+    angle it subtends (the static circles' sweep), so M circles cost about M beams each.
+    """
+    ox, oy, heading = pose
+    sorted_angles, order, step, cos_beam, sin_beam = beams
+    ch, sh = math.cos(heading), math.sin(heading)
+    heading = heading % (2.0 * math.pi)
+    for i in range(movers.shape[0]):
+        cx, cy, r = movers[i, 0], movers[i, 1], movers[i, 2]
+        fx, fy = cx - ox, cy - oy
+        d = math.sqrt(fx * fx + fy * fy)
+        if d - r >= max_range:
+            continue
+        if d <= r:
+            ranges[:] = 0.0
+            return
+        half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
+        lo = _wrap_positive(_bearing(fy, fx) - half - heading)
+        f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
+        n0 = max(l0 - f0, 0)
+        for q in range(n0 + l1 - f1):
+            j = order[f0 + q] if q < n0 else order[f1 + q - n0]
+            dx = ch * cos_beam[j] - sh * sin_beam[j]
+            dy = sh * cos_beam[j] + ch * sin_beam[j]
+            t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
+            if t < ranges[j]:
+                ranges[j] = t
 
 
 @njit(cache=True, fastmath=False)
@@ -51,6 +101,26 @@ def scan_layout_kernel(
     float32 below it, noise std [m], dropout probability. ``gaussians`` and ``uniforms`` hold
     one draw per packed beam, or are empty when no sensor needs them.
     """
+    return scan_layout_movers_kernel(circles, segments, first_polygon_edge, grid, sensor_poses,
+                                     beams, sensor_params, gaussians, uniforms,
+                                     np.empty((0, 3)))
+
+
+@njit(cache=True, fastmath=False)
+def scan_layout_movers_kernel(
+    circles: NDArray[np.float64],
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: PrimitiveGrid,
+    sensor_poses: NDArray[np.float64],
+    beams: tuple,
+    sensor_params: NDArray[np.float64],
+    gaussians: NDArray[np.float64],
+    uniforms: NDArray[np.float64],
+    movers: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """:func:`scan_layout_kernel` in a world that also holds the moving circles ``movers``
+    (M, 3: x, y, radius [m]), seen exactly like static ones (:func:`cast_movers`)."""
     beam_start, sorted_angles, order, steps, cos_beam, sin_beam = beams
     exact = np.empty(beam_start[-1])
     out = np.empty(beam_start[-1], dtype=np.float32)
@@ -63,6 +133,8 @@ def scan_layout_kernel(
         own = (sorted_angles[a:b], order[a:b], steps[k], cos_beam[a:b], sin_beam[a:b])
         cast_sensor(exact[a:b], pose, circles, segments, first_polygon_edge, grid, scratch,
                     k + 1, own, max_range)
+        if movers.shape[0] > 0:
+            cast_movers(exact[a:b], pose, movers, own, max_range)
         for j in range(a, b):
             r = exact[j]
             if r < max_range:
@@ -127,10 +199,12 @@ class LidarLayout:
         return beams, params
 
     def scan(
-        self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator
+        self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator,
+        movers: NDArray[np.float64] | None = None,
     ) -> list[NDArray[np.float32]]:
         """The K scans (float32 ``(n_k,)`` ranges [m]) from sensors at world ``sensor_poses``
-        (K, 3); every call returns new arrays."""
+        (K, 3); every call returns new arrays. ``movers`` (M, 3) are moving circles x, y,
+        radius [m] seen like the world's (None: none; the same draws either way)."""
         world, first_polygon_edge = as_world(world)
         poses = as_poses(sensor_poses)
         if len(poses) != len(self.lidars):
@@ -142,6 +216,11 @@ class LidarLayout:
         gaussians = rng.standard_normal(total) if self._noisy else _NO_DRAWS
         uniforms = rng.random(total) if self._dropping else _NO_DRAWS
         beams, params = self._packed
-        packed = scan_layout_kernel(world.circles, world.segments, first_polygon_edge,
-                                    world.grid, poses, beams, params, gaussians, uniforms)
+        if movers is None:
+            packed = scan_layout_kernel(world.circles, world.segments, first_polygon_edge,
+                                        world.grid, poses, beams, params, gaussians, uniforms)
+        else:
+            packed = scan_layout_movers_kernel(
+                world.circles, world.segments, first_polygon_edge, world.grid, poses, beams,
+                params, gaussians, uniforms, np.ascontiguousarray(movers, dtype=np.float64))
         return [packed[a:b] for a, b in self._slices]

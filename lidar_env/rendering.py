@@ -35,6 +35,7 @@ FREE = np.array([250, 250, 250], dtype=np.uint8)
 OBSTACLE = np.array([40, 40, 40], dtype=np.uint8)
 TRACE_COLOUR = np.array([120, 160, 255], dtype=np.uint8)
 CAR_COLOUR = np.array([220, 30, 30], dtype=np.uint8)
+MOVER_COLOUR = np.array([200, 0, 200], dtype=np.uint8)
 #: Opacity of an occupancy-map overlay over the world raster (the world stays visible through it).
 MAP_ALPHA = 0.6
 LIDAR_COLOURS = (np.array([255, 140, 0], dtype=np.uint8), np.array([0, 170, 80], dtype=np.uint8))
@@ -201,6 +202,22 @@ class Renderer:
         nose = [[x + c * half_length, y + s * half_length]]
         self._paint(frame, nose, np.array([255, 255, 255], dtype=np.uint8), 3)
 
+    def _movers(self, frame: NDArray[np.uint8], movers: ArrayLike) -> None:
+        """Fill each mover's disc (rows x, y, [vx, vy,] radius [m]; at least one pixel)."""
+        rows_xyr = np.asarray(movers, dtype=np.float64).reshape(len(movers), -1)
+        height, width = self.shape
+        for x, y, r in rows_xyr[:, [0, 1, -1]]:
+            (r0, r1), (c0, c1) = self.to_pixels([[x - r, y + r], [x + r, y - r]])
+            rows = np.arange(max(r0, 0), min(r1 + 1, height))
+            cols = np.arange(max(c0, 0), min(c1 + 1, width))
+            if len(rows) == 0 or len(cols) == 0:
+                continue
+            centres = self.pixel_centres(rows[:, None], cols[None, :])
+            inside = np.hypot(centres[..., 0] - x, centres[..., 1] - y) <= r
+            hit_rows, hit_cols = np.nonzero(inside)
+            frame[rows[hit_rows], cols[hit_cols]] = MOVER_COLOUR
+            self._paint(frame, [[x, y]], MOVER_COLOUR, 2)
+
     def draw(
         self,
         car_pose: ArrayLike,
@@ -213,6 +230,7 @@ class Renderer:
         trace: ArrayLike | None = None,
         trajectories: Mapping[str, ArrayLike] | None = None,
         occupancy: OccupancyMap | None = None,
+        movers: ArrayLike | None = None,
     ) -> NDArray[np.uint8]:
         """One ``(H, W, 3)`` uint8 frame.
 
@@ -229,6 +247,8 @@ class Renderer:
             trajectories: ``{name: (N, 2 or 3) poses [m]}``, each in its own colour.
             occupancy: an occupancy map to blend over the world, under everything else
                 (:meth:`overlay_map`).
+            movers: ``(M, 3)`` or ``(M, 5)`` moving circles (x, y, [vx, vy,] radius [m]),
+                drawn as discs over the scans.
         """
         frame = self.background.copy()
         if occupancy is not None:
@@ -254,6 +274,8 @@ class Renderer:
                 [np.cos(direction), np.sin(direction)], axis=1
             )
             self._paint(frame, points, LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 2)
+        if movers is not None and len(movers) > 0:
+            self._movers(frame, movers)
         self._car(frame, np.asarray(car_pose, dtype=np.float64), car_size)
         for k, pose in enumerate(poses):
             self._paint(frame, pose[None, :2], LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 3)

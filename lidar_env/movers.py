@@ -1,0 +1,118 @@
+"""Moving obstacles: a crowd of pedestrians (circles) walking between random free waypoints.
+
+:class:`Crowd` holds the state of ``M`` movers as plain arrays and advances it with the compiled
+kernels of :mod:`lidar_env.mover_kernels` (motion, the no-overlap guarantee, waypoints,
+placement). Units: metres, seconds, radians; world frame.
+
+Motion model ("waypoints", the only one): each mover walks in a straight line at its own
+speed (drawn uniformly from ``speed_range`` at spawn) to a waypoint it can see, a free point
+:data:`WAYPOINT_REACH` away in a random direction; at the waypoint, or after being stuck for a
+second, it draws the next one. On the way it turns away from walls and other movers it would
+come near within the next second, and it never overlaps an obstacle or another mover (see
+:mod:`lidar_env.mover_kernels`). Movers ignore the car: driving around them is the car's job,
+and touching one ends the episode like a wall.
+
+Random numbers, all from the generator passed in, in a fixed order so that the same seed gives
+the same crowd bit for bit: at :meth:`Crowd.spawn`, ``(SPAWN_TRIES * M, 2)`` uniforms for the
+candidate positions, then ``M`` uniforms for the speeds; at each :meth:`Crowd.step`, if any
+mover needs a waypoint, ``(n, WAYPOINT_TRIES, 2)`` uniforms for the ``n`` that do (the first
+step draws for all). A crowd of ``M = 0`` is never built, so it draws nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lidar_env.errors import ConfigError
+from lidar_env.mover_kernels import choose_waypoints, place_movers, step_movers
+from lidar_env.world import World
+
+#: [m] (min, max) distance of a new waypoint from the mover.
+WAYPOINT_REACH = (1.0, 10.0)
+#: Candidate waypoints drawn per mover that needs one (the first free, visible one is taken).
+WAYPOINT_TRIES = 16
+#: Candidate spawn positions drawn per mover asked for.
+SPAWN_TRIES = 200
+
+
+class Crowd:
+    """``count`` movers of ``radius`` [m] with speeds [m/s] drawn from ``speed_range``.
+
+    Attributes (after :meth:`spawn`): ``positions`` (M, 2) [m], ``velocities`` (M, 2) [m/s]
+    (held over the last step; zero at spawn), ``waypoints`` (M, 2) [m], ``speeds`` (M,) [m/s].
+    """
+
+    def __init__(self, count: int, radius: float, speed_range: tuple[float, float]) -> None:
+        self.count = int(count)
+        self.radius = float(radius)
+        self.speed_range = (float(speed_range[0]), float(speed_range[1]))
+        self.positions = np.zeros((self.count, 2))
+        self.velocities = np.zeros((self.count, 2))
+        self.waypoints = np.zeros((self.count, 2))
+        self.speeds = np.zeros(self.count)
+        self._stuck = np.zeros(self.count, dtype=np.int64)
+        self._needs = np.ones(self.count, dtype=np.bool_)
+        self._bounds = np.zeros(4)
+
+    def spawn(
+        self, world: World, anchors: ArrayLike, car_box: ArrayLike, car_clearance: float,
+        rng: np.random.Generator,
+    ) -> None:
+        """Place the crowd in ``world`` and draw the speeds (see the module docstring).
+
+        Args:
+            anchors: ``(K, 2)`` points [m] the car drives through (the trace): each mover can
+                walk straight to the nearest of them, so it is in the car's part of the world.
+            car_box: (x, y, heading, half length, half width) [m, rad] of the car.
+            car_clearance: [m] least distance of a mover's surface from the car's box.
+
+        Raises:
+            ConfigError: fewer than ``count`` movers fit (the world is too crowded).
+        """
+        self._bounds = np.array(world.bounds, dtype=np.float64)
+        xmin, ymin, xmax, ymax = self._bounds
+        draws = rng.random((SPAWN_TRIES * self.count, 2))
+        candidates = np.column_stack([xmin + (xmax - xmin) * draws[:, 0],
+                                      ymin + (ymax - ymin) * draws[:, 1]])
+        car = np.array([*np.asarray(car_box, dtype=np.float64), float(car_clearance)])
+        placed = place_movers(candidates, self.positions, self.radius, car,
+                              np.ascontiguousarray(anchors, dtype=np.float64), self._bounds,
+                              world.circles, world.segments, world.grid)
+        if placed < self.count:
+            raise ConfigError(
+                f"moving_obstacles: placed {placed} of {self.count} movers of mover_radius "
+                f"{self.radius:g} m in world {world.name!r} ({len(candidates)} random tries, "
+                f"keeping {car_clearance:g} m from the car): the world is too crowded; expected "
+                "fewer moving_obstacles or a smaller mover_radius")
+        low, high = self.speed_range
+        self.speeds = low + (high - low) * rng.random(self.count)
+        self.velocities[:] = 0.0
+        self.waypoints[:] = self.positions
+        self._stuck[:] = 0
+        self._needs[:] = True
+
+    def step(self, world: World, dt: float, rng: np.random.Generator) -> None:
+        """Advance every mover by ``dt`` [s]: new waypoints where needed, then one move each."""
+        if np.any(self._needs):
+            draws = rng.random((int(np.count_nonzero(self._needs)), WAYPOINT_TRIES, 2))
+            choose_waypoints(self.positions, self.waypoints, self._needs, draws, WAYPOINT_REACH,
+                             self.radius, self._bounds, world.circles, world.segments,
+                             world.grid)
+        needs = step_movers(self.positions, self.velocities, self.waypoints, self.speeds,
+                            self._stuck, self.radius, float(dt), self._bounds, world.circles,
+                            world.segments, world.grid)
+        self._needs |= needs
+
+    @property
+    def circles(self) -> NDArray[np.float64]:
+        """``(M, 3)`` current circles x, y, radius [m] (a new array)."""
+        return np.column_stack([self.positions, np.full(self.count, self.radius)])
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """``(M, 5)`` x, y [m], vx, vy [m/s] (over the last step), radius [m] (a new array)."""
+        return np.column_stack([self.positions, self.velocities,
+                                np.full(self.count, self.radius)])
+
+
