@@ -19,7 +19,7 @@ from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.errors import ConfigError
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
-from lidar_env.vector.kernel import collision_checks, observe_envs, step_envs
+from lidar_env.vector.kernel import EntryPoint, collision_checks, observe_envs, step_envs
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.world import World
 
@@ -72,6 +72,8 @@ class DualLidarVectorEnv(VectorEnv):
                               "DualLidar-v0 or use vectorization_mode='sync'")
         single = DualLidarEnv(world, trace, config)  # checks world, trace and config alike
         movers = getattr(single.config, "moving_obstacles", 0)
+        # the single env reports its movers (none here) in every info once it has them
+        self._mover_info = hasattr(single.config, "moving_obstacles")
         if movers:
             raise ConfigError(f"moving_obstacles: not batched yet; the batched env expected 0, "
                               f"got {movers!r}; use vectorization_mode='sync' for moving "
@@ -112,6 +114,8 @@ class DualLidarVectorEnv(VectorEnv):
         self._truncations = np.zeros(n, dtype=np.bool_)
         self._autoreset_envs = np.zeros(n, dtype=np.bool_)
         self._started = False
+        self._every_env = np.arange(n, dtype=np.int64)
+        self._observe_envs, self._step_envs = EntryPoint(observe_envs), EntryPoint(step_envs)
 
     @property
     def worlds(self) -> list[World | None]:
@@ -192,7 +196,7 @@ class DualLidarVectorEnv(VectorEnv):
 
     def _observe(self, envs: NDArray[np.int64]) -> None:
         if len(envs):
-            observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
+            self._observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
                          self._slots.scene, self._slots.rngs, self._sensors)
 
     # ------------------------------------------------------------------ step
@@ -203,19 +207,20 @@ class DualLidarVectorEnv(VectorEnv):
         if not self._started:
             raise gym.error.ResetNeeded("Cannot call step() before calling reset()")
         resetting = self._autoreset_envs.copy()
-        stepping = np.flatnonzero(~resetting)
+        stepping = np.flatnonzero(~resetting) if resetting.any() else self._every_env
         speed, yaw_rate, checks = self._motion(actions, stepping)
-        for i in np.flatnonzero(resetting):
-            self._reset_env(int(i), None, {})
-        self._observe(np.flatnonzero(resetting))
-        self._rewards[resetting] = 0.0
-        self._terminations[resetting] = False
-        self._truncations[resetting] = False
+        if len(stepping) < self.num_envs:
+            for i in np.flatnonzero(resetting):
+                self._reset_env(int(i), None, {})
+            self._observe(np.flatnonzero(resetting))
+            self._rewards[resetting] = 0.0
+            self._terminations[resetting] = False
+            self._truncations[resetting] = False
         if len(stepping):
             state = (self._pose, self._sensor_poses, self._time, self._arc, self._cross_track,
                      self._collision, self._scans)
             outcome = (self._rewards, self._terminations, self._truncations)
-            step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
+            self._step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
                       self._slots.rngs, self._sensors, self._constants)
         self._autoreset_envs = self._terminations | self._truncations
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
@@ -233,8 +238,8 @@ class DualLidarVectorEnv(VectorEnv):
             raise ConfigError(f"{expected} of numbers in [-1, 1], got {actions!r:.60}") from error
         if a.shape != (self.num_envs, 2):
             raise ConfigError(f"{expected}, got shape {a.shape}")
-        used = a[stepping]
-        if not np.all(np.isfinite(used)):
+        used = a[stepping] if len(stepping) < self.num_envs else a
+        if not np.isfinite(used).all():
             row = int(stepping[np.flatnonzero(~np.isfinite(used).all(axis=1))[0]])
             raise ConfigError(f"actions[{row}]: expected finite values in [-1, 1], got "
                               f"{a[row].tolist()}")
@@ -248,8 +253,8 @@ class DualLidarVectorEnv(VectorEnv):
             j = int(stepping[too_many[0]])
             self._car.substeps_for(float(speed[j]), float(yaw_rate[j]), cfg.control_dt,
                                    cfg.physics_substeps)
-        # rows of resetting sub-envs may hold anything: keep them castable, they are not used
-        checks = np.minimum(np.nan_to_num(needed, nan=1.0), MAX_SUBSTEPS).astype(np.int64)
+        # rows of resetting sub-envs may hold NaN (fmin drops it) or inf: unused, but castable
+        checks = np.fmin(needed, float(MAX_SUBSTEPS)).astype(np.int64)
         return speed, yaw_rate, checks
 
     # ------------------------------------------------------------------ outputs
@@ -270,4 +275,8 @@ class DualLidarVectorEnv(VectorEnv):
             else:
                 array[~mask] = 0
                 infos[key], infos[f"_{key}"] = array, mask.copy()
+        if self._mover_info:  # x, y, radius, vx, vy of each of no movers
+            present = np.ones(self.num_envs, np.bool_) if mask is None else mask.copy()
+            infos["moving_obstacles"] = np.zeros((self.num_envs, 0, 5))
+            infos["_moving_obstacles"] = present
         return infos

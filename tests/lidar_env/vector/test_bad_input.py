@@ -1,0 +1,97 @@
+"""Bad input to the batched env raises the errors the single env raises (``ConfigError`` from
+:mod:`lidar_env.errors`), naming the argument; what it cannot batch is refused, not ignored."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import lidar_env  # noqa: F401 - registers DualLidar-v0
+from lidar_env.errors import ConfigError
+from lidar_env.vector import DualLidarVectorEnv
+
+
+def batched(num_envs: int = 2, **kwargs) -> gym.vector.VectorEnv:
+    return gym.make_vec("DualLidar-v0", num_envs, vectorization_mode="vector_entry_point",
+                        **kwargs)
+
+
+@pytest.mark.parametrize("num_envs", [0, -3, 2.5, True])
+def test_num_envs_below_one_or_not_an_integer_is_refused(num_envs) -> None:
+    with pytest.raises(ConfigError, match="num_envs"):
+        DualLidarVectorEnv(num_envs=num_envs)
+
+
+def test_config_errors_are_the_single_envs() -> None:
+    with pytest.raises(ConfigError, match="max_speed"):
+        batched(config={"max_speed": -1.0})
+    with pytest.raises(ConfigError, match="unknown config key"):
+        batched(config={"max_sped": 1.0})
+
+
+def test_what_is_not_batched_yet_is_refused_by_name() -> None:
+    with pytest.raises(ConfigError, match="render_mode"):
+        DualLidarVectorEnv(2, render_mode="rgb_array")
+    if "moving_obstacles" in lidar_env.EnvConfig.keys():
+        with pytest.raises(ConfigError, match="moving_obstacles.*not batched yet"):
+            batched(config={"moving_obstacles": 2})
+
+
+#: (batched action for 2 envs, the same mistake made to one single env)
+BAD_ACTIONS = {
+    "three numbers per env": (np.zeros((2, 3)), np.zeros(3)),
+    "one env's action": (np.zeros(2), np.zeros(1)),
+    "one row too many": (np.zeros((3, 2)), np.zeros((2, 2))),
+    "strings": ([["a", "b"], ["c", "d"]], ["a", "b"]),
+    "NaN": (np.array([[0.1, np.nan], [0.0, 0.0]]), np.array([0.1, np.nan])),
+    "inf": (np.array([[0.0, 0.0], [np.inf, 0.0]]), np.array([np.inf, 0.0])),
+}
+
+
+@pytest.mark.parametrize("mistake", list(BAD_ACTIONS))
+def test_a_bad_action_is_a_config_error_like_the_single_envs(mistake: str) -> None:
+    actions, action = BAD_ACTIONS[mistake]
+    env = batched()
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="action"):
+        env.step(actions)
+    single = gym.make("DualLidar-v0")
+    single.reset(seed=0)
+    with pytest.raises(ConfigError, match="action"):
+        single.step(action)
+
+
+def test_a_bad_action_moves_no_car() -> None:
+    env = batched()
+    _, info = env.reset(seed=0)
+    with pytest.raises(ConfigError, match=r"actions\[1\]"):
+        env.step(np.array([[1.0, 0.0], [np.nan, 0.0]]))
+    _, _, _, _, after = env.step(np.zeros((2, 2)))
+    np.testing.assert_array_equal(after["pose"], info["pose"])  # zero action: no motion
+    assert np.allclose(after["time"], 0.1)
+
+
+def test_the_ignored_action_of_an_autoresetting_env_may_be_anything() -> None:
+    env = batched(world="hallway", config={"max_episode_time": 0.2})
+    env.reset(seed=0)
+    env.step(np.zeros((2, 2)))
+    _, _, _, truncated, _ = env.step(np.zeros((2, 2)))
+    assert truncated.all()
+    _, reward, _, _, info = env.step(np.full((2, 2), np.nan))  # both autoreset: not used
+    assert np.all(reward == 0.0) and np.all(info["time"] == 0.0)
+
+
+def test_step_before_reset_and_bad_reset_arguments() -> None:
+    env = batched()
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(ConfigError, match="reset option"):
+        env.reset(seed=0, options={"wrold": "hallway"})
+    with pytest.raises(ConfigError, match="seed"):
+        env.reset(seed=[1, 2, 3])
+    with pytest.raises(ConfigError, match="reset_mask"):
+        env.reset(options={"reset_mask": np.array([True, False])})  # before a full reset
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="reset_mask"):
+        env.reset(options={"reset_mask": np.array([1, 0])})
