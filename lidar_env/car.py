@@ -250,6 +250,7 @@ class Car:
     def drive(
         self, speed: float, yaw_rate: float, duration: float, substeps: int,
         movers: np.ndarray | None = None, mover_velocities: np.ndarray | None = None,
+        mover_speed: float | None = None,
     ) -> bool:
         """Drive ``duration`` [s] at ``speed`` [m/s] and ``yaw_rate`` [rad/s]; True on collision.
 
@@ -257,11 +258,13 @@ class Car:
         long (see :meth:`substeps_for`), so the car never tunnels through a wall. ``movers``
         (M, 3: x, y, radius [m] at the start) moving at ``mover_velocities`` (M, 2) [m/s]
         during the move are checked at every substep where they are then
-        (:func:`drive_arc_among_movers`).
+        (:func:`drive_arc_among_movers`); ``mover_speed`` [m/s] bounds their speeds (default:
+        the fastest of ``mover_velocities``) and adds collision checks for fast movers.
         """
         if movers is not None and len(movers) > 0:
             velocities = np.ascontiguousarray(mover_velocities, dtype=np.float64).reshape(-1, 2)
-            fastest = float(np.sqrt(np.max(np.sum(velocities**2, axis=1))))
+            fastest = (float(np.sqrt(np.max(np.sum(velocities**2, axis=1))))
+                       if mover_speed is None else float(mover_speed))
             checks = self.substeps_for(speed, yaw_rate, duration, substeps, fastest)
             return drive_arc_among_movers(
                 self.pose, speed, yaw_rate, duration, checks, self.half_length,

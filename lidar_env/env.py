@@ -267,7 +267,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
             start = self.crowd.circles
             self.crowd.step(self.world, cfg.control_dt, self.np_random)
             collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
-                                       start, self.crowd.velocities)
+                                       start, self.crowd.velocities, self.crowd.max_speed)
         self._time += cfg.control_dt
         previous_arc = self._arc
         arc, cross_track = self._progress()

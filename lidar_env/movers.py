@@ -54,6 +54,7 @@ class Crowd:
         self._stuck = np.zeros(self.count, dtype=np.int64)
         self._needs = np.ones(self.count, dtype=np.bool_)
         self._bounds = np.zeros(4)
+        self._max_speed = 0.0
 
     def spawn(
         self, world: World, anchors: ArrayLike, car_box: ArrayLike, car_clearance: float,
@@ -87,6 +88,7 @@ class Crowd:
                 "fewer moving_obstacles or a smaller mover_radius")
         low, high = self.speed_range
         self.speeds = low + (high - low) * rng.random(self.count)
+        self._max_speed = float(self.speeds.max())
         self.velocities[:] = 0.0
         self.waypoints[:] = self.positions
         self._stuck[:] = 0
@@ -107,12 +109,23 @@ class Crowd:
     @property
     def circles(self) -> NDArray[np.float64]:
         """``(M, 3)`` current circles x, y, radius [m] (a new array)."""
-        return np.column_stack([self.positions, np.full(self.count, self.radius)])
+        out = np.empty((self.count, 3))
+        out[:, :2] = self.positions
+        out[:, 2] = self.radius
+        return out
 
     @property
     def state(self) -> NDArray[np.float64]:
         """``(M, 5)`` x, y [m], vx, vy [m/s] (over the last step), radius [m] (a new array)."""
-        return np.column_stack([self.positions, self.velocities,
-                                np.full(self.count, self.radius)])
+        out = np.empty((self.count, 5))
+        out[:, :2] = self.positions
+        out[:, 2:4] = self.velocities
+        out[:, 4] = self.radius
+        return out
+
+    @property
+    def max_speed(self) -> float:
+        """[m/s] the fastest mover's speed (0 before :meth:`spawn`)."""
+        return self._max_speed
 
 
