@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from estimators.matching.point_to_line import (
-    gauss_newton_step,
-    point_to_line_jacobian,
-    robust_weights,
-)
+from estimators.matching.nearest import GridIndex
+from estimators.matching.normal_equations import nearest_on_surfaces, point_to_curve_system
+from estimators.matching.point_to_line import solve_normal_equations
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
 from lidar_env.se2 import rotate, transform_points, wrap_angle
 
@@ -98,7 +95,7 @@ class CurveReference:
         count = len(self.points)
         if count < 3:
             raise ValueError(f"reference scan: expected at least 3 returns, got {count}")
-        self.tree = cKDTree(self.points)
+        self.grid = GridIndex(self.points)
         n_beams = len(ranges)
         # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
         # adjacent beams less than MAX_SURFACE_GAP apart.
@@ -162,10 +159,9 @@ class CurveReference:
     def nearest_returns(self, points: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """The indices of the points ``(M, 2)`` that pair (see :meth:`correspond`) and of the
         returns they pair with."""
-        distance, nearest = self.tree.query(points, distance_upper_bound=MAX_PAIR_DISTANCE)
-        index = np.flatnonzero(np.isfinite(distance))
-        index = index[~self.pointlike[nearest[index]]]
-        return index, nearest[index]
+        return nearest_on_surfaces(*self.grid.arrays, self.pointlike,
+                                   np.ascontiguousarray(points, dtype=np.float64),
+                                   MAX_PAIR_DISTANCE)
 
     def project(
         self, points: FloatArray, index: NDArray[np.intp], k: NDArray[np.intp]
@@ -225,14 +221,15 @@ def refine_on_curves(
         index, k = pairs
         if len(index) < 3:
             break
-        anchors, normals = reference.project(moved, index, k)
-        residuals = np.einsum("ij,ij->i", moved[index] - anchors, normals)
+        # The pairs' J^T W J and -J^T W r (Cauchy weights) and inliers, compiled: the math of
+        # ``reference.project``, ``point_to_line_jacobian`` and ``robust_weights``.
+        information, gradient, inliers = point_to_curve_system(
+            moved, pose[:2], index, k, reference.points, reference.tangents, reference.normals,
+            reference.a, reference.b, reference.c, LOSS_SCALE, INLIER_DISTANCE)
         # Scored before the step, which by then is tiny: one correspondence search saved.
-        quality = np.count_nonzero(np.abs(residuals) < INLIER_DISTANCE) / len(points)
-        jacobian = point_to_line_jacobian(moved[index], pose[:2], normals)
-        weights = robust_weights(residuals, "cauchy", LOSS_SCALE)
+        quality = inliers / len(points)
         if prior is None:
-            step = gauss_newton_step(jacobian, residuals, weights)
+            step = solve_normal_equations(information, gradient, 0.0)
         else:
             # The prior enters as three more residual rows, on the pivot's position and the
             # heading: r + J d = (pivot moved by pose + d) - (pivot moved by prior), linearised.
@@ -242,12 +239,10 @@ def refine_on_curves(
                 np.append(prior[:2] + rotate(prior[2], pivot), prior[2]),
                 np.append(pose[:2] + lever, pose[2]),
             )
-            step = gauss_newton_step(
-                np.vstack([jacobian, prior_jacobian]),
-                np.concatenate([residuals, prior_residuals]),
-                np.concatenate([weights, prior_information]),
-            )
-            open_direction = _degenerate_translation(jacobian, weights)
+            weighted = prior_jacobian * prior_information[:, None]
+            step = solve_normal_equations(information + weighted.T @ prior_jacobian,
+                                          gradient - weighted.T @ prior_residuals, 0.0)
+            open_direction = _degenerate_translation(information)
             if open_direction is not None:
                 predicted = prior[:2] + rotate(prior[2], pivot)
                 moved_pivot = pose[:2] + step[:2] + rotate(pose[2] + step[2], pivot)
@@ -262,14 +257,13 @@ def refine_on_curves(
 
 
 
-def _degenerate_translation(jacobian: FloatArray, weights: FloatArray) -> FloatArray | None:
+def _degenerate_translation(information: FloatArray) -> FloatArray | None:
     """The unit translation direction (2,) the weighted pairs do not constrain, or None.
 
     The information on translation with the heading marginalised out is the Schur complement
-    of the 3x3 normal matrix; its weaker eigen-direction is open when its eigenvalue is under
-    ``DEGENERACY_RATIO`` times the stronger one.
+    of the pairs' 3x3 normal matrix ``information`` (``J^T W J``); its weaker eigen-direction
+    is open when its eigenvalue is under ``DEGENERACY_RATIO`` times the stronger one.
     """
-    information = (jacobian * weights[:, None]).T @ jacobian
     if information[2, 2] <= 0:
         return None
     translation = (

@@ -31,6 +31,7 @@ from estimators.matching.point_to_line import (
     gauss_newton_step,
     point_to_line_jacobian,
     robust_weights,
+    solve_normal_equations,
 )
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
@@ -118,25 +119,17 @@ def register(
     iterations = 0
     while iterations < params.max_iterations:
         iterations += 1
-        world = transform_points(pose, query_points)
-        pairs = reference.correspond(world, params.max_correspondence_distance)
-        if len(pairs.index) < 3:
-            break
-        moved = world[pairs.index]
-        residuals = np.einsum("ij,ij->i", moved - pairs.anchors, pairs.normals)
-        keep = np.ones(len(residuals), dtype=bool)
         if params.trim_ratio < 1.0:
-            cut = np.quantile(np.abs(residuals), params.trim_ratio)
-            keep = np.abs(residuals) <= cut
-        jacobian = point_to_line_jacobian(moved[keep], pose[:2], pairs.normals[keep])
-        weights = robust_weights(residuals[keep], params.loss, params.loss_scale)
-        offset = None
-        if information is not None and prior is not None:
-            offset = prior - pose
-            offset[2] = wrap_angle(offset[2])
-        step = gauss_newton_step(
-            jacobian, residuals[keep], weights, information, offset, params.min_information
-        )
+            step = _trimmed_step(reference, query_points, pose, params, information, prior)
+        else:
+            hessian, gradient, count, lever, _ = reference.normal_equations(
+                query_points, pose, params.max_correspondence_distance, params.loss,
+                params.loss_scale)
+            step = None if count < 3 else solve_normal_equations(
+                hessian, gradient, lever, information, _prior_offset(pose, information, prior),
+                params.min_information)
+        if step is None:
+            break
         pose = pose + step
         pose[2] = wrap_angle(pose[2])
         if (
@@ -148,6 +141,36 @@ def register(
     return _assess(reference, query_points, pose, params, iterations, converged)
 
 
+def _prior_offset(pose: NDArray[np.float64], information: NDArray[np.float64] | None,
+                  prior: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    """Prior pose minus ``pose``, heading wrapped (None without a prior)."""
+    if information is None or prior is None:
+        return None
+    offset = prior - pose
+    offset[2] = wrap_angle(offset[2])
+    return offset
+
+
+def _trimmed_step(
+    reference: PointToLineReference, query_points: NDArray[np.float64],
+    pose: NDArray[np.float64], params: ICPParams, information: NDArray[np.float64] | None,
+    prior: NDArray[np.float64] | None,
+) -> NDArray[np.float64] | None:
+    """One iteration with the largest residuals trimmed (``trim_ratio`` < 1), from the pairs
+    as arrays: the pure form of what :meth:`PointToLineReference.normal_equations` compiles."""
+    world = transform_points(pose, query_points)
+    pairs = reference.correspond(world, params.max_correspondence_distance)
+    if len(pairs.index) < 3:
+        return None
+    moved = world[pairs.index]
+    residuals = np.einsum("ij,ij->i", moved - pairs.anchors, pairs.normals)
+    keep = np.abs(residuals) <= np.quantile(np.abs(residuals), params.trim_ratio)
+    jacobian = point_to_line_jacobian(moved[keep], pose[:2], pairs.normals[keep])
+    weights = robust_weights(residuals[keep], params.loss, params.loss_scale)
+    return gauss_newton_step(jacobian, residuals[keep], weights, information,
+                             _prior_offset(pose, information, prior), params.min_information)
+
+
 def _assess(
     reference: PointToLineReference,
     query_points: NDArray[np.float64],
@@ -156,9 +179,9 @@ def _assess(
     iterations: int,
     converged: bool,
 ) -> MatchResult:
-    world = transform_points(pose, query_points)
-    pairs = reference.correspond(world, params.inlier_distance)
-    residuals = np.abs(np.einsum("ij,ij->i", world[pairs.index] - pairs.anchors, pairs.normals))
+    *_, residuals = reference.normal_equations(
+        query_points, pose, params.inlier_distance, params.loss, params.loss_scale)
+    residuals = np.abs(residuals[np.isfinite(residuals)])
     inliers = residuals[residuals < params.inlier_distance]
     quality = len(inliers) / max(len(query_points), 1)
     rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else float("inf")

@@ -12,11 +12,14 @@ closure.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from estimators.matching.nearest import GridIndex
+from estimators.matching.normal_equations import point_to_line_system
 from estimators.matching.scan_matching import (
     estimate_normals,
     fit_local_curves,
@@ -68,11 +71,24 @@ def gauss_newton_step(
     is scaled by the points' RMS lever arm to compare it with translation.
     """
     weighted = jacobian * weights[:, None]
-    hessian = weighted.T @ jacobian
-    gradient = -weighted.T @ residuals
+    lever = float(np.sqrt(np.mean(jacobian[:, 2] ** 2))) if len(jacobian) else 0.0
+    return solve_normal_equations(weighted.T @ jacobian, -weighted.T @ residuals, lever,
+                                  prior_information, prior_offset, min_information)
+
+
+def solve_normal_equations(
+    hessian: NDArray[np.float64],
+    gradient: NDArray[np.float64],
+    lever: float,
+    prior_information: NDArray[np.float64] | None = None,
+    prior_offset: NDArray[np.float64] | None = None,
+    min_information: float = 0.0,
+) -> NDArray[np.float64]:
+    """The step of :func:`gauss_newton_step` from the data's normal equations: ``hessian``
+    ``J^T W J`` (3, 3), ``gradient`` ``-J^T W r`` (3,) and ``lever``, the RMS of the Jacobian's
+    rotation column [m] (0 stands for 1)."""
     if min_information > 0 and prior_information is not None:
-        lever = np.sqrt(np.mean(jacobian[:, 2] ** 2)) or 1.0
-        scale = np.array([1.0, 1.0, lever])
+        scale = np.array([1.0, 1.0, lever or 1.0])
         values, vectors = np.linalg.eigh(hessian / np.outer(scale, scale))
         kept = vectors[:, values >= min_information]
         projection = kept @ kept.T
@@ -121,7 +137,7 @@ class PointToLineReference:
             raise ValueError(
                 f"reference points: expected shape (N >= 2, 2), got {self.points.shape}"
             )
-        self.tree = cKDTree(self.points)
+        self.grid = GridIndex(self.points)
         self.normals = normals
         self.valid_normals = (
             valid_normals
@@ -134,6 +150,11 @@ class PointToLineReference:
                 f"anchors: expected the points' shape {self.points.shape}, got "
                 f"{self.anchors.shape}"
             )
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """A k-d tree of the points, for the neighbourhood fits (k up to 72)."""
+        return cKDTree(self.points)
 
     @classmethod
     def with_estimated_normals(
@@ -167,7 +188,7 @@ class PointToLineReference:
         if self.normals is None:
             return self._censi_pairs(world_points, np.arange(len(world_points)), max_distance)
         # Stored normals need only the nearest neighbour: half the k-d tree work.
-        distances, nearest = self.tree.query(world_points, distance_upper_bound=max_distance)
+        distances, nearest = self.grid.query(world_points, distance_upper_bound=max_distance)
         index = np.flatnonzero(np.isfinite(distances))
         nearest = nearest[index]
         stored = self.valid_normals[nearest]
@@ -186,7 +207,7 @@ class PointToLineReference:
         self, world_points: NDArray[np.float64], candidates: NDArray[np.intp], max_distance: float
     ) -> Correspondences:
         """Lines through the two nearest reference points of ``world_points[candidates]``."""
-        distances, neighbours = self.tree.query(
+        distances, neighbours = self.grid.query(
             world_points[candidates], k=2, distance_upper_bound=max_distance
         )
         found = np.isfinite(distances[:, 0])
@@ -204,3 +225,27 @@ class PointToLineReference:
         offset_length = np.maximum(np.hypot(offset[:, 0], offset[:, 1]), 1e-12)
         normals[~has_line] = offset / offset_length[:, None]
         return Correspondences(index, first, normals)
+
+    def normal_equations(
+        self, query_points: NDArray[np.float64], pose: NDArray[np.float64], max_distance: float,
+        loss: str, scale: float,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float, NDArray[np.float64]]:
+        """One compiled ICP iteration of ``query_points`` (M, 2) at ``pose`` (3,): the pairs
+        :meth:`correspond` makes within ``max_distance`` [m], summed into ``J^T W J`` (3, 3)
+        and ``-J^T W r`` (3,) with ``loss`` at ``scale``; also the number of pairs, the RMS
+        lever of the rotation column (see :func:`solve_normal_equations`) and every query
+        point's residual [m] (NaN where unpaired)
+        (:func:`estimators.matching.normal_equations.point_to_line_system`)."""
+        residuals = np.empty(len(query_points))
+        has_normals = self.normals is not None
+        normals = self.normals if has_normals else self.points
+        valid = self.valid_normals if has_normals else np.ones(len(self.points), bool)
+        hessian, gradient, count, rotation_squares = point_to_line_system(
+            *self.grid.arrays, self.points, np.ascontiguousarray(normals, dtype=np.float64),
+            valid, np.ascontiguousarray(self.anchors), has_normals,
+            np.ascontiguousarray(query_points, dtype=np.float64),
+            np.asarray(pose, dtype=np.float64), float(max_distance), LOSSES.index(loss),
+            float(scale), residuals,
+        )
+        lever = float(np.sqrt(rotation_squares / count)) if count else 0.0
+        return hessian, gradient, count, lever, residuals

@@ -1,0 +1,79 @@
+"""The compiled grid index against scipy's k-d tree and brute force: same neighbours, same
+distances, the same "none within the bound" answer, on random and wall-like point sets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import cKDTree
+
+from estimators.matching.nearest import GridIndex
+
+
+def _brute(points: np.ndarray, queries: np.ndarray, k: int, bound: float):
+    """k nearest by exhaustive search, ties by index, ``inf``/``n`` beyond ``bound``."""
+    d2 = ((queries[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    d2 = np.hstack([d2, np.full((len(queries), k), np.inf)])  # fewer points than k
+    order = np.lexsort((np.broadcast_to(np.arange(d2.shape[1]), d2.shape), d2), axis=1)[:, :k]
+    best = np.take_along_axis(d2, order, axis=1)
+    inside = best < bound**2
+    return np.where(inside, np.sqrt(best), np.inf), np.where(inside, order, len(points))
+
+
+def _walls(rng: np.random.Generator, n_walls: int = 12) -> np.ndarray:
+    """Noisy points 5 cm apart along random segments: what a scan or a local map holds."""
+    points = []
+    for x1, y1, x2, y2 in rng.uniform(-8.0, 8.0, (n_walls, 4)):
+        s = np.linspace(0.0, 1.0, max(int(np.hypot(x2 - x1, y2 - y1) / 0.05), 2))
+        points.append(np.column_stack([x1 + s * (x2 - x1), y1 + s * (y2 - y1)]))
+    points = np.concatenate(points)
+    return points + rng.normal(0.0, 0.01, points.shape)
+
+
+@pytest.mark.parametrize("cell", [0.03, 0.1, 0.4])
+@pytest.mark.parametrize("bound", [0.05, 0.5, 1.0])
+def test_same_neighbours_and_distances_as_the_kd_tree_on_walls(cell: float, bound: float) -> None:
+    rng = np.random.default_rng(1)
+    points = _walls(rng)
+    queries = points[rng.integers(0, len(points), 400)] + rng.normal(0.0, 0.1, (400, 2))
+    tree, grid = cKDTree(points), GridIndex(points, cell)
+    for k in (1, 2):
+        expected = tree.query(queries, k=k, distance_upper_bound=bound)
+        found = grid.query(queries, k=k, distance_upper_bound=bound)
+        np.testing.assert_array_equal(found[1], expected[1])
+        np.testing.assert_allclose(found[0], expected[0], rtol=0, atol=1e-12)
+        assert np.any(np.isinf(found[0])) or bound >= 0.5  # the bound is exercised
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(1, 60), m=st.integers(1, 30), seed=st.integers(0, 2**31),
+    spread=st.floats(0.01, 200.0), bound=st.floats(1e-3, 50.0), cell=st.floats(0.01, 5.0),
+    k=st.sampled_from([1, 2]), duplicates=st.booleans(),
+)
+def test_matches_brute_force_on_any_points(n: int, m: int, seed: int, spread: float,
+                                           bound: float, cell: float, k: int,
+                                           duplicates: bool) -> None:
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-spread, spread, (n, 2))
+    if duplicates:  # exact ties: ranked by index
+        points[n // 2:] = points[: n - n // 2]
+    queries = np.concatenate([rng.uniform(-spread, spread, (m, 2)), points[:m]])
+    distances, index = GridIndex(points, cell).query(queries, k=k, distance_upper_bound=bound)
+    expected_distances, expected_index = _brute(points, queries, k, bound)
+    np.testing.assert_array_equal(index.reshape(-1, k), expected_index)
+    np.testing.assert_allclose(distances.reshape(-1, k), expected_distances, rtol=1e-12, atol=0)
+
+
+def test_bad_arguments_are_named() -> None:
+    grid = GridIndex(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="k: expected 1 or 2"):
+        grid.query(np.zeros((1, 2)), k=3, distance_upper_bound=1.0)
+    with pytest.raises(ValueError, match="distance_upper_bound"):
+        grid.query(np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="points: expected shape"):
+        GridIndex(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="cell_size"):
+        GridIndex(np.zeros((3, 2)), cell_size=0.0)
