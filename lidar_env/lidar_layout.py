@@ -5,7 +5,10 @@ over a field of view, max range, noise, dropouts) and :meth:`LidarLayout.scan` r
 float32 scans from one call of :func:`scan_layout_kernel`, which casts every sensor with
 :func:`lidar_env.ray_casting.cast_sensor` and applies noise, clipping and dropouts in the same
 pass. The beams of all sensors are packed end to end (sensor ``k`` owns positions
-``[beam_start[k], beam_start[k + 1])``).
+``[beam_start[k], beam_start[k + 1])``). Moving obstacles (circles that change every step, so
+they are not in the world's grid) are passed to :func:`scan_layout_movers_kernel` as an
+``(M, 3)`` array and cast by :func:`cast_movers` with the static circles' subtended-interval
+sweep, exactly; :func:`scan_layout_kernel` is that kernel without movers.
 
 Random numbers: if any Lidar is noisy, one standard normal per beam of every Lidar (in sensor
 order), then, if any has dropouts, one uniform per beam; so a layout of identical Lidars

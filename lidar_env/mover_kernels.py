@@ -43,6 +43,8 @@ HEADING_FAN = np.array([0.0, -1.0, 1.0, -2.0, 2.0, -3.0, 3.0, -4.0, 4.0, -5.0, 5
 #: after :data:`STUCK_STEPS` stuck steps in a row it picks a new waypoint.
 STUCK_FRACTION = 0.25
 STUCK_STEPS = 10
+#: [m] (min, max) distance of a new waypoint from the mover.
+WAYPOINT_REACH = (1.0, 10.0)
 
 
 @njit(cache=True, fastmath=False)
@@ -112,22 +114,31 @@ def new_mover_scratch(circles: NDArray[np.float64], segments: NDArray[np.float64
 @njit(cache=True, fastmath=False)
 def path_clearance(
     path: NDArray[np.float64], circles: NDArray[np.float64], segments: NDArray[np.float64],
-    scratch: tuple, n_circles: int, n_segments: int, bounds: NDArray[np.float64],
+    scratch: tuple, n_circles: int, n_segments: int, bounds: NDArray[np.float64], cap: float,
 ) -> float:
     """[m] least distance from the segment ``path`` (x1, y1, x2, y2) to the surfaces of the
     gathered statics and to the edges of ``bounds`` (xmin, ymin, xmax, ymax; negative when an
-    end lies outside). A zero-length path is a point."""
-    best = math.inf
+    end lies outside), or ``cap`` if that is less (primitives farther than ``cap`` are skipped
+    by their bounding boxes). A zero-length path is a point."""
+    best = cap
     for end in range(2):
         x, y = path[2 * end], path[2 * end + 1]
         best = min(best, x - bounds[0], bounds[2] - x, y - bounds[1], bounds[3] - y)
+    x_lo, x_hi = min(path[0], path[2]), max(path[0], path[2])
+    y_lo, y_hi = min(path[1], path[3]), max(path[1], path[3])
     circle_ids, segment_ids = scratch[2], scratch[3]
     for k in range(n_circles):
         i = circle_ids[k]
-        d = math.sqrt(segment_distance2(circles[i, 0], circles[i, 1], path)) - circles[i, 2]
-        best = min(best, d)
+        cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+        if max(x_lo - cx, cx - x_hi, y_lo - cy, cy - y_hi) - r >= best:
+            continue
+        best = min(best, math.sqrt(segment_distance2(cx, cy, path)) - r)
     for k in range(n_segments):
-        best = min(best, _segments_distance(path, segments[segment_ids[k]]))
+        seg = segments[segment_ids[k]]
+        if max(min(seg[0], seg[2]) - x_hi, x_lo - max(seg[0], seg[2]),
+               min(seg[1], seg[3]) - y_hi, y_lo - max(seg[1], seg[3])) >= best:
+            continue
+        best = min(best, _segments_distance(path, seg))
     return best
 
 
@@ -195,7 +206,7 @@ def step_movers(
         n_c, n_s = gather_statics(px - reach, py - reach, px + reach, py + reach, grid, scratch,
                                   i + 1)
         path[0], path[1], path[2], path[3] = px, py, px, py
-        here = path_clearance(path, circles, segments, scratch, n_c, n_s, bounds)
+        here = path_clearance(path, circles, segments, scratch, n_c, n_s, bounds, comfort)
         base = math.atan2(to_y, to_x)
         vx, vy, chosen = 0.0, 0.0, False
         for attempt in range(2):  # full speed with look-ahead, then half speed merely safe
@@ -205,14 +216,15 @@ def step_movers(
                 wx, wy = scale * speed * cx, scale * speed * cy
                 if attempt == 0 and look > 0.0:
                     path[2], path[3] = px + look * cx, py + look * cy
-                    ahead = path_clearance(path, circles, segments, scratch, n_c, n_s, bounds)
+                    ahead = path_clearance(path, circles, segments, scratch, n_c, n_s, bounds,
+                                           comfort)
                     if ahead < min(comfort, here) or not _movers_clear(
                             i, wx, wy, positions, velocities, m, look / speed,
                             2.0 * radius + COMFORT_GAP):
                         continue
                 path[2], path[3] = px + wx * dt, py + wy * dt
-                if path_clearance(path, circles, segments, scratch, n_c, n_s,
-                                  bounds) < min(hard, here):
+                if path_clearance(path, circles, segments, scratch, n_c, n_s, bounds,
+                                  hard) < min(hard, here):
                     continue
                 if not _movers_clear(i, wx, wy, positions, velocities, i + 1, dt,
                                      2.0 * radius + HARD_GAP):
@@ -261,8 +273,8 @@ def choose_waypoints(
                                       max(py, qy) + radius + COMFORT_GAP, grid, scratch,
                                       row * draws.shape[1] + c + 1)
             path[0], path[1], path[2], path[3] = px, py, qx, qy
-            if path_clearance(path, circles, segments, scratch, n_c, n_s,
-                              bounds) >= radius + COMFORT_GAP:
+            if path_clearance(path, circles, segments, scratch, n_c, n_s, bounds,
+                              radius + COMFORT_GAP) >= radius + COMFORT_GAP:
                 waypoints[i, 0], waypoints[i, 1] = qx, qy
                 needs[i] = False
                 break
@@ -314,8 +326,26 @@ def place_movers(
         n_c, n_s = gather_statics(min(path[0], path[2]) - need, min(path[1], path[3]) - need,
                                   max(path[0], path[2]) + need, max(path[1], path[3]) + need,
                                   grid, scratch, k + 1)
-        if path_clearance(path, circles, segments, scratch, n_c, n_s, bounds) < need:
+        if path_clearance(path, circles, segments, scratch, n_c, n_s, bounds, need) < need:
             continue
         out[placed, 0], out[placed, 1] = px, py
         placed += 1
     return placed
+
+
+@njit(cache=True, fastmath=False)
+def advance_crowd(
+    positions: NDArray[np.float64], velocities: NDArray[np.float64],
+    waypoints: NDArray[np.float64], speeds: NDArray[np.float64], stuck: NDArray[np.int64],
+    needs: NDArray[np.bool_], draws: NDArray[np.float64], radius: float, dt: float,
+    bounds: NDArray[np.float64], circles: NDArray[np.float64], segments: NDArray[np.float64],
+    grid: PrimitiveGrid,
+) -> None:
+    """One crowd step in one call: :func:`choose_waypoints` for the movers with ``needs``
+    (``draws`` holds their rows; empty when none needs one), then :func:`step_movers`;
+    ``needs`` is updated in place."""
+    if draws.shape[0] > 0:
+        choose_waypoints(positions, waypoints, needs, draws, WAYPOINT_REACH, radius, bounds,
+                         circles, segments, grid)
+    needs |= step_movers(positions, velocities, waypoints, speeds, stuck, radius, dt, bounds,
+                         circles, segments, grid)

@@ -25,15 +25,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError
-from lidar_env.mover_kernels import choose_waypoints, place_movers, step_movers
+from lidar_env.mover_kernels import WAYPOINT_REACH, advance_crowd, place_movers
 from lidar_env.world import World
 
-#: [m] (min, max) distance of a new waypoint from the mover.
-WAYPOINT_REACH = (1.0, 10.0)
+__all__ = ["SPAWN_TRIES", "WAYPOINT_REACH", "WAYPOINT_TRIES", "Crowd"]
 #: Candidate waypoints drawn per mover that needs one (the first free, visible one is taken).
 WAYPOINT_TRIES = 16
 #: Candidate spawn positions drawn per mover asked for.
 SPAWN_TRIES = 200
+#: Stands in for the waypoint draws of a step where no mover needs one.
+_NO_DRAWS = np.empty((0, WAYPOINT_TRIES, 2))
 
 
 class Crowd:
@@ -96,15 +97,11 @@ class Crowd:
 
     def step(self, world: World, dt: float, rng: np.random.Generator) -> None:
         """Advance every mover by ``dt`` [s]: new waypoints where needed, then one move each."""
-        if np.any(self._needs):
-            draws = rng.random((int(np.count_nonzero(self._needs)), WAYPOINT_TRIES, 2))
-            choose_waypoints(self.positions, self.waypoints, self._needs, draws, WAYPOINT_REACH,
-                             self.radius, self._bounds, world.circles, world.segments,
-                             world.grid)
-        needs = step_movers(self.positions, self.velocities, self.waypoints, self.speeds,
-                            self._stuck, self.radius, float(dt), self._bounds, world.circles,
-                            world.segments, world.grid)
-        self._needs |= needs
+        waiting = int(np.count_nonzero(self._needs))
+        draws = rng.random((waiting, WAYPOINT_TRIES, 2)) if waiting else _NO_DRAWS
+        advance_crowd(self.positions, self.velocities, self.waypoints, self.speeds, self._stuck,
+                      self._needs, draws, self.radius, float(dt), self._bounds, world.circles,
+                      world.segments, world.grid)
 
     @property
     def circles(self) -> NDArray[np.float64]:
