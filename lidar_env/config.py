@@ -22,6 +22,9 @@ SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
 #: Most moving obstacles an env may hold (each costs a little per step and per beam).
 MAX_MOVERS = 256
+#: [m/s] fastest mover speed accepted: a sprinting person (the car's collision checks are
+#: spaced for the fastest mover, so a runaway speed would need millions of them).
+MAX_MOVER_SPEED = 10.0
 
 #: Keys of earlier versions, now set per Lidar in ``lidars``.
 MOVED_TO_LIDARS: tuple[str, ...] = ("lidar_mounts", "n_beams", "max_range")
@@ -209,8 +212,9 @@ class EnvConfig:
 
 
 def _speed_range(value: Any) -> tuple[float, float]:
-    """``value`` as (min, max) [m/s] with 0 <= min <= max, both finite."""
-    expected = "mover_speed_range: expected (min, max) [m/s] with 0 <= min <= max"
+    """``value`` as (min, max) [m/s] with 0 <= min <= max <= :data:`MAX_MOVER_SPEED`."""
+    expected = (f"mover_speed_range: expected (min, max) [m/s] with 0 <= min <= max <= "
+                f"{MAX_MOVER_SPEED:g}")
     if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
         raise ConfigError(f"{expected}, got {value!r}")
     numbers = []
@@ -220,6 +224,6 @@ def _speed_range(value: Any) -> tuple[float, float]:
             raise ConfigError(f"{expected}, got {value!r}")
         numbers.append(float(v))
     low, high = numbers
-    if low < 0 or low > high:
+    if low < 0 or low > high or high > MAX_MOVER_SPEED:
         raise ConfigError(f"{expected}, got min {low:g} and max {high:g}")
     return low, high

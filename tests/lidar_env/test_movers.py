@@ -13,6 +13,8 @@ import numpy as np
 import pymunk
 import pytest
 from gymnasium.utils.env_checker import check_env
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env.car import Car, drive_arc, drive_arc_among_movers
@@ -293,6 +295,7 @@ def test_space_and_rendering_show_the_movers():
     ({"mover_speed_range": (1.5, 0.5)}, "mover_speed_range: expected (min, max)"),
     ({"mover_speed_range": (-0.5, 0.5)}, "mover_speed_range: expected (min, max)"),
     ({"mover_speed_range": 1.0}, "mover_speed_range: expected (min, max)"),
+    ({"mover_speed_range": (0.5, 1e6)}, "mover_speed_range: expected (min, max)"),
     ({"mover_speed_range": (0.1, float("nan"))}, "mover_speed_range: expected (min, max)"),
     ({"mover_radius": 0.0}, "mover_radius: expected a positive"),
     ({"mover_radius": -0.2}, "mover_radius: expected a positive"),
@@ -308,3 +311,26 @@ def test_a_world_too_crowded_for_the_movers_says_how_many_fit():
                    config={"moving_obstacles": 60, "mover_radius": 1.2})
     with pytest.raises(ConfigError, match=r"moving_obstacles: placed \d+ of 60 movers"):
         env.reset(seed=0)
+
+
+mover_values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-3, 300),
+                         st.tuples(st.floats(-1, 1e6), st.floats(-1, 1e6)),
+                         st.sampled_from([None, True, "2", [], [0.5], (0.0, 0.0)]))
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(config=st.dictionaries(
+    st.sampled_from(["moving_obstacles", "mover_radius", "mover_speed_range",
+                     "mover_clearance"]), mover_values, max_size=3))
+def test_any_mover_settings_are_a_config_error_or_step_finitely(config):
+    config = {"moving_obstacles": 3, **config}
+    try:
+        env = gym.make("DualLidar-v0", world="hallway", config=config)
+        env.reset(seed=0)
+        for _ in range(3):
+            _, reward, terminated, _, info = env.step(np.array([1.0, 0.3], dtype=np.float32))
+            assert np.isfinite(reward) and np.all(np.isfinite(info["moving_obstacles"]))
+            if terminated:
+                break
+    except ConfigError:
+        pass
