@@ -127,6 +127,10 @@ class DualLidarVectorEnv(VectorEnv):
         """Each sub-env's current :class:`~lidar_env.traces.Trace`."""
         return list(self._slots.traces)
 
+    def trace_of(self, i: int) -> Trace | None:
+        """Sub-env ``i``'s current trace (None before the first reset)."""
+        return self._slots.traces[i]
+
     # ------------------------------------------------------------------ reset
     def reset(
         self,
