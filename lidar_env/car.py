@@ -6,7 +6,10 @@ error accumulates however long the episode. The control step is split into ``sub
 along that arc (more when the move is long: no corner of the box moves more than a quarter of
 its width between two checks, so it cannot jump over a wall), and at each one the car's box
 is tested against every obstacle (circles and line segments) by a compiled kernel; the first
-touching substep ends the motion with the car left at the last free substep. Measured against
+touching substep ends the motion with the car left at the last free substep. Moving obstacles
+(circles, :mod:`lidar_env.movers`) move during the substeps too: :func:`drive_arc_among_movers`
+tests the box at each substep against each mover where its straight, constant-velocity move of
+the control step has taken it by then, and adds substeps for fast movers. Measured against
 stepping a pymunk body through the same substeps plus a shape query, this is exact and about
 5x cheaper per control step (see ``benchmarks/bench_env.py``); pymunk's own shape query stays
 the test oracle for the kernel.

@@ -86,7 +86,7 @@ class Crowd:
                 f"moving_obstacles: placed {placed} of {self.count} movers of mover_radius "
                 f"{self.radius:g} m in world {world.name!r} ({len(candidates)} random tries, "
                 f"keeping {car_clearance:g} m from the car): the world is too crowded; expected "
-                "fewer moving_obstacles or a smaller mover_radius")
+                "fewer moving_obstacles, a smaller mover_radius or a smaller mover_clearance")
         low, high = self.speed_range
         self.speeds = low + (high - low) * rng.random(self.count)
         self._max_speed = float(self.speeds.max())
