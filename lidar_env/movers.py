@@ -29,6 +29,7 @@ from lidar_env.mover_kernels import WAYPOINT_REACH, advance_crowd, place_movers
 from lidar_env.world import World
 
 __all__ = ["SPAWN_TRIES", "WAYPOINT_REACH", "WAYPOINT_TRIES", "Crowd"]
+
 #: Candidate waypoints drawn per mover that needs one (the first free, visible one is taken).
 WAYPOINT_TRIES = 16
 #: Candidate spawn positions drawn per mover asked for.
