@@ -52,6 +52,10 @@ step; all relations 1.77 m -> 0.17 m).
 
 Two Lidars are merged into one point set in the car frame through their known mounts
 (:func:`estimators.matching.scan_matching.scans_to_car_points`).
+
+Moving things (``reject_dynamic``, :class:`estimators.odometry.free_space.MovingPointFilter`):
+points in space recent scans saw as free, or next to points the new scan sees through, neither
+pull the registration nor enter the map, and map points the new scan sees through leave it.
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ from estimators.matching.scan_matching import (
     scans_to_car_points,
     voxel_downsample,
 )
+from estimators.odometry.free_space import MovingPointFilter
 from estimators.odometry.motion_prior import clock_jitter, prediction_sigma
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
 
@@ -156,12 +161,12 @@ class LocalMapOdometry(Estimator):
             (``exp(-4 sigma^2 / separation^2)``) only halves the 3 cm drift (0.40-0.80 m;
             0.74-0.95 m at 2 cm), for ACES 0.0338 -> 0.0334 m and Intel 0.0427 -> 0.0437 m; and
             letting only the fitted lines decide which directions the scan pins down fixes
-            it (0.00-0.14 m) but costs ACES 0.0361-0.0371 m. By their neighbourhoods'
-            statistics the two cases look alike (map noise 22 vs 19 mm, two-point
-            separations 45 vs 65 mm, corridor at 3 cm vs ACES).
+            it (0.00-0.14 m) but costs ACES 0.0361-0.0371 m.
         denoise_map: pair on each map point moved onto the parabola through its neighbours
             rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
             cylinder's points are not pulled ~3 cm inwards).
+        reject_dynamic, dynamic_margin: drop points on moving things (True; module docstring;
+            off for world-aligned scans) lying this far inside space seen free (0.2 m).
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -193,6 +198,8 @@ class LocalMapOdometry(Estimator):
     velocity_window: int = 5
     denoise_map: bool = True
     prediction_acceleration: float = 0.5
+    reject_dynamic: bool = True
+    dynamic_margin: float = 0.2
 
     def __post_init__(self) -> None:
         for name in (
@@ -200,6 +207,7 @@ class LocalMapOdometry(Estimator):
             "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
             "search_angular_window", "search_resolution", "prediction_acceleration",
+            "dynamic_margin",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
@@ -243,8 +251,10 @@ class LocalMapOdometry(Estimator):
         self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
         self._last_time = 0.0
         self._time_steps: deque[float] = deque(maxlen=21)
-        # Every finite scan interval [s], glitches included: the clock's regularity.
-        self._intervals: deque[float] = deque(maxlen=201)
+        self._intervals: deque[float] = deque(maxlen=201)  # every finite interval [s]: the clock
+        dynamic = self.reject_dynamic and not self.setup.world_aligned
+        self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
+                        if dynamic else None)
         self.fallbacks = 0
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -252,8 +262,29 @@ class LocalMapOdometry(Estimator):
         points = scans_to_car_points(scans, self.setup, self.min_range)
         return voxel_downsample(points, self.scan_voxel_size) if len(points) else points
 
+    def _static_points(self, points: NDArray[np.float64], guess: NDArray[np.float64],
+                       scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
+        """``points`` less those on moving things; the map loses its stale points."""
+        assert self._moving is not None
+        moving, stale = self._moving.classify(points, guess, scans,
+                                              [world for _, world in self._keyframes])
+        if any(mask.any() for mask in stale):
+            self._keyframes = deque([(key_pose, world[~mask]) for (key_pose, world), mask
+                                     in zip(self._keyframes, stale, strict=True)],
+                                    maxlen=self.n_keyframes)
+            self._build_reference()
+        return points[~moving] if np.count_nonzero(~moving) >= 3 else points
+
+    def _remember(self, pose: NDArray[np.float64], scans: dict[str, NDArray[np.float64]],
+                  points: NDArray[np.float64]) -> None:
+        if self._moving is not None:  # the scans and all their points, moving or not
+            self._moving.remember(pose, scans, points)
+
     def _add_keyframe(self, pose: NDArray[np.float64], points: NDArray[np.float64]) -> None:
         self._keyframes.append((pose.copy(), transform_points(pose, points)))
+        self._build_reference()
+
+    def _build_reference(self) -> None:
         merged = voxel_downsample(
             np.concatenate([world for _, world in reversed(self._keyframes)]), self.voxel_size
         )
@@ -267,7 +298,9 @@ class LocalMapOdometry(Estimator):
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._last_time = t
-        self._add_keyframe(self._initial_pose, self._points(scans))
+        points = self._points(scans)
+        self._add_keyframe(self._initial_pose, points)
+        self._remember(self._initial_pose, scans, points)
 
     def _time_step(self, t: float) -> float:
         """Scans since the last one (1), or with ``use_timestamps`` the time since it [s],
@@ -328,9 +361,8 @@ class LocalMapOdometry(Estimator):
         translation averaged over the last ``velocity_window`` increments, rotation from the
         last one. One increment carries the noise of two registrations (~1-2 % of a step);
         the average carries a fraction of it, and along a corridor's axis, where the motion
-        is dead-reckoned from this velocity, the error grows with it for as long as the
-        corridor lasts. Turn rates change faster than speeds (and are rarely unobservable),
-        so rotation is not averaged."""
+        is dead-reckoned from this velocity, the error grows with it as long as the corridor
+        lasts. Turn rates change faster than speeds (and are rarely unobservable): not averaged."""
         self._translations.append(increment[:2])
         return np.array([*np.mean(self._translations, axis=0), increment[2]])
 
@@ -338,7 +370,11 @@ class LocalMapOdometry(Estimator):
         dt = self._time_step(t)
         guess = compose(self.pose, self._velocity * dt)
         points = self._points(scans)
+        seen = points
+        if self._moving is not None:
+            points = self._static_points(points, guess, scans)
         if self._reference is None or len(points) < 3:
+            self._remember(guess, scans, seen)
             if len(points) >= 2:
                 self._add_keyframe(guess, points)
             return guess
@@ -352,6 +388,7 @@ class LocalMapOdometry(Estimator):
                 result = retry
         pose = result.pose
         self._velocity = self._updated_velocity(relative(self.pose, pose) / dt)
+        self._remember(pose, scans, seen)
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
         if (

@@ -1,0 +1,125 @@
+"""seen_through: points lying in space a scan saw as free."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from estimators.odometry.free_space import seen_through
+from lidar_env.lidar import cast_rays
+from lidar_env.world import World
+
+FULL = 2 * np.pi * np.arange(360) / 360
+FRONT = np.linspace(-np.pi / 2, np.pi / 2, 181)  # a 180-degree Lidar, beam 0 to the right
+BOX = World(segments=[[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]])
+
+
+def _oracle(point: np.ndarray, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
+            max_range: float, margin: float) -> bool:
+    """Brute force: the nearest beam by angle (within the field of view) and its neighbours."""
+    dx, dy = point - pose[:2]
+    distance = math.hypot(dx, dy)
+    if distance + margin >= max_range:
+        return False
+    bearing = math.atan2(dy, dx) - pose[2]
+    gaps = np.abs((angles - bearing + np.pi) % (2 * np.pi) - np.pi)
+    j = int(np.argmin(gaps))
+    n = len(angles)
+    full = n == 360
+    spacing = 2 * np.pi / n if full else (angles[-1] - angles[0]) / (n - 1)
+    if gaps[j] > 0.5 * spacing + 1e-12:
+        return False  # outside the field of view
+    neighbours = [(j + o) % n if full else j + o for o in (-1, 0, 1)]
+    if any(k < 0 or k >= n for k in neighbours):
+        return False
+    return all(min(ranges[k], max_range) > distance + margin for k in neighbours)
+
+
+def test_a_static_scene_is_not_seen_through_by_a_later_scan() -> None:
+    rng = np.random.default_rng(0)
+    world = World(circles=[[2.0, 1.0, 0.3]], segments=BOX.walls)
+    first, second = np.array([0.0, 0.0, 0.0]), np.array([0.3, 0.1, 0.2])
+    ranges = cast_rays(world, first, FULL, 10.0)[0] + 0.01 * rng.standard_normal(360)
+    points = first[:2] + np.column_stack([ranges * np.cos(FULL), ranges * np.sin(FULL)])
+    later = cast_rays(world, second, FULL, 10.0)[0] + 0.01 * rng.standard_normal(360)
+    assert not seen_through(points, second[None], [later], [FULL], [10.0]).any()
+
+
+def test_a_point_in_front_of_a_wall_is_seen_through_one_behind_it_is_not() -> None:
+    pose = np.array([0.0, 0.0, 0.0])
+    ranges = cast_rays(BOX, pose, FULL, 10.0)[0]
+    points = np.array([[2.0, 0.0], [5.5, 0.0], [4.9, 0.0], [0.0, -3.0]])
+    flags = seen_through(points, pose[None], [ranges], [FULL], [10.0])
+    np.testing.assert_array_equal(flags, [True, False, False, True])
+
+
+def test_a_narrow_lidar_says_nothing_behind_it() -> None:
+    pose = np.array([0.0, 0.0, 0.0])
+    ranges = cast_rays(BOX, pose, FRONT, 10.0)[0]
+    flags = seen_through(np.array([[2.0, 0.0], [-2.0, 0.0], [1.0, 1.5], [0.0, 2.0]]), pose[None],
+                         [ranges], [FRONT], [10.0])
+    np.testing.assert_array_equal(flags, [True, False, True, False])  # edge: no neighbour
+
+
+def test_any_sensor_suffices() -> None:
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.pi]])
+    scans = [cast_rays(BOX, p, FRONT, 10.0)[0] for p in poses]
+    flags = seen_through(np.array([[2.0, 0.0], [-2.0, 0.0]]), poses, scans, [FRONT] * 2,
+                         [10.0] * 2)
+    np.testing.assert_array_equal(flags, [True, True])
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), full=st.booleans(),
+       heading=st.floats(-np.pi, np.pi), margin=st.floats(0.0, 0.5))
+def test_matches_the_brute_force_oracle(seed: int, full: bool, heading: float,
+                                        margin: float) -> None:
+    rng = np.random.default_rng(seed)
+    angles = FULL if full else FRONT
+    pose = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), heading])
+    ranges = rng.uniform(0.0, 12.0, len(angles))  # beyond 10 m: no return
+    points = rng.uniform(-9, 9, (200, 2))
+    flags = seen_through(points, pose[None], [ranges], [angles], [10.0], margin)
+    expected = [_oracle(p, pose, ranges, angles, 10.0, margin) for p in points]
+    np.testing.assert_array_equal(flags, expected)
+
+
+def _car_points(scans: list[np.ndarray], setup: object) -> np.ndarray:
+    from estimators.matching.scan_matching import scans_to_car_points
+
+    return scans_to_car_points(dict(zip(setup.keys, scans, strict=True)), setup)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("path", ["crossing", "receding"])
+def test_the_filter_flags_a_walker_and_nothing_static(path: str) -> None:
+    from estimators.base import SensorSetup
+    from estimators.odometry.free_space import MovingPointFilter
+
+    setup = SensorSetup([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]], FULL, 10.0)
+    moving_filter = MovingPointFilter(setup)
+    rng = np.random.default_rng(2)
+    car = np.array([0.0, 0.0, 0.0])
+    sensors = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
+    walk = np.arange(0.0, 3.0, 0.1)  # 1 m/s at 10 Hz
+    # crossing 2.5 m ahead of the car; or walking straight away from it (it hides where it
+    # goes, never where it was: only the points it left tell)
+    places = (np.column_stack([np.full_like(walk, 2.5), walk - 2.0]) if path == "crossing"
+              else np.column_stack([1.2 + walk, np.full_like(walk, 0.3)]))
+    for step, (walker_x, walker_y) in enumerate(places):
+        world = World(circles=[[3.0, 2.0, 0.3], [walker_x, walker_y, 0.25]],
+                      segments=BOX.walls)
+        scans = [s + 0.01 * rng.standard_normal(360) for s in cast_rays(world, sensors, FULL,
+                                                                          10.0)]
+        points = _car_points(scans, setup)
+        moving, stale = moving_filter.classify(points, car, dict(zip(setup.keys, scans)), [])
+        on_walker = np.abs(np.hypot(points[:, 0] - walker_x, points[:, 1] - walker_y)
+                           - 0.25) < 0.05
+        if step >= 5:  # half a second of history: the walker's whole visible side
+            assert moving[on_walker].mean() > (0.9 if path == "crossing" else 0.8)
+        assert not moving[~on_walker].any()
+        assert stale == []
+        moving_filter.remember(car, dict(zip(setup.keys, scans)), points)
