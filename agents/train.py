@@ -9,6 +9,13 @@ stderr while it trains. Hyperparameters come from ``agents/ppo_driver.yaml`` (rl
 layout); ``--timesteps`` and ``--n-envs`` override it. Every episode draws its world (the
 built-in ones and ``random``) and trace seed, so the policy is not fitted to one scenario; the
 evaluation callback scores it on a fixed, seeded set of episodes and keeps the best model.
+
+The training envs are stepped batched (``--vectorization batched``: the batched
+``DualLidar-v0`` through :class:`agents.vec_adapter.TraceFollowingVecEnv`) or one by one
+(``single``: SB3's ``DummyVecEnv`` over wrapped single envs); both give the same observations
+and rewards, so the same seed trains the same model. The default, ``auto``, steps them batched
+unless the env config holds something the batched env does not simulate yet (moving
+obstacles); see the README for the wall times of both.
 """
 
 from __future__ import annotations
@@ -24,9 +31,14 @@ import yaml
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
+from lidar_env.errors import ConfigError
 
 HYPERPARAMETERS = Path(__file__).with_name("ppo_driver.yaml")
 DEFAULT_OUT = Path("runs/ppo_driver.zip")
+
+#: How the training envs are stepped: the batched env, one single env after another, or the
+#: batched env whenever it can run the config.
+VECTORIZATIONS: tuple[str, ...] = ("auto", "batched", "single")
 
 
 class TrainingExistsError(FileExistsError):
@@ -48,6 +60,40 @@ def make_training_env(
     return TraceFollowingObservation(env, randomize=True, **(wrapper or {}))
 
 
+def make_training_vec_env(
+    n_envs: int,
+    seed: int,
+    config: dict[str, Any] | None = None,
+    wrapper: dict[str, Any] | None = None,
+    vectorization: str = "auto",
+) -> Any:
+    """``n_envs`` randomised, wrapped ``DualLidar-v0`` as an SB3 ``VecEnv`` with episode
+    statistics, seeded ``seed``, ``seed + 1``, ...: batched, or SB3's ``DummyVecEnv`` of
+    single envs (the same observations and rewards)."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    if vectorization not in VECTORIZATIONS:
+        raise ConfigError(f"vectorization: expected one of {', '.join(VECTORIZATIONS)}, got "
+                         f"{vectorization!r}")
+    if vectorization == "auto":
+        from lidar_env.config import EnvConfig
+        from lidar_env.vector.env import not_batched
+
+        batchable = not_batched(EnvConfig.from_dict(config)) is None
+        vectorization = "batched" if batchable else "single"
+    if vectorization == "single":
+        return make_vec_env(make_training_env, n_envs, seed=seed,
+                            env_kwargs={"config": config, "wrapper": wrapper})
+    from agents.vec_adapter import TraceFollowingVecEnv
+
+    venv = gym.make_vec("DualLidar-v0", n_envs, vectorization_mode="vector_entry_point",
+                        config=config or {})
+    vec_env = VecMonitor(TraceFollowingVecEnv(venv, randomize=True, **(wrapper or {})))
+    vec_env.seed(seed)
+    return vec_env
+
+
 def train(
     timesteps: int | None = None,
     seed: int = 0,
@@ -59,6 +105,7 @@ def train(
     hyperparameters: Path = HYPERPARAMETERS,
     overwrite: bool = False,
     progress: bool = True,
+    vectorization: str = "auto",
 ) -> Path:
     """Train PPO and save the best evaluated model to ``out`` (a .zip); return its path.
 
@@ -74,7 +121,7 @@ def train(
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     torch.set_num_threads(torch_threads)  # small MLP: more threads only add contention
     params = load_hyperparameters(hyperparameters)
@@ -88,8 +135,10 @@ def train(
     policy = params.pop("policy")
 
     env_kwargs = {"config": env_config, "wrapper": wrapper_kwargs}
-    vec_env = make_vec_env(make_training_env, n_envs, seed=seed, env_kwargs=env_kwargs)
+    vec_env = make_training_vec_env(n_envs, seed, env_config, wrapper_kwargs, vectorization)
     eval_env = make_vec_env(make_training_env, 1, seed=seed + 10_000, env_kwargs=env_kwargs)
+    if isinstance(vec_env, VecMonitor):  # the type EvalCallback expects (statistics alike)
+        eval_env = VecMonitor(eval_env)
     if normalize:
         vec_env = VecNormalize(vec_env)
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
@@ -116,7 +165,7 @@ def train(
     final.save(out)
     if normalize:
         vec_env.save(str(out.with_suffix(".vecnormalize.pkl")))
-    print(f"trained {total} steps in {elapsed / 60:.1f} min; saved {out}")
+    print(f"trained {total} steps in {elapsed / 60:.1f} min ({elapsed:.1f} s); saved {out}")
     return out
 
 
@@ -150,6 +199,9 @@ def main(argv: list[str] | None = None) -> None:
                         help=f"model .zip (default: %(default)s; shipped: {SHIPPED_MODEL})")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--vectorization", choices=VECTORIZATIONS, default="auto",
+                        help="step the training envs batched or one by one (default: %(default)s,"
+                             " batched when the env config allows)")
     parser.add_argument("--tensorboard", type=Path, default=None, help="TensorBoard log dir")
     parser.add_argument("--hyperparameters", type=Path, default=HYPERPARAMETERS,
                         help="rl-zoo3-style YAML (default: %(default)s)")
@@ -157,7 +209,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
               hyperparameters=args.hyperparameters, overwrite=args.overwrite,
-              progress=not args.no_progress)
+              progress=not args.no_progress, vectorization=args.vectorization)
     except TrainingExistsError as error:
         parser.error(str(error))
 

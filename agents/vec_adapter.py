@@ -184,17 +184,23 @@ class TraceFollowingVecEnv(SB3VecEnv):
             rewards = rewards.copy()
         for i in envs:
             view = self.views[i]
+            info = {key: value[i] for key, value in infos.items() if not key.startswith("_")}
             if rewards is None:  # TraceFollowingObservation.reset
                 view.last_action = np.zeros(2, np.float32)
                 view._arc = 0.0
             else:  # TraceFollowingObservation.step
-                rewards[i] -= view.cross_track_weight * abs(infos["cross_track_error"][i]) \
-                    * self._dt
+                rewards[i] = self._shaped(view, float(rewards[i]), info)
                 view.last_action = np.clip(np.asarray(actions[i], np.float32), -1.0, 1.0)
-            out[i] = view.observe({key: value[i] for key, value in observation.items()},
-                                  {key: value[i] for key, value in infos.items()
-                                   if not key.startswith("_")})
+            out[i] = view.observe({key: value[i] for key, value in observation.items()}, info)
         return out, rewards
+
+    def _shaped(self, view: TraceFollowingObservation, reward: float,
+                info: dict[str, Any]) -> float:
+        """The wrapper's training reward for one sub-env's step."""
+        shape_reward = getattr(view, "shape_reward", None)
+        if shape_reward is not None:
+            return float(shape_reward(reward, info))
+        return reward - view.cross_track_weight * abs(info["cross_track_error"]) * self._dt
 
 
 def _row(observation: Any, i: int) -> Any:

@@ -30,6 +30,15 @@ INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_po
 Observation = dict[str, NDArray[np.float32]]
 
 
+def not_batched(config: EnvConfig) -> str | None:
+    """Why the batched env cannot run ``config`` yet (the ConfigError it raises), or None."""
+    movers = getattr(config, "moving_obstacles", 0)
+    if movers:
+        return (f"moving_obstacles: not batched yet; the batched env expected 0, got {movers!r}; "
+                "use vectorization_mode='sync' for moving obstacles")
+    return None
+
+
 class DualLidarVectorEnv(VectorEnv):
     """``num_envs`` independent ``DualLidar-v0`` episodes, stepped together.
 
@@ -71,13 +80,11 @@ class DualLidarVectorEnv(VectorEnv):
                               f"yet); expected None, got {render_mode!r}; render a single "
                               "DualLidar-v0 or use vectorization_mode='sync'")
         single = DualLidarEnv(world, trace, config)  # checks world, trace and config alike
-        movers = getattr(single.config, "moving_obstacles", 0)
+        reason = not_batched(single.config)
+        if reason is not None:
+            raise ConfigError(reason)
         # the single env reports its movers (none here) in every info once it has them
         self._mover_info = hasattr(single.config, "moving_obstacles")
-        if movers:
-            raise ConfigError(f"moving_obstacles: not batched yet; the batched env expected 0, "
-                              f"got {movers!r}; use vectorization_mode='sync' for moving "
-                              "obstacles")
         self.num_envs = int(num_envs)
         self.render_mode = None
         self.config = cfg = single.config

@@ -99,3 +99,19 @@ def test_a_vector_env_without_next_step_autoreset_is_refused() -> None:
                         vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP})
     with pytest.raises(ConfigError, match="autoreset_mode"):
         SB3VecEnv(venv)
+
+
+def test_training_steps_batched_unless_the_config_needs_the_single_env() -> None:
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from agents.train import make_training_vec_env
+
+    auto = make_training_vec_env(2, 0, dict(SHORT), {}, "auto")
+    assert isinstance(auto, VecMonitor) and isinstance(auto.venv, TraceFollowingVecEnv)
+    single = make_training_vec_env(2, 0, dict(SHORT), {}, "single")
+    assert isinstance(single, DummyVecEnv)
+    if "moving_obstacles" in lidar_env.EnvConfig.keys():
+        movers = make_training_vec_env(2, 0, {**SHORT, "moving_obstacles": 1}, {}, "auto")
+        assert isinstance(movers, DummyVecEnv)
+    with pytest.raises(ConfigError, match="vectorization"):
+        make_training_vec_env(2, 0, dict(SHORT), {}, "threads")
