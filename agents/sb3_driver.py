@@ -20,7 +20,8 @@ class SB3Driver:
 
     ``reset(env)`` then ``act(observation, info) -> action`` like every driver; the raw env
     observation and ``info`` are turned into the policy's input by the same
-    :class:`~agents.observation.TraceFollowingObservation` logic used in training.
+    :class:`~agents.observation.TraceFollowingObservation` logic used in training, with sector
+    deltas when the model's input has room for them (models trained before them have not).
     """
 
     def __init__(self, model_path: str | Path = SHIPPED_MODEL, deterministic: bool = True) -> None:
@@ -38,10 +39,20 @@ class SB3Driver:
             )
         self.model = PPO.load(path, device="cpu")
         self.deterministic = deterministic
+        self.model_path = path
         self._view: TraceFollowingObservation | None = None
 
     def reset(self, env: gym.Env) -> None:
-        self._view = TraceFollowingObservation(env.unwrapped)
+        plain = TraceFollowingObservation(env.unwrapped)
+        if self.model.observation_space.shape == plain.observation_space.shape:
+            self._view = plain
+        else:
+            self._view = TraceFollowingObservation(env.unwrapped, sector_deltas=True)
+        if self.model.observation_space.shape != self._view.observation_space.shape:
+            raise ValueError(
+                f"model_path: {self.model_path} takes observations of shape "
+                f"{self.model.observation_space.shape}, expected "
+                f"{plain.observation_space.shape} or {self._view.observation_space.shape}")
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]) -> NDArray[np.float32]:
         if self._view is None:
