@@ -19,6 +19,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from estimators.base import SensorSetup
+from estimators.matching.neighbourhood_fits import curve_points, line_fits
 from lidar_env.se2 import transform_points, wrap_angle
 
 #: Readings at or below this [m] are treated as "no return" (CARMEN logs write 0 for none).
@@ -81,6 +82,7 @@ class _Neighbourhoods(NamedTuple):
     """Some points' nearest neighbours within a radius and the line fitted through them."""
 
     rows: NDArray[np.intp]  # (n,) which points these are
+    index: NDArray[np.intp]  # (n, k) their neighbours, len(points) for a missing one
     neighbours: NDArray[np.float64]  # (n, k, 2); missing ones repeat the point itself
     weights: NDArray[np.float64]  # (n, k): 1 for a neighbour found, 0 for a missing one
     count: NDArray[np.float64]  # (n,) neighbours found
@@ -92,16 +94,23 @@ class _Neighbourhoods(NamedTuple):
 
 def _fit_rows(
     points: NDArray[np.float64], tree: cKDTree, rows: NDArray[np.intp], k: int,
-    max_radius: float,
+    max_radius: float, compiled: bool = True,
 ) -> _Neighbourhoods:
-    """Lines through the ``k`` nearest neighbours (within ``max_radius``) of ``points[rows]``."""
+    """Lines through the ``k`` nearest neighbours (within ``max_radius``) of ``points[rows]``
+    (``tree``: anything with ``cKDTree.query``'s signature over ``points``). ``compiled``
+    fits them in :func:`estimators.matching.neighbourhood_fits.line_fits`, else in arrays
+    (the same math)."""
     distances, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
     distances = distances.reshape(len(rows), k)
-    index = index.reshape(len(rows), k)
+    index = index.reshape(len(rows), k).astype(np.int64)
     found = np.isfinite(distances)
     safe = np.where(found, index, rows[:, None])
     neighbours = points[safe]
     weights = found.astype(np.float64)
+    if compiled:
+        count, mean, normals, across, valid = line_fits(points, rows.astype(np.int64), index)
+        return _Neighbourhoods(rows, index, neighbours, weights, count, mean, normals, across,
+                               valid)
     count = weights.sum(axis=1)
     mean = (neighbours * weights[..., None]).sum(axis=1) / count[:, None]
     centred = (neighbours - mean[:, None, :]) * weights[..., None]
@@ -119,7 +128,7 @@ def _fit_rows(
     # return off a chair leg next to a wall is not a wall point.
     own = np.abs(np.einsum("ij,ij->i", points[rows] - mean, normals))
     valid = (count >= 3) & (small < 0.1 * large) & (own <= 3.0 * across + 1e-9)
-    return _Neighbourhoods(rows, neighbours, weights, count, mean, normals, across, valid)
+    return _Neighbourhoods(rows, index, neighbours, weights, count, mean, normals, across, valid)
 
 
 def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
@@ -129,7 +138,7 @@ def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
 
 def _fit_lines(
     points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float,
-    max_k: int | None = None,
+    max_k: int | None = None, compiled: bool = True,
 ) -> list[_Neighbourhoods]:
     """Lines through each point's ``k`` nearest neighbours; where they do not form one, the
     neighbourhood doubles (up to ``max_k`` points and ``max_radius``) until they do.
@@ -149,7 +158,8 @@ def _fit_lines(
     of that noise and stays a feature; where it is as noisy as the feature is deep, it cannot
     be told from a wall anyway.
     """
-    fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
+    fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius,
+                    compiled)
     noise = 2.0 * float(np.median(fit.across))
     groups = [fit]
     width = fit.weights.shape[1]
@@ -162,7 +172,7 @@ def _fit_lines(
         if not np.any(grow):
             break
         width = min(2 * width, limit)
-        grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius)
+        grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius, compiled)
         groups[-1] = _subset(widest, ~grow)
         groups.append(grown._replace(valid=grown.valid & (grown.across <= noise)))
     return groups
@@ -170,7 +180,7 @@ def _fit_lines(
 
 def estimate_normals(
     points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5,
-    max_k: int | None = None,
+    max_k: int | None = None, compiled: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
     (principal axis of their covariance), and which points have a reliable one: at least 3
@@ -180,16 +190,20 @@ def estimate_normals(
     noisy wall needs (see :func:`_fit_lines`); None keeps ``k``."""
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
-    for fit in _fit_lines(points, tree, k, max_radius, max_k):
+    for fit in _fit_lines(points, tree, k, max_radius, max_k, compiled):
         normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
     return normals, valid
 
 
 def _curve_points(
-    points: NDArray[np.float64], fit: _Neighbourhoods
+    points: NDArray[np.float64], fit: _Neighbourhoods, compiled: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Normals and anchors ``(n, 2)``: ``points`` (the fit's rows) moved onto the parabola
-    through their neighbours in the frame of their line (see :func:`fit_local_curves`)."""
+    """Normals and anchors ``(n, 2)``: ``points[fit.rows]`` moved onto the parabola through
+    their neighbours in the frame of their line (see :func:`fit_local_curves`); ``compiled``
+    by :func:`estimators.matching.neighbourhood_fits.curve_points`, else in arrays."""
+    if compiled:
+        return curve_points(points, fit.rows.astype(np.int64), fit.index, fit.mean, fit.normals)
+    points = points[fit.rows]
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
     offsets = fit.neighbours - fit.mean[:, None, :]
     along = np.einsum("ijk,ik->ij", offsets, tangents)
@@ -207,7 +221,7 @@ def _curve_points(
 
 def fit_local_curves(
     points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5,
-    max_k: int | None = None,
+    max_k: int | None = None, compiled: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Denoised surface points: normals ``(M, 2)``, which are reliable (as
     :func:`estimate_normals`), and anchors ``(M, 2)``.
@@ -220,14 +234,16 @@ def fit_local_curves(
     towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
     0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
     ``max_k`` grows the neighbourhoods that fail the line test, as in :func:`estimate_normals`.
+    ``compiled=False`` fits in arrays rather than in the numba kernels (the same math; the
+    tests' reference).
     """
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
     anchors = points.astype(np.float64)
-    for fit in _fit_lines(points, tree, k, max_radius, max_k):
+    for fit in _fit_lines(points, tree, k, max_radius, max_k, compiled):
         normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
         curved = _subset(fit, fit.valid & (fit.count >= 5))
-        normals[curved.rows], anchors[curved.rows] = _curve_points(points[curved.rows], curved)
+        normals[curved.rows], anchors[curved.rows] = _curve_points(points, curved, compiled)
     return normals, valid, anchors
 
 

@@ -1,9 +1,12 @@
 """Local surface fits of the scan matchers' reference maps: denoised anchors and normals on
-noisy walls and curved surfaces, checked against the true geometry."""
+noisy walls and curved surfaces, checked against the true geometry, and the compiled fits
+against the array form of the same math."""
 
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from estimators.matching.scan_matching import estimate_normals, fit_local_curves, voxel_downsample
@@ -131,3 +134,32 @@ def test_anchors_of_grown_neighbourhoods_average_a_noisy_wall():
     anchor_error = np.sqrt(np.mean(anchors[inner & valid, 1] ** 2))
     assert anchor_error < 0.3 * raw_error
     np.testing.assert_array_equal(anchors[~valid], points[~valid])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31), noise=st.floats(0.0, 0.04), k=st.sampled_from([5, 9]),
+       max_k=st.sampled_from([None, 18, 72]))
+def test_compiled_fits_match_the_array_fits(seed: int, noise: float, k: int,
+                                            max_k: int | None) -> None:
+    """The numba line and parabola fits (estimators.matching.neighbourhood_fits) against the
+    array form of the same math, on noisy walls, corners and a cylinder."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 1.0, 80)
+    angles = np.linspace(0.0, 2.0 * np.pi, 60, endpoint=False)
+    points = np.concatenate([
+        np.column_stack([4.0 * s, np.zeros_like(s)]),  # a wall
+        np.column_stack([np.full_like(s, 4.0), 3.0 * s]),  # meeting another at a corner
+        np.column_stack([2.0 + 0.3 * np.cos(angles), 1.5 + 0.3 * np.sin(angles)]),  # a post
+        rng.uniform(-1.0, 5.0, (20, 2)),  # clutter
+    ])
+    points = voxel_downsample(points + rng.normal(0.0, noise, points.shape), 0.02)
+    tree = cKDTree(points)
+    compiled = fit_local_curves(points, tree, k, max_k=max_k)
+    pure = fit_local_curves(points, tree, k, max_k=max_k, compiled=False)
+    np.testing.assert_array_equal(compiled[1], pure[1])
+    np.testing.assert_allclose(compiled[0], pure[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(compiled[2], pure[2], rtol=0, atol=1e-9)
+    normals, valid = estimate_normals(points, tree, k, max_k=max_k)
+    pure_normals, pure_valid = estimate_normals(points, tree, k, max_k=max_k, compiled=False)
+    np.testing.assert_array_equal(valid, pure_valid)
+    np.testing.assert_allclose(normals, pure_normals, rtol=0, atol=1e-9)
