@@ -61,6 +61,18 @@ def cpu_steps_per_second(env: gym.vector.VectorEnv, seconds: float, seed: int = 
     return steps * env.num_envs / (time.process_time() - start)
 
 
+def scan_microseconds(env: Any, seconds: float) -> float:
+    """CPU time [us] per env of the batched env's scan call alone (every sub-env)."""
+    env.reset(seed=0)
+    every = np.arange(env.num_envs)
+    calls = 0
+    start = time.process_time()
+    while time.process_time() - start < seconds:
+        env._observe(every)
+        calls += 1
+    return (time.process_time() - start) / calls / env.num_envs * 1e6
+
+
 def traced_bytes_per_env(mode: str, num_envs: int) -> float:
     """Bytes ``tracemalloc`` sees allocated and kept by building and resetting the env, / N
     (numba's own allocations, e.g. its typed lists, are not traced)."""
@@ -98,12 +110,16 @@ def main(argv: list[str] | None = None) -> None:
     n = max(args.sizes)
     noiseless = cpu_steps_per_second(make("vector_entry_point", n, {"range_noise_std": 0.0}),
                                      args.seconds)
-    few = cpu_steps_per_second(make("vector_entry_point", n, FEW_BEAMS), args.seconds)
+    few_env = make("vector_entry_point", n, FEW_BEAMS)
+    few = cpu_steps_per_second(few_env, args.seconds)
+    few_scan = scan_microseconds(few_env.unwrapped, args.seconds)
     full_us, noiseless_us, few_us = (1e6 / r for r in (rates[n], noiseless, few))
-    print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all = "
-          f"{full_us - noiseless_us:.2f} for the 720 Gaussian draws + "
-          f"{noiseless_us - few_us:.2f} for the other 704 exact rays (and their noise pass) + "
-          f"{few_us:.2f} for motion, collision, progress, reward, 16 rays and Python")
+    print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
+          f"  {full_us - noiseless_us:5.2f} the 720 Gaussian draws\n"
+          f"  {noiseless_us - few_us:5.2f} the other 704 exact rays and their noise pass\n"
+          f"  {few_scan:5.2f} the scan call's fixed cost (2 Lidars x 8 beams: gathering the "
+          "candidates in range, the inside-a-polygon test)\n"
+          f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     env = make("vector_entry_point", n)
     env.reset(seed=0)
