@@ -57,9 +57,11 @@ class DualLidarVectorEnv(VectorEnv):
     ``options`` (world, trace, start, as for the single env) apply to every sub-env reset,
     and ``options["reset_mask"]`` (bool ``(num_envs,)``) resets only those sub-envs.
 
-    Differences from ``SyncVectorEnv``: a bad action raises before any sub-env moves (it stops
-    at the bad sub-env); no rendering (``render_mode`` must be None); moving obstacles are not
-    batched yet (``config["moving_obstacles"] > 0`` raises a ``ConfigError``).
+    Differences from ``SyncVectorEnv``: a bad action (wrong shape, NaN or inf in the action of
+    a sub-env that steps) raises a ``ConfigError`` before any sub-env moves, where
+    ``SyncVectorEnv`` has stepped the sub-envs before the bad one; what is not batched yet is
+    refused by name with a ``ConfigError`` (rendering: ``render_mode`` must be None; moving
+    obstacles: ``config["moving_obstacles"]`` must be 0).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
