@@ -130,3 +130,24 @@ def test_reaching_the_goal_ends_and_autoresets_alike() -> None:
         np.testing.assert_array_equal(got[2], expected[2])
         goals += int((got[2] & ~got[4]["collision"]).sum())
     assert goals >= 2
+
+
+def test_a_user_world_and_a_waypoint_route_match_single_envs() -> None:
+    grid = np.zeros((160, 400))  # 20 m x 8 m at 0.05 m per pixel: a walled room and a block
+    grid[:4] = grid[-4:] = grid[:, :4] = grid[:, -4:] = 1
+    grid[60:100, 250:270] = 1
+    route = np.array([[2.0, 0.0], [8.0, 0.0], [12.0, 1.0]])
+    for kwargs in ({"world": grid, "config": SHORT},
+                   {"world": "hallway", "trace": route, "config": SHORT}):
+        batched, reference = pair(2, **kwargs)
+        got, expected = batched.reset(seed=3), reference.reset(seed=3)
+        assert_same(got[0], expected[0], "reset observation")
+        rng, steer, collisions = np.random.default_rng(1), np.zeros(2), 0
+        for t in range(120):
+            actions = wall_seeking_actions(rng, steer)
+            got, expected = batched.step(actions), reference.step(actions)
+            assert_same(got[0], expected[0], f"step {t} observation")
+            assert_same(got[4], expected[4], f"step {t} info")
+            np.testing.assert_array_equal(got[1], expected[1])
+            collisions += int(got[4]["collision"].sum())
+        assert collisions >= 1
