@@ -7,7 +7,7 @@ Prints, in one run on this machine:
   ``vectorization_mode="sync"`` at N = 1, 16, 64, 256, and their ratio;
 * where a batched env step goes at the largest N, from the same loop with less work: without
   range noise (no Gaussian draws), and noiseless with 8-beam Lidars (nearly no ray casting),
-  so the differences are the cost of the 720 draws and of the 720 exact rays [us per env step];
+  so the differences are the cost of the range noise and of the exact rays [us per env step];
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> None:
     few_scan = scan_microseconds(few_env.unwrapped, args.seconds)
     full_us, noiseless_us, few_us = (1e6 / r for r in (rates[n], noiseless, few))
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
-          f"  {full_us - noiseless_us:5.2f} the 720 Gaussian draws\n"
+          f"  {full_us - noiseless_us:5.2f} the range noise (720 Gaussian draws, adding them)\n"
           f"  {noiseless_us - few_us:5.2f} the other 704 exact rays and their noise pass\n"
           f"  {few_scan:5.2f} the scan call's fixed cost (2 Lidars x 8 beams: gathering the "
           "candidates in range, the inside-a-polygon test)\n"
