@@ -68,6 +68,7 @@ class Track:
     # per round detection: its Kåsa normal equations about _origin, its own centre and rms
     _round: list[tuple[NDArray[np.float64], NDArray[np.float64], float, float, float]] = field(
         default_factory=list, repr=False)
+    _positions: list[NDArray[np.float64]] = field(default_factory=list, repr=False)
 
     def reach(self) -> tuple[NDArray[np.float64], float]:
         """Centre (2,) [m] and radius [m] of a circle holding :attr:`points`: their mean and
@@ -85,6 +86,7 @@ class Track:
         self.points = np.vstack([self.points, obstacle.points]) if same_step else obstacle.points
         self.hits += 1
         self.last_step = step
+        self._positions.append(obstacle.position)
         self.circle_tests += obstacle.circle_tested
         if obstacle.circle is None:
             if self.circle is None:
@@ -101,6 +103,22 @@ class Track:
         if not math.isnan(radius):
             self.circle = CircleFit(cx, cy, radius, rms)
             self.position = self.circle.centre
+
+    def centre_spread(self) -> float:
+        """Median distance [m] of the round detections' own centres from their median: about a
+        centimetre for a post, the extent of the path for a person walking (0 with fewer than
+        two round detections)."""
+        centres = np.array([(cx, cy) for _, _, cx, cy, _ in self._round]).reshape(-1, 2)
+        if len(centres) < 2:
+            return 0.0
+        return float(np.median(np.hypot(*(centres - np.median(centres, axis=0)).T)))
+
+    def travel(self) -> float:
+        """Median distance [m] of its detections' positions (circle centre, else centroid) from
+        their median: about a centimetre for a post seen round, a fraction of its radius when
+        seen as short arcs, the extent of the path for a person walking."""
+        positions = np.array(self._positions)
+        return float(np.median(np.hypot(*(positions - np.median(positions, axis=0)).T)))
 
     def consensus_circle(self) -> CircleFit | None:
         """The joint Kåsa fit of the round detections whose own centre lies within three
@@ -199,11 +217,18 @@ class ObstacleTracker:
         best = int(np.argmin(distances))
         return self.tracks[best] if np.isfinite(distances[best]) else None
 
-    def cylinders(self, min_hits: int = 3, min_round_share: float = 0.5) -> NDArray[np.float64]:
+    def cylinders(self, min_hits: int = 3, min_round_share: float = 0.5,
+                  max_centre_spread: float = 0.05, max_travel: float = 0.3
+                  ) -> NDArray[np.float64]:
         """``(M, 3)`` rows ``cx, cy, r`` [m] (:meth:`Track.consensus_circle`) of the round
-        tracks detected at least ``min_hits``
-        times (one detection may be a coincidence of noise) and found round in at least
-        ``min_round_share`` of their roundness tests (the majority of the views that could tell).
+        tracks detected at least ``min_hits`` times (one detection may be a coincidence of
+        noise), round in at least ``min_round_share`` of their roundness tests (the majority
+        of the views that could tell) and standing still: :meth:`Track.centre_spread` at most
+        ``max_centre_spread`` [m] (0.05: posts in the built-in worlds scatter 4-15 mm, people
+        tracked for a second walked 7 cm and more) and :meth:`Track.travel` at most
+        ``max_travel`` [m] (0.3: a post's centroids wander by up to about its radius as the
+        view changes; this catches people seen round only once). Moving round things are
+        :mod:`estimators.mapping.motion_tracking`'s.
         A cylinder is round in most of them, also one touching a wall, whose arc the detector
         cuts out of the wall's cluster (85-100 % in the built-in worlds and the tests); the
         convex corner of a box or of two walls in a few percent (a short arc of returns around
@@ -216,6 +241,7 @@ class ObstacleTracker:
             t.consensus_circle() for t in self.tracks
             if t.circle is not None and t.hits >= min_hits
             and t.round_hits >= min_round_share * t.circle_tests
+            and t.centre_spread() <= max_centre_spread and t.travel() <= max_travel
         ]
         rows = [(c.cx, c.cy, c.radius) for c in circles if c is not None]
         return np.array(rows, dtype=np.float64).reshape(-1, 3)

@@ -87,3 +87,19 @@ def test_time_must_increase() -> None:
     tracker.update([], 1.0)
     with pytest.raises(ValueError, match="t: expected a finite time after 1.0"):
         tracker.update([], 1.0)
+
+
+def test_the_static_map_keeps_the_post_and_leaves_the_walker_out() -> None:
+    from estimators.mapping.tracking import ObstacleTracker
+
+    rng = np.random.default_rng(4)
+    static = ObstacleTracker()
+    for k in range(60):
+        world = World(circles=[CYLINDER, (3.0, -3.0 + 0.1 * k, 0.25)], segments=WALLS)
+        detections = []
+        for scan, pose in zip(cast_rays(world, SENSORS, ANGLES, 10.0), SENSORS, strict=True):
+            noisy = np.where(scan < 10.0, scan + 0.01 * rng.standard_normal(scan.shape), scan)
+            detections += detect_obstacles(noisy, ANGLES, pose, 10.0)
+        static.update(detections)
+    (post,) = static.cylinders()
+    np.testing.assert_allclose(post, CYLINDER, atol=0.03)
