@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.nearest import GridIndex
+from estimators.matching.curve_refinement_kernel import refine_compiled
+from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import nearest_on_surfaces, point_to_curve_system
 from estimators.matching.point_to_line import solve_normal_equations
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
@@ -95,7 +96,7 @@ class CurveReference:
         count = len(self.points)
         if count < 3:
             raise ValueError(f"reference scan: expected at least 3 returns, got {count}")
-        self.grid = GridIndex(self.points)
+        self.search_tree = PointIndex(self.points)
         n_beams = len(ranges)
         # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
         # adjacent beams less than MAX_SURFACE_GAP apart.
@@ -159,7 +160,7 @@ class CurveReference:
     def nearest_returns(self, points: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """The indices of the points ``(M, 2)`` that pair (see :meth:`correspond`) and of the
         returns they pair with."""
-        return nearest_on_surfaces(*self.grid.arrays, self.pointlike,
+        return nearest_on_surfaces(*self.search_tree.arrays, self.pointlike,
                                    np.ascontiguousarray(points, dtype=np.float64),
                                    MAX_PAIR_DISTANCE)
 
@@ -209,6 +210,29 @@ def refine_on_curves(
     does not shift the predicted position, whereas at a sensor mounted ``l`` away it shifts it
     by ``l`` times the error -- which the open direction of a corridor would then take over.
     """
+    pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
+    tree = reference.search_tree.arrays
+    pose, quality = refine_compiled(
+        *tree, reference.pointlike, reference.points, reference.tangents, reference.normals,
+        reference.a, reference.b, reference.c, np.ascontiguousarray(points, dtype=np.float64),
+        np.asarray(initial, dtype=np.float64), int(iterations), prior is not None,
+        np.zeros(3) if prior is None else np.asarray(prior, dtype=np.float64), pivot,
+        np.asarray(prior_information, dtype=np.float64), MAX_PAIR_DISTANCE, LOSS_SCALE,
+        INLIER_DISTANCE, DEGENERACY_RATIO, STEP_TOLERANCE, REPAIR_DISTANCE)
+    return pose, float(quality)
+
+
+def refine_pure(
+    reference: CurveReference,
+    points: FloatArray,
+    initial: FloatArray,
+    iterations: int,
+    prior: FloatArray | None = None,
+    pivot: FloatArray | None = None,
+    prior_information: FloatArray = PRIOR_INFORMATION,
+) -> tuple[FloatArray, float]:
+    """:func:`refine_on_curves` step by step in arrays: the reference the compiled loop
+    (:func:`estimators.matching.curve_refinement_kernel.refine_compiled`) is tested against."""
     pose = np.asarray(initial, dtype=np.float64).copy()
     pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
     quality = 0.0

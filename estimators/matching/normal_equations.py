@@ -50,15 +50,14 @@ def _accumulate(hessian: NDArray[np.float64], gradient: NDArray[np.float64], nx:
 
 @njit(cache=True)
 def point_to_line_system(
-    order: NDArray[np.int64], sorted_points: NDArray[np.float64],
-    table_keys: NDArray[np.int64], table_start: NDArray[np.int64],
-    table_end: NDArray[np.int64], cell: float,
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
     points: NDArray[np.float64], normals: NDArray[np.float64], valid: NDArray[np.bool_],
     anchors: NDArray[np.float64], has_normals: bool,
     query: NDArray[np.float64], pose: NDArray[np.float64], max_distance: float, loss: int,
     scale: float, residuals: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float]:
-    """One point-to-line iteration of ``query`` (M, 2) at ``pose`` onto a reference (its grid,
+    """One point-to-line iteration of ``query`` (M, 2) at ``pose`` onto a reference (its tree,
     ``points``, and with ``has_normals`` its stored ``normals``/``valid``/``anchors``).
 
     Returns the normal equations ``H = sum w J^T J`` (3, 3), ``g = -sum w J^T r`` (3,), the
@@ -77,7 +76,7 @@ def point_to_line_system(
         wx = query[i, 0] * c - query[i, 1] * s + pose[0]
         wy = query[i, 0] * s + query[i, 1] * c + pose[1]
         k = 1 if has_normals else 2
-        d0, i0, d1, i1 = search(order, sorted_points, table_keys, table_start, table_end, cell,
+        d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
                                 wx, wy, k, bound)
         if i0 == n:
             continue
@@ -86,8 +85,8 @@ def point_to_line_system(
             nx, ny = normals[i0, 0], normals[i0, 1]
         else:
             if has_normals:  # a stored normal that is not valid: the two-nearest-point line
-                d0, i0, d1, i1 = search(order, sorted_points, table_keys, table_start,
-                                        table_end, cell, wx, wy, 2, bound)
+                d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
+                                        wx, wy, 2, bound)
             ax, ay = points[i0, 0], points[i0, 1]
             has_line = i1 != n
             second = i1 if has_line else i0
@@ -110,20 +109,20 @@ def point_to_line_system(
 
 @njit(cache=True)
 def nearest_on_surfaces(
-    order: NDArray[np.int64], sorted_points: NDArray[np.float64],
-    table_keys: NDArray[np.int64], table_start: NDArray[np.int64],
-    table_end: NDArray[np.int64], cell: float, pointlike: NDArray[np.bool_],
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    pointlike: NDArray[np.bool_],
     query: NDArray[np.float64], max_distance: float,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The query points (M, 2) whose nearest return lies within ``max_distance`` and is not
     ``pointlike``, and those returns (``CurveReference.nearest_returns``)."""
-    n = sorted_points.shape[0]
+    n = tree_points.shape[0]
     index = np.empty(query.shape[0], np.int64)
     nearest = np.empty(query.shape[0], np.int64)
     count = 0
     bound = max_distance * max_distance
     for i in range(query.shape[0]):
-        _, i0, _, _ = search(order, sorted_points, table_keys, table_start, table_end, cell,
+        _, i0, _, _ = search(order, tree_points, start, end, child, box,
                              query[i, 0], query[i, 1], 1, bound)
         if i0 != n and not pointlike[i0]:
             index[count], nearest[count] = i, i0

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from estimators.matching.nearest import GridIndex
+from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import point_to_line_system
 from estimators.matching.scan_matching import (
     estimate_normals,
@@ -137,7 +137,7 @@ class PointToLineReference:
             raise ValueError(
                 f"reference points: expected shape (N >= 2, 2), got {self.points.shape}"
             )
-        self.grid = GridIndex(self.points)
+        self.search_tree = PointIndex(self.points)
         self.normals = normals
         self.valid_normals = (
             valid_normals
@@ -188,7 +188,7 @@ class PointToLineReference:
         if self.normals is None:
             return self._censi_pairs(world_points, np.arange(len(world_points)), max_distance)
         # Stored normals need only the nearest neighbour: half the k-d tree work.
-        distances, nearest = self.grid.query(world_points, distance_upper_bound=max_distance)
+        distances, nearest = self.search_tree.query(world_points, distance_upper_bound=max_distance)
         index = np.flatnonzero(np.isfinite(distances))
         nearest = nearest[index]
         stored = self.valid_normals[nearest]
@@ -207,7 +207,7 @@ class PointToLineReference:
         self, world_points: NDArray[np.float64], candidates: NDArray[np.intp], max_distance: float
     ) -> Correspondences:
         """Lines through the two nearest reference points of ``world_points[candidates]``."""
-        distances, neighbours = self.grid.query(
+        distances, neighbours = self.search_tree.query(
             world_points[candidates], k=2, distance_upper_bound=max_distance
         )
         found = np.isfinite(distances[:, 0])
@@ -241,7 +241,7 @@ class PointToLineReference:
         normals = self.normals if has_normals else self.points
         valid = self.valid_normals if has_normals else np.ones(len(self.points), bool)
         hessian, gradient, count, rotation_squares = point_to_line_system(
-            *self.grid.arrays, self.points, np.ascontiguousarray(normals, dtype=np.float64),
+            *self.search_tree.arrays, self.points, np.ascontiguousarray(normals, dtype=np.float64),
             valid, np.ascontiguousarray(self.anchors), has_normals,
             np.ascontiguousarray(query_points, dtype=np.float64),
             np.asarray(pose, dtype=np.float64), float(max_distance), LOSSES.index(loss),

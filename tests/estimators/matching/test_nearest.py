@@ -1,4 +1,4 @@
-"""The compiled grid index against scipy's k-d tree and brute force: same neighbours, same
+"""The compiled k-d tree against scipy's k-d tree and brute force: same neighbours, same
 distances, the same "none within the bound" answer, on random and wall-like point sets."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from estimators.matching.nearest import GridIndex
+from estimators.matching.nearest import PointIndex
 
 
 def _brute(points: np.ndarray, queries: np.ndarray, k: int, bound: float):
@@ -32,13 +32,12 @@ def _walls(rng: np.random.Generator, n_walls: int = 12) -> np.ndarray:
     return points + rng.normal(0.0, 0.01, points.shape)
 
 
-@pytest.mark.parametrize("cell", [0.03, 0.1, 0.4])
-@pytest.mark.parametrize("bound", [0.05, 0.5, 1.0])
-def test_same_neighbours_and_distances_as_the_kd_tree_on_walls(cell: float, bound: float) -> None:
+@pytest.mark.parametrize("bound", [0.05, 0.5, 1.0, 100.0])
+def test_same_neighbours_and_distances_as_scipys_tree_on_walls(bound: float) -> None:
     rng = np.random.default_rng(1)
     points = _walls(rng)
     queries = points[rng.integers(0, len(points), 400)] + rng.normal(0.0, 0.1, (400, 2))
-    tree, grid = cKDTree(points), GridIndex(points, cell)
+    tree, grid = cKDTree(points), PointIndex(points)
     for k in (1, 2):
         expected = tree.query(queries, k=k, distance_upper_bound=bound)
         found = grid.query(queries, k=k, distance_upper_bound=bound)
@@ -49,31 +48,30 @@ def test_same_neighbours_and_distances_as_the_kd_tree_on_walls(cell: float, boun
 
 @settings(max_examples=60, deadline=None)
 @given(
-    n=st.integers(1, 60), m=st.integers(1, 30), seed=st.integers(0, 2**31),
-    spread=st.floats(0.01, 200.0), bound=st.floats(1e-3, 50.0), cell=st.floats(0.01, 5.0),
+    n=st.integers(1, 300), m=st.integers(1, 30), seed=st.integers(0, 2**31),
+    spread=st.floats(0.01, 200.0), bound=st.floats(1e-3, 50.0),
     k=st.sampled_from([1, 2]), duplicates=st.booleans(),
 )
 def test_matches_brute_force_on_any_points(n: int, m: int, seed: int, spread: float,
-                                           bound: float, cell: float, k: int,
-                                           duplicates: bool) -> None:
+                                           bound: float, k: int, duplicates: bool) -> None:
     rng = np.random.default_rng(seed)
     points = rng.uniform(-spread, spread, (n, 2))
     if duplicates:  # exact ties: ranked by index
         points[n // 2:] = points[: n - n // 2]
     queries = np.concatenate([rng.uniform(-spread, spread, (m, 2)), points[:m]])
-    distances, index = GridIndex(points, cell).query(queries, k=k, distance_upper_bound=bound)
+    distances, index = PointIndex(points).query(queries, k=k, distance_upper_bound=bound)
     expected_distances, expected_index = _brute(points, queries, k, bound)
     np.testing.assert_array_equal(index.reshape(-1, k), expected_index)
     np.testing.assert_allclose(distances.reshape(-1, k), expected_distances, rtol=1e-12, atol=0)
 
 
 def test_bad_arguments_are_named() -> None:
-    grid = GridIndex(np.zeros((3, 2)))
+    grid = PointIndex(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="k: expected 1 or 2"):
         grid.query(np.zeros((1, 2)), k=3, distance_upper_bound=1.0)
     with pytest.raises(ValueError, match="distance_upper_bound"):
-        grid.query(np.zeros((1, 2)))
+        grid.query(np.zeros((1, 2)), distance_upper_bound=0.0)
     with pytest.raises(ValueError, match="points: expected shape"):
-        GridIndex(np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="cell_size"):
-        GridIndex(np.zeros((3, 2)), cell_size=0.0)
+        PointIndex(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="points: expected shape"):
+        PointIndex(np.zeros((0, 2)))
