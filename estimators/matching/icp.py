@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator
+from estimators.matching.normal_equations import register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
     PointToLineReference,
@@ -99,12 +100,15 @@ def register(
     params: ICPParams = ICPParams(),
     prior_pose: ArrayLike | None = None,
     prior_information: ArrayLike | None = None,
+    compiled: bool = True,
 ) -> MatchResult:
     """Robust point-to-line ICP of ``query_points`` (M, 2, query frame) onto ``reference``.
 
     ``prior_pose``/``prior_information`` (3,) add ``(x - prior)^T diag(L) (x - prior)`` to the
     cost: a motion prior [1/m^2, 1/m^2, 1/rad^2] that holds the pose where the scan alone does
-    not (a long corridor).
+    not (a long corridor). ``compiled`` runs the iterations in one numba call
+    (:func:`estimators.matching.normal_equations.register_loop`); ``False``, or a trimmed
+    loss, steps in Python (the same math; the tests' reference).
     """
     query_points = np.asarray(query_points, dtype=np.float64)
     if query_points.ndim != 2 or query_points.shape[1] != 2:
@@ -115,6 +119,20 @@ def register(
             f"initial_guess: expected a pose (x, y, heading), got shape {pose.shape}")
     information = None if prior_information is None else np.asarray(prior_information, float)
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
+    if compiled and params.trim_ratio >= 1.0 and (information is None) == (prior is None):
+        has_normals = reference.normals is not None
+        pose, iterations, converged = register_loop(
+            *reference.search_tree.arrays, reference.points,
+            np.ascontiguousarray(reference.normals if has_normals else reference.points,
+                                 dtype=np.float64),
+            reference.valid_normals if has_normals else np.ones(len(reference.points), bool),
+            np.ascontiguousarray(reference.anchors), has_normals,
+            np.ascontiguousarray(query_points), pose, params.max_iterations,
+            params.max_correspondence_distance, LOSSES.index(params.loss), params.loss_scale,
+            prior is not None, np.zeros(3) if prior is None else prior,
+            np.zeros(3) if information is None else information, params.min_information,
+            params.tolerance_translation, params.tolerance_rotation)
+        return _assess(reference, query_points, pose, params, iterations, converged)
     converged = False
     iterations = 0
     while iterations < params.max_iterations:

@@ -164,3 +164,58 @@ def point_to_curve_system(
         lever = cy * (moved[i, 0] - position[0]) - cx * (moved[i, 1] - position[1])
         _accumulate(hessian, gradient, cx, cy, lever, residual, _weight(residual, CAUCHY, scale))
     return hessian, gradient, inliers
+
+
+@njit(cache=True)
+def _solve_step(hessian: NDArray[np.float64], gradient: NDArray[np.float64], lever: float,
+                has_prior: bool, prior_information: NDArray[np.float64],
+                prior_offset: NDArray[np.float64], min_information: float,
+                ) -> NDArray[np.float64]:
+    """``point_to_line.solve_normal_equations``, compiled."""
+    if min_information > 0 and has_prior:
+        scale = np.array([1.0, 1.0, lever if lever != 0 else 1.0])
+        outer = np.outer(scale, scale)
+        values, vectors = np.linalg.eigh(hessian / outer)
+        kept = vectors[:, values >= min_information]
+        projection = kept @ kept.T
+        hessian = outer * (projection @ (hessian / outer) @ projection)
+        gradient = scale * (projection @ (gradient / scale))
+    if has_prior:
+        hessian = hessian + np.diag(prior_information)
+        gradient = gradient + prior_information * prior_offset
+    return np.linalg.solve(hessian + 1e-9 * np.eye(3), gradient)
+
+
+@njit(cache=True)
+def register_loop(
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    points: NDArray[np.float64], normals: NDArray[np.float64], valid: NDArray[np.bool_],
+    anchors: NDArray[np.float64], has_normals: bool, query: NDArray[np.float64],
+    initial: NDArray[np.float64], max_iterations: int, max_distance: float, loss: int,
+    scale: float, has_prior: bool, prior: NDArray[np.float64],
+    prior_information: NDArray[np.float64], min_information: float,
+    tolerance_translation: float, tolerance_rotation: float,
+) -> tuple[NDArray[np.float64], int, bool]:
+    """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
+    run and whether the step fell below the tolerances."""
+    pose = initial.copy()
+    residuals = np.empty(query.shape[0])
+    iterations = 0
+    while iterations < max_iterations:
+        iterations += 1
+        hessian, gradient, count, rotation_squares = point_to_line_system(
+            order, tree_points, start, end, child, box, points, normals, valid, anchors,
+            has_normals, query, pose, max_distance, loss, scale, residuals)
+        if count < 3:
+            break
+        offset = prior - pose
+        offset[2] = (offset[2] + np.pi) % (2.0 * np.pi) - np.pi
+        step = _solve_step(hessian, gradient, np.sqrt(rotation_squares / count), has_prior,
+                           prior_information, offset, min_information)
+        pose = pose + step
+        pose[2] = (pose[2] + np.pi) % (2.0 * np.pi) - np.pi
+        if np.hypot(step[0], step[1]) < tolerance_translation and (
+                abs(step[2]) < tolerance_rotation):
+            return pose, iterations, True
+    return pose, iterations, False

@@ -1,6 +1,7 @@
 """The compiled ICP iterations against the pure functions they replace: the normal equations
 ``J^T W J`` and ``-J^T W r`` built from ``correspond`` / ``project``, the Jacobian and the
-robust weights agree to 1e-9 on random scans, poses and references of every kind."""
+robust weights agree to 1e-9 on random scans, poses and references of every kind, and so
+does the whole compiled registration loop with its Python form."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from estimators.matching.curve_refinement import (
     MAX_PAIR_DISTANCE,
     CurveReference,
 )
+from estimators.matching.icp import ICPParams, register
 from estimators.matching.normal_equations import point_to_curve_system
 from estimators.matching.point_to_line import (
     LOSSES,
@@ -118,3 +120,37 @@ def test_point_to_curve_normal_equations_match_project(seed: int, shift: float,
     np.testing.assert_allclose(hessian, weighted.T @ jacobian, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(gradient, -weighted.T @ residuals, rtol=1e-9, atol=1e-9)
     assert inliers == np.count_nonzero(np.abs(residuals) < INLIER_DISTANCE)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31), kind=st.sampled_from(["censi", "normals", "denoised"]),
+    loss=st.sampled_from(LOSSES), with_prior=st.booleans(),
+    min_information=st.sampled_from([0.0, 2.0, 1e6]), iterations=st.integers(1, 30),
+    shift=st.floats(-0.2, 0.2), turn=st.floats(-0.2, 0.2),
+)
+def test_compiled_registration_matches_the_python_loop(
+    seed: int, kind: str, loss: str, with_prior: bool, min_information: float,
+    iterations: int, shift: float, turn: float,
+) -> None:
+    """``register`` in one numba call against its Python loop over the same steps."""
+    rng = np.random.default_rng(seed)
+    ranges, angles = _room_scan(rng)
+    hit = ranges < 20.0
+    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
+    reference = (PointToLineReference(points) if kind == "censi" else
+                 PointToLineReference.with_estimated_normals(points, 9, kind == "denoised", 72))
+    query_ranges, _ = _room_scan(rng)
+    keep = query_ranges < 20.0
+    query = np.column_stack([query_ranges[keep] * np.cos(angles[keep]),
+                             query_ranges[keep] * np.sin(angles[keep])])
+    params = ICPParams(max_iterations=iterations, loss=loss, min_information=min_information,
+                       max_correspondence_distance=0.5)
+    guess = np.array([shift, -shift, turn])
+    prior = (guess + 0.01, np.array([0.4, 0.4, 0.04])) if with_prior else (None, None)
+    found = register(reference, query, guess, params, *prior)
+    expected = register(reference, query, guess, params, *prior, compiled=False)
+    np.testing.assert_allclose(found.pose, expected.pose, rtol=0, atol=1e-9)
+    assert (found.iterations, found.converged) == (expected.iterations, expected.converged)
+    assert found.quality == expected.quality
+    assert found.rmse == pytest.approx(expected.rmse, rel=1e-9)
