@@ -14,9 +14,11 @@ Reported (:meth:`MoverScore.summary`):
     * ``velocity_error`` [m/s]: mean |track velocity - true velocity| over matches whose track
       has at least ``settled_hits`` detections (a filter needs a few steps to learn a speed);
     * ``id_switches``: times a mover's matched track id changed;
-    * ``moving_precision``: of the track-steps labelled moving, the share that match a mover;
+    * ``moving_precision``: of the track-steps labelled moving, the share that lie within
+      ``match_distance`` of a mover (any mover: one too far or too hidden to count for recall
+      is still a mover);
     * ``label_accuracy``: of the track-steps with at least ``settled_hits`` detections, the
-      share whose label (moving or static) is right, a track being a mover's if it matches one.
+      share whose label (moving or static) is right in that sense.
 """
 
 from __future__ import annotations
@@ -88,8 +90,10 @@ class MoverScore:
             if m in self._last_id and self._last_id[m] != track.id:
                 self.id_switches += 1
             self._last_id[m] = track.id
-        for k, track in enumerate(tracks):
-            is_mover = k in matched_track
+        for k, track in enumerate(tracks):  # a label is right if a mover is there, seen or not
+            is_mover = k in matched_track or bool(len(truth)) and bool(np.min(np.hypot(
+                truth[:, 0] - track.position[0], truth[:, 1] - track.position[1]))
+                <= self.match_distance)
             if track.moving:
                 self._labelled_moving += 1
                 self._moving_right += is_mover

@@ -1,0 +1,138 @@
+"""Estimators, maps and trackers among moving obstacles (issue 16), against the same drive
+without them.
+
+    python benchmarks/bench_movers_estimators.py               # the three paper groups, seed 0
+    python benchmarks/bench_movers_estimators.py --seeds 0 1
+
+Each paper group (G1 ``open_cylinders`` + ``right_turn`` with 10 pedestrians, G2 ``hallway`` +
+``zigzag`` with 5, G3 ``closed_to_open`` + ``zigzag`` with 5) is driven by the scripted driver
+twice with the same seed: without movers and with them. A mover the driver (which ignores the
+scans) walks into ends the episode, so both drives are scored over the steps they share. Per
+drive: eq.-11 accuracy and ATE of ``lidar_odometry`` and ``slam``; the occupancy map's IoU and
+the static cylinders' precision at the ``lidar_odometry`` poses (against the static world); and
+the moving-obstacle tracker (:class:`estimators.mapping.motion_tracking.MotionTracker` on
+those poses) scored by :class:`estimators.evaluation.mover_scores.MoverScore` against
+``info["moving_obstacles"]``: recall of visible movers within 5 m, position and velocity
+error, identity switches, moving-label precision.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import lidar_env  # noqa: F401  (registers DualLidar-v0)
+from agents.driver import make_driver
+from estimators import make
+from estimators.base import SensorSetup
+from estimators.evaluation.metrics import evaluate
+from estimators.evaluation.mover_scores import MoverScore
+from estimators.leaderboard.recording import map_reference, score_map, world_geometry
+from estimators.leaderboard.records import SensorDataset
+from estimators.mapping.motion_tracking import MotionTracker
+from estimators.mapping.obstacles import detect_in_observation
+from estimators.matching.scan_matching import scans_to_car_points
+from lidar_env.se2 import transform_points
+
+GROUPS = (("open_cylinders", "right_turn", 10), ("hallway", "zigzag", 5),
+          ("closed_to_open", "zigzag", 5))
+ESTIMATORS = ("lidar_odometry", "slam")
+
+
+def drive(world: str, trace: str, seed: int, movers: int) -> tuple[SensorDataset, list[Any]]:
+    """The scripted drive's sensor dataset and the true movers (M, 5) at every observation."""
+    env = gym.make("DualLidar-v0", world=world, trace=trace,
+                   config={"moving_obstacles": movers})
+    driver = make_driver("scripted")
+    observation, info = env.reset(seed=seed)
+    driver.reset(env)
+    observations, infos, done = [observation], [info], False
+    while not done:
+        observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
+        observations.append(observation)
+        infos.append(info)
+        done = terminated or truncated
+    setup = SensorSetup.from_env(env)
+    dataset = SensorDataset(
+        setup=setup, times=np.array([i["time"] for i in infos]),
+        scans={key: np.stack([o[key] for o in observations]).astype(np.float32)
+               for key in setup.keys},
+        poses=np.array([i["pose"] for i in infos]),
+        lidar_poses=np.array([i["lidar_poses"] for i in infos]),
+        world=world_geometry(env.unwrapped.world))
+    env.close()
+    return dataset, [i["moving_obstacles"] for i in infos]
+
+
+def prefix(dataset: SensorDataset, n: int) -> SensorDataset:
+    """The first ``n`` steps of ``dataset``."""
+    return dataclasses.replace(
+        dataset, times=dataset.times[:n], poses=dataset.poses[:n],
+        lidar_poses=dataset.lidar_poses[:n],
+        scans={key: scan[:n] for key, scan in dataset.scans.items()})
+
+
+def run(name: str, dataset: SensorDataset) -> np.ndarray:
+    """The estimator's trajectory (N, 3), started at the true first pose."""
+    estimator = make(name)
+    estimator.reset(dataset.setup, dataset.poses[0])
+    for step, observation in enumerate(dataset.observations()):
+        estimator.update(observation, float(dataset.times[step]))
+    return estimator.trajectory
+
+
+def track(dataset: SensorDataset, poses: np.ndarray, movers: list[Any]) -> dict[str, float]:
+    """MoverScore of a MotionTracker fed detections at ``poses`` (N, 3)."""
+    tracker, score = MotionTracker(), MoverScore()
+    setup = dataset.setup
+    for step, observation in enumerate(dataset.observations()):
+        tracker.update(detect_in_observation(observation, poses[step], setup),
+                       float(dataset.times[step]))
+        scans = {key: np.asarray(observation[key], dtype=np.float64) for key in setup.keys}
+        returns = transform_points(dataset.poses[step], scans_to_car_points(scans, setup))
+        score.add(tracker.detected_tracks(), movers[step], dataset.poses[step], returns)
+    return score.summary()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    args = parser.parse_args()
+    print("| group | seed | movers | steps | " + " | ".join(
+        f"{n} acc [%] | {n} ATE [m]" for n in ESTIMATORS) + " | map IoU | cylinder prec. | "
+          "mover recall | pos. err [m] | vel. err [m/s] | id sw. | moving prec. |")
+    print("|---" * (11 + 2 * len(ESTIMATORS)) + "|")
+    for world, trace, count in GROUPS:
+        for seed in args.seeds:
+            with_movers, movers = drive(world, trace, seed, count)
+            without, _ = drive(world, trace, seed, 0)
+            n = min(len(with_movers), len(without))
+            for dataset, m in ((prefix(without, n), 0), (prefix(with_movers, n), count)):
+                cells = []
+                trajectories = {name: run(name, dataset) for name in ESTIMATORS}
+                for name in ESTIMATORS:
+                    metrics = evaluate(trajectories[name], dataset.poses)
+                    cells += [f"{metrics.accuracy_percent:.2f}", f"{metrics.ate_rmse_m:.4f}"]
+                poses = trajectories["lidar_odometry"]
+                reference = map_reference(dataset)
+                assert reference is not None
+                maps = score_map(reference, poses, dataset)
+                cells += [f"{maps['map_iou']:.3f}",
+                          f"{maps.get('cylinder_precision', float('nan')):.3f}"]
+                if m:
+                    s = track(dataset, poses, movers[:n])
+                    cells += [f"{s['recall']:.3f}", f"{s['position_error']:.3f}",
+                              f"{s['velocity_error']:.3f}", f"{s['id_switches']:.0f}",
+                              f"{s['moving_precision']:.3f}"]
+                else:
+                    cells += ["-"] * 5
+                print(f"| {world}/{trace} | {seed} | {m} | {n} | " + " | ".join(cells) + " |",
+                      flush=True)
+
+
+if __name__ == "__main__":
+    main()
