@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -13,13 +14,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.car import MAX_SUBSTEPS, Car
+from lidar_env.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.config import EnvConfig
 from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.errors import ConfigError
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
-from lidar_env.vector.kernel import EntryPoint, collision_checks, observe_envs, step_envs
+from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_envs
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.world import World
 
@@ -125,6 +126,14 @@ class DualLidarVectorEnv(VectorEnv):
         self._started = False
         self._every_env = np.arange(n, dtype=np.int64)
         self._observe_envs, self._step_envs = EntryPoint(observe_envs), EntryPoint(step_envs)
+        self._plan_motion = EntryPoint(plan_motion)
+        car = self._car  # the limits of Car.substeps_for, computed as it computes them
+        self._limits = np.array([
+            cfg.max_speed, cfg.max_yaw_rate, cfg.control_dt,
+            math.hypot(car.half_length, car.half_width),
+            MAX_STEP_FRACTION * 2.0 * min(car.half_length, car.half_width)], dtype=np.float64)
+        self._speed, self._yaw_rate = np.zeros(n), np.zeros(n)
+        self._checks = np.ones(n, dtype=np.int64)
 
     @property
     def worlds(self) -> list[World | None]:
@@ -246,29 +255,23 @@ class DualLidarVectorEnv(VectorEnv):
         naming a bad action (only the rows of ``stepping`` sub-envs are used)."""
         expected = f"actions: expected shape ({self.num_envs}, 2) (speed, yaw rate per sub-env)"
         try:
-            a = np.asarray(actions, dtype=np.float64)
+            a = np.ascontiguousarray(actions, dtype=np.float64)
         except (TypeError, ValueError) as error:
             raise ConfigError(f"{expected} of numbers in [-1, 1], got {actions!r:.60}") from error
         if a.shape != (self.num_envs, 2):
             raise ConfigError(f"{expected}, got shape {a.shape}")
-        used = a[stepping] if len(stepping) < self.num_envs else a
-        if not np.isfinite(used).all():
-            row = int(stepping[np.flatnonzero(~np.isfinite(used).all(axis=1))[0]])
+        cfg = self.config
+        code = self._plan_motion(a, stepping, self._limits, cfg.physics_substeps, MAX_SUBSTEPS,
+                                 self._speed, self._yaw_rate, self._checks)
+        if code <= -2:
+            row = -2 - code
             raise ConfigError(f"actions[{row}]: expected finite values in [-1, 1], got "
                               f"{a[row].tolist()}")
-        cfg = self.config
-        speed = np.clip(a[:, 0], -1.0, 1.0) * cfg.max_speed
-        yaw_rate = np.clip(a[:, 1], -1.0, 1.0) * cfg.max_yaw_rate
-        needed = collision_checks(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
-                                  self._car.half_length, self._car.half_width)
-        too_many = np.flatnonzero(needed[stepping] > MAX_SUBSTEPS)
-        if len(too_many):  # the single car's own check words the error
-            j = int(stepping[too_many[0]])
-            self._car.substeps_for(float(speed[j]), float(yaw_rate[j]), cfg.control_dt,
-                                   cfg.physics_substeps)
-        # rows of resetting sub-envs may hold NaN (fmin drops it) or inf: unused, but castable
-        checks = np.fmin(needed, float(MAX_SUBSTEPS)).astype(np.int64)
-        return speed, yaw_rate, checks
+        if code >= 0:  # the single car's own check words the error
+            speed = min(max(float(a[code, 0]), -1.0), 1.0) * cfg.max_speed
+            yaw_rate = min(max(float(a[code, 1]), -1.0), 1.0) * cfg.max_yaw_rate
+            self._car.substeps_for(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
+        return self._speed, self._yaw_rate, self._checks
 
     # ------------------------------------------------------------------ outputs
     def _observation(self) -> Observation:

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from lidar_env.car import MAX_STEP_FRACTION, drive_arc, mount_poses
+from lidar_env.car import drive_arc, mount_poses
 from lidar_env.lidar_layout import scan_layout_kernel
 from lidar_env.primitive_grid import segment_distance2
 from lidar_env.trace_geometry import project_onto_polyline
@@ -152,21 +152,40 @@ def step_envs(
     observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors)
 
 
-def collision_checks(
+@njit(cache=True)
+def plan_motion(
+    actions: NDArray[np.float64],
+    envs: NDArray[np.int64],
+    limits: NDArray[np.float64],
+    substeps: int,
+    max_checks: int,
     speed: NDArray[np.float64],
     yaw_rate: NDArray[np.float64],
-    duration: float,
-    substeps: int,
-    half_length: float,
-    half_width: float,
-) -> NDArray[np.float64]:
-    """Collision checks per env for a ``duration`` [s] move, as floats: the count of
-    :meth:`lidar_env.car.Car.substeps_for` over arrays (the same float operations, so the same
-    counts), before its :data:`~lidar_env.car.MAX_SUBSTEPS` check, which the caller makes."""
-    half_diagonal = math.hypot(half_length, half_width)
-    corner_travel = (np.abs(speed) + np.abs(yaw_rate) * half_diagonal) * duration  # [m]
-    max_step = MAX_STEP_FRACTION * 2.0 * min(half_length, half_width)
-    return np.maximum(np.ceil(corner_travel / max_step), float(max(int(substeps), 1)))
+    checks: NDArray[np.int64],
+) -> int:
+    """Speed [m/s], yaw rate [rad/s] and collision checks of the sub-envs ``envs`` from their
+    ``actions`` (N, 2), as the single env's ``step`` and :meth:`lidar_env.car.Car.substeps_for`
+    compute them (the same float operations, in their order), into ``speed``, ``yaw_rate``,
+    ``checks``.
+
+    ``limits`` holds max_speed [m/s], max_yaw_rate [rad/s], control_dt [s], the car's
+    half-diagonal [m] and its largest move between two checks [m]. Returns -1, or ``-2 - i``
+    for the first sub-env ``i`` whose action is not finite, or the first ``i`` whose move needs
+    more than ``max_checks`` checks (nothing is meant to move then).
+    """
+    max_speed, max_yaw_rate, duration, half_diagonal, max_step = limits
+    for i in envs:
+        throttle, steer = actions[i, 0], actions[i, 1]
+        if not (math.isfinite(throttle) and math.isfinite(steer)):
+            return -2 - i
+        v = min(max(throttle, -1.0), 1.0) * max_speed
+        w = min(max(steer, -1.0), 1.0) * max_yaw_rate
+        corner_travel = (abs(v) + abs(w) * half_diagonal) * duration  # [m]
+        needed = math.ceil(corner_travel / max_step)
+        if needed > max_checks:
+            return i
+        speed[i], yaw_rate[i], checks[i] = v, w, max(substeps, needed, 1)
+    return -1
 
 
 class EntryPoint:

@@ -95,3 +95,18 @@ def test_step_before_reset_and_bad_reset_arguments() -> None:
     env.reset(seed=0)
     with pytest.raises(ConfigError, match="reset_mask"):
         env.reset(options={"reset_mask": np.array([1, 0])})
+
+
+def test_a_move_too_long_to_check_is_the_single_cars_error() -> None:
+    config = {"max_speed": 1e6}  # a corner would move 1e5 m per step: 8e5 collision checks
+    env = batched(config=config)
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="car motion") as batched_error:
+        env.step(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    single = gym.make("DualLidar-v0", config=config)
+    single.reset(seed=0)
+    with pytest.raises(ConfigError, match="car motion") as single_error:
+        single.step(np.array([1.0, 0.0]))
+    assert str(batched_error.value) == str(single_error.value)
+    _, _, _, _, info = env.step(np.zeros((2, 2)))  # nothing moved: the envs step on
+    assert np.allclose(info["time"], 0.1)
