@@ -357,7 +357,8 @@ class RotationPhaseCorrelation(Estimator):
         setup = self._checked_setup()
         require_sensor_frame(setup, type(self).__name__)
         self._matcher = ScanMatcher(
-            setup.max_range, self.image_size, self.resolution, self.icp_iterations
+            setup.sensors[self.lidar].max_range, self.image_size, self.resolution,
+            self.icp_iterations
         )
         self._previous = None
         self._last_motion = None
@@ -375,12 +376,13 @@ class RotationPhaseCorrelation(Estimator):
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
         assert self._matcher is not None and self.setup is not None
         self._previous = self._matcher.prepare(
-            scans[self.setup.keys[self.lidar]], self.setup.beam_angles
+            scans[self.setup.keys[self.lidar]], self.setup.sensors[self.lidar].beam_angles
         )
 
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self._matcher is not None and self._previous is not None and self.setup is not None
-        current = self._matcher.prepare(scans[self.setup.keys[self.lidar]], self.setup.beam_angles)
+        current = self._matcher.prepare(scans[self.setup.keys[self.lidar]],
+                                        self.setup.sensors[self.lidar].beam_angles)
         dt = t - self._times[-1]
         prior = None
         # past the prediction horizon (a clock gap) the last velocity says nothing: no prior

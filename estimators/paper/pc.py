@@ -79,10 +79,26 @@ class _ImageCorrelationEstimator(Estimator):
     def __post_init__(self) -> None:
         check_image_size(self.image_size)
 
+    def _used_lidars(self) -> tuple[int, ...]:
+        """The Lidars this estimator reads (they must share one beam geometry)."""
+        assert self.setup is not None
+        return tuple(range(min(self.setup.n_lidars, 2)))
+
     def _reset_state(self) -> None:
         assert self.setup is not None
+        missing = [k for k in self._used_lidars() if k >= self.setup.n_lidars]
+        if missing:
+            raise EstimatorInputError(
+                f"lidar {missing[0]} requested but the setup has {self.setup.n_lidars} Lidar(s)")
+        used = [self.setup.sensors[k] for k in self._used_lidars()]
+        self._geometry = used[0]
+        if any(not np.array_equal(s.beam_angles, used[0].beam_angles)
+               or s.max_range != used[0].max_range for s in used[1:]):
+            raise EstimatorInputError(
+                f"{type(self).__name__}: the Lidars it reads ({', '.join(s.name for s in used)}) "
+                "differ in beam geometry; expected one beam layout and max range for both")
         self._pixel_size = check_image_geometry(
-            self.image_size, self.resolution, self.setup.max_range
+            self.image_size, self.resolution, self._geometry.max_range
         )
         self._position = self._initial_pose[:2].copy()
 
@@ -98,8 +114,8 @@ class _ImageCorrelationEstimator(Estimator):
         assert self.setup is not None
         image = scan_to_image(
             scan,
-            self.setup.beam_angles + rotation,
-            self.setup.max_range,
+            self._geometry.beam_angles + rotation,
+            self._geometry.max_range,
             self.image_size,
             self._pixel_size,
         )
@@ -113,8 +129,7 @@ class _ImageCorrelationEstimator(Estimator):
 
     def _enough_returns(self, *scans: NDArray[np.float64]) -> bool:
         """Every scan holds at least ``MIN_MATCH_RETURNS`` returns."""
-        assert self.setup is not None
-        limit = self.setup.max_range
+        limit = self._geometry.max_range
         return all(
             np.count_nonzero((scan > 0) & (scan < limit)) >= MIN_MATCH_RETURNS for scan in scans
         )
@@ -139,6 +154,9 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
     def min_lidars(self) -> int:  # type: ignore[override]  # the offset Lidar needs both
         return self.lidar + 1
 
+    def _used_lidars(self) -> tuple[int, ...]:
+        return (self.lidar,)
+
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.lidar not in (0, 1):
@@ -147,10 +165,6 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
     def _reset_state(self) -> None:
         super()._reset_state()
         assert self.setup is not None
-        if self.lidar >= self.setup.n_lidars:
-            raise EstimatorInputError(
-                f"lidar {self.lidar} requested but the setup has {self.setup.n_lidars} Lidar(s)"
-            )
         self._key = self.setup.keys[self.lidar]
         self._axes_heading = self._image_axes_heading(self.lidar)
 
