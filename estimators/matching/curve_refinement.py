@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.curve_refinement_kernel import refine_compiled
+from estimators.matching.curve_refinement_kernel import chain_curves, refine_compiled
 from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import nearest_on_surfaces, point_to_curve_system
 from estimators.matching.point_to_line import solve_normal_equations
@@ -97,52 +97,9 @@ class CurveReference:
         if count < 3:
             raise ValueError(f"reference scan: expected at least 3 returns, got {count}")
         self.search_tree = PointIndex(self.points)
-        n_beams = len(ranges)
-        # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
-        # adjacent beams less than MAX_SURFACE_GAP apart.
-        half = SURFACE_HALF_WINDOW
-        offsets = np.arange(-half, half + 1)
-        following = np.append(np.arange(1, count), 0)
-        linked = ((hit[following] - hit) % n_beams == 1) & (
-            np.hypot(*(self.points[following] - self.points).T) < MAX_SURFACE_GAP
-        )
-        if not _full_turn(beam_angles):
-            linked[-1] = False  # the last beam does not neighbour the first
-        rows = np.arange(count)
-        # links[:, h + s] joins neighbours s and s + 1 (s = -h..h-1); neighbour o < 0 is on the
-        # surface when every link from it up to the return holds, o > 0 likewise.
-        links = linked[(rows[:, None] + np.arange(-half, half)) % count]
-        valid = np.hstack(
-            [
-                np.cumprod(links[:, half - 1 :: -1], axis=1)[:, ::-1],
-                np.ones((count, 1), dtype=bool),
-                np.cumprod(links[:, half:], axis=1),
-            ]
-        ).astype(bool)
-        neighbours = self.points[(rows[:, None] + offsets) % count]
-        # Local frame: along the chord between the outermost neighbours on the same surface.
-        first = np.argmax(valid, axis=1)
-        last = len(offsets) - 1 - np.argmax(valid[:, ::-1], axis=1)
-        chord = neighbours[rows, last] - neighbours[rows, first]
-        length = np.hypot(*chord.T)
-        self.pointlike = length < 1e-9
-        self.tangents = chord / np.where(self.pointlike, 1.0, length)[:, None]
-        self.normals = np.column_stack([-self.tangents[:, 1], self.tangents[:, 0]])
-        local = neighbours - self.points[:, None, :]
-        u = np.einsum("mkj,mj->mk", local, self.tangents)
-        v = np.einsum("mkj,mj->mk", local, self.normals)
-        # Weighted normal equations of v = c + b u + a u^2; the tiny ridge on a turns an
-        # under-determined fit (two points) into the line through them.
-        design = np.stack([np.ones_like(u), u, u**2], axis=-1) * valid[..., None]
-        normal_matrix = np.einsum("mki,mkj->mij", design, design)
-        scale = np.maximum(length, 1e-3) ** 4
-        normal_matrix[:, 2, 2] += 1e-9 * scale
-        normal_matrix[self.pointlike] = np.eye(3)
-        coefficients = np.linalg.solve(
-            normal_matrix, np.einsum("mki,mk->mi", design, v)[..., None]
-        )[..., 0]
-        coefficients[self.pointlike] = 0.0
-        self.c, self.b, self.a = coefficients.T
+        self.tangents, self.normals, self.pointlike, self.a, self.b, self.c = chain_curves(
+            self.points, hit.astype(np.int64), len(ranges), _full_turn(beam_angles),
+            SURFACE_HALF_WINDOW, MAX_SURFACE_GAP)
         self.smoothed = self.points + self.c[:, None] * self.normals
 
     def correspond(self, points: FloatArray) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
@@ -180,6 +137,62 @@ class CurveReference:
         )
         normals = (normal - slope[:, None] * tangent) / np.sqrt(1.0 + slope**2)[:, None]
         return anchors, normals
+
+
+def chain_curves_pure(
+    points: FloatArray, hit: NDArray[np.intp], n_beams: int, full_turn: bool
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], FloatArray, FloatArray, FloatArray]:
+    """The local quadratics of :class:`CurveReference` in arrays: tangents, normals, which
+    returns are pointlike, and the coefficients a, b, c of ``v = c + b u + a u^2`` for the
+    returns ``points`` (M, 2) of beams ``hit`` of ``n_beams``. The reference the compiled
+    :func:`estimators.matching.curve_refinement_kernel.chain_curves` is tested against."""
+    count = len(points)
+    # Neighbours at beam offsets -h..h on the same surface: every link of the chain joins
+    # adjacent beams less than MAX_SURFACE_GAP apart.
+    half = SURFACE_HALF_WINDOW
+    offsets = np.arange(-half, half + 1)
+    following = np.append(np.arange(1, count), 0)
+    linked = ((hit[following] - hit) % n_beams == 1) & (
+        np.hypot(*(points[following] - points).T) < MAX_SURFACE_GAP
+    )
+    if not full_turn:
+        linked[-1] = False  # the last beam does not neighbour the first
+    rows = np.arange(count)
+    # links[:, h + s] joins neighbours s and s + 1 (s = -h..h-1); neighbour o < 0 is on the
+    # surface when every link from it up to the return holds, o > 0 likewise.
+    links = linked[(rows[:, None] + np.arange(-half, half)) % count]
+    valid = np.hstack(
+        [
+            np.cumprod(links[:, half - 1 :: -1], axis=1)[:, ::-1],
+            np.ones((count, 1), dtype=bool),
+            np.cumprod(links[:, half:], axis=1),
+        ]
+    ).astype(bool)
+    neighbours = points[(rows[:, None] + offsets) % count]
+    # Local frame: along the chord between the outermost neighbours on the same surface.
+    first = np.argmax(valid, axis=1)
+    last = len(offsets) - 1 - np.argmax(valid[:, ::-1], axis=1)
+    chord = neighbours[rows, last] - neighbours[rows, first]
+    length = np.hypot(*chord.T)
+    pointlike = length < 1e-9
+    tangents = chord / np.where(pointlike, 1.0, length)[:, None]
+    normals = np.column_stack([-tangents[:, 1], tangents[:, 0]])
+    local = neighbours - points[:, None, :]
+    u = np.einsum("mkj,mj->mk", local, tangents)
+    v = np.einsum("mkj,mj->mk", local, normals)
+    # Weighted normal equations of v = c + b u + a u^2; the tiny ridge on a turns an
+    # under-determined fit (two points) into the line through them.
+    design = np.stack([np.ones_like(u), u, u**2], axis=-1) * valid[..., None]
+    normal_matrix = np.einsum("mki,mkj->mij", design, design)
+    scale = np.maximum(length, 1e-3) ** 4
+    normal_matrix[:, 2, 2] += 1e-9 * scale
+    normal_matrix[pointlike] = np.eye(3)
+    coefficients = np.linalg.solve(
+        normal_matrix, np.einsum("mki,mk->mi", design, v)[..., None]
+    )[..., 0]
+    coefficients[pointlike] = 0.0
+    c, b, a = coefficients.T
+    return tangents, normals, pointlike, a, b, c
 
 
 def refine_on_curves(

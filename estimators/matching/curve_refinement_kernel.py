@@ -118,3 +118,70 @@ def refine_compiled(
         if moved_by + abs(step[2]) * reach > repair_distance:
             paired = False  # points moved enough to have new nearest returns
     return pose, quality
+
+
+@njit(cache=True)
+def chain_curves(
+    points: NDArray[np.float64], hit: NDArray[np.int64], n_beams: int, full_turn: bool,
+    half: int, max_gap: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64],
+           NDArray[np.float64], NDArray[np.float64]]:
+    """``CurveReference``'s local quadratics of the returns ``points`` (beams ``hit`` of
+    ``n_beams``): tangents, normals, pointlike, and the coefficients a, b, c of
+    ``v = c + b u + a u^2`` (see :func:`estimators.matching.curve_refinement.chain_curves_pure`)."""
+    count = points.shape[0]
+    linked = np.empty(count, np.bool_)
+    for i in range(count):
+        j = (i + 1) % count
+        linked[i] = ((hit[j] - hit[i]) % n_beams == 1) and (
+            np.hypot(points[j, 0] - points[i, 0], points[j, 1] - points[i, 1]) < max_gap)
+    if not full_turn:
+        linked[count - 1] = False
+    width = 2 * half + 1
+    tangents = np.empty((count, 2))
+    normals = np.empty((count, 2))
+    pointlike = np.empty(count, np.bool_)
+    a = np.zeros(count)
+    b = np.zeros(count)
+    c = np.zeros(count)
+    valid = np.empty(width, np.bool_)
+    gram = np.empty((3, 3))
+    moment = np.empty(3)
+    for r in range(count):
+        valid[half] = True
+        for o in range(1, half + 1):  # every link from the neighbour up to the return holds
+            valid[half + o] = valid[half + o - 1] and linked[(r + o - 1) % count]
+            valid[half - o] = valid[half - o + 1] and linked[(r - o) % count]
+        first = 0
+        while not valid[first]:
+            first += 1
+        last = width - 1
+        while not valid[last]:
+            last -= 1
+        f, g = (r + first - half) % count, (r + last - half) % count
+        chord_x, chord_y = points[g, 0] - points[f, 0], points[g, 1] - points[f, 1]
+        length = np.hypot(chord_x, chord_y)
+        pointlike[r] = length < 1e-9
+        divisor = 1.0 if pointlike[r] else length
+        tx, ty = chord_x / divisor, chord_y / divisor
+        tangents[r, 0], tangents[r, 1] = tx, ty
+        normals[r, 0], normals[r, 1] = -ty, tx
+        if pointlike[r]:
+            continue
+        gram[:] = 0.0
+        moment[:] = 0.0
+        for o in range(width):
+            if not valid[o]:
+                continue
+            k = (r + o - half) % count
+            lx, ly = points[k, 0] - points[r, 0], points[k, 1] - points[r, 1]
+            u, v = lx * tx + ly * ty, lx * -ty + ly * tx
+            basis = (1.0, u, u * u)
+            for p in range(3):
+                moment[p] += basis[p] * v
+                for q in range(3):
+                    gram[p, q] += basis[p] * basis[q]
+        gram[2, 2] += 1e-9 * max(length, 1e-3) ** 4
+        coefficients = np.linalg.solve(gram, moment)
+        c[r], b[r], a[r] = coefficients[0], coefficients[1], coefficients[2]
+    return tangents, normals, pointlike, a, b, c

@@ -1,6 +1,7 @@
 """The compiled point-to-curve refinement against its array form (``refine_pure``): the same
 pose to 1e-9 and the same quality, with and without a motion prior, about any pivot, in a
-room and in a featureless corridor (where the prior takes over the open direction)."""
+room and in a featureless corridor (where the prior takes over the open direction); and the
+compiled local quadratics of a scan against theirs (``chain_curves_pure``)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimators.matching.curve_refinement import CurveReference, refine_on_curves, refine_pure
+from estimators.matching.curve_refinement import (
+    MAX_SURFACE_GAP,
+    SURFACE_HALF_WINDOW,
+    CurveReference,
+    chain_curves_pure,
+    refine_on_curves,
+    refine_pure,
+)
+from estimators.matching.curve_refinement_kernel import chain_curves
 
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
 
@@ -65,3 +74,29 @@ def test_too_few_pairs_stop_at_the_start() -> None:
     pose, quality = refine_on_curves(reference, far, np.array([0.1, 0.0, 0.0]), 5)
     np.testing.assert_array_equal(pose, [0.1, 0.0, 0.0])
     assert quality == 0.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), corridor=st.booleans(), fov=st.sampled_from([360, 270, 5]),
+       drop=st.floats(0.0, 0.5))
+def test_compiled_chain_curves_match_the_array_form(seed: int, corridor: bool, fov: int,
+                                                    drop: float) -> None:
+    """The local quadratics of a scan (partial fields of view, gaps, lone returns)."""
+    rng = np.random.default_rng(seed)
+    ranges = _scan(np.array([0.3, 0.2, 0.1]), corridor, rng)[:fov]
+    ranges[rng.random(fov) < drop] = 20.0
+    angles = ANGLES[:fov]
+    hit = np.flatnonzero(ranges < 20.0)
+    if len(hit) < 3:
+        return
+    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
+    found = chain_curves(points, hit.astype(np.int64), fov, fov == 360, SURFACE_HALF_WINDOW,
+                         MAX_SURFACE_GAP)
+    expected = chain_curves_pure(points, hit, fov, fov == 360)
+    np.testing.assert_array_equal(found[2], expected[2])
+    for got, want in zip(found[:2], expected[:2], strict=True):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    # a, b, c: the curve's height and slope at the return to 1e-9 (a alone is ill-conditioned
+    # where two returns fit a line: its tiny ridge leaves it ~1e-9 relative)
+    for got, want in zip(found[3:], expected[3:], strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9)
