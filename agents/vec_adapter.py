@@ -49,7 +49,6 @@ class SB3VecEnv(VecEnv):
         super().__init__(venv.num_envs, observation_space or venv.single_observation_space,
                          venv.single_action_space)
         self._actions: NDArray[Any] | None = None
-        self._started = False
 
     # ------------------------------------------------------------------ hooks
     def episode_options(self, i: int, seed: int | None) -> dict[str, Any]:
@@ -72,10 +71,7 @@ class SB3VecEnv(VecEnv):
             observation, info = self.venv.reset(seed=seeds, options=options[0])
             observation, _ = self.transform(observation, None, info, every, None)
         else:
-            if not self._started:  # a vector env's first reset resets every sub-env
-                self.venv.reset(seed=seeds, options=options[0])
             observation = self._reset_each(every, options, seeds)
-        self._started = True
         self.reset_infos = [{} for _ in range(self.num_envs)]
         self._reset_seeds()
         self._reset_options()

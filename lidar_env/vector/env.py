@@ -56,7 +56,8 @@ class DualLidarVectorEnv(VectorEnv):
     observation and info with reward 0 and no termination or truncation.
     ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (or ``seed=[s_0, ...]``);
     ``options`` (world, trace, start, as for the single env) apply to every sub-env reset,
-    and ``options["reset_mask"]`` (bool ``(num_envs,)``) resets only those sub-envs.
+    and ``options["reset_mask"]`` (bool ``(num_envs,)``) resets only those sub-envs (so each
+    can start with its own options); ``step()`` needs every sub-env reset once.
 
     Differences from ``SyncVectorEnv``: a bad action (wrong shape, NaN or inf in the action of
     a sub-env that steps) raises a ``ConfigError`` before any sub-env moves, where
@@ -123,7 +124,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._terminations = np.zeros(n, dtype=np.bool_)
         self._truncations = np.zeros(n, dtype=np.bool_)
         self._autoreset_envs = np.zeros(n, dtype=np.bool_)
-        self._started = False
+        self._ready = np.zeros(n, dtype=np.bool_)  # reset at least once
         self._every_env = np.arange(n, dtype=np.int64)
         self._observe_envs, self._step_envs = EntryPoint(observe_envs), EntryPoint(step_envs)
         self._plan_motion = EntryPoint(plan_motion)
@@ -168,7 +169,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._terminations[mask] = False
         self._truncations[mask] = False
         self._autoreset_envs[mask] = False
-        self._started = True
+        self._ready |= mask
         return self._observation(), self._infos(mask)
 
     def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
@@ -191,9 +192,6 @@ class DualLidarVectorEnv(VectorEnv):
                 or mask.shape != (self.num_envs,) or not mask.any():
             raise ConfigError(f"options['reset_mask']: expected a bool numpy array of shape "
                               f"({self.num_envs},) with at least one True, got {mask!r:.80}")
-        if not self._started:
-            raise ConfigError("options['reset_mask']: the first reset() must reset every "
-                              "sub-env; expected no reset_mask")
         return mask
 
     def _reset_env(self, i: int, seed: int | None, options: Mapping[str, Any]) -> None:
@@ -226,8 +224,10 @@ class DualLidarVectorEnv(VectorEnv):
         self, actions: ArrayLike
     ) -> tuple[Observation, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_],
                dict[str, Any]]:
-        if not self._started:
-            raise gym.error.ResetNeeded("Cannot call step() before calling reset()")
+        if not self._ready.all():
+            raise gym.error.ResetNeeded(
+                f"Cannot call step() before every sub-env was reset; sub-envs "
+                f"{np.flatnonzero(~self._ready).tolist()} never were")
         resetting = self._autoreset_envs.copy()
         stepping = np.flatnonzero(~resetting) if resetting.any() else self._every_env
         speed, yaw_rate, checks = self._motion(actions, stepping)

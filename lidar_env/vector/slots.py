@@ -13,7 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import typed
+from numba import njit
+from numba.typed import List
 from numpy.typing import DTypeLike, NDArray
 
 from lidar_env.primitive_grid import PrimitiveGrid
@@ -27,6 +28,21 @@ def _read_only(array: Any, dtype: DTypeLike, columns: int | None = None) -> NDAr
     view = view.reshape(-1, columns) if columns is not None else view.view()
     view.flags.writeable = False
     return view
+
+
+@njit(cache=True)
+def _filled_list(item: Any, n: int) -> Any:
+    """A numba typed list of ``n`` times ``item``, built compiled: typed-list operations from
+    Python are compiled anew in every process (~1 s per item type), these are cached."""
+    values = List()
+    for _ in range(n):
+        values.append(item)
+    return values
+
+
+@njit(cache=True)
+def _set_item(values: Any, i: int, item: Any) -> None:
+    values[i] = item
 
 
 def _kernel_grid(grid: PrimitiveGrid) -> PrimitiveGrid:
@@ -63,10 +79,10 @@ class SceneSlots:
                  _read_only(trace.waypoints, np.float64, 2),
                  _read_only(trace.arc, np.float64))
         if self._lists is None:
-            self._lists = tuple(typed.List([item] * self.n) for item in items)
+            self._lists = tuple(_filled_list(item, self.n) for item in items)
         else:
             for values, item in zip(self._lists, items, strict=True):
-                values[i] = item
+                _set_item(values, i, item)
         self.worlds[i], self.traces[i] = world, trace
         self.first_edge[i] = len(world.walls)
         self.closed[i] = trace.closed
@@ -75,9 +91,9 @@ class SceneSlots:
     def set_generator(self, i: int, rng: np.random.Generator) -> None:
         """Env ``i`` draws from ``rng`` (the kernel advances its state, as numpy would)."""
         if self._rngs is None:
-            self._rngs = typed.List([rng] * self.n)
+            self._rngs = _filled_list(rng, self.n)
         else:
-            self._rngs[i] = rng
+            _set_item(self._rngs, i, rng)
         self.generators[i] = rng
 
     @property

@@ -90,9 +90,11 @@ def test_step_before_reset_and_bad_reset_arguments() -> None:
         env.reset(seed=0, options={"wrold": "hallway"})
     with pytest.raises(ConfigError, match="seed"):
         env.reset(seed=[1, 2, 3])
-    with pytest.raises(ConfigError, match="reset_mask"):
-        env.reset(options={"reset_mask": np.array([True, False])})  # before a full reset
-    env.reset(seed=0)
+    env.reset(seed=0, options={"reset_mask": np.array([True, False])})
+    with pytest.raises(gym.error.ResetNeeded, match=r"sub-envs \[1\] never were"):
+        env.step(np.zeros((2, 2)))
+    env.reset(seed=1, options={"reset_mask": np.array([False, True])})
+    env.step(np.zeros((2, 2)))  # every sub-env was reset once: it steps
     with pytest.raises(ConfigError, match="reset_mask"):
         env.reset(options={"reset_mask": np.array([1, 0])})
 
