@@ -96,3 +96,30 @@ def test_the_recorder_takes_either_driver(driver: str) -> None:
     assert len(dataset.times) == 41  # the initial observation + 4 s at 10 Hz
     travelled = np.hypot(*np.diff(dataset.poses[:, :2], axis=0).T).sum()
     assert travelled > 3.0  # both drivers drive off along the trace at about 1 m/s or more
+
+
+def test_the_driver_feeds_sector_deltas_to_a_model_trained_on_them(tmp_path) -> None:
+    from stable_baselines3 import PPO
+
+    for deltas, size in ((False, 86), (True, 158)):
+        env = wrapped(sector_deltas=deltas)
+        PPO("MlpPolicy", env, n_steps=64, seed=0, device="cpu").save(tmp_path / "m.zip")
+        driver = SB3Driver(tmp_path / "m.zip")
+        raw = gym.make("DualLidar-v0", trace="straight")
+        observation, info = raw.reset(seed=0)
+        driver.reset(raw)
+        assert driver._view is not None and driver._view.sector_deltas == deltas
+        assert driver._view.observation_space.shape == (size,)
+        assert driver.act(observation, info).shape == (2,)
+
+
+def test_evaluation_reports_how_close_the_movers_came() -> None:
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
+                   config={"moving_obstacles": 10})
+    # Seed 1_000_000: pure pursuit, blind to the scans, walks into a pedestrian after 3.7 s.
+    episode = drive_episode(env, make_driver("scripted"), seed=1_000_000)
+    assert episode.collided and not episode.success and episode.time < 5.0
+    half_diagonal = np.hypot(env.unwrapped.config.car_length, env.unwrapped.config.car_width) / 2
+    assert 0.0 <= episode.closest_mover <= half_diagonal  # touching: edge within the car's box
+    static = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn")
+    assert drive_episode(static, make_driver("scripted"), seed=0).closest_mover == np.inf
