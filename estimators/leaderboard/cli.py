@@ -58,6 +58,7 @@ from estimators.leaderboard.headline import annotate_rows, board_markdown
 from estimators.leaderboard.matrix import (
     DEFAULT_NOISE,
     DEFAULT_SEEDS,
+    MOVER_GROUPS,
     PAPER_DRIVER,
     PAPER_ESTIMATORS,
     Group,
@@ -110,6 +111,9 @@ def _parser() -> argparse.ArgumentParser:
                         "and out-and-back hallway drives)")
     parser.add_argument("--traces", nargs="+", metavar="TRACE",
                         help="trace seeds, crossed with --worlds (default: the paper's pairs)")
+    parser.add_argument("--moving-obstacles", action="store_true",
+                        help="also run the paper's groups with pedestrians walking through "
+                        "them, scoring the moving-obstacle tracker too")
     parser.add_argument("--seeds", nargs="+", type=int, default=list(DEFAULT_SEEDS),
                         help="env seeds per scenario (default: %(default)s)")
     parser.add_argument("--driver", choices=sorted(DRIVERS), default="scripted",
@@ -226,7 +230,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         with db:
-            return _run(args, db, build_groups(args.worlds, args.traces),
+            groups = build_groups(args.worlds, args.traces)
+            groups += list(MOVER_GROUPS) if args.moving_obstacles else []
+            return _run(args, db, groups,
                         [EstimatorSpec(name) for name in estimator_names], start)
     except KeyboardInterrupt as error:  # Ctrl-C: one line, not a traceback; 130 = 128 + SIGINT
         print(error if isinstance(error, RunCancelled) else "interrupted; re-run to resume",
@@ -316,7 +322,8 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
 def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
          specs: list[EstimatorSpec], start: float) -> int:
     config = {"range_noise_std": args.noise}
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config, args.driver)
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, {**config, **dict(g.config)},
+                                   args.driver)
                           for seed in args.seeds]
                  for g in groups}
     logs = _real_logs(args)

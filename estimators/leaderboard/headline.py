@@ -35,7 +35,8 @@ HEADLINE_METRICS: tuple[tuple[str, str, int], ...] = (
 #: The per-group tables' metrics (ms/step is a property of the estimator, not of the group).
 GROUP_METRICS = HEADLINE_METRICS[:4]
 MAP_METRICS: tuple[tuple[str, str, int], ...] = tuple(
-    (key, title, 3) for key, title, _ in METRIC_COLUMNS if key.startswith(("map_", "cylinder_")))
+    (key, title, 3) for key, title, _ in METRIC_COLUMNS
+    if key.startswith(("map_", "cylinder_", "mover_", "moving_")))
 
 
 def annotate_rows(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
@@ -110,10 +111,14 @@ def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
 
 
 def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
-    """The map scores of the estimators' poses, mean ± std over seeds."""
-    header = ["overall #", "estimator", *(title for _, title, _ in MAP_METRICS)]
+    """The map (and, where movers walked, tracker) scores of the estimators' poses, mean ± std
+    over seeds; a column no run has (the tracker's without movers) is left out."""
+    shown = [(key, title, digits) for key, title, digits in MAP_METRICS
+             if not key.startswith(("mover_", "moving_"))
+             or any(math.isfinite(row.get(key, math.nan)) for row in rows)]
+    header = ["overall #", "estimator", *(title for _, title, _ in shown)]
     body = [[row["rank"], str(row["estimator"]),
-             *(_cell(row, key, digits) for key, _, digits in MAP_METRICS)] for row in rows]
+             *(_cell(row, key, digits) for key, _, digits in shown)] for row in rows]
     return _markdown(header, body)
 
 

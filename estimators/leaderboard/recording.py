@@ -32,6 +32,7 @@ from agents.driver import make_driver
 from estimators.base import SensorSetup
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
+from lidar_env.errors import DatabaseError
 
 if TYPE_CHECKING:
     from estimators.mapping.run_maps import MapTruth
@@ -89,12 +90,8 @@ def world_from_geometry(geometry: Mapping[str, Any]) -> Any:
                  bounds=geometry["bounds"])
 
 
-def record(scenario: Scenario) -> SensorDataset:
-    """Drive the scenario's trace once with its driver; return every observation and the truth.
-
-    The episode runs until the env terminates or truncates it; the observation after the last
-    step is kept, as an online estimator would see it.
-    """
+def _drive(scenario: Scenario) -> tuple[list[Any], list[dict[str, Any]], Any]:
+    """The observations and infos of the scenario's drive, and its env (closed)."""
     driver = make_driver(scenario.driver)
     env = make_env(scenario)
     try:
@@ -107,11 +104,19 @@ def record(scenario: Scenario) -> SensorDataset:
             observations.append(observation)
             infos.append(info)
             done = terminated or truncated
-        setup = SensorSetup.from_env(env)
-        env_config = _config_dict(env.unwrapped.config)
-        world = world_geometry(env.unwrapped.world)
     finally:
         env.close()
+    return observations, infos, env
+
+
+def record(scenario: Scenario) -> SensorDataset:
+    """Drive the scenario's trace once with its driver; return every observation and the truth.
+
+    The episode runs until the env terminates or truncates it; the observation after the last
+    step is kept, as an online estimator would see it.
+    """
+    observations, infos, env = _drive(scenario)
+    setup = SensorSetup.from_env(env)
     return SensorDataset(
         setup=setup,
         times=np.array([i["time"] for i in infos], dtype=np.float64),
@@ -119,8 +124,8 @@ def record(scenario: Scenario) -> SensorDataset:
                for key in setup.keys},
         poses=np.array([i["pose"] for i in infos], dtype=np.float64),
         lidar_poses=np.array([i["lidar_poses"] for i in infos], dtype=np.float64),
-        env_config=env_config,
-        world=world,
+        env_config=_config_dict(env.unwrapped.config),
+        world=world_geometry(env.unwrapped.world),
     )
 
 
@@ -226,3 +231,47 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
                         "cylinder_precision": cylinders.precision,
                         "cylinder_error_m": cylinders.mean_error})
     return metrics
+
+
+def mover_truth(scenario: Scenario, dataset: SensorDataset) -> NDArray[np.float64]:
+    """The true movers ``(N, M, 5)`` (x, y, vx, vy, radius) at every observation of the
+    scenario's drive, driven again (the env and its driver are deterministic per seed; a
+    stored dataset does not keep them). Raises :class:`DatabaseError` if the drive does not
+    reproduce ``dataset``'s scans bit for bit."""
+    observations, infos, _ = _drive(scenario)
+    same = len(infos) == len(dataset) and all(
+        np.array_equal(np.stack([o[key] for o in observations]), dataset.scans[key])
+        for key in dataset.setup.keys)
+    if not same:
+        raise DatabaseError(f"scenario {scenario.label}: driving it again did not reproduce "
+                            "the stored scans, so its movers cannot be recovered")
+    return np.stack([i["moving_obstacles"] for i in infos])
+
+
+def score_movers(dataset: SensorDataset, poses: NDArray[np.float64],
+                 movers: NDArray[np.float64]) -> dict[str, float]:
+    """The moving-obstacle tracker (:class:`estimators.mapping.motion_tracking.MotionTracker`,
+    fed the detections of every scan at car poses ``poses`` (N, 3)) scored against the true
+    ``movers`` (N, M, 5) (:class:`estimators.evaluation.mover_scores.MoverScore`):
+    ``mover_recall``, ``mover_position_error_m``, ``mover_velocity_error_mps``,
+    ``mover_id_switches``, ``moving_label_precision``."""
+    from estimators.evaluation.mover_scores import MoverScore
+    from estimators.mapping.motion_tracking import MotionTracker
+    from estimators.mapping.obstacles import detect_in_observation
+    from estimators.matching.scan_matching import scans_to_car_points
+    from lidar_env.se2 import transform_points
+
+    tracker, scores = MotionTracker(), MoverScore()
+    setup = dataset.setup
+    for step, observation in enumerate(dataset.observations()):
+        tracker.update(detect_in_observation(observation, poses[step], setup),
+                       float(dataset.times[step]))
+        scans = {key: np.asarray(observation[key], dtype=np.float64) for key in setup.keys}
+        returns = transform_points(dataset.poses[step], scans_to_car_points(scans, setup))
+        scores.add(tracker.detected_tracks(), movers[step], dataset.poses[step], returns)
+    summary = scores.summary()
+    return {"mover_recall": summary["recall"],
+            "mover_position_error_m": summary["position_error"],
+            "mover_velocity_error_mps": summary["velocity_error"],
+            "mover_id_switches": summary["id_switches"],
+            "moving_label_precision": summary["moving_precision"]}

@@ -30,6 +30,10 @@ METRIC_COLUMNS: tuple[tuple[str, str, bool], ...] = (
     ("map_recall", "map recall", False),
     ("cylinder_recall", "cylinder recall", False),
     ("cylinder_error_m", "cylinder error [m]", True),
+    ("mover_recall", "mover recall", False),
+    ("mover_position_error_m", "mover error [m]", True),
+    ("mover_velocity_error_mps", "mover velocity error [m/s]", True),
+    ("moving_label_precision", "moving-label precision", False),
 )
 
 

@@ -16,7 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from estimators.leaderboard.recording import map_reference, record, replay, score, score_map
+from estimators.leaderboard.recording import (
+    map_reference,
+    mover_truth,
+    record,
+    replay,
+    score,
+    score_map,
+    score_movers,
+)
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import defaults, make, names
 
@@ -115,6 +123,14 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         except Exception:  # the trajectories are still scored, without map metrics
             outcome.failures["map reference"] = traceback.format_exc(limit=-6)
         outcome.timed("map reference", started)
+    movers = None
+    if task.estimators and task.score_maps and task.scenario.config.get("moving_obstacles"):
+        started = time.perf_counter()
+        try:
+            movers = mover_truth(task.scenario, dataset)
+        except Exception:  # the trajectories are still scored, without tracker metrics
+            outcome.failures["movers"] = traceback.format_exc(limit=-6)
+        outcome.timed("map reference", started)
     for spec in task.estimators:
         started = time.perf_counter()
         try:
@@ -129,6 +145,8 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             started = time.perf_counter()
             try:
                 metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
+                if movers is not None:
+                    metrics.update(score_movers(dataset, trace.poses, movers))
             except Exception:  # e.g. poses far outside the world: the trace is kept unmapped
                 outcome.failures[f"{spec.name} map"] = traceback.format_exc(limit=-6)
             outcome.timed("map scores", started)
