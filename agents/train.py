@@ -121,7 +121,7 @@ def train(
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize
 
     torch.set_num_threads(torch_threads)  # small MLP: more threads only add contention
     params = load_hyperparameters(hyperparameters)
@@ -136,9 +136,11 @@ def train(
 
     env_kwargs = {"config": env_config, "wrapper": wrapper_kwargs}
     vec_env = make_training_vec_env(n_envs, seed, env_config, wrapper_kwargs, vectorization)
-    eval_env = make_vec_env(make_training_env, 1, seed=seed + 10_000, env_kwargs=env_kwargs)
-    if isinstance(vec_env, VecMonitor):  # the type EvalCallback expects (statistics alike)
-        eval_env = VecMonitor(eval_env)
+    if isinstance(vec_env, VecMonitor):  # the type EvalCallback expects, with the statistics
+        eval_env = VecMonitor(DummyVecEnv([lambda: make_training_env(**env_kwargs)]))
+        eval_env.seed(seed + 10_000)
+    else:
+        eval_env = make_vec_env(make_training_env, 1, seed=seed + 10_000, env_kwargs=env_kwargs)
     if normalize:
         vec_env = VecNormalize(vec_env)
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False)
