@@ -1,0 +1,34 @@
+"""The estimator speed benchmark's bookkeeping: the forward clock it feeds Intel with, and one
+quick run on a short simulated drive that prints every estimator asked for against ``icp``."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_estimators.py"
+_SPEC = importlib.util.spec_from_file_location("bench_estimators", _PATH)
+bench = importlib.util.module_from_spec(_SPEC)
+sys.modules["bench_estimators"] = bench  # dataclasses look their module up
+_SPEC.loader.exec_module(bench)
+
+
+def test_forward_clock_moves_only_the_stamps_that_jump_back() -> None:
+    times = bench.forward_clock([0.0, 0.1, 0.05, 0.1, 0.3], step=0.001)
+    np.testing.assert_allclose(times, [0.0, 0.1, 0.101, 0.102, 0.3])
+    assert np.all(np.diff(times) > 0)
+
+
+def test_a_short_run_prints_each_estimator_against_icp(capsys: pytest.CaptureFixture) -> None:
+    bench.main(["--estimators", "zero", "lidar_odometry", "--scenarios",
+                "open_cylinders:straight:0", "--no-real", "--max-episode-time", "0.5"])
+    lines = capsys.readouterr().out.splitlines()
+    table = {line.split()[0]: line.split()[1:] for line in lines[lines.index(
+        next(line for line in lines if line.startswith("estimator"))) + 1:]}
+    assert list(table) == ["icp", "zero", "lidar_odometry"]
+    assert float(table["icp"][1]) == 1.0
+    assert all(float(ms) > 0 and float(realtime) > 0 for ms, _, realtime in table.values())
