@@ -17,6 +17,16 @@ seen at grazing incidence, where one beam may slip past a point the next one hit
 at or beyond ``max_range`` (no return) count as free up to ``max_range``; readings below
 ``min_range`` say nothing.
 
+Where it helps and where not: in simulation a reading of ``max_range`` means exactly "nothing
+there", and with pedestrians the filter keeps the odometry's static accuracy (README, "Moving
+obstacles: odometry, maps and tracking"). On a real log it misjudges static points (far
+corners seen from a guessed pose, no-return beams off glass): on the whole ACES log
+``lidar_odometry`` went from 0.034 to 0.059 m per local relation (all relations 0.23 ->
+1.57 m) and 13 to 197 ms per scan (wall time, loaded machine) with it. Taking no-return beams
+as saying nothing still cost the first 2,000 ACES scans 0.032 -> 0.037 m (3 -> 20 ms CPU per
+scan) and took the simulated hallway with movers back to 97.7 % (from 99.1 %). So it is off
+by default (``LocalMapOdometry(reject_dynamic=True)`` turns it on).
+
 Units: metres, radians; points and sensor poses in one common frame (the world, or the car's).
 """
 

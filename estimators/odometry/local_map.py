@@ -53,7 +53,7 @@ step; all relations 1.77 m -> 0.17 m).
 Two Lidars are merged into one point set in the car frame through their known mounts
 (:func:`estimators.matching.scan_matching.scans_to_car_points`).
 
-Moving things (``reject_dynamic``, :class:`estimators.odometry.free_space.MovingPointFilter`):
+Moving things (``reject_dynamic=True``, :class:`estimators.odometry.free_space.MovingPointFilter`):
 points in space recent scans saw as free, or next to points the new scan sees through, neither
 pull the registration nor enter the map, and map points the new scan sees through leave it.
 """
@@ -165,8 +165,8 @@ class LocalMapOdometry(Estimator):
         denoise_map: pair on each map point moved onto the parabola through its neighbours
             rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
             cylinder's points are not pulled ~3 cm inwards).
-        reject_dynamic, dynamic_margin: drop points on moving things (True; module docstring;
-            off for world-aligned scans) lying this far inside space seen free (0.2 m).
+        reject_dynamic, dynamic_margin: drop points on moving things (module docstring) lying
+            this far inside space seen free (0.2 m). Off by default: it costs ACES dearly.
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -198,7 +198,7 @@ class LocalMapOdometry(Estimator):
     velocity_window: int = 5
     denoise_map: bool = True
     prediction_acceleration: float = 0.5
-    reject_dynamic: bool = True
+    reject_dynamic: bool = False
     dynamic_margin: float = 0.2
 
     def __post_init__(self) -> None:

@@ -115,11 +115,12 @@ def test_the_filter_flags_a_walker_and_nothing_static(path: str) -> None:
         scans = [s + 0.01 * rng.standard_normal(360) for s in cast_rays(world, sensors, FULL,
                                                                           10.0)]
         points = _car_points(scans, setup)
-        moving, stale = moving_filter.classify(points, car, dict(zip(setup.keys, scans)), [])
+        observation = dict(zip(setup.keys, scans, strict=True))
+        moving, stale = moving_filter.classify(points, car, observation, [])
         on_walker = np.abs(np.hypot(points[:, 0] - walker_x, points[:, 1] - walker_y)
                            - 0.25) < 0.05
         if step >= 5:  # half a second of history: the walker's whole visible side
             assert moving[on_walker].mean() > (0.9 if path == "crossing" else 0.8)
         assert not moving[~on_walker].any()
         assert stale == []
-        moving_filter.remember(car, dict(zip(setup.keys, scans)), points)
+        moving_filter.remember(car, observation, points)
