@@ -12,7 +12,8 @@ drive: eq.-11 accuracy and ATE of ``lidar_odometry`` and ``slam`` (both with
 ``reject_dynamic=True``, also on the static drive, so like is compared with like); the
 occupancy map's IoU and the static cylinders' precision at the ``lidar_odometry`` poses
 (against the static world); and the moving-obstacle tracker
-(:class:`estimators.mapping.motion_tracking.MotionTracker` on those poses) scored by
+(:func:`estimators.leaderboard.recording.score_movers`: a
+:class:`estimators.mapping.motion_tracking.MotionTracker` on those poses) scored by
 :class:`estimators.evaluation.mover_scores.MoverScore` against ``info["moving_obstacles"]``:
 recall of visible movers within 5 m, position and velocity error, identity switches,
 moving-label precision.
@@ -32,13 +33,13 @@ from agents.driver import make_driver
 from estimators import make
 from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
-from estimators.evaluation.mover_scores import MoverScore
-from estimators.leaderboard.recording import map_reference, score_map, world_geometry
+from estimators.leaderboard.recording import (
+    map_reference,
+    score_map,
+    score_movers,
+    world_geometry,
+)
 from estimators.leaderboard.records import SensorDataset
-from estimators.mapping.motion_tracking import MotionTracker
-from estimators.mapping.obstacles import detect_in_observation
-from estimators.matching.scan_matching import scans_to_car_points
-from lidar_env.se2 import transform_points
 
 GROUPS = (("open_cylinders", "right_turn", 10), ("hallway", "zigzag", 5),
           ("closed_to_open", "zigzag", 5))
@@ -90,19 +91,6 @@ def run(name: str, dataset: SensorDataset) -> np.ndarray:
     return estimator.trajectory
 
 
-def track(dataset: SensorDataset, poses: np.ndarray, movers: list[Any]) -> dict[str, float]:
-    """MoverScore of a MotionTracker fed detections at ``poses`` (N, 3)."""
-    tracker, score = MotionTracker(), MoverScore()
-    setup = dataset.setup
-    for step, observation in enumerate(dataset.observations()):
-        tracker.update(detect_in_observation(observation, poses[step], setup),
-                       float(dataset.times[step]))
-        scans = {key: np.asarray(observation[key], dtype=np.float64) for key in setup.keys}
-        returns = transform_points(dataset.poses[step], scans_to_car_points(scans, setup))
-        score.add(tracker.detected_tracks(), movers[step], dataset.poses[step], returns)
-    return score.summary()
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
@@ -129,10 +117,11 @@ def main() -> None:
                 cells += [f"{maps['map_iou']:.3f}",
                           f"{maps.get('cylinder_precision', float('nan')):.3f}"]
                 if m:
-                    s = track(dataset, poses, movers[:n])
-                    cells += [f"{s['recall']:.3f}", f"{s['position_error']:.3f}",
-                              f"{s['velocity_error']:.3f}", f"{s['id_switches']:.0f}",
-                              f"{s['moving_precision']:.3f}"]
+                    s = score_movers(dataset, poses, np.stack(movers[:n]))
+                    cells += [f"{s['mover_recall']:.3f}", f"{s['mover_position_error_m']:.3f}",
+                              f"{s['mover_velocity_error_mps']:.3f}",
+                              f"{s['mover_id_switches']:.0f}",
+                              f"{s['moving_label_precision']:.3f}"]
                 else:
                     cells += ["-"] * 5
                 print(f"| {world}/{trace} | {seed} | {m} | {n} | " + " | ".join(cells) + " |",

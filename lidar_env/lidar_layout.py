@@ -30,15 +30,7 @@ from lidar_env.errors import ConfigError
 from lidar_env.lidar import Geometry, as_poses, as_world
 from lidar_env.lidar_config import LidarConfig
 from lidar_env.primitive_grid import PrimitiveGrid
-from lidar_env.ray_casting import (
-    _beam_span,
-    _bearing,
-    _circle_hit,
-    _wrap_positive,
-    beam_geometry,
-    cast_sensor,
-    new_scratch,
-)
+from lidar_env.ray_casting import beam_geometry, cast_sensor, new_scratch, sweep_circle
 
 _NO_DRAWS = np.empty(0)
 
@@ -63,25 +55,10 @@ def cast_movers(
     ch, sh = math.cos(heading), math.sin(heading)
     heading = heading % (2.0 * math.pi)
     for i in range(movers.shape[0]):
-        cx, cy, r = movers[i, 0], movers[i, 1], movers[i, 2]
-        fx, fy = cx - ox, cy - oy
-        d = math.sqrt(fx * fx + fy * fy)
-        if d - r >= max_range:
-            continue
-        if d <= r:
-            ranges[:] = 0.0
+        if not sweep_circle(ranges, ox, oy, ch, sh, heading, movers[i, 0], movers[i, 1],
+                            movers[i, 2], sorted_angles, order, step, cos_beam, sin_beam,
+                            max_range):
             return
-        half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
-        lo = _wrap_positive(_bearing(fy, fx) - half - heading)
-        f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
-        n0 = max(l0 - f0, 0)
-        for q in range(n0 + l1 - f1):
-            j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-            dx = ch * cos_beam[j] - sh * sin_beam[j]
-            dy = sh * cos_beam[j] + ch * sin_beam[j]
-            t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
-            if t < ranges[j]:
-                ranges[j] = t
 
 
 @njit(cache=True, fastmath=False)

@@ -170,6 +170,43 @@ def _gather(
 
 
 @njit(cache=True, fastmath=False)
+def sweep_circle(
+    ranges: NDArray[np.float64],
+    ox: float, oy: float, ch: float, sh: float, heading: float,
+    cx: float, cy: float, r: float,
+    sorted_angles: NDArray[np.float64],
+    order: NDArray[np.int64],
+    step: float,
+    cos_beam: NDArray[np.float64],
+    sin_beam: NDArray[np.float64],
+    max_range: float,
+) -> bool:
+    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi), its
+    cosine ``ch`` and sine ``sh``) to the exact hits on the circle ``(cx, cy, r)`` [m], for the
+    beams within the angle it subtends only. Returns False (all ranges 0) when the sensor is
+    inside the circle."""
+    fx, fy = cx - ox, cy - oy
+    d = math.sqrt(fx * fx + fy * fy)
+    if d - r >= max_range:
+        return True
+    if d <= r:
+        ranges[:] = 0.0
+        return False
+    half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
+    lo = _wrap_positive(_bearing(fy, fx) - half - heading)
+    f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
+    n0 = max(l0 - f0, 0)
+    for q in range(n0 + l1 - f1):
+        j = order[f0 + q] if q < n0 else order[f1 + q - n0]
+        dx = ch * cos_beam[j] - sh * sin_beam[j]
+        dy = sh * cos_beam[j] + ch * sin_beam[j]
+        t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
+        if t < ranges[j]:
+            ranges[j] = t
+    return True
+
+
+@njit(cache=True, fastmath=False)
 def _scan_one(
     ranges: NDArray[np.float64],
     ox: float,
@@ -193,26 +230,11 @@ def _scan_one(
     heading = heading % _TWO_PI
     for i in circle_ids:
         cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
-        fx, fy = cx - ox, cy - oy
-        if max(abs(fx), abs(fy)) - r >= max_range:  # a cheap bounding-box test first
+        if max(abs(cx - ox), abs(cy - oy)) - r >= max_range:  # a cheap bounding-box test first
             continue
-        d = math.sqrt(fx * fx + fy * fy)
-        if d - r >= max_range:
-            continue
-        if d <= r:
-            ranges[:] = 0.0
+        if not sweep_circle(ranges, ox, oy, ch, sh, heading, cx, cy, r, sorted_angles, order,
+                            step, cos_beam, sin_beam, max_range):
             return
-        half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
-        lo = _wrap_positive(_bearing(fy, fx) - half - heading)
-        f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
-        n0 = max(l0 - f0, 0)
-        for q in range(n0 + l1 - f1):
-            j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-            dx = ch * cos_beam[j] - sh * sin_beam[j]
-            dy = sh * cos_beam[j] + ch * sin_beam[j]
-            t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
-            if t < ranges[j]:
-                ranges[j] = t
     for i in segment_ids:
         seg = segments[i]
         # A cheap bounding-box test first (few branches), then the exact distance.
