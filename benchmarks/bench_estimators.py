@@ -35,6 +35,7 @@ from estimators.leaderboard.matrix import DEFAULT_NOISE
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
 from estimators.paths import SHARED_DATA
+from lidar_env.errors import EstimatorInputError
 
 REFERENCE = "icp"
 DATA = SHARED_DATA / "radish"
@@ -103,13 +104,18 @@ def cpu_seconds_per_scan(name: str, data: Data) -> float:
 
 
 def rows(names: list[str], data: Data) -> Iterator[tuple[str, float, float, float]]:
-    """(name, ms/scan, ratio to the reference, real-time factor), the reference first."""
+    """(name, ms/scan, ratio to the reference, real-time factor), the reference first; NaN
+    for an estimator the data cannot feed (``pc_offset``/``pc_pg`` on a one-Lidar log)."""
     reference = cpu_seconds_per_scan(REFERENCE, data)
     yield REFERENCE, 1e3 * reference, 1.0, data.scan_period / reference
     for name in names:
-        if name != REFERENCE:
+        if name == REFERENCE:
+            continue
+        try:
             seconds = cpu_seconds_per_scan(name, data)
-            yield name, 1e3 * seconds, seconds / reference, data.scan_period / seconds
+        except EstimatorInputError:
+            seconds = float("nan")
+        yield name, 1e3 * seconds, seconds / reference, data.scan_period / seconds
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -147,7 +153,10 @@ def main(argv: list[str] | None = None) -> None:
         print(f"\n{data.label}: {len(data.times)} scans at {1 / data.scan_period:.1f} Hz")
         print(f"{'estimator':<16}{'ms/scan':>9}{'x ' + REFERENCE:>8}{'x real time':>13}")
         for name, ms, ratio, realtime in rows(args.estimators, data):
-            print(f"{name:<16}{ms:9.3f}{ratio:8.2f}{realtime:13.1f}", flush=True)
+            if np.isnan(ms):
+                print(f"{name:<16}{'n/a (needs more Lidars than the data has)':>30}", flush=True)
+            else:
+                print(f"{name:<16}{ms:9.3f}{ratio:8.2f}{realtime:13.1f}", flush=True)
 
 
 if __name__ == "__main__":
