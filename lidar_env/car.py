@@ -100,6 +100,18 @@ def box_touches_obstacles(
 
 
 @numba.njit(cache=True)
+def arc_pose(x0: float, y0: float, h0: float, speed: float, yaw_rate: float,
+             t: float) -> tuple[float, float, float]:
+    """The pose (x [m], y [m], unwrapped heading [rad]) ``t`` [s] along the unicycle arc from
+    ``(x0, y0, h0)`` at ``speed`` [m/s] and ``yaw_rate`` [rad/s] (a line below 1e-9 rad/s)."""
+    h = h0 + yaw_rate * t
+    if abs(yaw_rate) < 1e-9:
+        return x0 + speed * t * math.cos(h0), y0 + speed * t * math.sin(h0), h
+    radius = speed / yaw_rate
+    return x0 + radius * (math.sin(h) - math.sin(h0)), y0 - radius * (math.cos(h) - math.cos(h0)), h
+
+
+@numba.njit(cache=True)
 def drive_arc(
     pose: np.ndarray,
     speed: float,
@@ -119,14 +131,7 @@ def drive_arc(
     x0, y0, h0 = pose[0], pose[1], pose[2]
     for k in range(1, substeps + 1):
         t = duration * k / substeps
-        h = h0 + yaw_rate * t
-        if abs(yaw_rate) < 1e-9:
-            x = x0 + speed * t * math.cos(h0)
-            y = y0 + speed * t * math.sin(h0)
-        else:
-            radius = speed / yaw_rate
-            x = x0 + radius * (math.sin(h) - math.sin(h0))
-            y = y0 - radius * (math.cos(h) - math.cos(h0))
+        x, y, h = arc_pose(x0, y0, h0, speed, yaw_rate, t)
         if box_touches_obstacles(x, y, h, half_length, half_width, circles, segments):
             return True
         pose[0], pose[1] = x, y
@@ -156,14 +161,7 @@ def drive_arc_among_movers(
     no_segments = np.empty((0, 4))
     for k in range(1, substeps + 1):
         t = duration * k / substeps
-        h = h0 + yaw_rate * t
-        if abs(yaw_rate) < 1e-9:
-            x = x0 + speed * t * math.cos(h0)
-            y = y0 + speed * t * math.sin(h0)
-        else:
-            radius = speed / yaw_rate
-            x = x0 + radius * (math.sin(h) - math.sin(h0))
-            y = y0 - radius * (math.cos(h) - math.cos(h0))
+        x, y, h = arc_pose(x0, y0, h0, speed, yaw_rate, t)
         for i in range(movers.shape[0]):
             moved[i, 0] = movers[i, 0] + mover_velocities[i, 0] * t
             moved[i, 1] = movers[i, 1] + mover_velocities[i, 1] * t
