@@ -22,7 +22,7 @@ import dataclasses
 import os
 import platform
 import time
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 import estimators
 from estimators.base import LIDAR_KEYS, SensorSetup
 from estimators.datasets.carmen import CarmenLog, load_log
-from estimators.datasets.real_log import setup_from_log
+from estimators.datasets.real_log import forward_clock, setup_from_log
 from estimators.leaderboard.matrix import DEFAULT_NOISE
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
@@ -60,15 +60,6 @@ class Data:
     def scan_period(self) -> float:
         """Median time between scans [s]."""
         return float(np.median(np.diff(self.times)))
-
-
-def forward_clock(times: Iterable[float], step: float = 1e-6) -> NDArray[np.float64]:
-    """``times`` [s] made strictly increasing: each at least ``step`` after the one before
-    (a stamp that jumps back is moved just past its predecessor; the rest are untouched)."""
-    result = np.array(list(times), dtype=np.float64)
-    for i in range(1, len(result)):
-        result[i] = max(result[i], result[i - 1] + step)
-    return result
 
 
 def simulated(spec: str, max_episode_time: float | None = None) -> Data:

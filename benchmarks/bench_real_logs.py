@@ -8,8 +8,8 @@ No estimator reads odometry. ``icp`` (scan-to-previous-scan PL-ICP from the iden
 reference every ratio is measured against, in the same run on the same machine. ms/scan is
 CPU time (``time.process_time``) per scan, the real-time factor the log's median scan interval
 over it. Intel's logger clock runs backwards 631 times, which the estimators refuse: they are
-fed the stamps made to run forward (``bench_estimators.forward_clock``: a stamp that jumps
-back is moved 1 us past its predecessor) and scored on the logged ones.
+fed the stamps made to run forward (``estimators.datasets.real_log.forward_clock``: a stamp
+that jumps back is moved 1 us past its predecessor) and scored on the logged ones.
 """
 
 from __future__ import annotations
@@ -18,23 +18,19 @@ import argparse
 import dataclasses
 import os
 import platform
-import sys
 import time
-from pathlib import Path
 
 from estimators import make
 from estimators.datasets.carmen import CarmenLog, load_log
 from estimators.datasets.real_log import (
     LogRun,
+    forward_clock,
     pseudo_truth_relations,
     run_on_log,
     score_relations,
 )
 from estimators.evaluation.relations import load_relations, relation_errors
 from estimators.paths import SHARED_DATA
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_estimators import forward_clock  # noqa: E402  (a sibling script, not a package)
 
 DATA = SHARED_DATA / "radish"
 REFERENCE = "icp"

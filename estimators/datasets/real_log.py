@@ -9,6 +9,8 @@ or the logged poses.
 from __future__ import annotations
 
 import time
+import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +77,20 @@ class LogRun:
         return self.scan_period / self.seconds_per_scan
 
 
+class BackwardClockWarning(UserWarning):
+    """A log's stamps do not run forward; the estimator was fed them nudged forward."""
+
+
+def forward_clock(times: Iterable[float], step: float = 1e-6) -> NDArray[np.float64]:
+    """``times`` [s] made strictly increasing: each at least ``step`` after the one before
+    (a stamp that jumps back, or repeats, is moved just past its predecessor; the rest are
+    untouched)."""
+    result = np.array(list(times), dtype=np.float64)
+    for i in range(1, len(result)):
+        result[i] = max(result[i], result[i - 1] + step)
+    return result
+
+
 def run_on_log(
     estimator: Estimator,
     log: CarmenLog | Recording,
@@ -84,7 +100,9 @@ def run_on_log(
 ) -> LogRun:
     """Feed the first ``limit`` scans of ``log`` (all when None) to ``estimator``; the first
     scan is the origin. A CARMEN log is timestamped on ``clock`` (``"ipc"`` for Kümmerle's
-    relation files, ``"logger"`` for ``*-corrected`` logs); a :class:`Recording` (K Lidars)
+    relation files, ``"logger"`` for ``*-corrected`` logs; stamps that run back, as 631 of
+    Intel's logger stamps do, reach the estimator nudged forward, with a
+    :class:`BackwardClockWarning`); a :class:`Recording` (K Lidars)
     on its own header stamps, with its own setup unless ``setup`` overrides it (e.g.
     self-calibrated mounts)."""
     if isinstance(log, Recording):
@@ -95,9 +113,15 @@ def run_on_log(
     times = log.scan_times(clock)
     scans = log.scans if limit is None else log.scans[:limit]
     times = times[: len(scans)]
+    fed = forward_clock(times)
+    moved = int(np.count_nonzero(fed != times))
+    if moved:  # estimators refuse a clock that runs back; the run keeps the logged stamps
+        warnings.warn(f"{moved} of the log's {len(times)} {clock!r} stamps do not run forward; "
+                      "the estimator gets each moved 1 us past the one before, the run "
+                      "keeps the logged ones", BackwardClockWarning, stacklevel=2)
     estimator.reset(setup, np.zeros(3))
     start = time.perf_counter()
-    for scan, t in zip(scans, times, strict=True):
+    for scan, t in zip(scans, fed, strict=True):
         estimator.update({LIDAR_KEYS[0]: scan.ranges}, float(t))
     elapsed = time.perf_counter() - start
     return LogRun(times, estimator.trajectory, elapsed / max(len(scans), 1))

@@ -75,3 +75,17 @@ def test_intel_pseudo_truth_lines_up_with_the_log():
     times = load_log(DATA / "intel.clf.bz2").scan_times("logger")
     # Every SLAM keyframe is one of the log's scans (its stamps are rounded to 6 digits).
     match_times(times, relations["consecutive"].t1, tolerance=0.01)
+
+
+def test_a_clock_that_runs_back_is_nudged_forward_with_a_warning(aces):
+    from estimators.datasets.real_log import BackwardClockWarning
+
+    head = aces.scans[:30]
+    stamps = [s.logger_timestamp for s in head]
+    stamps[10] = stamps[9] - 0.05  # a stamp that jumps back, as 631 of Intel's do
+    tampered = dataclasses.replace(aces, scans=[
+        dataclasses.replace(s, logger_timestamp=t) for s, t in zip(head, stamps, strict=True)])
+    with pytest.warns(BackwardClockWarning, match="1 of the log's 30 'logger' stamps"):
+        run = run_on_log(make("icp"), tampered, clock="logger")
+    np.testing.assert_array_equal(run.times, stamps)  # scored on the logged stamps
+    assert np.all(np.isfinite(run.poses)) and len(run.poses) == 30
