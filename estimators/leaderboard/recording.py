@@ -115,6 +115,12 @@ def record(scenario: Scenario) -> SensorDataset:
     The episode runs until the env terminates or truncates it; the observation after the last
     step is kept, as an online estimator would see it.
     """
+    return record_with_movers(scenario)[0]
+
+
+def record_with_movers(scenario: Scenario) -> tuple[SensorDataset, NDArray[np.float64]]:
+    """:func:`record`, and the true movers ``(N, M, 5)`` of the same drive (which a
+    :class:`SensorDataset` does not keep; :func:`mover_truth` recovers them later)."""
     observations, infos, env = _drive(scenario)
     setup = SensorSetup.from_env(env)
     return SensorDataset(
@@ -126,7 +132,7 @@ def record(scenario: Scenario) -> SensorDataset:
         lidar_poses=np.array([i["lidar_poses"] for i in infos], dtype=np.float64),
         env_config=_config_dict(env.unwrapped.config),
         world=world_geometry(env.unwrapped.world),
-    )
+    ), np.stack([i["moving_obstacles"] for i in infos])
 
 
 def replay(dataset: SensorDataset, estimator: str, params: Mapping[str, Any] | None = None,
@@ -238,14 +244,13 @@ def mover_truth(scenario: Scenario, dataset: SensorDataset) -> NDArray[np.float6
     scenario's drive, driven again (the env and its driver are deterministic per seed; a
     stored dataset does not keep them). Raises :class:`DatabaseError` if the drive does not
     reproduce ``dataset``'s scans bit for bit."""
-    observations, infos, _ = _drive(scenario)
-    same = len(infos) == len(dataset) and all(
-        np.array_equal(np.stack([o[key] for o in observations]), dataset.scans[key])
-        for key in dataset.setup.keys)
+    again, movers = record_with_movers(scenario)
+    same = len(again) == len(dataset) and all(
+        np.array_equal(again.scans[key], dataset.scans[key]) for key in dataset.setup.keys)
     if not same:
         raise DatabaseError(f"scenario {scenario.label}: driving it again did not reproduce "
                             "the stored scans, so its movers cannot be recovered")
-    return np.stack([i["moving_obstacles"] for i in infos])
+    return movers
 
 
 def score_movers(dataset: SensorDataset, poses: NDArray[np.float64],

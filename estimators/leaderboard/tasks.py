@@ -19,7 +19,7 @@ import numpy as np
 from estimators.leaderboard.recording import (
     map_reference,
     mover_truth,
-    record,
+    record_with_movers,
     replay,
     score,
     score_map,
@@ -100,12 +100,12 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
     yield (the map reference, and the scores of the map at the true poses, stored with every
     trace as ``<metric>_true_poses``, are computed once here for all estimators); runs in a
     worker, touches no database."""
-    dataset, recorded = task.dataset, False
+    dataset, recorded, recorded_movers = task.dataset, False, None
     outcome = ScenarioOutcome(task.scenario, None, False)
     if dataset is None:
         started = time.perf_counter()
         try:
-            dataset, recorded = record(task.scenario), True
+            (dataset, recorded_movers), recorded = record_with_movers(task.scenario), True
         except Exception:  # reported per stage; the rest of the run goes on
             outcome.failures["record"] = traceback.format_exc(limit=-6)
             return outcome
@@ -126,8 +126,9 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
     movers = None
     if task.estimators and task.score_maps and task.scenario.config.get("moving_obstacles"):
         started = time.perf_counter()
-        try:
-            movers = mover_truth(task.scenario, dataset)
+        try:  # a stored dataset lacks them: drive it again
+            movers = (recorded_movers if recorded_movers is not None
+                      else mover_truth(task.scenario, dataset))
         except Exception:  # the trajectories are still scored, without tracker metrics
             outcome.failures["movers"] = traceback.format_exc(limit=-6)
         outcome.timed("map reference", started)
