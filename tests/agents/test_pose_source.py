@@ -62,3 +62,21 @@ def test_the_scripted_driver_finishes_a_paper_trace_on_estimated_poses(source: s
     assert episode.success and not episode.collided
     assert episode.cross_track_error < 0.05
     assert 0.0 < episode.end_point_error < 0.2
+
+
+def test_evaluate_drives_the_paper_groups_on_each_pose_source(capsys: pytest.CaptureFixture[str]
+                                                              ) -> None:
+    from agents.evaluate import PAPER_GROUPS, main
+
+    main(["--drivers", "scripted", "--paper-groups", "--episodes", "1",
+          "--pose-sources", "true"])
+    lines = capsys.readouterr().out.splitlines()
+    header = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    rows = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
+    assert [(row[2], row[3]) for row in rows] == list(PAPER_GROUPS)
+    for row in rows:  # the true pose: every trace finished, no estimate to be off
+        assert row[header.index("success")] == "100%"
+        assert row[header.index("end-point [m]")] == "0.000"
+    with pytest.raises(ConfigError, match="pose_source: expected one of"):
+        main(["--drivers", "scripted", "--paper-groups", "--episodes", "1",
+              "--pose-sources", "gps"])
