@@ -1,4 +1,4 @@
-"""Loading a large ROS map_server map and scanning it: ``lidar_env.ros_map.load_ros_map`` on a
+"""Loading a large ROS map_server map and scanning it: ``World.from_ros_map`` on a
 2000 x 2000 px map (5 cm: 100 m x 100 m of rooms, walls, pillars, unknown border), then the
 exact Lidar against pymunk's ``segment_query_first`` on the world it gives.
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from lidar_env.lidar import cast_rays, pymunk_cast_rays
 from lidar_env.ros_map import read_ros_map, save_ros_map
+from lidar_env.world import World
 
 
 def building(pixels: int, rng: np.random.Generator) -> np.ndarray:
@@ -56,10 +57,10 @@ def main() -> None:
         ros = read_ros_map(yaml_path)
         read_s = time.process_time() - cpu
         cpu = time.process_time()
-        world = ros.to_world()
+        world = World.from_ros_map(ros)
         trace_s = time.process_time() - cpu
     print(f"{args.pixels} x {args.pixels} px map: read {read_s:.2f} s, traced into "
-          f"{len(world.segments)} edges in {trace_s:.2f} s; load_ros_map total "
+          f"{len(world.segments)} edges in {trace_s:.2f} s; from_ros_map total "
           f"{read_s + trace_s:.2f} s CPU (target <= 5 s)")
     xmin, ymin, xmax, ymax = world.bounds
     candidates = np.column_stack([rng.uniform(xmin, xmax, 50 * args.poses),

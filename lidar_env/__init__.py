@@ -10,7 +10,7 @@ import gymnasium
 from lidar_env.config import EnvConfig
 from lidar_env.env import DualLidarEnv
 from lidar_env.lidar_config import LidarConfig
-from lidar_env.ros_map import load_ros_map, save_ros_map
+from lidar_env.ros_map import save_ros_map
 from lidar_env.traces import TRACE_NAMES, Trace, make_trace
 from lidar_env.world import World
 from lidar_env.worlds import WORLD_NAMES, make_world
@@ -27,7 +27,6 @@ __all__ = [
     "LidarConfig",
     "Trace",
     "World",
-    "load_ros_map",
     "make_trace",
     "make_world",
     "save_ros_map",

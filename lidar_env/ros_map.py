@@ -8,7 +8,8 @@ occupancy probability ``p = (255 - v) / 255`` (``v / 255`` if ``negate``): occup
 ``p > occupied_thresh``, free if ``p < free_thresh``, else unknown (in ``scale`` mode, cells in
 between are obstacles when ``p >= 0.5``, as the scaled value would then say "occupied").
 Unknown cells are obstacles by default (``unknown_is_obstacle``), so the car never drives into
-unmapped space. The writer stores 0 = occupied, 254 = free, 205 = unknown, as map_saver does.
+unmapped space; :meth:`lidar_env.world.World.from_ros_map` builds the world. The writer
+stores 0 = occupied, 254 = free, 205 = unknown, as map_saver does.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import MapError
-from lidar_env.world import World
 
 #: map_server's modes this reader understands.
 ROS_MAP_MODES: tuple[str, ...] = ("trinary", "scale")
@@ -41,39 +41,6 @@ class RosMap:
     resolution: float
     origin: tuple[float, float, float]
     name: str
-
-    def to_world(self, unknown_is_obstacle: bool = True) -> World:
-        """The map as a :class:`World` of traced polygons (unknown cells as obstacles unless
-        ``unknown_is_obstacle`` is False); a yaw rotates it about the origin."""
-        blocked = (self.cells == 100) | ((self.cells == -1) & bool(unknown_is_obstacle))
-        ox, oy, yaw = self.origin
-        if yaw == 0.0:
-            return World.from_image(blocked, self.resolution, (ox, oy), name=self.name)
-        flat = World.from_image(blocked, self.resolution, (0.0, 0.0), name=self.name)
-        height, width = blocked.shape
-        corners = np.array([[0, 0], [width, 0], [width, height], [0, height]]) * self.resolution
-        c, s = math.cos(yaw), math.sin(yaw)
-        c, s = (round(c), round(s)) if min(abs(c), abs(s)) < 1e-12 else (c, s)  # quarter turns
-
-        def place(points: NDArray[np.float64]) -> NDArray[np.float64]:
-            return points @ np.array([[c, s], [-s, c]]) + (ox, oy)
-
-        rect = place(corners.astype(np.float64))
-        lo, hi = rect.min(axis=0), rect.max(axis=0)
-        box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-        # the parts of the bounding box outside the rotated image are not map: each box corner
-        # and the two image corners on the box edges through it make a solid triangle
-        outside = []
-        for corner in box:
-            if np.min(np.abs(rect - corner).sum(axis=1)) < 1e-9 * (hi - lo).sum():
-                continue  # the image fills this corner (a quarter-turn yaw)
-            on_row = rect[np.argmin(np.abs(rect[:, 1] - corner[1]))]
-            on_column = rect[np.argmin(np.abs(rect[:, 0] - corner[0]))]
-            u, v = on_row - corner, on_column - corner
-            if abs(u[0] * v[1] - u[1] * v[0]) > 1e-9 * (hi - lo).prod():  # not a sliver
-                outside.append(np.array([corner, on_row, on_column]))
-        polygons = [place(np.asarray(p, dtype=np.float64)) for p in flat.polygons] + outside
-        return World(polygons=polygons, name=self.name, bounds=(*lo, *hi))
 
 
 def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
@@ -115,11 +82,6 @@ def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
         cells[between & (p >= 0.5)] = 100
         cells[between & (p < 0.5)] = 0
     return RosMap(cells, resolution, origin, path.stem)  # type: ignore[arg-type]
-
-
-def load_ros_map(yaml_path: str | os.PathLike, unknown_is_obstacle: bool = True) -> World:
-    """The :class:`World` of a map_server YAML (see the module docstring)."""
-    return read_ros_map(yaml_path).to_world(unknown_is_obstacle)
 
 
 def save_ros_map(

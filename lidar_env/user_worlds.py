@@ -19,7 +19,6 @@ from typing import Any
 import numpy as np
 
 from lidar_env.errors import ConfigError
-from lidar_env.ros_map import load_ros_map
 from lidar_env.traces import TraceFitError, make_trace
 from lidar_env.world import World
 from lidar_env.worlds import WORLD_NAMES, Scene, check_world_name
@@ -48,7 +47,7 @@ def resolve_world(value: Any, resolution: float) -> str | World:
     if isinstance(value, (str, os.PathLike)):
         path = Path(value)
         if path.suffix.lower() in (".yaml", ".yml"):
-            return load_ros_map(path)
+            return World.from_ros_map(path)
         if isinstance(value, os.PathLike) or path.suffix.lower() in (".png", ".pgm", ".bmp",
                                                                      ".jpg", ".jpeg", ".tif"):
             if not path.exists():

@@ -11,6 +11,7 @@ polygons when you mean a union.
 
 from __future__ import annotations
 
+import math
 import numbers
 import os
 from collections.abc import Sequence
@@ -25,6 +26,7 @@ from lidar_env.errors import MapError
 from lidar_env.occupancy_image import PixelGrid, read_occupancy, trace_outlines
 from lidar_env.polygons import as_polygon, as_rows, convex_pieces, even_odd_inside, polygon_edges
 from lidar_env.primitive_grid import PrimitiveGrid, build_grid, point_queries
+from lidar_env.ros_map import RosMap, read_ros_map
 
 #: [m] margin either side of a flat default bounding box (a world of one straight wall).
 FLAT_BOUNDS_MARGIN = 0.5
@@ -202,6 +204,47 @@ class World:
         polygons = [np.asarray(loop) * resolution + (ox, oy) for loop in loops]
         bounds = (ox, oy, ox + width * resolution, oy + height * resolution)
         return cls(polygons=polygons, name=name, bounds=bounds)
+
+    @classmethod
+    def from_ros_map(
+        cls, yaml_path: str | os.PathLike | RosMap, unknown_is_obstacle: bool = True
+    ) -> World:
+        """The world of a ROS ``map_server`` map: its YAML (``image``, ``resolution``, ``origin``
+        [x, y, yaw], ``negate``, ``occupied_thresh``, ``free_thresh``, ``mode``; see
+        :mod:`lidar_env.ros_map`) or a :class:`~lidar_env.ros_map.RosMap` read from one.
+        Traced polygons; unknown cells are obstacles unless ``unknown_is_obstacle`` is False; a
+        yaw rotates the map about its origin. A :class:`~lidar_env.errors.MapError` names the
+        file and key of a bad map."""
+        ros = yaml_path if isinstance(yaml_path, RosMap) else read_ros_map(yaml_path)
+        blocked = (ros.cells == 100) | ((ros.cells == -1) & bool(unknown_is_obstacle))
+        ox, oy, yaw = ros.origin
+        if yaw == 0.0:
+            return cls.from_image(blocked, ros.resolution, (ox, oy), name=ros.name)
+        flat = cls.from_image(blocked, ros.resolution, (0.0, 0.0), name=ros.name)
+        height, width = blocked.shape
+        corners = np.array([[0, 0], [width, 0], [width, height], [0, height]]) * ros.resolution
+        c, s = math.cos(yaw), math.sin(yaw)
+        c, s = (round(c), round(s)) if min(abs(c), abs(s)) < 1e-12 else (c, s)  # quarter turns
+
+        def place(points: NDArray[np.float64]) -> NDArray[np.float64]:
+            return points @ np.array([[c, s], [-s, c]]) + (ox, oy)
+
+        rect = place(corners.astype(np.float64))
+        lo, hi = rect.min(axis=0), rect.max(axis=0)
+        box = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        # the parts of the bounding box outside the rotated image are not map: each box corner
+        # and the two image corners on the box edges through it make a solid triangle
+        outside = []
+        for corner in box:
+            if np.min(np.abs(rect - corner).sum(axis=1)) < 1e-9 * (hi - lo).sum():
+                continue  # the image fills this corner (a quarter-turn yaw)
+            on_row = rect[np.argmin(np.abs(rect[:, 1] - corner[1]))]
+            on_column = rect[np.argmin(np.abs(rect[:, 0] - corner[0]))]
+            u, v = on_row - corner, on_column - corner
+            if abs(u[0] * v[1] - u[1] * v[0]) > 1e-9 * (hi - lo).prod():  # not a sliver
+                outside.append(np.array([corner, on_row, on_column]))
+        polygons = [place(np.asarray(p, dtype=np.float64)) for p in flat.polygons] + outside
+        return cls(polygons=polygons, name=ros.name, bounds=(*lo, *hi))
 
     def to_image(
         self, resolution: float, bounds: Sequence[float] | None = None

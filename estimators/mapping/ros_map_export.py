@@ -4,7 +4,7 @@ The file format lives in :mod:`lidar_env.ros_map`; this module only places an
 :class:`~estimators.mapping.occupancy.OccupancyGrid` in it: the grid's lower-left corner
 ``(xmin, ymin)`` becomes the map origin (yaw 0), its cells (row 0 at max y) the pixels, cells
 never observed (probability 0.5) "unknown". A map built from estimated poses can then be loaded
-with :func:`lidar_env.ros_map.load_ros_map` and driven again.
+with :meth:`lidar_env.world.World.from_ros_map` and driven again.
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ from PIL import Image
 
 from lidar_env.errors import MapError
 from lidar_env.lidar import cast_rays, pymunk_cast_rays
-from lidar_env.ros_map import load_ros_map, read_ros_map, save_ros_map
+from lidar_env.ros_map import read_ros_map, save_ros_map
+from lidar_env.world import World
 
 RES = 0.05
 
@@ -41,11 +42,11 @@ def centre(row: float, col: float, height: int = 80) -> tuple[float, float]:
 def test_free_occupied_and_unknown_cells_land_where_the_image_says(tmp_path):
     ros = read_ros_map(write_map(tmp_path))
     assert np.mean(ros.cells == 0) == pytest.approx(70 * 110 / (80 * 120) - 400 / 9600)
-    world = load_ros_map(tmp_path / "m.yaml")
+    world = World.from_ros_map(tmp_path / "m.yaml")
     inside_block, free, border = centre(30, 80), centre(60, 20), centre(2, 60)
     assert world.contains(np.array([inside_block, free, border])).tolist() == [True, False, True]
     assert world.bounds == pytest.approx((0.0, 0.0, 120 * RES, 80 * RES))
-    open_border = load_ros_map(tmp_path / "m.yaml", unknown_is_obstacle=False)
+    open_border = World.from_ros_map(tmp_path / "m.yaml", unknown_is_obstacle=False)
     assert open_border.contains(np.array([border, inside_block])).tolist() == [False, True]
 
 
@@ -62,7 +63,7 @@ def test_negate_thresholds_and_scale_mode(tmp_path):
 
 def test_origin_yaw_rotates_the_map_about_its_origin(tmp_path):
     yaw = math.pi / 2
-    world = load_ros_map(write_map(tmp_path, origin=[1.0, 2.0, yaw]))
+    world = World.from_ros_map(write_map(tmp_path, origin=[1.0, 2.0, yaw]))
     x, y = centre(30, 80)  # inside the block in the map's own frame
     c, s = math.cos(yaw), math.sin(yaw)
     block = (1.0 + c * x - s * y, 2.0 + s * x + c * y)
@@ -70,7 +71,7 @@ def test_origin_yaw_rotates_the_map_about_its_origin(tmp_path):
     free = (1.0 + c * x - s * y, 2.0 + s * x + c * y)
     assert world.contains(np.array([block, free])).tolist() == [True, False]
     assert world.bounds == pytest.approx((1.0 - 80 * RES, 2.0, 1.0, 2.0 + 120 * RES))
-    tilted = load_ros_map(write_map(tmp_path, origin=[0.0, 0.0, 0.3]))
+    tilted = World.from_ros_map(write_map(tmp_path, origin=[0.0, 0.0, 0.3]))
     xmin, ymin, xmax, ymax = tilted.bounds
     # a bounding-box corner is outside the rotated image: solid, not free space
     assert tilted.contains(np.array([[xmin + 0.05, ymin + 0.05], [xmax - 0.05, ymax - 0.05]])).all()
@@ -91,12 +92,12 @@ def test_origin_yaw_rotates_the_map_about_its_origin(tmp_path):
 )
 def test_bad_map_files_raise_map_errors_naming_the_file_and_key(tmp_path, keys, message):
     with pytest.raises(MapError, match=message):
-        load_ros_map(write_map(tmp_path, **keys))
+        World.from_ros_map(write_map(tmp_path, **keys))
 
 
 def test_missing_yaml_is_a_map_error(tmp_path):
     with pytest.raises(MapError, match="no such map YAML"):
-        load_ros_map(tmp_path / "none.yaml")
+        World.from_ros_map(tmp_path / "none.yaml")
 
 
 def test_round_trip_grid_to_ros_map_to_world_to_scan(tmp_path):
@@ -111,7 +112,7 @@ def test_round_trip_grid_to_ros_map_to_world_to_scan(tmp_path):
     ros = read_ros_map(yaml_path)
     expected = np.where(probabilities > 0.65, 100, np.where(probabilities < 0.196, 0, -1))
     np.testing.assert_array_equal(ros.cells, expected)
-    world = load_ros_map(yaml_path)
+    world = World.from_ros_map(yaml_path)
     rows, cols = np.mgrid[0:60, 0:90]
     centres = np.stack([-1.0 + (cols.ravel() + 0.5) * RES,
                         2.0 + (60 - rows.ravel() - 0.5) * RES], axis=1)
@@ -122,3 +123,15 @@ def test_round_trip_grid_to_ros_map_to_world_to_scan(tmp_path):
     poses = np.column_stack([free[rng.choice(len(free), 5)], rng.uniform(-3, 3, 5)])
     np.testing.assert_allclose(cast_rays(world, poses, angles, 6.0),
                                pymunk_cast_rays(space, poses, angles, 6.0), atol=1e-6)
+
+
+
+def test_world_from_ros_map_takes_a_ros_map_read_before(tmp_path):
+    yaml_path = write_map(tmp_path, origin=[1.0, 2.0, 0.3])
+    for unknown in (True, False):
+        read_first = World.from_ros_map(read_ros_map(yaml_path), unknown_is_obstacle=unknown)
+        direct = World.from_ros_map(yaml_path, unknown_is_obstacle=unknown)
+        assert read_first.bounds == direct.bounds
+        np.testing.assert_array_equal(read_first.segments, direct.segments)
+    assert not np.array_equal(World.from_ros_map(yaml_path).segments,
+                              World.from_ros_map(yaml_path, unknown_is_obstacle=False).segments)

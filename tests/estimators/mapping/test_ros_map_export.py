@@ -10,7 +10,8 @@ from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.mapping.occupancy import from_estimator_run
 from estimators.mapping.ros_map_export import save_grid_as_ros_map
-from lidar_env.ros_map import load_ros_map, read_ros_map
+from lidar_env.ros_map import read_ros_map
+from lidar_env.world import World
 
 
 def test_a_mapped_drive_saves_as_a_ros_map_that_drives_again(tmp_path):
@@ -30,7 +31,7 @@ def test_a_mapped_drive_saves_as_a_ros_map_that_drives_again(tmp_path):
     yaml_path, _ = save_grid_as_ros_map(grid, tmp_path / "hallway_map.yaml")
     ros = read_ros_map(yaml_path)
     np.testing.assert_array_equal(ros.cells == 100, grid.probabilities() > 0.65)
-    world = load_ros_map(yaml_path)
+    world = World.from_ros_map(yaml_path)
     truth = env.unwrapped.world
     # every cell the map calls occupied is within two cells of a true wall
     rows, cols = np.nonzero(ros.cells == 100)
