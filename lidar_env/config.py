@@ -20,6 +20,9 @@ from lidar_env.lidar_config import LidarConfig, check_lidars
 #: Valid values of :attr:`EnvConfig.scan_frame`.
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
+#: Valid values of :attr:`EnvConfig.mover_model` (see :mod:`lidar_env.movers`).
+MOVER_MODELS: tuple[str, ...] = ("waypoints", "yielding")
+
 #: Most moving obstacles an env may hold (each costs a little per step and per beam).
 MAX_MOVERS = 256
 #: [m/s] fastest mover speed accepted: a sprinting person (the car's collision checks are
@@ -57,6 +60,10 @@ class EnvConfig:
           (:mod:`lidar_env.movers`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
           person's shoulders) walking at a speed drawn from ``mover_speed_range`` 0.5-1.5 m/s
           (slow to brisk walking), placed at least ``mover_clearance`` 1 m from the car.
+        * ``mover_model`` "waypoints": movers ignore the car, the harder case for a driver and
+          the model every published mover result (leaderboard, bench_movers_estimators) was
+          made with; "yielding" movers keep clear of the car like real pedestrians (they never
+          walk into it; it can still drive into them).
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)
@@ -80,6 +87,7 @@ class EnvConfig:
     mover_radius: float = 0.25  # [m] radius of each moving circle
     mover_speed_range: tuple[float, float] = (0.5, 1.5)  # [m/s] (min, max) of a mover's speed
     mover_clearance: float = 1.0  # [m] least gap between a mover and the car's box at reset
+    mover_model: str = "waypoints"  # "waypoints": movers ignore the car; "yielding": they avoid it
 
     def __post_init__(self) -> None:
         positive = {
@@ -122,6 +130,9 @@ class EnvConfig:
                 or not 0 <= movers <= MAX_MOVERS):
             raise ConfigError(f"moving_obstacles: expected an integer in [0, {MAX_MOVERS}], "
                               f"got {movers!r}")
+        if not isinstance(self.mover_model, str) or self.mover_model not in MOVER_MODELS:
+            raise ConfigError(f"mover_model: expected one of {', '.join(MOVER_MODELS)}, got "
+                              f"{self.mover_model!r}")
         object.__setattr__(self, "mover_speed_range", _speed_range(self.mover_speed_range))
         object.__setattr__(self, "lidars", check_lidars(self.lidars, self.car_half_diagonal))
         object.__setattr__(self, "physics_substeps", int(self.physics_substeps))

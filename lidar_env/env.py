@@ -17,7 +17,7 @@ from lidar_env.config import EnvConfig
 from lidar_env.env_views import EnvViews
 from lidar_env.errors import ConfigError, ResetNeededError
 from lidar_env.lidar_layout import LidarLayout
-from lidar_env.movers import Crowd
+from lidar_env.movers import Crowd, car_circles
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.traces import check_trace_name
@@ -50,7 +50,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     are what Lidar-only motion estimators are scored against. With
     ``config["moving_obstacles"]`` M > 0, M pedestrians (circles of ``mover_radius``) walk
     between random free waypoints at their own speeds (:mod:`lidar_env.movers`): the Lidars
-    see them exactly and touching one ends the episode like a wall.
+    see them exactly and touching one ends the episode like a wall; ``config["mover_model"]``
+    "yielding" makes them keep clear of the car (by default they ignore it).
 
     ## Action Space
 
@@ -210,8 +211,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         self._space: Any = None
         self._space_world: World | None = None
         self._space_movers: list = []
-        self.crowd = (Crowd(cfg.moving_obstacles, cfg.mover_radius, cfg.mover_speed_range)
-                      if cfg.moving_obstacles else None)
+        self.crowd = (Crowd(cfg.moving_obstacles, cfg.mover_radius, cfg.mover_speed_range,
+                            cfg.mover_model) if cfg.moving_obstacles else None)
         self._renderer: Any = None
         self._trajectories: dict[str, NDArray[np.float64]] = {}
         self._render_map: Any = None
@@ -265,7 +266,9 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
             collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
         else:  # movers first (their waypoint draws), then the car among them
             start = self.crowd.circles
-            self.crowd.step(self.world, cfg.control_dt, self.np_random)
+            car = (None if cfg.mover_model == "waypoints" else car_circles(
+                self.car.pose, self.car.half_length, self.car.half_width, speed, yaw_rate))
+            self.crowd.step(self.world, cfg.control_dt, self.np_random, car)
             collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
                                        start, self.crowd.velocities, self.crowd.max_speed)
         self._time += cfg.control_dt

@@ -17,6 +17,13 @@ still to move, taken as standing: if that one then moves, its own check is again
 
 Static primitives come from the world's :class:`~lidar_env.primitive_grid.PrimitiveGrid`
 (the cells near the mover), so a map of thousands of edges costs little more than a few.
+
+The car (motion model "yielding", :mod:`lidar_env.movers`): ``car`` is a ``(K, 5)`` array of
+circles x, y [m], vx, vy [m/s], radius [m] that cover the car's box, moving at its commanded
+velocity this step (empty for "waypoints": the car is ignored). A yielding mover takes the car's
+circles like movers already moved: its look-ahead keeps :data:`CAR_COMFORT_GAP` from them, and
+its step keeps :data:`CAR_HARD_GAP` (or, nearer already, does not get closer), so a mover never
+walks into the car; the car can still drive into a mover that has no way out.
 """
 
 from __future__ import annotations
@@ -43,6 +50,12 @@ HEADING_FAN = np.array([0.0, -1.0, 1.0, -2.0, 2.0, -3.0, 3.0, -4.0, 4.0, -5.0, 5
 #: after :data:`STUCK_STEPS` stuck steps in a row it picks a new waypoint.
 STUCK_FRACTION = 0.25
 STUCK_STEPS = 10
+#: [m] distance a yielding mover plans to keep from the car's circles over its look-ahead.
+CAR_COMFORT_GAP = 0.3
+#: [m] least distance a yielding mover's step keeps from the car's circles: the circles move in
+#: a straight line over the step while the car drives an arc (at most about 5 mm apart for a
+#: 0.15 m step on the tightest 1 m turn), so this covers the difference.
+CAR_HARD_GAP = 0.02
 #: [m] (min, max) distance of a new waypoint from the mover.
 WAYPOINT_REACH = (1.0, 10.0)
 
@@ -178,13 +191,30 @@ def _movers_clear(i: int, vx: float, vy: float, positions: NDArray[np.float64],
 
 
 @njit(cache=True, fastmath=False)
+def _car_clear(px: float, py: float, vx: float, vy: float, radius: float,
+               car: NDArray[np.float64], duration: float, gap: float) -> bool:
+    """A mover of ``radius`` at (px, py) moving at (vx, vy) for ``duration`` [s] keeps ``gap``
+    [m] from every circle of ``car`` (rows x, y, vx, vy, radius); or, nearer already, does not
+    get closer."""
+    for k in range(car.shape[0]):
+        dx, dy = px - car[k, 0], py - car[k, 1]
+        least = radius + car[k, 4] + gap
+        d2 = dx * dx + dy * dy
+        gap2 = closest_approach2(dx, dy, vx - car[k, 2], vy - car[k, 3], duration)
+        if gap2 < least * least and gap2 < d2 - 1e-12:
+            return False
+    return True
+
+
+@njit(cache=True, fastmath=False)
 def step_movers(
     positions: NDArray[np.float64], velocities: NDArray[np.float64],
     waypoints: NDArray[np.float64], speeds: NDArray[np.float64], stuck: NDArray[np.int64],
     radius: float, dt: float, bounds: NDArray[np.float64], circles: NDArray[np.float64],
-    segments: NDArray[np.float64], grid: PrimitiveGrid,
+    segments: NDArray[np.float64], grid: PrimitiveGrid, car: NDArray[np.float64],
 ) -> NDArray[np.bool_]:
-    """Move every mover one step ``dt`` [s] (see the module docstring); ``positions``,
+    """Move every mover one step ``dt`` [s] (see the module docstring; ``car`` (K, 5) the car's
+    moving circles, K = 0 to ignore it); ``positions``,
     ``velocities`` (the velocity held over this step) and ``stuck`` are updated in place.
 
     Returns ``(M,)`` True for each mover that reached its waypoint or has been stuck for
@@ -220,14 +250,16 @@ def step_movers(
                                            comfort)
                     if ahead < min(comfort, here) or not _movers_clear(
                             i, wx, wy, positions, velocities, m, look / speed,
-                            2.0 * radius + COMFORT_GAP):
+                            2.0 * radius + COMFORT_GAP) or not _car_clear(
+                            px, py, wx, wy, radius, car, look / speed, CAR_COMFORT_GAP):
                         continue
                 path[2], path[3] = px + wx * dt, py + wy * dt
                 if path_clearance(path, circles, segments, scratch, n_c, n_s, bounds,
                                   hard) < min(hard, here):
                     continue
                 if not _movers_clear(i, wx, wy, positions, velocities, i + 1, dt,
-                                     2.0 * radius + HARD_GAP):
+                                     2.0 * radius + HARD_GAP) or not _car_clear(
+                                         px, py, wx, wy, radius, car, dt, CAR_HARD_GAP):
                     continue
                 vx, vy, chosen = wx, wy, True
                 break
@@ -339,13 +371,13 @@ def advance_crowd(
     waypoints: NDArray[np.float64], speeds: NDArray[np.float64], stuck: NDArray[np.int64],
     needs: NDArray[np.bool_], draws: NDArray[np.float64], radius: float, dt: float,
     bounds: NDArray[np.float64], circles: NDArray[np.float64], segments: NDArray[np.float64],
-    grid: PrimitiveGrid,
+    grid: PrimitiveGrid, car: NDArray[np.float64],
 ) -> None:
     """One crowd step in one call: :func:`choose_waypoints` for the movers with ``needs``
-    (``draws`` holds their rows; empty when none needs one), then :func:`step_movers`;
-    ``needs`` is updated in place."""
+    (``draws`` holds their rows; empty when none needs one), then :func:`step_movers` (``car``
+    as there); ``needs`` is updated in place."""
     if draws.shape[0] > 0:
         choose_waypoints(positions, waypoints, needs, draws, WAYPOINT_REACH, radius, bounds,
                          circles, segments, grid)
     needs |= step_movers(positions, velocities, waypoints, speeds, stuck, radius, dt, bounds,
-                         circles, segments, grid)
+                         circles, segments, grid, car)

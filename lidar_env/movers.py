@@ -4,13 +4,22 @@
 kernels of :mod:`lidar_env.mover_kernels` (motion, the no-overlap guarantee, waypoints,
 placement). Units: metres, seconds, radians; world frame.
 
-Motion model ("waypoints", the only one): each mover walks in a straight line at its own
+Motion models (``config["mover_model"]``, :data:`~lidar_env.config.MOVER_MODELS`). "waypoints"
+(the default): each mover walks in a straight line at its own
 speed (drawn uniformly from ``speed_range`` at spawn) to a waypoint it can see, a free point
 :data:`WAYPOINT_REACH` away in a random direction; at the waypoint, or after being stuck for a
 second, it draws the next one. On the way it turns away from walls and other movers it would
 come near within the next second, and it never overlaps an obstacle or another mover (see
 :mod:`lidar_env.mover_kernels`). Movers ignore the car: driving around them is the car's job,
-and touching one ends the episode like a wall.
+and touching one ends the episode like a wall; a mover may walk into a standing car. "yielding":
+the same walk, but the car counts like another mover, as real pedestrians keep clear of a
+vehicle: its box (covered by :data:`CAR_CIRCLES` circles) and its commanded motion of the step,
+held over the look-ahead, are avoided with the look-ahead's 0.3 m to spare, and no step ever
+brings a mover closer to the car than 2 cm (nor, nearer already, any closer). The car can still
+drive into a mover (one that has nowhere to go, or one it runs down from behind). The default
+stays "waypoints" so that every mover result made before "yielding" existed (the leaderboard's
+movers group, ``bench_movers_estimators``) is unchanged, bit for bit; it is also the harder
+crowd for a driver, since standing still is no escape.
 
 Random numbers, all from the generator passed in, in a fixed order so that the same seed gives
 the same crowd bit for bit: at :meth:`Crowd.spawn`, ``(SPAWN_TRIES * M, 2)`` uniforms for the
@@ -24,11 +33,16 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.config import MOVER_MODELS
 from lidar_env.errors import ConfigError
 from lidar_env.mover_kernels import WAYPOINT_REACH, advance_crowd, place_movers
 from lidar_env.world import World
 
-__all__ = ["SPAWN_TRIES", "WAYPOINT_REACH", "WAYPOINT_TRIES", "Crowd"]
+__all__ = ["CAR_CIRCLES", "SPAWN_TRIES", "WAYPOINT_REACH", "WAYPOINT_TRIES", "Crowd",
+           "car_circles"]
+
+#: Circles along the car's axis that together cover its box (for "yielding" movers).
+CAR_CIRCLES = 3
 
 #: Candidate waypoints drawn per mover that needs one (the first free, visible one is taken).
 WAYPOINT_TRIES = 16
@@ -36,6 +50,32 @@ WAYPOINT_TRIES = 16
 SPAWN_TRIES = 200
 #: Stands in for the waypoint draws of a step where no mover needs one.
 _NO_DRAWS = np.empty((0, WAYPOINT_TRIES, 2))
+#: The car as "waypoints" movers see it: not at all.
+_NO_CAR = np.empty((0, 5))
+
+
+def car_circles(
+    pose: ArrayLike, half_length: float, half_width: float, speed: float, yaw_rate: float,
+) -> NDArray[np.float64]:
+    """``(CAR_CIRCLES, 5)`` circles x, y [m], vx, vy [m/s], radius [m] covering the car's box
+    at ``pose`` (x, y, heading) [m, rad], each with the velocity of its centre when the car
+    drives at ``speed`` [m/s] and ``yaw_rate`` [rad/s].
+
+    The centres sit on the axis ``2 s`` apart with ``s = half_length / CAR_CIRCLES`` (the end
+    ones ``s`` from the box's ends), so each covers a ``2 s`` slice of the box with radius
+    ``hypot(s, half_width)``: the union holds the whole box.
+    """
+    x, y, heading = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
+    c, s = np.cos(heading), np.sin(heading)
+    half_slice = half_length / CAR_CIRCLES
+    offsets = half_slice * (2.0 * np.arange(CAR_CIRCLES) - (CAR_CIRCLES - 1))
+    out = np.empty((CAR_CIRCLES, 5))
+    out[:, 0] = x + offsets * c
+    out[:, 1] = y + offsets * s
+    out[:, 2] = speed * c - yaw_rate * offsets * s
+    out[:, 3] = speed * s + yaw_rate * offsets * c
+    out[:, 4] = np.hypot(half_slice, half_width)
+    return out
 
 
 class Crowd:
@@ -45,7 +85,12 @@ class Crowd:
     (held over the last step; zero at spawn), ``waypoints`` (M, 2) [m], ``speeds`` (M,) [m/s].
     """
 
-    def __init__(self, count: int, radius: float, speed_range: tuple[float, float]) -> None:
+    def __init__(self, count: int, radius: float, speed_range: tuple[float, float],
+                 model: str = "waypoints") -> None:
+        if model not in MOVER_MODELS:
+            raise ConfigError(f"mover_model: expected one of {', '.join(MOVER_MODELS)}, got "
+                              f"{model!r}")
+        self.model = model
         self.count = int(count)
         self.radius = float(radius)
         self.speed_range = (float(speed_range[0]), float(speed_range[1]))
@@ -96,13 +141,20 @@ class Crowd:
         self._stuck[:] = 0
         self._needs[:] = True
 
-    def step(self, world: World, dt: float, rng: np.random.Generator) -> None:
-        """Advance every mover by ``dt`` [s]: new waypoints where needed, then one move each."""
+    def step(self, world: World, dt: float, rng: np.random.Generator,
+             car: NDArray[np.float64] | None = None) -> None:
+        """Advance every mover by ``dt`` [s]: new waypoints where needed, then one move each.
+
+        ``car``: the car's moving circles this step (:func:`car_circles`), which "yielding"
+        movers avoid; "waypoints" movers ignore it, as they do when it is None.
+        """
         waiting = int(np.count_nonzero(self._needs))
         draws = rng.random((waiting, WAYPOINT_TRIES, 2)) if waiting else _NO_DRAWS
+        seen = _NO_CAR if car is None or self.model == "waypoints" else np.ascontiguousarray(
+            car, dtype=np.float64).reshape(-1, 5)
         advance_crowd(self.positions, self.velocities, self.waypoints, self.speeds, self._stuck,
                       self._needs, draws, self.radius, float(dt), self._bounds, world.circles,
-                      world.segments, world.grid)
+                      world.segments, world.grid, seen)
 
     @property
     def circles(self) -> NDArray[np.float64]:

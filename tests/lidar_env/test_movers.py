@@ -334,3 +334,80 @@ def test_any_mover_settings_are_a_config_error_or_step_finitely(config):
                 break
     except ConfigError:
         pass
+
+
+def test_a_yielding_mover_walks_around_the_standing_car_instead_of_into_it():
+    env, _, info = _crowd_env("open_cylinders", 1, seed=0, mover_speed_range=(1.0, 1.0),
+                              mover_model="yielding")
+    crowd = env.unwrapped.crowd
+    x, y, heading = info["pose"]
+    ahead = np.array([math.cos(heading), math.sin(heading)])
+    crowd.positions[0] = (x, y) + 1.2 * ahead  # the same set-up as the "waypoints" test above
+    crowd.waypoints[0] = (x, y) - 2.0 * ahead
+    crowd._needs[:] = False
+    passed = False
+    for _ in range(60):
+        _, _, terminated, _, info = env.step(np.zeros(2, dtype=np.float32))
+        assert not terminated and not info["collision"]
+        passed |= float(np.dot(crowd.positions[0] - (x, y), ahead)) < -1.0  # behind the car
+    assert passed
+
+
+@pytest.mark.parametrize(("world", "movers"), [("open_cylinders", 20), ("hallway", 10),
+                                               ("random", 10)])
+def test_yielding_movers_never_walk_into_the_car_and_still_keep_clear_of_everything(world,
+                                                                                      movers):
+    from lidar_env.mover_kernels import CAR_HARD_GAP
+    from lidar_env.movers import car_circles
+
+    env, _, info = _crowd_env(world, movers, seed=3, mover_model="yielding")
+    crowd, scene, car = env.unwrapped.crowd, env.unwrapped.world, env.unwrapped.car
+    radius, walked = crowd.radius, 0.0
+    disc = car_circles(car.pose, car.half_length, car.half_width, 0.0, 0.0)
+    for step in range(600):
+        # drive a slow circle for a while, then stand: the movers must step around it either way
+        action = np.array([0.3, 0.4] if step < 200 else [0.0, 0.0], dtype=np.float32)
+        before = crowd.positions.copy()
+        _, _, terminated, _, info = env.step(action)
+        if terminated:  # the car drove into a mover that could not escape: allowed, rare
+            assert info["collision"] and step < 200
+            break
+        after = crowd.positions
+        assert np.all(scene.clearance(after) > radius)
+        assert _pairwise_gaps(after, radius).min() > 0.0
+        walked += float(np.sum(np.hypot(*(after - before).T)))
+        if step >= 200:  # standing car: the exact box, not only its covering circles
+            disc = car_circles(car.pose, car.half_length, car.half_width, 0.0, 0.0)
+            gaps = np.hypot(*(after[:, None, :] - disc[None, :, :2]).transpose(2, 0, 1))
+            assert (gaps - disc[None, :, 4]).min() > radius + CAR_HARD_GAP - 1e-9
+    else:
+        assert walked / (600 * 0.1 * movers) > 0.3 * np.mean(crowd.speeds)
+
+
+def test_car_circles_cover_the_car_box():
+    from lidar_env.movers import car_circles
+
+    circles = car_circles((1.0, -2.0, 0.7), 0.4, 0.25, 1.0, 0.5)
+    u, v = np.meshgrid(np.linspace(-0.4, 0.4, 41), np.linspace(-0.25, 0.25, 21))
+    c, s = math.cos(0.7), math.sin(0.7)
+    points = np.column_stack([1.0 + c * u.ravel() - s * v.ravel(),
+                              -2.0 + s * u.ravel() + c * v.ravel()])
+    inside = np.hypot(*(points[:, None, :] - circles[None, :, :2]).transpose(2, 0, 1)) <= (
+        circles[None, :, 4] + 1e-12)
+    assert inside.any(axis=1).all()
+    # each centre moves with the car's rigid motion: forward speed plus yaw rate x offset
+    offsets = (circles[:, :2] - (1.0, -2.0)) @ np.array([c, s])
+    np.testing.assert_allclose(circles[:, 2], 1.0 * c - 0.5 * offsets * s)
+    np.testing.assert_allclose(circles[:, 3], 1.0 * s + 0.5 * offsets * c)
+
+
+def test_mover_model_is_validated_and_waypoints_is_the_default():
+    with pytest.raises(ConfigError, match="mover_model: expected one of waypoints, yielding"):
+        gym.make("DualLidar-v0", config={"mover_model": "polite"})
+    assert gym.make("DualLidar-v0").unwrapped.config.mover_model == "waypoints"
+    a, _, _ = _crowd_env("hallway", 6, seed=2, mover_model="yielding")
+    b, _, _ = _crowd_env("hallway", 6, seed=2, mover_model="yielding")
+    for _ in range(40):
+        for env in (a, b):
+            env.step(np.array([0.5, 0.1], dtype=np.float32))
+    np.testing.assert_array_equal(a.unwrapped.crowd.state, b.unwrapped.crowd.state)
