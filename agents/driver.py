@@ -14,11 +14,13 @@ __all__ = ["DRIVERS", "Driver", "make_driver"]
 DRIVERS: dict[str, str] = {
     "scripted": "agents.scripted:PurePursuitDriver",
     "sb3": "agents.sb3_driver:SB3Driver",
+    "scan_aware": "agents.scan_aware:ScanAwareDriver",
 }
 
 
 def make_driver(name: str, pose_source: str = "true") -> Driver:
-    """A fresh driver by name: ``scripted`` (pure pursuit) or ``sb3`` (the shipped PPO policy).
+    """A fresh driver by name: ``scripted`` (pure pursuit), ``scan_aware`` (pure pursuit that
+    brakes for what its scans show ahead) or ``sb3`` (the shipped learned policy).
 
     ``pose_source`` is where the driver takes the car's pose from: ``"true"`` (the env's
     ``info["pose"]``) or the name of an estimator (``estimators.registry.names()``) that runs

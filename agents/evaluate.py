@@ -4,6 +4,7 @@
     python -m agents.evaluate --episodes 10 --pose-sources true lidar_odometry slam
     python -m agents.evaluate --moving-obstacles 10 --worlds open_cylinders random
     python -m agents.evaluate --drivers sb3 --sb3-model runs/ppo_driver.zip
+    python -m agents.evaluate --moving-obstacles 10 --mover-model yielding --worlds random
 
 An episode succeeds when the car reaches the trace's end without touching an obstacle and
 before the time limit. Each (world, trace, episode) uses reset seed ``base_seed + episode``;
@@ -12,8 +13,10 @@ one (training evaluates on seeds >= 10000 of its own stream) they are unseen wor
 pose source other than ``true`` the driver steers by an estimator's poses
 (:mod:`agents.pose_source`); the scores always use the env's ground truth. With
 ``--moving-obstacles M`` every episode has M pedestrians (``config["moving_obstacles"]``, drawn
-from the same reset seed, so every driver meets the same crowd); the closest a mover's edge
-came to the car's centre is reported so that a success among movers is seen to mean something.
+from the same reset seed, so every driver meets the same crowd), walking by
+``--mover-model`` (``config["mover_model"]``: "waypoints", the default, ignore the car;
+"yielding" keep clear of it); the closest a mover's edge came to the car's centre is reported
+so that a success among movers is seen to mean something.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import numpy as np
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.driver import DRIVERS, Driver, make_driver
+from lidar_env.config import MOVER_MODELS
 
 BUILT_IN_WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 TRACE_SEEDS = ("straight", "right_turn", "zigzag")
@@ -92,12 +96,12 @@ def _closest_mover(info: dict[str, Any]) -> float:
 
 def evaluate(
     driver: Driver, world: str, trace: str, episodes: int, base_seed: int = 1_000_000,
-    moving_obstacles: int = 0,
+    moving_obstacles: int = 0, mover_model: str = "waypoints",
 ) -> DrivingScore:
     """Score ``driver`` over ``episodes`` seeded episodes of ``world`` and ``trace`` with
-    ``moving_obstacles`` pedestrians."""
+    ``moving_obstacles`` pedestrians walking by ``mover_model``."""
     env = gym.make("DualLidar-v0", world=world, trace=trace,
-                   config={"moving_obstacles": moving_obstacles})
+                   config={"moving_obstacles": moving_obstacles, "mover_model": mover_model})
     runs = [drive_episode(env, driver, base_seed + k) for k in range(episodes)]
     env.close()
     success = np.array([r.success for r in runs])
@@ -140,12 +144,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--base-seed", type=int, default=1_000_000)
     parser.add_argument("--moving-obstacles", type=int, default=0,
                         help="pedestrians per episode (config moving_obstacles; default 0)")
+    parser.add_argument("--mover-model", choices=MOVER_MODELS, default="waypoints",
+                        help="how the pedestrians walk (config mover_model; default %(default)s)")
     parser.add_argument("--sb3-model", type=Path, default=None,
                         help="the sb3 driver's model .zip (default: the shipped one)")
     args = parser.parse_args(argv)
     print("| driver | pose | world | trace | movers | success | cross-track [m] | end-point [m] | "
           "time [s] | collisions | closest mover [m] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
+    movers = (f"{args.moving_obstacles} {args.mover_model}" if args.moving_obstacles
+              else "0")
     pairs = PAPER_GROUPS if args.paper_groups else [
         (world, trace) for world in args.worlds for trace in args.traces]
     for name in args.drivers:
@@ -153,9 +161,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             driver = build_driver(name, source, args.sb3_model)
             for world, trace in pairs:
                 s = evaluate(driver, world, trace, args.episodes, args.base_seed,
-                             args.moving_obstacles)
+                             args.moving_obstacles, args.mover_model)
                 print(
-                    f"| {name} | {source} | {world} | {trace} | {args.moving_obstacles} | "
+                    f"| {name} | {source} | {world} | {trace} | {movers} | "
                     f"{100 * s.success_rate:.0f}% | {s.cross_track_error:.3f} | "
                     f"{s.end_point_error:.3f} | {s.time_to_finish:.1f} | {s.collisions} | "
                     f"{s.closest_mover:.2f} |",

@@ -62,8 +62,8 @@ class EnvConfig:
           (slow to brisk walking), placed at least ``mover_clearance`` 1 m from the car.
         * ``mover_model`` "waypoints": movers ignore the car, the harder case for a driver and
           the model every published mover result (leaderboard, bench_movers_estimators) was
-          made with; "yielding" movers keep clear of the car like real pedestrians (they never
-          walk into it; it can still drive into them).
+          made with; "yielding" movers keep clear of the car's box like real pedestrians (they
+          never walk into it; it can still drive into them).
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)

@@ -51,7 +51,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     ``config["moving_obstacles"]`` M > 0, M pedestrians (circles of ``mover_radius``) walk
     between random free waypoints at their own speeds (:mod:`lidar_env.movers`): the Lidars
     see them exactly and touching one ends the episode like a wall; ``config["mover_model"]``
-    "yielding" makes them keep clear of the car (by default they ignore it).
+    "yielding" makes them keep clear of where the car stands (by default they ignore it).
 
     ## Action Space
 
@@ -267,7 +267,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         else:  # movers first (their waypoint draws), then the car among them
             start = self.crowd.circles
             car = (None if cfg.mover_model == "waypoints" else car_circles(
-                self.car.pose, self.car.half_length, self.car.half_width, speed, yaw_rate))
+                self.car.pose, self.car.half_length, self.car.half_width))
             self.crowd.step(self.world, cfg.control_dt, self.np_random, car)
             collision = self.car.drive(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
                                        start, self.crowd.velocities, self.crowd.max_speed)

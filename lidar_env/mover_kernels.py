@@ -19,11 +19,11 @@ Static primitives come from the world's :class:`~lidar_env.primitive_grid.Primit
 (the cells near the mover), so a map of thousands of edges costs little more than a few.
 
 The car (motion model "yielding", :mod:`lidar_env.movers`): ``car`` is a ``(K, 5)`` array of
-circles x, y [m], vx, vy [m/s], radius [m] that cover the car's box, moving at its commanded
-velocity this step (empty for "waypoints": the car is ignored). A yielding mover takes the car's
-circles like movers already moved: its look-ahead keeps :data:`CAR_COMFORT_GAP` from them, and
-its step keeps :data:`CAR_HARD_GAP` (or, nearer already, does not get closer), so a mover never
-walks into the car; the car can still drive into a mover that has no way out.
+circles x, y [m], vx, vy [m/s], radius [m] that cover the car's box (the env gives them zero
+velocity: the car as it stands; empty for "waypoints": the car is ignored). A yielding mover
+takes the car's circles like movers already moved: its look-ahead keeps :data:`CAR_COMFORT_GAP`
+from them, and its step keeps :data:`CAR_HARD_GAP` (or, nearer already, does not get closer),
+so a mover never walks into the car; the car can still drive into a mover.
 """
 
 from __future__ import annotations
@@ -52,9 +52,9 @@ STUCK_FRACTION = 0.25
 STUCK_STEPS = 10
 #: [m] distance a yielding mover plans to keep from the car's circles over its look-ahead.
 CAR_COMFORT_GAP = 0.3
-#: [m] least distance a yielding mover's step keeps from the car's circles: the circles move in
-#: a straight line over the step while the car drives an arc (at most about 5 mm apart for a
-#: 0.15 m step on the tightest 1 m turn), so this covers the difference.
+#: [m] least distance a yielding mover's step keeps from the car's circles (circles given a
+#: velocity move in a straight line over the step, while a car drives an arc: at most about
+#: 5 mm apart for a 0.15 m step on the tightest 1 m turn, which this covers).
 CAR_HARD_GAP = 0.02
 #: [m] (min, max) distance of a new waypoint from the mover.
 WAYPOINT_REACH = (1.0, 10.0)

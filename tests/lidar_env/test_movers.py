@@ -365,7 +365,7 @@ def test_yielding_movers_never_walk_into_the_car_and_still_keep_clear_of_everyth
     radius, walked = crowd.radius, 0.0
     disc = car_circles(car.pose, car.half_length, car.half_width, 0.0, 0.0)
     for step in range(600):
-        # drive a slow circle for a while, then stand: the movers must step around it either way
+        # drive a slow circle (the car may run into a mover), then stand: never walked into
         action = np.array([0.3, 0.4] if step < 200 else [0.0, 0.0], dtype=np.float32)
         before = crowd.positions.copy()
         _, _, terminated, _, info = env.step(action)

@@ -1,0 +1,131 @@
+"""A driver that sees: pure pursuit of the trace, slowed and stopped by what its scans show ahead.
+
+:class:`ScanAwareDriver` steers like :class:`~agents.scripted.PurePursuitDriver` (the trace
+from the true pose, ``info["pose"]``) but chooses its speed from the current scans alone: every
+beam's return is put in the car frame (from each Lidar's mount), and of the returns in the
+*corridor* the car is about to sweep (the arc of the pure-pursuit command, as wide as the car
+plus ``side_margin``) the nearest one ahead of the nose limits the speed to what stops in time:
+
+    speed = min(pure-pursuit speed, (free - stop_gap) / headway), and 0 below ``stop_gap``,
+
+with ``free`` [m] the arc length from the nose to that return. It never reads
+``info["moving_obstacles"]``: a pedestrian is a cluster of returns like any other. It is the
+expert the learned driver imitates (:mod:`agents.imitate`) and a driver in its own right
+(``make_driver("scan_aware")``). It only brakes, never swerves, so it relies on pedestrians
+that give way (``config["mover_model"] = "yielding"``) not to stand in its lane for ever, and
+it cannot escape a mover that walks into it from the side or behind (``"waypoints"``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.scripted import PurePursuitDriver
+
+
+class ScanAwareDriver:
+    """Pure pursuit with a speed limit from the scans (see the module docstring).
+
+    Args:
+        speed: cruise speed [m/s] of the pure pursuit.
+        side_margin: [m] added to the car's half width on each side of the corridor.
+        stop_gap: [m] free arc length ahead of the nose at which the car stops.
+        headway: [s] the speed is at most (free - stop_gap) / headway.
+        reach: [m] arc length ahead of the nose the corridor is checked over.
+    """
+
+    def __init__(self, speed: float = 1.0, side_margin: float = 0.2, stop_gap: float = 0.3,
+                 headway: float = 1.0, reach: float = 3.0) -> None:
+        for name, value in (("speed", speed), ("side_margin", side_margin),
+                            ("stop_gap", stop_gap), ("headway", headway), ("reach", reach)):
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{name}: expected a positive number, got {value!r}")
+        self.pursuit = PurePursuitDriver(speed=speed)
+        self.side_margin = side_margin
+        self.stop_gap = stop_gap
+        self.headway = headway
+        self.reach = reach
+        self._keys: tuple[str, ...] = ()
+        self._directions: list[NDArray[np.float64]] = []  # per Lidar, (n, 2) unit beams
+        self._mounts: list[NDArray[np.float64]] = []
+        self._max_ranges: list[float] = []
+        self._world_frame = False
+        self._half_length = 0.4
+        self._half_width = 0.25
+        self._max_speed = 1.0
+        self._max_yaw_rate = 1.0
+        self.last_free = math.inf  # [m] free arc ahead of the nose at the last act()
+
+    def reset(self, env: gym.Env) -> None:
+        """Follow the trace ``env`` was just reset to, with its Lidars' geometry."""
+        self.pursuit.reset(env)
+        config = env.unwrapped.config
+        self._keys = tuple(env.unwrapped.lidar_keys)
+        self._world_frame = config.scan_frame == "world"
+        self._mounts = [np.asarray(lidar.mount, np.float64) for lidar in config.lidars]
+        self._directions = []
+        for lidar in config.lidars:
+            angles = np.asarray(lidar.beam_angles, np.float64)
+            self._directions.append(np.column_stack([np.cos(angles), np.sin(angles)]))
+        self._max_ranges = [float(lidar.max_range) for lidar in config.lidars]
+        self._half_length = 0.5 * float(config.car_length)
+        self._half_width = 0.5 * float(config.car_width)
+        self._max_speed = float(config.max_speed)
+        self._max_yaw_rate = float(config.max_yaw_rate)
+        self.last_free = math.inf
+
+    def scan_points(self, observation: Mapping[str, Any], heading: float) -> NDArray[np.float64]:
+        """``(N, 2)`` [m] every return (not the no-hit reading ``max_range``), car frame."""
+        parts = []
+        for key, directions, mount, max_range in zip(
+                self._keys, self._directions, self._mounts, self._max_ranges, strict=True):
+            ranges = np.asarray(observation[key], np.float64)
+            hit = ranges < max_range
+            turn = -heading if self._world_frame else mount[2]
+            c, s = math.cos(turn), math.sin(turn)
+            d = directions[hit]
+            r = ranges[hit, None]
+            parts.append(mount[:2] + r * np.column_stack([c * d[:, 0] - s * d[:, 1],
+                                                          s * d[:, 0] + c * d[:, 1]]))
+        return np.concatenate(parts) if parts else np.zeros((0, 2))
+
+    def free_arc(self, points: NDArray[np.float64], curvature: float) -> float:
+        """[m] arc length from the nose to the nearest of ``points`` (car frame) in the
+        corridor of the arc of ``curvature`` [1/m] (``reach`` + ``stop_gap`` if none)."""
+        width = self._half_width + self.side_margin
+        if abs(curvature) < 1e-6:
+            along, lateral = points[:, 0], points[:, 1]
+        else:
+            radius = 1.0 / curvature
+            dx, dy = points[:, 0], points[:, 1] - radius  # from the turn's centre
+            rho = np.hypot(dx, dy)
+            lateral = np.sign(radius) * (abs(radius) - rho)
+            swept = np.arctan2(dx, -dy * np.sign(radius))  # [rad] turned from the car
+            along = abs(radius) * np.where(swept < -0.5 * math.pi, swept + 2 * math.pi, swept)
+        ahead = along - self._half_length
+        blocking = (np.abs(lateral) <= width) & (ahead > -self._half_length) & (
+            ahead < self.reach)
+        if not blocking.any():
+            return self.reach + self.stop_gap
+        return float(max(ahead[blocking].min(), 0.0))
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> NDArray[np.float32]:
+        """The pure-pursuit action with its speed capped by the free arc ahead."""
+        action = self.pursuit.act(observation, info)
+        speed = float(action[0]) * self._max_speed
+        if speed <= 0.0:
+            return action
+        yaw_rate = float(action[1]) * self._max_yaw_rate
+        heading = float(np.asarray(info["pose"], np.float64)[2])
+        self.last_free = self.free_arc(self.scan_points(observation, heading), yaw_rate / speed)
+        limit = max(self.last_free - self.stop_gap, 0.0) / self.headway
+        if limit < speed:  # keep the arc: scale the yaw rate with the speed
+            scale = limit / speed
+            action = np.array([action[0] * scale, action[1] * scale], dtype=np.float32)
+        return action
