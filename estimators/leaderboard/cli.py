@@ -28,6 +28,8 @@ it through every estimator (:mod:`estimators.leaderboard.runner`), scores it
   :attr:`estimators.base.Estimator.min_lidars`) is not run there and shows "n/a (needs 2
   Lidars)"; that is no failure.
 
+The real-log column is the first 1,000 scans of the Radish ACES log when it is there, or the
+user's own CARMEN log or ROS bag (``--real-log``, :mod:`estimators.leaderboard.real_logs`).
 Re-running with the same database skips everything already stored.
 
 Cost grows as scenarios x steps x estimators. The default matrix (5 groups x 2 seeds, the
@@ -53,6 +55,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.driver import DRIVERS
+from estimators.leaderboard import real_logs
 from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.headline import annotate_rows, board_markdown
 from estimators.leaderboard.matrix import (
@@ -67,6 +70,7 @@ from estimators.leaderboard.matrix import (
     table_one_scenarios,
 )
 from estimators.leaderboard.publish import draw_all, publish_report
+from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import (
     RunCancelled,
@@ -84,11 +88,12 @@ from estimators.leaderboard.tables import (
     rank_table,
     write_csv,
 )
-from estimators.leaderboard.tasks import STAGES, EstimatorSpec, RealLog
+from estimators.leaderboard.tasks import STAGES, EstimatorSpec
 from estimators.leaderboard.warmup import warm_up
 from estimators.leaderboard.workers import process_pool
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
+from lidar_env.errors import DualLidarError
 
 DATA_DIR = SHARED_DATA / "radish"
 #: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
@@ -134,14 +139,11 @@ def _parser() -> argparse.ArgumentParser:
                              "instead of local worker processes; needs dask.distributed")
     parser.add_argument("--rank-by", choices=sorted(RANK_KEYS), default="ate",
                         help="metric that orders the table (default: %(default)s)")
-    parser.add_argument("--no-real", action="store_true",
-                        help="skip the real-log (Radish ACES) results")
-    parser.add_argument("--real-scans", type=int, default=DEFAULT_REAL_SCANS,
-                        help="scans of the real log to replay, 0 = all (default: %(default)s)")
     parser.add_argument("--tum", action="store_true",
                         help="also write every trace of the run and its ground truth as TUM "
                              "files (OUT/tum/), for evo")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    real_logs.add_arguments(parser)
     return parser
 
 
@@ -219,8 +221,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             import distributed  # noqa: F401
         except ImportError:
             parser.error("--scheduler needs dask.distributed: pip install 'duallidar[distributed]'")
-    if args.real_scans < 0:
-        parser.error(f"--real-scans: expected an integer >= 0, got {args.real_scans}")
+    try:
+        args.logs = real_logs.from_arguments(args, DATA_DIR, DEFAULT_REAL_SCANS)
+    except (DualLidarError, OSError) as error:
+        parser.error(str(error))
     start = time.perf_counter()
     try:
         check_output_dir(args.out)
@@ -238,18 +242,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(error if isinstance(error, RunCancelled) else "interrupted; re-run to resume",
               file=sys.stderr)
         return 130
-
-
-def _real_logs(args: argparse.Namespace) -> list[RealLog]:
-    """The real logs to score on: ACES, unless ``--no-real`` or it is not in :data:`DATA_DIR`."""
-    if args.no_real:
-        return []
-    log = RealLog("aces", str(DATA_DIR / "aces.clf.bz2"), str(DATA_DIR / "aces.relations"),
-                  args.real_scans or None)
-    if Path(log.log_path).exists() and Path(log.relations_path).exists():
-        return [log]
-    print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
-    return []
 
 
 def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: list[Scenario],
@@ -290,7 +282,7 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
                       not_applicable)
     rows = annotate_rows(rows, groups, scenarios, records, RANK_KEYS[args.rank_by])
     out: Path = args.out
-    table = board_markdown(rows, groups, "ACES" if real else None, args.rank_by)
+    table = board_markdown(rows, groups, logs[0].name.upper() if real else None, args.rank_by)
     table += map_ceiling_note(records)
     case_rows = table_one(table_i_runs, records)
     written = [out / "leaderboard.md", out / "leaderboard.csv", out / "results.csv"]
@@ -326,7 +318,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
                                    args.driver)
                           for seed in args.seeds]
                  for g in groups}
-    logs = _real_logs(args)
+    logs = args.logs
     table_i_runs = table_one_scenarios(groups, scenarios, specs)
     world_aligned = SideRun(
         side_scenarios(table_i_runs),

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.evaluation.relations import Relations
 from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.records import Scenario, TraceRecord
 from estimators.leaderboard.style import (
@@ -106,15 +107,14 @@ def draw_segment_errors(db: ExperimentDatabase, runs: Sequence[Scenario], names:
     return save_figure(figure, out / "segment_errors.png")
 
 
-def relation_error_samples(db: ExperimentDatabase, scenario: Scenario, relations_path: str,
+def relation_error_samples(db: ExperimentDatabase, scenario: Scenario, relations: Relations,
                            names: Sequence[str],
                            records: Mapping[tuple[Scenario, str], TraceRecord]
                            ) -> dict[str, NDArray[np.float64]]:
     """Per estimator that ran on the real-log ``scenario``, the translation error [m] of each
-    ground-truth relation of ``relations_path`` inside its trace's time span (as scored)."""
-    from estimators.evaluation.relations import load_relations, relation_errors
+    ground-truth relation of ``relations`` inside its trace's time span (as scored)."""
+    from estimators.evaluation.relations import relation_errors
 
-    relations = load_relations(relations_path)
     stored = {r.trace_id: r for r in db.traces(scenario)}
     samples = {}
     for name in names:

@@ -19,9 +19,10 @@ from estimators.leaderboard.plots import (
     draw_speed_accuracy,
     relation_error_samples,
 )
+from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.records import Scenario, TraceRecord
 from estimators.leaderboard.report import write_report
-from estimators.leaderboard.tasks import EstimatorSpec, RealLog
+from estimators.leaderboard.tasks import EstimatorSpec
 
 #: Each figure's caption in the report, by file name.
 CAPTIONS: dict[str, str] = {
@@ -52,7 +53,7 @@ def draw_all(db: ExperimentDatabase, groups: Sequence[Group],
     written += draw_segment_errors(db, every, names, records, out)
     written += draw_speed_accuracy(rows, out)
     for log in logs[:1]:
-        samples = relation_error_samples(db, log.scenario, log.relations_path, names, records)
+        samples = relation_error_samples(db, log.scenario, log.relations(), names, records)
         written += draw_relation_histograms(samples, log.name.upper(), out)
     return written
 

@@ -38,10 +38,10 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.records import Scenario, package_version
 from estimators.leaderboard.tasks import (
     EstimatorSpec,
-    RealLog,
     RealLogTask,
     ScenarioOutcome,
     ScenarioTask,

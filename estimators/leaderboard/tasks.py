@@ -1,6 +1,7 @@
 """What a worker runs: one task per scenario (:func:`run_scenario_task`: record its sensor dataset
 if the database lacks it, replay it through the estimators that have no trace yet, score each)
-or per real log (:func:`run_real_log_task`), and the outcome it sends back. Tasks are plain,
+or per real log (:func:`run_real_log_task`, a
+:class:`~estimators.leaderboard.real_logs.RealLog`), and the outcome it sends back. Tasks are plain,
 picklable dataclasses and touch no database: the parent commits every outcome
 (:mod:`estimators.leaderboard.runner`). Worker time is reported per stage (:data:`STAGES`).
 """
@@ -11,11 +12,11 @@ import time
 import traceback
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
+from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.recording import (
     map_reference,
     mover_truth,
@@ -156,56 +157,24 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
 
 
 @dataclass(frozen=True)
-class RealLog:
-    """A recorded CARMEN log with ground-truth relations, scored on its first ``scans`` scans
-    (all when ``None``); stored as a scenario of kind ``real``."""
-
-    name: str
-    log_path: str
-    relations_path: str
-    scans: int | None = None
-
-    @property
-    def n_lidars(self) -> int:
-        """Lidars the estimators see: one, the front laser
-        (:func:`estimators.datasets.real_log.run_on_log`)."""
-        return 1
-
-    @property
-    def scenario(self) -> Scenario:
-        return Scenario(self.name, "log", 0, {"scans": self.scans}, driver="recorded",
-                        kind="real")
-
-
-@dataclass(frozen=True)
 class RealLogTask:
     log: RealLog
     estimator: EstimatorSpec
-
-
-@lru_cache(maxsize=2)
-def _load_log(path: str) -> Any:
-    """A parsed CARMEN log, kept per worker process: every estimator replays the same log."""
-    from estimators.datasets.carmen import load_log
-
-    return load_log(path)
 
 
 def run_real_log_task(task: RealLogTask) -> ScenarioOutcome:
     """Run one estimator over a real log and score it with the relations metric
     (Kümmerle et al. 2009): mean translational [m] and rotational [deg] relation errors."""
     from estimators.datasets.real_log import run_on_log, score_relations
-    from estimators.evaluation.relations import load_relations
     from estimators.registry import make
 
     log, spec = task.log, task.estimator
     outcome = ScenarioOutcome(log.scenario, None, False)
     started = time.perf_counter()
     try:
-        carmen = _load_log(log.log_path)
-        run = run_on_log(make(spec.name, **dict(spec.params)), carmen, limit=log.scans)
+        run = run_on_log(make(spec.name, **dict(spec.params)), log.load(), limit=log.scans)
         metrics: dict[str, float] = {"ms_per_step": 1e3 * run.seconds_per_scan}
-        for subset, summary in score_relations(run, load_relations(log.relations_path)).items():
+        for subset, summary in score_relations(run, log.relations()).items():
             metrics.update({
                 f"relations_{subset}_translation_m": summary.translation_mean,
                 f"relations_{subset}_rotation_deg": summary.rotation_mean,

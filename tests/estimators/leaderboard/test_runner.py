@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.records import Scenario
 from estimators.leaderboard.runner import (
     RunInterrupted,
@@ -21,7 +22,7 @@ from estimators.leaderboard.runner import (
     run_real_logs,
     run_scenarios,
 )
-from estimators.leaderboard.tasks import EstimatorSpec, RealLog
+from estimators.leaderboard.tasks import EstimatorSpec
 
 # Short episodes (4 s of driving, 41 observations) keep the test quick.
 SHORT = {"range_noise_std": 0.01, "max_episode_time": 4.0}
