@@ -4,13 +4,18 @@ Examples::
 
     python -m estimators.calibration --world hallway --trace zigzag --seed 0
     python -m estimators.calibration --bag drive.bag --guess -0.4 0.1 15
+    python -m estimators.calibration --carmen robot.clf --guess -0.7 0 180
+    python -m estimators.calibration --carmen left.log right.log
     python -m estimators.calibration --world hallway --trace loop --mount-error 0.03 0.04 3 \
         --compare pc_fusion lidar_odometry
 
 A simulated drive (``--world``/``--trace``/``--seed``, ``--config`` JSON env overrides) is
 recorded with the scripted driver; a ROS bag (``--bag``, ``--topics``) is read with
-:func:`estimators.datasets.load_bag`. ``--guess x y heading_deg`` (one triple per Lidar 2..K,
-in Lidar 1's frame) starts the calibration; for a bag it replaces the bag's tf mounts.
+:func:`estimators.datasets.load_bag`; CARMEN logs (``--carmen``: one log's front and rear
+laser, or two logs' front lasers, paired by stamp) with
+:func:`estimators.datasets.carmen_pairs.carmen_recording`. ``--guess x y heading_deg`` (one
+triple per Lidar 2..K, in Lidar 1's frame) starts the calibration; for a bag it replaces the
+bag's tf mounts, for a CARMEN log the mounts its parameters state.
 ``--compare`` (simulated drives) scores estimators with the true mounts, with Lidar 2's mount
 wrong by ``--mount-error dx dy dheading_deg``, and with the mounts self-calibrated from the
 wrong ones (:func:`estimators.calibration.comparison.compare_mounts`).
@@ -36,6 +41,8 @@ def _parser() -> argparse.ArgumentParser:
                                      description="Estimate Lidars 2..K's mounts from a drive.")
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--bag", help="ROS 1 .bag, ROS 2 .db3/.mcap file or bag directory")
+    source.add_argument("--carmen", nargs="+", metavar="LOG",
+                        help="a CARMEN log with FLASER + RLASER, or two logs of one laser each")
     source.add_argument("--world", help="simulate a drive in this world (with --trace)")
     parser.add_argument("--trace", default="zigzag", help="trace of the simulated drive")
     parser.add_argument("--seed", type=int, default=0, help="env seed of the simulated drive")
@@ -85,6 +92,10 @@ def _recording(args: argparse.Namespace, guess: np.ndarray | None):
 
         mounts = None if guess is None else np.vstack([np.zeros(3), guess])
         return load_bag(args.bag, args.topics, mounts=mounts)
+    if args.carmen:
+        from estimators.datasets.carmen_pairs import carmen_recording
+
+        return carmen_recording(args.carmen)  # --guess goes to calibrate() as for the others
     from estimators.leaderboard.recording import record
     from estimators.leaderboard.records import Scenario
 

@@ -3,14 +3,16 @@
 Supported messages (one per line, fields separated by white space)::
 
     FLASER n r_1 .. r_n x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_timestamp
+    RLASER  (as FLASER: the rear laser)
     ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
         n r_1 .. r_n n_remissions e_1 .. e_m laser_x laser_y laser_theta robot_x robot_y
         robot_theta tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_ts
     ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp
+    ROBOTLASER2  (as ROBOTLASER1: the rear laser)
     PARAM name value [hostname logger_timestamp]
 
-Lines starting with ``#`` and blank lines are comments. Any other message type (``RLASER``,
-``NEFF``, ``SYNC``, ``TRUEPOS``, ...) is not parsed but *counted* in
+Lines starting with ``#`` and blank lines are comments. Any other message type (``NEFF``,
+``SYNC``, ``TRUEPOS``, ...) is not parsed but *counted* in
 :attr:`CarmenLog.unknown_messages`, so nothing is dropped silently. A truncated or
 malformed line of a supported type (a beam count below 2, a negative range, a non-finite
 number, ``PARAM robot_frontlaser_offset`` that is not a finite number) and corrupt or
@@ -23,7 +25,12 @@ is even (180 beams: -90 .. +89 at 1 degree) and ``180 / (n - 1)`` degrees when `
 (181 beams: -90 .. +90 inclusive, the SICK interlaced convention). The laser sits at
 ``PARAM robot_frontlaser_offset`` [m] ahead of the robot centre (0 when absent).
 ``ROBOTLASER1`` states its own start angle and resolution, and its laser pose relative to
-the robot pose gives the mount.
+the robot pose gives the mount. The rear laser (``RLASER``, ``ROBOTLASER2``) is kept apart, in
+:attr:`CarmenLog.rear_scans`; an ``RLASER`` has FLASER's beam geometry and sits at
+(``robot_rearlaser_offset``, ``robot_rearlaser_side_offset``, ``robot_rearlaser_angular_offset``)
+[m, m, rad], facing backwards (pi) when the angular offset is absent, as CARMEN and GMapping
+read it. :func:`estimators.datasets.carmen_pairs.carmen_recording` makes a two-Lidar recording
+of the two lasers (or of two logs).
 
 Odometry is kept in the log for completeness; the project's estimators never read it.
 """
@@ -46,11 +53,14 @@ from lidar_env.errors import ConfigError, LogFormatError
 from lidar_env.se2 import relative
 
 #: Messages this module parses; any other message name is counted, not parsed.
-PARSED_MESSAGES: tuple[str, ...] = ("FLASER", "ROBOTLASER1", "ODOM", "PARAM")
+PARSED_MESSAGES: tuple[str, ...] = ("FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2", "ODOM",
+                                    "PARAM")
 
 
 #: ``PARAM`` values that must be numbers (checked on their own line, not where they are used).
-NUMERIC_PARAMS: tuple[str, ...] = ("robot_frontlaser_offset",)
+NUMERIC_PARAMS: tuple[str, ...] = ("robot_frontlaser_offset", "robot_rearlaser_offset",
+                                   "robot_rearlaser_side_offset",
+                                   "robot_rearlaser_angular_offset")
 
 
 class CarmenFormatError(LogFormatError):
@@ -75,7 +85,7 @@ class LaserScan:
             estimators).
         timestamp: [s] IPC timestamp of the message (the clock of Kümmerle's relation files).
         logger_timestamp: [s] logger clock (seconds since the logger started).
-        message: ``"FLASER"`` or ``"ROBOTLASER1"``.
+        message: ``"FLASER"``, ``"RLASER"``, ``"ROBOTLASER1"`` or ``"ROBOTLASER2"``.
         line_number: 1-based line in the file.
     """
 
@@ -109,6 +119,8 @@ class CarmenLog:
 
     source: str
     scans: list[LaserScan] = field(default_factory=list)
+    #: the rear laser's scans (``RLASER``, ``ROBOTLASER2``), apart from the front laser's
+    rear_scans: list[LaserScan] = field(default_factory=list)
     odometry: list[Odometry] = field(default_factory=list)
     params: dict[str, str] = field(default_factory=dict)
     #: message name -> number of lines of that type that were not parsed
@@ -197,39 +209,43 @@ def _check_length(fields: list[str], expected: int, message: str, source: str, n
 
 
 def _parse_flaser(
-    fields: list[str], front_offset: float, source: str, number: int
+    fields: list[str], mount: NDArray[np.float64], source: str, number: int
 ) -> LaserScan:
+    """An ``FLASER`` or ``RLASER`` line; ``mount`` is the laser's pose on the robot."""
+    name = fields[0]
     if len(fields) < 2:
-        raise CarmenFormatError(source, number, "FLASER: missing the beam count")
-    n = _beam_count(fields[1], "FLASER beam count", source, number)
-    _check_length(fields, 2 + n + 6 + 3, "FLASER", source, number)
-    ranges = _ranges(fields[2 : 2 + n], "FLASER ranges", source, number)
-    tail = _floats(fields[2 + n : 2 + n + 7] + fields[-1:], "FLASER poses/time", source, number)
+        raise CarmenFormatError(source, number, f"{name}: missing the beam count")
+    n = _beam_count(fields[1], f"{name} beam count", source, number)
+    _check_length(fields, 2 + n + 6 + 3, name, source, number)
+    ranges = _ranges(fields[2 : 2 + n], f"{name} ranges", source, number)
+    tail = _floats(fields[2 + n : 2 + n + 7] + fields[-1:], f"{name} poses/time", source, number)
     return LaserScan(
         ranges=ranges,
         angles=flaser_beam_angles(n),
         max_range=np.inf,
-        laser_offset=np.array([front_offset, 0.0, 0.0]),
+        laser_offset=mount,
         logged_pose=tail[0:3],
         timestamp=float(tail[6]),
         logger_timestamp=float(tail[7]),
-        message="FLASER",
+        message=name,
         line_number=number,
     )
 
 
 def _parse_robotlaser(fields: list[str], source: str, number: int) -> LaserScan:
+    """A ``ROBOTLASER1`` or ``ROBOTLASER2`` line."""
+    name = fields[0]
     if len(fields) < 9:
-        raise CarmenFormatError(source, number, "ROBOTLASER1: truncated header")
-    header = _floats(fields[1:8], "ROBOTLASER1 header", source, number)
-    n = _beam_count(fields[8], "ROBOTLASER1 beam count", source, number)
+        raise CarmenFormatError(source, number, f"{name}: truncated header")
+    header = _floats(fields[1:8], f"{name} header", source, number)
+    n = _beam_count(fields[8], f"{name} beam count", source, number)
     if len(fields) < 10 + n:
-        raise CarmenFormatError(source, number, "ROBOTLASER1: truncated before the remissions")
-    n_remissions = _count(fields[9 + n], "ROBOTLASER1 remission count", source, number)
-    _check_length(fields, 10 + n + n_remissions + 11 + 3, "ROBOTLASER1", source, number)
-    ranges = _ranges(fields[9 : 9 + n], "ROBOTLASER1 ranges", source, number)
+        raise CarmenFormatError(source, number, f"{name}: truncated before the remissions")
+    n_remissions = _count(fields[9 + n], f"{name} remission count", source, number)
+    _check_length(fields, 10 + n + n_remissions + 11 + 3, name, source, number)
+    ranges = _ranges(fields[9 : 9 + n], f"{name} ranges", source, number)
     rest = 10 + n + n_remissions
-    tail = _floats(fields[rest : rest + 12] + fields[-1:], "ROBOTLASER1 tail", source, number)
+    tail = _floats(fields[rest : rest + 12] + fields[-1:], f"{name} tail", source, number)
     _, start_angle, _, resolution, max_range = header[:5]
     laser_pose, robot_pose = tail[0:3], tail[3:6]
     return LaserScan(
@@ -240,7 +256,7 @@ def _parse_robotlaser(fields: list[str], source: str, number: int) -> LaserScan:
         logged_pose=robot_pose,
         timestamp=float(tail[11]),
         logger_timestamp=float(tail[12]),
-        message="ROBOTLASER1",
+        message=name,
         line_number=number,
     )
 
@@ -280,6 +296,16 @@ def iter_lines(path: str | Path) -> Iterator[tuple[int, list[str]]]:
         ) from error
 
 
+def _front_mount(params: dict[str, str]) -> NDArray[np.float64]:
+    return np.array([float(params.get("robot_frontlaser_offset", "0")), 0.0, 0.0])
+
+
+def _rear_mount(params: dict[str, str]) -> NDArray[np.float64]:
+    return np.array([float(params.get("robot_rearlaser_offset", "0")),
+                     float(params.get("robot_rearlaser_side_offset", "0")),
+                     float(params.get("robot_rearlaser_angular_offset", repr(np.pi)))])
+
+
 def load_log(path: str | Path) -> CarmenLog:
     """Read a whole CARMEN log (plain, ``.gz`` or ``.bz2``); see the module docstring."""
     path = Path(path)
@@ -289,10 +315,14 @@ def load_log(path: str | Path) -> CarmenLog:
     for number, fields in iter_lines(path):
         name = fields[0]
         if name == "FLASER":
-            offset = float(log.params.get("robot_frontlaser_offset", "0"))
-            log.scans.append(_parse_flaser(fields, offset, log.source, number))
+            log.scans.append(_parse_flaser(fields, _front_mount(log.params), log.source, number))
+        elif name == "RLASER":
+            log.rear_scans.append(_parse_flaser(fields, _rear_mount(log.params), log.source,
+                                                number))
         elif name == "ROBOTLASER1":
             log.scans.append(_parse_robotlaser(fields, log.source, number))
+        elif name == "ROBOTLASER2":
+            log.rear_scans.append(_parse_robotlaser(fields, log.source, number))
         elif name == "ODOM":
             log.odometry.append(_parse_odom(fields, log.source, number))
         elif name == "PARAM":
