@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+import estimators.odometry.motion_prior as motion_prior
 from estimators.base import Estimator
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
@@ -356,19 +357,18 @@ class LocalMapOdometry(Estimator):
                 break
         return best
 
-    def _updated_velocity(self, increment: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Constant-velocity model after ``increment`` (car frame, per scan or per second):
-        translation averaged over the last ``velocity_window`` increments, rotation from the
-        last one. One increment carries the noise of two registrations (~1-2 % of a step);
-        the average carries a fraction of it, and along a corridor's axis, where the motion
-        is dead-reckoned from this velocity, the error grows with it as long as the corridor
-        lasts. Turn rates change faster than speeds (and are rarely unobservable): not averaged."""
-        self._translations.append(increment[:2])
-        return np.array([*np.mean(self._translations, axis=0), increment[2]])
+    def _updated_velocity(self, increment: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+        """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
+        translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
+        averaged over the last ``velocity_window`` increments (one carries the noise of two
+        registrations, ~1-2 % of a step, which a corridor's axis dead-reckons), the turn rate
+        from the last one (turn rates change faster than speeds and are rarely unobservable)."""
+        self._translations.append(motion_prior.midpoint_velocity(increment, dt)[:2])
+        return np.array([*np.mean(self._translations, axis=0), increment[2] / dt])
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         dt = self._time_step(t)
-        guess = compose(self.pose, self._velocity * dt)
+        guess = compose(self.pose, motion_prior.constant_velocity_increment(self._velocity, dt))
         points = self._points(scans)
         seen = points
         if self._moving is not None:
@@ -387,7 +387,7 @@ class LocalMapOdometry(Estimator):
             if retry.quality > result.quality:
                 result = retry
         pose = result.pose
-        self._velocity = self._updated_velocity(relative(self.pose, pose) / dt)
+        self._velocity = self._updated_velocity(relative(self.pose, pose), dt)
         self._remember(pose, scans, seen)
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
