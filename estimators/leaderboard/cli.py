@@ -55,7 +55,6 @@ from pathlib import Path
 from typing import Any
 
 from agents.driver import DRIVERS
-from estimators.leaderboard import real_logs
 from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.headline import annotate_rows, board_markdown
 from estimators.leaderboard.matrix import (
@@ -70,7 +69,7 @@ from estimators.leaderboard.matrix import (
     table_one_scenarios,
 )
 from estimators.leaderboard.publish import draw_all, publish_report
-from estimators.leaderboard.real_logs import RealLog
+from estimators.leaderboard.real_logs import RealLog, add_real_log_arguments, real_logs_from
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import (
     RunCancelled,
@@ -143,7 +142,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="also write every trace of the run and its ground truth as TUM "
                              "files (OUT/tum/), for evo")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    real_logs.add_arguments(parser)
+    add_real_log_arguments(parser)
     return parser
 
 
@@ -222,7 +221,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ImportError:
             parser.error("--scheduler needs dask.distributed: pip install 'duallidar[distributed]'")
     try:
-        args.logs = real_logs.from_arguments(args, DATA_DIR, DEFAULT_REAL_SCANS)
+        args.logs = real_logs_from(args, DATA_DIR, DEFAULT_REAL_SCANS)
     except (DualLidarError, OSError) as error:
         parser.error(str(error))
     start = time.perf_counter()

@@ -133,7 +133,7 @@ def user_log(path: str | Path, relations: str | Path | None = None, scans: int |
                    truth_topic, topics, file_digest(path))
 
 
-def add_arguments(parser: Any) -> None:
+def add_real_log_arguments(parser: Any) -> None:
     """The leaderboard's real-log options on an ``argparse`` parser."""
     group = parser.add_argument_group("real log", "score on a recorded log (default: ACES)")
     group.add_argument("--no-real", action="store_true",
@@ -152,7 +152,7 @@ def add_arguments(parser: Any) -> None:
                             "1000 of ACES, all of --real-log)")
 
 
-def from_arguments(args: Any, aces_dir: Path, aces_scans: int) -> list[RealLog]:
+def real_logs_from(args: Any, aces_dir: Path, aces_scans: int) -> list[RealLog]:
     """The real logs the parsed ``args`` ask for: none (``--no-real``), the user's
     ``--real-log``, or the ACES log of ``aces_dir`` (its first ``aces_scans`` scans by default)
     when it is there. Raises :class:`ConfigError` naming the option at fault."""

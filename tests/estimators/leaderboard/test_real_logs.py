@@ -12,7 +12,7 @@ import pytest
 
 from estimators.leaderboard import cli as leaderboard
 from estimators.leaderboard import real_logs
-from estimators.leaderboard.real_logs import RealLog, from_arguments, user_log
+from estimators.leaderboard.real_logs import RealLog, real_logs_from, user_log
 from lidar_env.errors import ConfigError
 
 pytest.importorskip("rosbags")
@@ -36,7 +36,7 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def options(**values: object) -> argparse.Namespace:
     parser = argparse.ArgumentParser()
-    real_logs.add_arguments(parser)
+    real_logs.add_real_log_arguments(parser)
     args = parser.parse_args([])
     for key, value in values.items():
         setattr(args, key, value)
@@ -91,16 +91,16 @@ def test_a_changed_file_is_a_new_scenario(tmp_path: Path) -> None:
 ])
 def test_bad_real_log_options_name_the_option(values: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        from_arguments(options(**values), Path("/nonexistent"), 1000)
+        real_logs_from(options(**values), Path("/nonexistent"), 1000)
 
 
 def test_a_carmen_log_takes_no_bag_options_and_needs_relations(tmp_path: Path) -> None:
     path = tmp_path / "run.log"
     path.write_text("FLASER 0 0 0 0 0 0 0 1.0 host 1.0\n")
     with pytest.raises(ConfigError, match="CARMEN log, not a bag"):
-        from_arguments(options(real_log=path, truth_topic="/gt"), tmp_path, 1000)
+        real_logs_from(options(real_log=path, truth_topic="/gt"), tmp_path, 1000)
     with pytest.raises(ConfigError, match="expected a relations file, or a bag"):
-        from_arguments(options(real_log=path), tmp_path, 1000)
+        real_logs_from(options(real_log=path), tmp_path, 1000)
 
 
 def test_a_bag_without_truth_or_relations_is_refused_before_any_run(
