@@ -174,7 +174,7 @@ def fit(model: Any, features: NDArray[np.float32], labels: NDArray[np.float32], 
 
 
 def imitate(
-    seed: int = 0, out: Path = DEFAULT_OUT, iterations: int = 8, steps: int = 24_000,
+    seed: int = 0, out: Path = DEFAULT_OUT, iterations: int = 10, steps: int = 30_000,
     epochs: int = 4, batch_size: int = 256, learning_rate: float = 1e-3,
     net_arch: tuple[int, ...] = (64, 64), log_std: float = -2.0, overwrite: bool = False,
 ) -> Path:
@@ -238,8 +238,8 @@ def imitate(
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--iterations", type=int, default=8, help="DAgger iterations")
-    parser.add_argument("--steps", type=int, default=24_000, help="env steps per iteration")
+    parser.add_argument("--iterations", type=int, default=10, help="DAgger iterations")
+    parser.add_argument("--steps", type=int, default=30_000, help="env steps per iteration")
     parser.add_argument("--epochs", type=int, default=4, help="passes over all labels per fit")
     parser.add_argument("--net-arch", type=int, nargs="+", default=[64, 64],
                         help="hidden layers of the policy (default: %(default)s)")

@@ -11,7 +11,9 @@ from numpy.typing import NDArray
 
 from agents.observation import TraceFollowingObservation
 
-#: The policy shipped with the package (trained by ``python -m agents.train``).
+#: The policy shipped with the package (trained by ``python -m agents.imitate``: it imitates
+#: the scan-aware driver and gives way to pedestrians; ``ppo_driver.json`` beside it records
+#: the run).
 SHIPPED_MODEL = Path(__file__).with_name("models") / "ppo_driver.zip"
 
 

@@ -1,7 +1,11 @@
-"""Train the PPO trace-following driver.
+"""Train a PPO trace-following driver from scratch (reinforcement learning).
 
     python -m agents.train --seed 0                  # -> runs/ppo_driver.zip
-    python -m agents.train --seed 0 --out agents/models/ppo_driver.zip --overwrite  # re-ship
+
+The shipped model (``agents/models/ppo_driver.zip``) no longer comes from here: it is imitated
+from the scan-aware driver by :mod:`agents.imitate` and gives way to pedestrians, which PPO from
+scratch did not learn (see the README). This script trained the earlier shipped trace follower
+(no movers) and is kept for reinforcement-learning experiments.
 
 The default output is ``runs/ppo_driver.zip``, never the shipped model; an existing file is
 only replaced with ``--overwrite``. A progress bar (steps, steps/s, time left) is printed to

@@ -123,3 +123,15 @@ def test_evaluation_reports_how_close_the_movers_came() -> None:
     assert 0.0 <= episode.closest_mover <= half_diagonal  # touching: edge within the car's box
     static = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn")
     assert drive_episode(static, make_driver("scripted"), seed=0).closest_mover == np.inf
+
+
+@pytest.mark.skipif(not SHIPPED_MODEL.is_file(), reason="no shipped model")
+def test_the_shipped_policy_gives_way_to_a_pedestrian_that_pure_pursuit_runs_into():
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
+                   config={"moving_obstacles": 10, "mover_model": "yielding"})
+    # Seed 3: pure pursuit, blind to the scans, drives into a crossing pedestrian after 15 s.
+    blind = drive_episode(env, make_driver("scripted"), seed=3)
+    assert blind.collided and blind.time < 20.0
+    episode = drive_episode(env, SB3Driver(), seed=3)
+    assert episode.success and not episode.collided
+    assert episode.closest_mover < 1.0  # a pedestrian came close, and it was seen in time
