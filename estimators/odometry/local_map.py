@@ -43,12 +43,9 @@ seed 0: 0.014 -> 0.040 m); ACES local 0.0338 m / 0.324 deg / 0.4 % -> 0.0338 m /
 0.6 %, all 0.187 -> 0.172 m; Intel 0.0422 -> 0.0427 m per keyframe pair (5 s: 0.0600 ->
 0.0605 m).
 
-When the match is poor (few points explained) a correlative search over headings and
-translations on a likelihood field of the map (Olson 2009) finds a new start, and ICP refines
-it; if that still explains too few points, the search covers every heading. A turn faster than
-the motion model, or one spanning a gap in the scans, lies outside any window around the guess
-(ACES, 613 s: ~80 deg between two scans 3 s apart was reported as +3 deg with a 0.9 m sideways
-step; all relations 1.77 m -> 0.17 m).
+Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
+the car can have reached; a poor match gets correlative searches in ever wider windows, and
+one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`).
 
 Two Lidars are merged into one point set in the car frame through their known mounts
 (:func:`estimators.matching.scan_matching.scans_to_car_points`).
@@ -68,22 +65,21 @@ from numpy.typing import NDArray
 
 import estimators.odometry.motion_prior as motion_prior
 from estimators.base import Estimator
-from estimators.matching.icp import ICPParams, MatchResult, register
+from estimators.matching.icp import ICPParams
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
-    LikelihoodField,
-    correlative_search,
     scans_to_car_points,
     voxel_downsample,
 )
+from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.free_space import MovingPointFilter
 from estimators.odometry.motion_prior import clock_jitter, prediction_sigma
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
 
 
 @dataclass
-class LocalMapOdometry(Estimator):
+class LocalMapOdometry(FarScanMatching, Estimator):
     """Scan-to-local-map Lidar odometry with a robust loss, a constant-velocity motion prior
     and a correlative fallback. Distances [m], angles [rad]; defaults chosen for indoor 2D
     Lidars (1-3 cm range noise, 5-40 Hz), not for one log:
@@ -130,7 +126,11 @@ class LocalMapOdometry(Estimator):
         min_quality: share of points explained below which the correlative search runs (0.5).
         search_linear_window, search_angular_window: its window around the guess (0.5 m,
             30 deg: a sharp change of turn rate); when the match found there is still poor,
-            the heading window widens to all headings (rare: 2 of 7374 ACES scans, ~0.6 s each).
+            the heading window widens to all headings (rare: 2 of 7374 ACES scans, ~0.6 s each),
+            then to the far-apart window.
+        max_speed, max_turn_rate: [m/s], [rad/s] how fast the car can go (1.5, 1.5: a brisk
+            indoor robot, the simulated car's limits): scans far apart are searched over every
+            pose within these times the scan interval (:mod:`estimators.odometry.far_scans`).
         search_resolution: the search's translation step and likelihood-field cell (0.05 m:
             it only has to land in ICP's basin, several cm wide; decoupled from
             ``voxel_size`` because the search's cost grows with the inverse square of it).
@@ -172,7 +172,8 @@ class LocalMapOdometry(Estimator):
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
 
-    After a run, ``fallbacks`` counts the correlative searches that were needed.
+    After a run, ``fallbacks`` counts the correlative searches that were needed, ``far_searches``
+    the far-apart ones, and ``poor_matches`` lists the scans still matched poorly (flagged).
     """
 
     keyframe_distance: float = 0.25
@@ -201,6 +202,8 @@ class LocalMapOdometry(Estimator):
     prediction_acceleration: float = 0.5
     reject_dynamic: bool = False
     dynamic_margin: float = 0.2
+    max_speed: float = 1.5
+    max_turn_rate: float = 1.5
 
     def __post_init__(self) -> None:
         for name in (
@@ -208,7 +211,7 @@ class LocalMapOdometry(Estimator):
             "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
             "search_angular_window", "search_resolution", "prediction_acceleration",
-            "dynamic_margin",
+            "dynamic_margin", "max_speed", "max_turn_rate",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
@@ -247,7 +250,7 @@ class LocalMapOdometry(Estimator):
             maxlen=self.n_keyframes
         )
         self._reference: PointToLineReference | None = None
-        self._field: LikelihoodField | None = None
+        self._search: GlobalSearch | None = None
         self._velocity = np.zeros(3)  # car frame, per second or per scan
         self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
         self._last_time = 0.0
@@ -256,7 +259,9 @@ class LocalMapOdometry(Estimator):
         dynamic = self.reject_dynamic and not self.setup.world_aligned
         self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
                         if dynamic else None)
-        self.fallbacks = 0
+        self.fallbacks = self.far_searches = 0
+        self._far_steps: deque[tuple[float, float]] = deque(maxlen=self.velocity_window)
+        self.poor_matches: list[int] = []
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         assert self.setup is not None
@@ -295,7 +300,7 @@ class LocalMapOdometry(Estimator):
         self._reference = PointToLineReference.with_estimated_normals(
             merged, self.normal_neighbours, self.denoise_map, self.max_normal_neighbours
         )
-        self._field = None
+        self._search = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._last_time = t
@@ -338,25 +343,6 @@ class LocalMapOdometry(Estimator):
         information[:2] = (self.noise_sigma / sigma) ** 2
         return information
 
-    def _fallback(self, points: NDArray[np.float64], guess: NDArray[np.float64]) -> MatchResult:
-        """Correlative search around ``guess``, refined by ICP; when that still explains too
-        few points, the search widens to every heading: a turn faster than the motion model
-        (or a gap in the scans) leaves the true heading outside any window around it."""
-        assert self._reference is not None
-        if self._field is None:
-            self._field = LikelihoodField(self._reference.points, resolution=self.search_resolution)
-        best: MatchResult | None = None
-        for angular_window in (self.search_angular_window, np.pi):
-            start, _ = correlative_search(
-                self._field, points, guess, self.search_linear_window, angular_window
-            )
-            result = register(self._reference, points, start, self.params)
-            if best is None or result.quality > best.quality:
-                best = result
-            if best.quality >= self.min_quality:
-                break
-        return best
-
     def _updated_velocity(self, increment: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
         """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
         translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
@@ -367,26 +353,21 @@ class LocalMapOdometry(Estimator):
         return np.array([*np.mean(self._translations, axis=0), increment[2] / dt])
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
+        interval = t - self._last_time
         dt = self._time_step(t)
-        guess = compose(self.pose, motion_prior.constant_velocity_increment(self._velocity, dt))
+        predicted = motion_prior.constant_velocity_increment(self._velocity, dt)
+        guess = compose(self.pose, predicted)
         points = self._points(scans)
         seen = points
         if self._moving is not None:
             points = self._static_points(points, guess, scans)
         if self._reference is None or len(points) < 3:
+            self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
             self._remember(guess, scans, seen)
             if len(points) >= 2:
                 self._add_keyframe(guess, points)
             return guess
-        result = register(
-            self._reference, points, guess, self.params, guess, self._prediction_information()
-        )
-        if result.quality < self.min_quality:
-            retry = self._fallback(points, guess)
-            self.fallbacks += 1
-            if retry.quality > result.quality:
-                result = retry
-        pose = result.pose
+        pose = self._match(points, guess, predicted, interval).pose
         self._velocity = self._updated_velocity(relative(self.pose, pose), dt)
         self._remember(pose, scans, seen)
         last_keyframe = self._keyframes[-1][0]

@@ -1,0 +1,382 @@
+"""Multi-resolution branch-and-bound correlative scan matching: the exact best pose of a scan
+on a likelihood grid over a window of translations and headings, at a fraction of the cost of
+scoring every pose.
+
+Olson, "Real-time correlative scan matching", ICRA 2009 (sec. III-C: the multi-resolution
+search); Hess et al., "Real-time loop closure in 2D LIDAR SLAM", ICRA 2016 (sec. V-C:
+branch-and-bound over precomputed grids, Cartographer's ``FastCorrelativeScanMatcher2D``).
+
+A candidate is a heading and a translation in whole cells; its score is the mean grid value
+under the scan's points (0 outside the grid). Level ``l`` of a :class:`GridPyramid` holds, in
+every cell, the maximum of the ``2^l x 2^l`` cells of level 0 starting there, so the score of a
+translation on level ``l`` bounds from above the score of every one of the ``4^l``
+translations it stands for (Hess et al., eq. 14-15). The search scores the coarsest level for
+every heading, then descends depth first, best child first, and drops every node whose bound
+does not beat the best leaf found so far: the result is the grid optimum the exhaustive search
+(:func:`brute_force_match`, the tests' oracle) finds. An ``allowed`` mask of translations
+(e.g. "at least 0.5 m from the best", for an ambiguity test) is pooled the same way, so a node
+with no allowed translation is never expanded.
+
+Frames: the scan's points ``(M, 2)`` are in the car frame; the grid, the centre of the window
+and the returned pose are in the grid's (world) frame. Distances [m], angles [rad].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.se2 import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+#: Most levels a pyramid may have: level 9 pools 512 x 512 cells (25.6 m at 5 cm).
+MAX_LEVELS = 10
+
+
+@njit(cache=True)
+def _pool_levels(padded: NDArray[np.float64],
+                 levels: int) -> NDArray[np.float64]:  # pragma: no cover (numba)
+    """``(levels, NX, NY)``: level ``l`` holds in cell ``(i, j)`` the maximum of ``padded[i :
+    i + 2^l, j : j + 2^l]`` (0 beyond the grid), each level from the one below in two passes
+    of ``max(cell, cell + 2^(l-1))``."""
+    n_rows, n_cols = padded.shape
+    out = np.zeros((levels, n_rows, n_cols))
+    out[0] = padded
+    row = np.zeros((n_rows, n_cols))
+    for level in range(1, levels):
+        width = 2 ** (level - 1)
+        below = out[level - 1]
+        for i in range(n_rows):
+            for j in range(n_cols):
+                value = below[i, j]
+                if i + width < n_rows and below[i + width, j] > value:
+                    value = below[i + width, j]
+                row[i, j] = value
+        for i in range(n_rows):
+            for j in range(n_cols):
+                value = row[i, j]
+                if j + width < n_cols and row[i, j + width] > value:
+                    value = row[i, j + width]
+                out[level, i, j] = value
+    return out
+
+
+def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
+    """``(levels, NX, NY)`` copies of ``grid`` (2-D, values >= 0; booleans count as 0 / 1):
+    level ``l`` holds in cell ``(i, j)`` the maximum of ``grid[i : i + 2^l, j : j + 2^l]``
+    (clipped to the grid)."""
+    if not 1 <= levels <= MAX_LEVELS:
+        raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
+    return _pool_levels(np.ascontiguousarray(grid, dtype=np.float64), levels)
+
+
+@njit(cache=True)
+def _rotated_cells(points: NDArray[np.float64], headings: NDArray[np.float64],
+                   shift: NDArray[np.float64], resolution: float,
+                   padding: int) -> NDArray[np.int64]:  # pragma: no cover (numba)
+    """``(H, M, 2)`` cells of ``points`` turned by each heading and moved by ``shift`` (2,)."""
+    out = np.empty((len(headings), len(points), 2), np.int64)
+    for h in range(len(headings)):
+        c, s = np.cos(headings[h]), np.sin(headings[h])
+        for m in range(len(points)):
+            x = c * points[m, 0] - s * points[m, 1] + shift[0]
+            y = s * points[m, 0] + c * points[m, 1] + shift[1]
+            out[h, m, 0] = int(np.floor(x / resolution)) + padding
+            out[h, m, 1] = int(np.floor(y / resolution)) + padding
+    return out
+
+
+@njit(cache=True)
+def _stamp(cells: NDArray[np.int64], n_rows: int, n_cols: int,
+           kernel: NDArray[np.float64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
+    """``(n_rows, n_cols)`` grid holding in each cell the largest ``kernel`` value any of
+    ``cells`` (N, 2) puts there (``kernel`` centred on the cell)."""
+    grid = np.zeros((n_rows, n_cols))
+    reach = kernel.shape[0] // 2
+    for k in range(len(cells)):
+        ci, cj = cells[k, 0], cells[k, 1]
+        for a in range(kernel.shape[0]):
+            i = ci + a - reach
+            if 0 <= i < n_rows:
+                for b in range(kernel.shape[1]):
+                    j = cj + b - reach
+                    if 0 <= j < n_cols and kernel[a, b] > grid[i, j]:
+                        grid[i, j] = kernel[a, b]
+    return grid
+
+
+def likelihood_grid(points: ArrayLike, origin: ArrayLike, shape: tuple[int, int],
+                    resolution: float, sigma: float = 0.1) -> FloatArray:
+    """``shape`` grid of ``exp(-d^2 / 2 sigma^2)``, ``d`` [m] from each cell to the nearest
+    cell holding one of ``points`` (M, 2) [m] (cell ``(0, 0)`` at ``origin``), cut to 0 beyond
+    ``3 sigma``: the values of :class:`~estimators.matching.scan_matching.LikelihoodField`
+    (which spends a distance transform on the whole grid to give cells further out 0.01 or
+    less), stamped point by point, so a grid costs its points, not its area."""
+    if not (resolution > 0 and sigma > 0):
+        raise ConfigError(f"resolution and sigma: expected > 0 [m], got {resolution}, {sigma}")
+    reach = int(np.ceil(3.0 * sigma / resolution))
+    offsets = np.arange(-reach, reach + 1) * resolution
+    distance2 = offsets[:, None] ** 2 + offsets[None, :] ** 2
+    kernel = np.where(distance2 <= (3.0 * sigma) ** 2, np.exp(-0.5 * distance2 / sigma**2), 0.0)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    cells = np.floor((points - np.asarray(origin, dtype=np.float64)) / resolution)
+    return _stamp(cells.astype(np.int64), int(shape[0]), int(shape[1]), kernel)
+
+
+class GridPyramid:
+    """A likelihood grid and its max-pooled levels, ready for :func:`match`.
+
+    Args:
+        grid: ``(NX, NY)`` scores >= 0; cell ``(i, j)`` covers ``origin + resolution * (i, j)``
+            up to the next cell.
+        origin: ``(2,)`` [m] corner of cell ``(0, 0)``.
+        resolution: cell size [m], also the translation step of the search.
+        levels: 1 (only the grid: exhaustive) to ``MAX_LEVELS``; a window ``2n + 1`` cells
+            wide is searched fastest with ``2^(levels - 1)`` about a quarter of it.
+
+    The levels are padded with ``2^(levels - 1) - 1`` empty cells on the low side, so that a
+    coarse cell reaching into the grid from outside still bounds the cells it covers.
+    """
+
+    def __init__(self, grid: ArrayLike, origin: ArrayLike, resolution: float,
+                 levels: int) -> None:
+        grid = np.asarray(grid, dtype=np.float64)
+        if grid.ndim != 2 or grid.size == 0:
+            raise EstimatorInputError(f"grid: expected a non-empty 2-D array, got {grid.shape}")
+        if not np.all(np.isfinite(grid)) or grid.min() < 0:
+            raise EstimatorInputError("grid: expected finite scores >= 0")
+        if not resolution > 0:
+            raise ConfigError(f"resolution: expected a cell size > 0 [m], got {resolution}")
+        if not (isinstance(levels, int | np.integer) and 1 <= levels <= MAX_LEVELS):
+            raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
+        self.origin = np.asarray(origin, dtype=np.float64).reshape(2)
+        self.resolution = float(resolution)
+        self.padding = 2 ** (levels - 1) - 1
+        padded = np.pad(grid, ((self.padding, 0), (self.padding, 0)))
+        self.levels = max_pool_levels(padded, levels)
+
+    @classmethod
+    def from_field(cls, field: object, levels: int) -> GridPyramid:
+        """The pyramid of a :class:`~estimators.matching.scan_matching.LikelihoodField`."""
+        return cls(field.grid, field.origin, field.resolution, levels)  # type: ignore[attr-defined]
+
+    @property
+    def n_levels(self) -> int:
+        """Levels, the grid itself included."""
+        return len(self.levels)
+
+    def cells(self, points: FloatArray, center: FloatArray,
+              headings: FloatArray) -> NDArray[np.int64]:
+        """``(H, M, 2)`` padded level-0 cells of ``points`` (M, 2) turned to each of
+        ``headings`` (H,) and moved to ``center[:2]`` (no translation offset yet)."""
+        return _rotated_cells(np.ascontiguousarray(points, dtype=np.float64),
+                              np.asarray(headings, dtype=np.float64), center[:2] - self.origin,
+                              self.resolution, self.padding)
+
+
+@dataclass(frozen=True)
+class Match:
+    """Outcome of :func:`match`: the best ``pose`` (3,) and its mean ``score`` in [0, 1];
+    ``found`` is False when no candidate beat ``min_score`` (``pose`` is then the window's
+    centre and ``score`` 0); ``nodes`` counts the candidates scored at any level (the
+    exhaustive search scores ``headings * (2n + 1)^2``)."""
+
+    pose: FloatArray
+    score: float
+    found: bool
+    nodes: int
+
+
+def search_headings(center_heading: float, angular_window: float,
+                    angular_step: float) -> FloatArray:
+    """Headings [rad] of the search: ``center_heading + k * angular_step`` within
+    ``± angular_window``; a window of pi or more covers the circle once."""
+    if not angular_step > 0:
+        raise ConfigError(f"angular_step: expected a step > 0 [rad], got {angular_step}")
+    if not angular_window >= 0:
+        raise ConfigError(f"angular_window: expected a window >= 0 [rad], got {angular_window}")
+    if angular_window >= np.pi:
+        n = int(np.ceil(2 * np.pi / angular_step))
+        return center_heading + (2 * np.pi / n) * (np.arange(n) - n // 2)
+    n = int(np.ceil(angular_window / angular_step - 1e-9))
+    return center_heading + angular_step * np.arange(-n, n + 1)
+
+
+def angular_step_for(points: FloatArray, resolution: float, max_step: float = np.radians(1.0),
+                     min_step: float = np.radians(0.1)) -> float:
+    """Heading step [rad] at which the scan's far points (90th percentile of their ranges)
+    move by one grid cell (Hess et al. 2016, eq. 7), within [``min_step``, ``max_step``]."""
+    ranges = np.hypot(points[:, 0], points[:, 1])
+    far = float(np.percentile(ranges, 90)) if len(ranges) else 0.0
+    if far <= resolution:
+        return max_step
+    return float(np.clip(resolution / far, min_step, max_step))
+
+
+@njit(cache=True)
+def _node_score(grid: NDArray[np.float64], cells: NDArray[np.int64], h: int, di: int,
+                dj: int) -> float:  # pragma: no cover (numba)
+    """Mean of ``grid`` under the points of heading ``h`` moved by ``(di, dj)`` cells."""
+    n_rows, n_cols = grid.shape
+    n_points = cells.shape[1]
+    total = 0.0
+    for m in range(n_points):
+        i, j = cells[h, m, 0] + di, cells[h, m, 1] + dj
+        if 0 <= i < n_rows and 0 <= j < n_cols:
+            total += grid[i, j]
+    return total / max(n_points, 1)
+
+
+@njit(cache=True)
+def _branch_and_bound(
+    levels: NDArray[np.float64], cells: NDArray[np.int64], n: int,
+    allowed: NDArray[np.bool_], min_score: float,
+) -> tuple[float, int, int, int, int]:  # pragma: no cover (numba)
+    """Best (score, heading, di, dj) over the translations ``[-n, n]^2`` cells that
+    ``allowed[0]`` admits, scoring ``levels[l]`` for nodes of ``2^l x 2^l`` translations;
+    also the number of nodes scored. ``allowed[l]`` is the mask pooled like the grid."""
+    top = levels.shape[0] - 1
+    width = 2**top
+    n_headings = cells.shape[0]
+    starts = np.arange(-n, n + 1, width)
+    n_starts = len(starts)
+    roots = np.empty(n_headings * n_starts * n_starts)
+    for h in range(n_headings):
+        for a in range(n_starts):
+            for b in range(n_starts):
+                k = (h * n_starts + a) * n_starts + b
+                if allowed[top, starts[a] + n, starts[b] + n]:
+                    roots[k] = _node_score(levels[top], cells, h, starts[a], starts[b])
+                else:
+                    roots[k] = -1.0
+    nodes = len(roots)
+    order = np.argsort(-roots, kind="mergesort")
+    best, best_h, best_i, best_j = min_score, -1, 0, 0
+    capacity = 4 * (top + 1) + 1
+    stack_level = np.empty(capacity, np.int64)
+    stack_h = np.empty(capacity, np.int64)
+    stack_i = np.empty(capacity, np.int64)
+    stack_j = np.empty(capacity, np.int64)
+    stack_score = np.empty(capacity)
+    child_i = np.empty(4, np.int64)
+    child_j = np.empty(4, np.int64)
+    child_score = np.empty(4)
+    for k in order:
+        if roots[k] <= best:
+            break
+        h = k // (n_starts * n_starts)
+        stack_level[0], stack_h[0] = top, h
+        stack_i[0], stack_j[0] = starts[(k // n_starts) % n_starts], starts[k % n_starts]
+        stack_score[0] = roots[k]
+        size = 1
+        while size > 0:
+            size -= 1
+            level, score = stack_level[size], stack_score[size]
+            di, dj = stack_i[size], stack_j[size]
+            if score <= best:
+                continue
+            if level == 0:
+                best, best_h, best_i, best_j = score, stack_h[size], di, dj
+                continue
+            half = 2 ** (level - 1)
+            count = 0
+            for a in range(2):
+                for b in range(2):
+                    ci, cj = di + a * half, dj + b * half
+                    if ci > n or cj > n or not allowed[level - 1, ci + n, cj + n]:
+                        continue
+                    child_i[count], child_j[count] = ci, cj
+                    child_score[count] = _node_score(levels[level - 1], cells, h, ci, cj)
+                    count += 1
+            nodes += count
+            # Push the best child last, so that it is expanded first.
+            for c in np.argsort(child_score[:count], kind="mergesort"):
+                if child_score[c] > best:
+                    stack_level[size], stack_h[size] = level - 1, h
+                    stack_i[size], stack_j[size] = child_i[c], child_j[c]
+                    stack_score[size] = child_score[c]
+                    size += 1
+    return best, best_h, best_i, best_j, nodes
+
+
+def _window_cells(linear_window: float, resolution: float) -> int:
+    if not linear_window >= 0:
+        raise ConfigError(f"linear_window: expected a window >= 0 [m], got {linear_window}")
+    return int(np.ceil(linear_window / resolution - 1e-9))
+
+
+def _check_inputs(points: ArrayLike, center: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    points = np.asarray(points, dtype=np.float64)
+    center = np.asarray(center, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 2 or len(points) == 0:
+        raise EstimatorInputError(f"points: expected shape (M >= 1, 2), got {points.shape}")
+    if center.shape != (3,) or not np.all(np.isfinite(center)):
+        raise EstimatorInputError(f"center: expected a finite pose (x, y, heading), got {center}")
+    return points, center
+
+
+def match(
+    pyramid: GridPyramid, points: ArrayLike, center: ArrayLike, linear_window: float,
+    angular_window: float, angular_step: float, min_score: float = 0.0,
+    allowed: NDArray[np.bool_] | None = None,
+) -> Match:
+    """Best pose of ``points`` (M, 2, car frame) on ``pyramid`` within ``center[:2] ±
+    linear_window`` [m] (whole cells: ``n = ceil(linear_window / resolution)`` each way) and
+    ``center[2] ± angular_window`` at ``angular_step`` (:func:`search_headings`), exact on the
+    grid. Only translations where ``allowed`` ``(2n + 1, 2n + 1)`` holds count (index
+    ``(di + n, dj + n)`` for a shift of ``(di, dj)`` cells; all when None). A best score
+    that does not exceed ``min_score`` gives ``found=False``."""
+    points, center = _check_inputs(points, center)
+    n = _window_cells(linear_window, pyramid.resolution)
+    headings = search_headings(center[2], angular_window, angular_step)
+    if allowed is None:
+        allowed = np.ones((2 * n + 1, 2 * n + 1), dtype=bool)
+    elif allowed.shape != (2 * n + 1, 2 * n + 1):
+        raise EstimatorInputError(f"allowed: expected shape {(2 * n + 1, 2 * n + 1)}, "
+                                  f"got {allowed.shape}")
+    mask = max_pool_levels(np.asarray(allowed, dtype=bool), pyramid.n_levels) > 0
+    cells = pyramid.cells(points, center, headings)
+    best, h, di, dj, nodes = _branch_and_bound(pyramid.levels, cells, n, mask, float(min_score))
+    if h < 0:
+        return Match(center.copy(), 0.0, False, int(nodes))
+    pose = np.array([center[0] + di * pyramid.resolution, center[1] + dj * pyramid.resolution,
+                     float(wrap_angle(headings[h]))])
+    return Match(pose, float(best), True, int(nodes))
+
+
+def brute_force_match(
+    pyramid: GridPyramid, points: ArrayLike, center: ArrayLike, linear_window: float,
+    angular_window: float, angular_step: float,
+) -> Match:
+    """The exhaustive search :func:`match` must agree with: every heading and translation of
+    the same window scored on the grid (level 0), in arrays."""
+    points, center = _check_inputs(points, center)
+    n = _window_cells(linear_window, pyramid.resolution)
+    headings = search_headings(center[2], angular_window, angular_step)
+    cells = pyramid.cells(points, center, headings)  # (H, M, 2)
+    grid = pyramid.levels[0]
+    shifts = np.arange(-n, n + 1)
+    i = cells[:, None, None, :, 0] + shifts[None, :, None, None]  # (H, S, 1, M)
+    j = cells[:, None, None, :, 1] + shifts[None, None, :, None]  # (H, 1, S, M)
+    i, j = np.broadcast_arrays(i, j)
+    inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+    values = np.where(inside, grid[np.where(inside, i, 0), np.where(inside, j, 0)], 0.0)
+    scores = values.mean(axis=-1)  # (H, S, S)
+    h, a, b = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    pose = np.array([center[0] + shifts[a] * pyramid.resolution,
+                     center[1] + shifts[b] * pyramid.resolution, float(wrap_angle(headings[h]))])
+    return Match(pose, float(scores[h, a, b]), True, int(scores.size))
+
+
+def levels_for_window(linear_window: float, resolution: float) -> int:
+    """Levels for a window of ``± linear_window`` [m]: the coarsest node spans at least half
+    of it, so a heading starts from 4 nodes (fewer when the window is one cell). Scoring
+    the headings' first nodes is most of a search's cost: the bounds of a fine grid of
+    headings prune almost all of them, and the children of the rest."""
+    cells = 2 * _window_cells(linear_window, resolution) + 1
+    return int(np.clip(np.ceil(np.log2(cells)), 1, MAX_LEVELS))

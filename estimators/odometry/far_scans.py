@@ -1,0 +1,253 @@
+"""Scans far apart: where the ``lidar_odometry`` front end searches before ICP refines.
+
+ICP converges from a guess within its pairing gate; a constant-velocity guess is that good when
+scans come a few centimetres apart (10 Hz), not when they come a metre and tens of degrees
+apart (keyframe-only logs, 1-2 Hz scanners, dropped scans). Two searches give ICP its start
+on the likelihood field of the local map (Olson 2009):
+
+* **Far-apart search.** When the car moved at least a keyframe spacing per scan lately (the
+  constant-velocity guess then misses by a good part of a step: a 1 Hz car braking at
+  0.5 m/s^2 is 0.5 m off), ICP starts from the exact best pose of a multi-resolution
+  branch-and-bound search (:mod:`estimators.matching.branch_and_bound`) over every pose the
+  car can have reached: within ``max_speed * dt`` of the guess and turned by up to
+  ``max_turn_rate * dt`` (every heading beyond 180 deg), ``dt`` the scan interval, or the
+  typical one when the logged stamp says less (stamps glitch; a window too small loses the
+  car, one too large costs a few ms). The motion prior then weighs what a constant-velocity
+  guess is worth over that interval (``prediction_acceleration * dt^2``, unclipped).
+* **Fallback** (:func:`fallback_match`), when a match explains too few points: a correlative
+  search in a small window around the guess, then over every heading, then over the
+  far-apart window. A turn faster than the motion model, or one spanning a gap in the scans,
+  lies outside any small window around the guess (ACES, 613 s: ~80 deg between two scans
+  3 s apart was reported as +3 deg with a 0.9 m sideways step; all relations 1.77 m ->
+  0.17 m).
+
+A match that still explains less than ``min_quality`` of the scan (no overlap with the map:
+the car was carried off, a scan of a new room through a door) is kept as the best there is
+and *flagged*: the scan's index goes to the estimator's ``poor_matches``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.branch_and_bound import (
+    GridPyramid,
+    Match,
+    angular_step_for,
+    levels_for_window,
+    likelihood_grid,
+    match,
+)
+from estimators.matching.icp import ICPParams, MatchResult, register
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.matching.scan_matching import LikelihoodField, correlative_search, voxel_downsample
+from lidar_env.se2 import relative
+
+FloatArray = NDArray[np.float64]
+
+#: Thinning [m] of the scan the branch-and-bound scores: a few points per metre of wall is what
+#: pins a pose to a 5 cm cell, and the cost is linear in the points.
+SEARCH_VOXEL = 0.1
+#: At most this many points are scored (evenly spread); ICP refines with all of them.
+SEARCH_POINTS = 300
+#: A best mean score at or below this (a scan landing on nothing of the map: 0.05 = one point
+#: in 20 on a wall) is "not found".
+MIN_SEARCH_SCORE = 0.05
+
+
+@dataclass(frozen=True)
+class SearchWindow:
+    """Where the car can be: ``linear`` [m] around the guess, ``angular`` [rad] either side."""
+
+    linear: float
+    angular: float
+
+
+def reach_window(max_speed: float, max_turn_rate: float, interval: float,
+                 typical: float) -> SearchWindow:
+    """Every pose reachable since the last scan: ``max_speed`` [m/s] and ``max_turn_rate``
+    [rad/s] times the larger of the scan ``interval`` and the ``typical`` one [s] (a stamp
+    that glitches short must not shrink the window; a non-finite one counts as typical)."""
+    dt = max(interval if np.isfinite(interval) else 0.0, typical if np.isfinite(typical) else 0.0)
+    return SearchWindow(max_speed * dt, min(max_turn_rate * dt, np.pi))
+
+
+def far_apart(increment: FloatArray, keyframe_distance: float, keyframe_angle: float) -> bool:
+    """Whether scans come far apart: the last increment (3,) per scan moved the car at least a
+    keyframe spacing (``keyframe_distance`` [m] or ``keyframe_angle`` [rad])."""
+    return bool(np.hypot(increment[0], increment[1]) >= keyframe_distance
+                or abs(increment[2]) >= keyframe_angle)
+
+
+class GlobalSearch:
+    """The correlative searches on one map: its likelihood field (``resolution`` cells, 0.1 m
+    wide) for the exhaustive search, built once when first needed, and for each
+    branch-and-bound search a grid and pyramid over the part of the map the scan can reach."""
+
+    def __init__(self, map_points: FloatArray, resolution: float) -> None:
+        self.map_points = map_points
+        self.resolution = resolution
+        self._field: LikelihoodField | None = None
+
+    @property
+    def field(self) -> LikelihoodField:
+        """The likelihood field of the whole map (built once)."""
+        if self._field is None:
+            self._field = LikelihoodField(self.map_points, resolution=self.resolution)
+        return self._field
+
+    def search(self, points: FloatArray, guess: FloatArray, window: SearchWindow) -> Match:
+        """Exact best pose of ``points`` (M, 2, car frame) within ``window`` of ``guess``."""
+        thinned = voxel_downsample(points, SEARCH_VOXEL)
+        thinned = thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
+        reach = window.linear + float(np.hypot(thinned[:, 0], thinned[:, 1]).max()) + 0.5
+        low = np.maximum(self.map_points.min(axis=0), guess[:2] - reach) - 0.5
+        high = np.minimum(self.map_points.max(axis=0), guess[:2] + reach) + 0.5
+        shape = tuple(np.maximum(np.ceil((high - low) / self.resolution).astype(int), 1))
+        inside = np.all((self.map_points >= low) & (self.map_points <= high), axis=1)
+        grid = likelihood_grid(self.map_points[inside], low, shape, self.resolution)
+        levels = levels_for_window(window.linear, self.resolution)
+        pyramid = GridPyramid(grid, low, self.resolution, levels)
+        step = angular_step_for(thinned, self.resolution)
+        return match(pyramid, thinned, guess, window.linear, window.angular, step,
+                     MIN_SEARCH_SCORE)
+
+
+def far_match(
+    search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
+    guess: FloatArray, window: SearchWindow, params: ICPParams,
+    prior_information: FloatArray,
+) -> MatchResult:
+    """ICP of ``points`` from the guess and from the branch-and-bound's best pose in
+    ``window`` around it, both held by the weak prior ``prior_information`` (3,) at ``guess``.
+
+    The search's result wins only if it explains more of the points by more than the count's
+    own noise (one standard error of the share, ``sqrt(q (1 - q) / M)``): where the scan
+    leaves a direction open (a corridor's axis) every pose along it scores about the same, the
+    search's best is one of them at random, and the guess is the better bet."""
+    from_guess = register(reference, points, guess, params, guess, prior_information)
+    found = search.search(points, guess, window)
+    if not found.found:
+        return from_guess
+    from_search = register(reference, points, found.pose, params, guess, prior_information)
+    return from_search if from_search.quality >= from_guess.quality else from_guess
+
+
+def fallback_match(
+    search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
+    guess: FloatArray, near: SearchWindow, far: SearchWindow | None, params: ICPParams,
+    min_quality: float,
+) -> MatchResult:
+    """The best-explaining ICP match of ``points`` from correlative searches around ``guess``
+    in ever wider windows, until one explains ``min_quality`` of the points: exhaustive
+    (:func:`~estimators.matching.scan_matching.correlative_search`) in the ``near`` window,
+    then over every heading at its translations, then (if given) branch-and-bound in the
+    ``far`` window."""
+    best: MatchResult | None = None
+    for window in (near, SearchWindow(near.linear, np.pi), far):
+        if window is None:
+            break
+        if window is far:
+            start = search.search(points, guess, window).pose
+        else:
+            start, _ = correlative_search(search.field, points, guess, window.linear,
+                                          window.angular)
+        result = register(reference, points, start, params)
+        if best is None or result.quality > best.quality:
+            best = result
+        if best.quality >= min_quality:
+            break
+    assert best is not None
+    return best
+
+
+class FarScanMatching:
+    """The matching step of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin:
+    ICP from the guess, from the far-apart search, or through the fallback. It reads the
+    front end's settings (``params``, ``min_quality``, ``keyframe_*``, ``max_speed``,
+    ``max_turn_rate``, ``search_*``, ``noise_sigma``, ``prior_sigma_translation``,
+    ``prediction_acceleration``) and state (``_reference``, ``_search``, ``_time_steps``)."""
+
+    params: ICPParams
+    min_quality: float
+    keyframe_distance: float
+    keyframe_angle: float
+    max_speed: float
+    max_turn_rate: float
+    search_linear_window: float
+    search_angular_window: float
+    search_resolution: float
+    noise_sigma: float
+    prior_sigma_translation: float
+    prediction_acceleration: float
+    _reference: PointToLineReference | None
+    _search: GlobalSearch | None
+    _time_steps: deque[float]
+    _far_steps: deque[tuple[float, float]]  # the last few steps' lengths [m] and turns [rad]
+    _prior_information: FloatArray
+    _poses: list[FloatArray]
+    _prediction_information: Callable[[], FloatArray]
+    fallbacks: int
+    far_searches: int
+    poor_matches: list[int]
+
+    def _global_search(self) -> GlobalSearch:
+        assert self._reference is not None
+        if self._search is None:
+            self._search = GlobalSearch(self._reference.points, self.search_resolution)
+        return self._search
+
+    def _far_prior(self, window: SearchWindow) -> FloatArray:
+        """Prior information (3,) of a constant-velocity guess over the window's interval
+        ``dt``: its position good to ``prediction_acceleration * dt^2`` (never better than
+        ``prior_sigma_translation``)."""
+        dt = window.linear / self.max_speed
+        sigma = max(self.prediction_acceleration * dt**2, self.prior_sigma_translation)
+        information = self._prior_information.copy()
+        information[:2] = (self.noise_sigma / sigma) ** 2
+        return information
+
+    def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,
+               interval: float) -> MatchResult:
+        """The registration of ``points`` (M, 2, car frame) near ``guess`` (3,), the car
+        having moved ``predicted`` (3,) over the scan ``interval`` [s] if its velocity held."""
+        assert self._reference is not None
+        typical = float(np.median(self._time_steps)) if self._time_steps else interval
+        window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
+        if self._far_steps:  # a stalled clock does not mean the car drove or turned further
+            longest, sharpest = np.max(self._far_steps, axis=0)
+            window = SearchWindow(
+                min(window.linear, 2.0 * longest + self.params.max_correspondence_distance),
+                min(window.angular, 2.0 * sharpest + self.search_angular_window))
+        # With no motion seen yet, a window wider than ICP's gate means scans far apart.
+        unknown = len(self._poses) == 1 and window.linear > self.params.max_correspondence_distance
+        if unknown or far_apart(predicted, self.keyframe_distance, self.keyframe_angle):
+            self.far_searches += 1
+            result = far_match(self._global_search(), self._reference, points, guess, window,
+                               self.params, self._far_prior(window))
+            if result.quality < self.min_quality and window.angular < np.pi:
+                self.fallbacks += 1
+                retry = far_match(self._global_search(), self._reference, points, guess,
+                                  SearchWindow(window.linear, np.pi), self.params,
+                                  self._far_prior(window))
+                result = retry if retry.quality > result.quality else result
+        else:
+            result = register(self._reference, points, guess, self.params, guess,
+                              self._prediction_information())
+            if result.quality < self.min_quality:
+                self.fallbacks += 1
+                near = SearchWindow(self.search_linear_window, self.search_angular_window)
+                retry = fallback_match(self._global_search(), self._reference, points, guess,
+                                       near, window if window.linear > near.linear else None,
+                                       self.params, self.min_quality)
+                result = retry if retry.quality > result.quality else result
+        if result.quality < self.min_quality:
+            self.poor_matches.append(len(self._poses))
+        step = relative(self._poses[-1], result.pose)
+        self._far_steps.append((float(np.hypot(step[0], step[1])), abs(float(step[2]))))
+        return result

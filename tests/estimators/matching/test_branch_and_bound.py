@@ -1,0 +1,157 @@
+"""Multi-resolution branch-and-bound: the exhaustive search's optimum on random grids (with
+and without a mask of allowed translations), pooled levels against a direct maximum, the
+stamped likelihood grid against the distance-transform field, a pair of scans 1.5 m and 45 deg
+apart recovered, and no overlap reported as "not found"."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.matching.branch_and_bound import (
+    GridPyramid,
+    brute_force_match,
+    levels_for_window,
+    likelihood_grid,
+    match,
+    max_pool_levels,
+    search_headings,
+)
+from estimators.matching.icp import register
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.matching.scan_matching import LikelihoodField, scan_to_points
+from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.lidar import cast_rays
+from lidar_env.se2 import relative, wrap_angle
+
+ANGLES = 2 * np.pi * np.arange(360) / 360
+MAX_RANGE = 12.0
+
+
+def room() -> tuple[np.ndarray, np.ndarray]:
+    """A 16 m x 10 m room with an inner wall and a few pillars (circles x, y, r; segments)."""
+    walls = np.array([[0, 0, 16, 0], [16, 0, 16, 10], [16, 10, 0, 10], [0, 10, 0, 0],
+                      [6, 0, 6, 4], [10, 10, 10, 7]], dtype=float)
+    pillars = np.array([[3, 7, 0.4], [12, 3, 0.3], [8.5, 5.5, 0.5], [13.5, 8, 0.25]])
+    return pillars, walls
+
+
+def scan_points(pose: np.ndarray, rng: np.random.Generator, noise: float = 0.01) -> np.ndarray:
+    """Car-frame points of one noisy 360-beam scan taken at world ``pose``."""
+    ranges = cast_rays(room(), pose, ANGLES, MAX_RANGE)[0]
+    ranges = np.where(ranges < MAX_RANGE, ranges + rng.normal(0, noise, ranges.shape), ranges)
+    return scan_to_points(ranges, ANGLES, MAX_RANGE)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_branch_and_bound_finds_the_exhaustive_optimum_on_random_grids(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        grid = rng.random((int(rng.integers(15, 50)), int(rng.integers(15, 50)))) ** 3
+        resolution = 0.1
+        pyramid = GridPyramid(grid, rng.normal(size=2), resolution, int(rng.integers(1, 7)))
+        points = rng.normal(size=(int(rng.integers(1, 30)), 2)) * 1.5
+        center = np.array([*(pyramid.origin + rng.random(2) * 4), rng.uniform(-3, 3)])
+        linear = rng.uniform(0, 1.6)
+        angular = rng.choice([rng.uniform(0, 0.6), np.pi])
+        fast = match(pyramid, points, center, linear, angular, 0.07)
+        slow = brute_force_match(pyramid, points, center, linear, angular, 0.07)
+        assert fast.found
+        assert fast.score == pytest.approx(slow.score, abs=1e-12)
+        np.testing.assert_allclose(fast.pose, slow.pose, atol=1e-9)
+        assert fast.nodes <= slow.nodes or slow.nodes < 50
+
+
+def test_a_mask_of_allowed_translations_is_honoured_exactly() -> None:
+    rng = np.random.default_rng(7)
+    grid = rng.random((40, 40)) ** 3
+    pyramid = GridPyramid(grid, (0.0, 0.0), 0.1, 4)
+    points = rng.normal(size=(12, 2))
+    center = np.array([2.0, 2.0, 0.3])
+    best = brute_force_match(pyramid, points, center, 0.8, 0.2, 0.05)
+    n = 8
+    shift = np.round((best.pose[:2] - center[:2]) / 0.1).astype(int)
+    di, dj = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
+    allowed = np.hypot(di - shift[0], dj - shift[1]) >= 3  # away from the optimum
+    masked = match(pyramid, points, center, 0.8, 0.2, 0.05, allowed=allowed)
+    # oracle: the exhaustive scores of the allowed translations only
+    headings = search_headings(center[2], 0.2, 0.05)
+    cells = pyramid.cells(points, center, headings)
+    margin = 30  # cells outside the grid score 0
+    padded = np.pad(pyramid.levels[0], margin)
+    top = -1.0
+    for h in range(len(headings)):
+        for a, b in zip(*np.nonzero(allowed), strict=True):
+            i, j = cells[h, :, 0] + a - n + margin, cells[h, :, 1] + b - n + margin
+            top = max(top, float(padded[i, j].mean()))
+    assert masked.score == pytest.approx(top, abs=1e-12)
+    assert masked.score < best.score
+    assert np.hypot(*((masked.pose[:2] - best.pose[:2]) / 0.1)) >= 3 - 1e-9
+
+
+def test_pooled_levels_hold_the_maximum_of_their_window() -> None:
+    rng = np.random.default_rng(3)
+    grid = rng.random((13, 9))
+    levels = max_pool_levels(grid, 4)
+    for level in range(4):
+        width = 2**level
+        for i in range(13):
+            for j in range(9):
+                assert levels[level, i, j] == grid[i:i + width, j:j + width].max()
+
+
+def test_stamped_grid_matches_the_distance_transform_field_within_three_sigma() -> None:
+    rng = np.random.default_rng(4)
+    points = rng.uniform(0, 5, size=(60, 2))
+    field = LikelihoodField(points, resolution=0.05, sigma=0.1)
+    stamped = likelihood_grid(points, field.origin, field.grid.shape, 0.05, 0.1)
+    near = field.grid >= np.exp(-4.5) + 1e-12  # within 3 sigma of a point's cell
+    np.testing.assert_allclose(stamped[near], field.grid[near], atol=1e-12)
+    assert np.all(stamped[~near] <= field.grid[~near] + 1e-12)
+
+
+def test_a_scan_1_5_m_and_45_degrees_away_is_found_and_refined() -> None:
+    rng = np.random.default_rng(5)
+    first, second = np.array([4.0, 3.0, 0.3]), np.array([5.2, 3.9, 0.3 + np.radians(45)])
+    reference_points = scan_points(first, rng)
+    query = scan_points(second, rng)
+    field = LikelihoodField(reference_points, resolution=0.05)
+    window = 1.6  # the true step is 1.5 m, the heading 45 deg off the guess (no motion)
+    pyramid = GridPyramid.from_field(field, levels_for_window(window, 0.05))
+    found = match(pyramid, query, np.zeros(3), window, np.radians(60), np.radians(0.5))
+    truth = relative(first, second)
+    assert found.found
+    assert np.hypot(*(found.pose[:2] - truth[:2])) < 0.1
+    assert abs(wrap_angle(found.pose[2] - truth[2])) < np.radians(1.0)
+    exhaustive = len(search_headings(0.0, np.radians(60), np.radians(0.5))) * (2 * 32 + 1) ** 2
+    assert found.nodes < exhaustive / 100
+    reference = PointToLineReference.with_estimated_normals(reference_points, 9, True, 72)
+    refined = register(reference, query, found.pose)
+    assert np.hypot(*(refined.pose[:2] - truth[:2])) < 0.02
+    assert abs(wrap_angle(refined.pose[2] - truth[2])) < np.radians(0.3)
+
+
+def test_a_scan_with_no_overlap_is_not_found() -> None:
+    rng = np.random.default_rng(6)
+    reference_points = scan_points(np.array([4.0, 3.0, 0.0]), rng)
+    pyramid = GridPyramid.from_field(LikelihoodField(reference_points), 5)
+    far_away = scan_points(np.array([4.0, 3.0, 0.0]), rng) + [100.0, 0.0]
+    result = match(pyramid, far_away, np.zeros(3), 1.0, np.pi, np.radians(1.0), 0.05)
+    assert not result.found and result.score == 0.0
+    np.testing.assert_array_equal(result.pose, np.zeros(3))
+
+
+def test_bad_input_is_refused_with_a_readable_error() -> None:
+    pyramid = GridPyramid(np.ones((5, 5)), (0.0, 0.0), 0.1, 2)
+    with pytest.raises(EstimatorInputError, match="points: expected shape"):
+        match(pyramid, np.zeros((0, 2)), np.zeros(3), 0.5, 0.1, 0.01)
+    with pytest.raises(EstimatorInputError, match="center: expected a finite pose"):
+        match(pyramid, np.zeros((3, 2)), [0.0, np.nan, 0.0], 0.5, 0.1, 0.01)
+    with pytest.raises(EstimatorInputError, match="allowed: expected shape"):
+        match(pyramid, np.zeros((3, 2)), np.zeros(3), 0.5, 0.1, 0.01, allowed=np.ones((3, 3)))
+    with pytest.raises(ConfigError, match="levels: expected an integer"):
+        GridPyramid(np.ones((5, 5)), (0.0, 0.0), 0.1, 0)
+    with pytest.raises(EstimatorInputError, match="grid: expected finite scores"):
+        GridPyramid(-np.ones((5, 5)), (0.0, 0.0), 0.1, 2)
+    with pytest.raises(ConfigError, match="angular_step"):
+        match(pyramid, np.zeros((3, 2)), np.zeros(3), 0.5, 0.1, 0.0)
