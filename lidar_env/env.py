@@ -200,7 +200,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         })
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.lidar = LidarLayout(cfg.lidars, [cfg.noise_std(k) for k in range(cfg.n_lidars)],
-                                 [cfg.dropout(k) for k in range(cfg.n_lidars)])
+                                 [cfg.dropout(k) for k in range(cfg.n_lidars)],
+                                 (cfg.car_length, cfg.car_width))
         self._mounts = cfg.mounts_array
         self._sensor_poses = np.zeros((cfg.n_lidars, 3))
         self._world_aligned = cfg.scan_frame == "world"
@@ -305,7 +306,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
             cast_from = self._sensor_poses.copy()
             cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
         movers = None if self.crowd is None else self.crowd.circles
-        scans = self.lidar.scan(self.world, cast_from, self.np_random, movers)
+        scans = self.lidar.scan(self.world, cast_from, self.np_random, movers, self.car.pose)
         self._last_scans = scans
         return dict(zip(self.lidar_keys, scans, strict=True))
 

@@ -21,47 +21,37 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError
-from lidar_env.ray_casting import beam_geometry, cast_rays_kernel, scan_kernel
+from lidar_env.lidar_layout import (
+    Geometry,
+    as_poses,
+    as_world,
+    cast_packed,
+    pack_sensors,
+    scan_layout_kernel,
+)
 from lidar_env.world import World
 
-Geometry = World | tuple[ArrayLike, ArrayLike]
+__all__ = ["Geometry", "Lidar", "World", "as_poses", "as_world", "cast_rays", "pymunk_cast_rays"]
 
-#: Stands in for the random draws of a Lidar without noise or dropout (the kernel skips them).
-#: Writeable like real draws, so the kernel compiles once for every combination; being empty,
-#: it cannot be written to.
-_NO_DRAWS = np.empty((0, 0))
-
-
-def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
-    """``sensor_poses`` as a contiguous float64 ``(K, 3)`` array (a single pose becomes K = 1)."""
-    poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
-    if poses.ndim == 1:
-        poses = poses[None, :]
-    if poses.ndim != 2 or poses.shape[1] != 3:
-        raise ConfigError(
-            f"sensor_poses: expected finite (K, 3) poses (x, y, heading), got shape {poses.shape}"
-        )
-    return poses
+_NO_DRAWS = np.empty(0)
+_NO_MOVERS = np.empty((0, 3))
+_NO_CAR = np.empty(0)
 
 
-def as_world(world_or_arrays: Geometry) -> tuple[World, int]:
-    """The world to scan and the index of its first polygon edge in ``world.segments``."""
-    if isinstance(world_or_arrays, World):
-        return world_or_arrays, len(world_or_arrays.walls)
-    if not isinstance(world_or_arrays, tuple) or len(world_or_arrays) != 2:
-        raise TypeError(
-            "world_or_arrays: expected a World or a (circles (N,3), segments (M,4)) tuple, "
-            f"got {type(world_or_arrays).__name__}"
-        )
-    world = World(*world_or_arrays, bounds=(0.0, 0.0, 1.0, 1.0))
-    return world, len(world.segments)
+@lru_cache(maxsize=64)
+def _identical_sensors(angle_bytes: bytes, count: int, max_range: float, noise_std: float,
+                       dropout_prob: float) -> tuple[tuple, NDArray[np.float64]]:
+    """The kernel's ``(beams, params)`` for ``count`` sensors with the same beams (cached)."""
+    angles = np.frombuffer(angle_bytes, dtype=np.float64)
+    return pack_sensors([angles] * count, [(0.0, max_range, noise_std, dropout_prob, -1.0)]
+                        * count)
 
 
 def cast_rays(
@@ -101,11 +91,11 @@ def cast_rays(
     max_range = float(max_range)
     if not (math.isfinite(max_range) and max_range > 0):
         raise ConfigError(f"max_range: expected a positive finite number [m], got {max_range}")
-    beams = beam_geometry(angles.tobytes())
+    beams, params = _identical_sensors(angles.tobytes(), len(poses), max_range, 0.0, 0.0)
     # The kernel itself rejects non-finite poses: checking here would cost more than a scan.
-    return cast_rays_kernel(
-        world.circles, world.segments, first_polygon_edge, world.grid, poses, beams, max_range
-    )
+    exact = cast_packed(world.circles, world.segments, first_polygon_edge, tuple(world.grid),
+                        poses, beams, params, _NO_MOVERS, _NO_CAR)
+    return exact.reshape(len(poses), len(angles))
 
 
 def pymunk_cast_rays(
@@ -174,16 +164,6 @@ class Lidar:
         angles.flags.writeable = False
         return angles
 
-    @cached_property
-    def _beams(self) -> tuple:
-        """The kernel's beam geometry (see :func:`beam_geometry`), looked up once."""
-        return beam_geometry(self.beam_angles.tobytes())
-
-    @cached_property
-    def _below_max(self) -> float:
-        """The largest float32 below ``max_range``: a hit must never round up to "no return"."""
-        return float(np.nextafter(np.float32(self.max_range), np.float32(0.0)))
-
     def scan(
         self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator
     ) -> NDArray[np.float32]:
@@ -197,16 +177,17 @@ class Lidar:
         """
         world, first_polygon_edge = as_world(world)
         poses = as_poses(sensor_poses)
-        shape = (poses.shape[0], self.n_beams)
+        total = poses.shape[0] * self.n_beams
         # Drawn by numpy from the caller's generator (numba would take it only at a cost of
-        # several microseconds per call), then applied in the same compiled pass as the cast.
-        gaussians = _check_rng(rng).standard_normal(shape) if self.noise_std > 0 else _NO_DRAWS
-        uniforms = _check_rng(rng).random(shape) if self.dropout_prob > 0 else _NO_DRAWS
-        return scan_kernel(
-            world.circles, world.segments, first_polygon_edge, world.grid, poses, self._beams,
-            self.max_range, self._below_max, self.noise_std, gaussians, self.dropout_prob,
-            uniforms,
-        )
+        # several microseconds per call), then applied in the same compiled pass as the cast:
+        # the layout kernel's, the K sensors packed end to end.
+        gaussians = _check_rng(rng).standard_normal(total) if self.noise_std > 0 else _NO_DRAWS
+        uniforms = _check_rng(rng).random(total) if self.dropout_prob > 0 else _NO_DRAWS
+        beams, params = _identical_sensors(self.beam_angles.tobytes(), len(poses),
+                                           self.max_range, self.noise_std, self.dropout_prob)
+        packed = scan_layout_kernel(world.circles, world.segments, first_polygon_edge,
+                                    tuple(world.grid), poses, beams, params, gaussians, uniforms)
+        return packed.reshape(len(poses), self.n_beams)
 
 
 def _check_rng(rng: object) -> np.random.Generator:

@@ -5,6 +5,15 @@ forward axis, angle growing CCW. A full turn (``fov = 2 pi``) has beam ``i`` at 
 (beam 0 forward, no beam doubled at +-pi); a narrower Lidar has beam 0 at ``-fov / 2`` and the
 last beam at ``+fov / 2`` (``-fov / 2 + fov i / (n - 1)``, as a ROS ``LaserScan`` from
 ``angle_min`` to ``angle_max``): a 270-degree Lidar's beam 0 points at -135 degrees.
+
+Self-occlusion: by default a Lidar sees over the car (a roof mount). ``self_occlusion=True``
+says it sits at body level: the car's rectangle (``car_length x car_width``) is then a wall to
+it, except where the outline passes within ``housing_radius`` of the mount (the scanner's window
+through the body); a beam meeting the outline farther out reads the distance to it. So a
+270-degree Lidar on a corner of the outline, facing out, keeps its whole view; one mounted
+5 cm inside both sides of the corner (0.35, 0.2 on the default 0.8 x 0.5 m car) with the
+default 0.1 m housing sees 210 degrees, its beams that graze along the two sides reading the
+car; a 360-degree one at body level in the car's middle reads only the car.
 """
 
 from __future__ import annotations
@@ -41,6 +50,8 @@ class LidarConfig:
     max_range: float = 10.0  # [m] a beam that hits nothing reads exactly max_range
     range_noise_std: float | None = None  # [m] std of the Gaussian noise added to each hit
     dropout_prob: float | None = None  # [-] probability that a beam reads max_range regardless
+    self_occlusion: bool = False  # mounted at body level: the car's own outline blocks beams
+    housing_radius: float = 0.1  # [m] the outline within this of the mount does not (window)
     where: str = dataclasses.field(default="lidars[0]", compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -66,6 +77,14 @@ class LidarConfig:
         if drop is not None and (not _finite(drop) or not 0 <= drop < 1):
             raise ConfigError(f"{w}.dropout_prob: expected a number in [0, 1) or None, "
                               f"got {drop!r}")
+        if not isinstance(self.self_occlusion, (bool, np.bool_)):
+            raise ConfigError(f"{w}.self_occlusion: expected True or False, "
+                              f"got {self.self_occlusion!r}")
+        if not _finite(self.housing_radius) or self.housing_radius < 0:
+            raise ConfigError(f"{w}.housing_radius: expected a finite number >= 0 [m], "
+                              f"got {self.housing_radius!r}")
+        object.__setattr__(self, "self_occlusion", bool(self.self_occlusion))
+        object.__setattr__(self, "housing_radius", float(self.housing_radius))
         object.__setattr__(self, "mount", tuple(float(v) for v in mount))
         object.__setattr__(self, "n_beams", int(n))
         object.__setattr__(self, "fov", float(self.fov))

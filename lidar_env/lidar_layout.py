@@ -1,14 +1,22 @@
-"""Several Lidars of their own geometry scanned in one compiled call (the env's sensor layout).
+"""Several Lidars of their own geometry scanned in one compiled call: the one sensor kernel.
 
 :class:`LidarLayout` holds K Lidars (:class:`~lidar_env.lidar_config.LidarConfig`: mount, beams
-over a field of view, max range, noise, dropouts) and :meth:`LidarLayout.scan` returns their K
-float32 scans from one call of :func:`scan_layout_kernel`, which casts every sensor with
-:func:`lidar_env.ray_casting.cast_sensor` and applies noise, clipping and dropouts in the same
-pass. The beams of all sensors are packed end to end (sensor ``k`` owns positions
-``[beam_start[k], beam_start[k + 1])``). Moving obstacles (circles that change every step, so
-they are not in the world's grid) are passed to :func:`scan_layout_movers_kernel` as an
-``(M, 3)`` array and cast by :func:`cast_movers` with the static circles' subtended-interval
-sweep, exactly; :func:`scan_layout_kernel` is that kernel without movers.
+over a field of view, max range, noise, dropouts, self-occlusion) and :meth:`LidarLayout.scan`
+returns their K float32 scans from one call of :func:`scan_layout_body_kernel`. Every scan of
+the package goes through :func:`cast_packed` (exact float64 ranges of K sensors, each cast by
+:func:`lidar_env.ray_casting.cast_sensor`, then the moving circles by :func:`cast_movers` and
+the car's own outline by :func:`cast_body`) and :func:`readings` (noise, clipping, dropouts,
+float32): :class:`lidar_env.lidar.Lidar` and :func:`lidar_env.lidar.cast_rays` pack their
+identical sensors the same way (:func:`pack_sensors`). :func:`scan_layout_movers_kernel` and
+:func:`scan_layout_kernel` (the vector env's) are that kernel without the car, and without
+movers too. The beams of all sensors are packed end to end (sensor ``k`` owns positions
+``[first, end)`` of its ``params`` row).
+
+Self-occlusion (``LidarConfig.self_occlusion``, for a Lidar at body level): the four edges of
+the car's ``car_length x car_width`` rectangle are walls to that Lidar, except where they pass
+within ``housing_radius`` of its mount (its window, where the scanner head pokes out of the
+body). A beam that meets the outline farther out reads the distance to it: it is blocked by the
+car, at a point of the car's known shape. A Lidar that is not flagged sees over the car.
 
 Random numbers: if any Lidar is noisy, one standard normal per beam of every Lidar (in sensor
 order), then, if any has dropouts, one uniform per beam; so a layout of identical Lidars
@@ -20,102 +28,221 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError
-from lidar_env.lidar import Geometry, as_poses, as_world
 from lidar_env.lidar_config import LidarConfig
-from lidar_env.primitive_grid import PrimitiveGrid
-from lidar_env.ray_casting import beam_geometry, cast_sensor, new_scratch, sweep_circle
+from lidar_env.primitive_grid import point_segment_distance2
+from lidar_env.ray_casting import (
+    beam_directions,
+    cast_sensor,
+    segment_hit,
+    sweep_circle,
+    sweep_segment,
+)
+from lidar_env.world import World
 
+Geometry = World | tuple[ArrayLike, ArrayLike]
+
+_TWO_PI = 2.0 * math.pi
 _NO_DRAWS = np.empty(0)
+_NO_CAR = np.empty(0)
+#: Columns of the ``params`` rows of :func:`pack_sensors`: packed beam positions ``[first,
+#: end)``, uniform step [rad] (0: not uniform), angle of beam 0 from forward [rad], max range
+#: [m], the largest float32 below it, noise std [m], dropout probability, housing radius [m]
+#: (negative: no self-occlusion).
+FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING = range(9)
+
+
+def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
+    """``sensor_poses`` as a contiguous float64 ``(K, 3)`` array (a single pose becomes K = 1)."""
+    poses = np.ascontiguousarray(sensor_poses, dtype=np.float64)
+    if poses.ndim == 1:
+        poses = poses[None, :]
+    if poses.ndim != 2 or poses.shape[1] != 3:
+        raise ConfigError(
+            f"sensor_poses: expected finite (K, 3) poses (x, y, heading), got shape {poses.shape}"
+        )
+    return poses
+
+
+def as_world(world_or_arrays: Geometry) -> tuple[World, int]:
+    """The world to scan and the index of its first polygon edge in ``world.segments``."""
+    if isinstance(world_or_arrays, World):
+        return world_or_arrays, len(world_or_arrays.walls)
+    if not isinstance(world_or_arrays, tuple) or len(world_or_arrays) != 2:
+        raise TypeError(
+            "world_or_arrays: expected a World or a (circles (N,3), segments (M,4)) tuple, "
+            f"got {type(world_or_arrays).__name__}"
+        )
+    world = World(*world_or_arrays, bounds=(0.0, 0.0, 1.0, 1.0))
+    return world, len(world.segments)
 
 
 @njit(cache=True, fastmath=False)
-def cast_movers(
-    ranges: NDArray[np.float64],
-    pose: tuple[float, float, float],
-    movers: NDArray[np.float64],
-    beams: tuple,
-    max_range: float,
-) -> None:
-    """Lower ``ranges`` (n,) of one sensor at world ``pose`` to the exact hits on the moving
-    circles ``movers`` (M, 3: x, y, radius [m]); all 0 when the sensor is inside one.
+def _beam_order(beam_angles: NDArray[np.float64]) -> tuple:
+    """Beam angles wrapped to [0, 2 pi), sorted; their order; and the uniform step (0 if not)."""
+    n = beam_angles.shape[0]
+    wrapped = np.empty(n)
+    for j in range(n):
+        wrapped[j] = beam_angles[j] % _TWO_PI
+    order = np.argsort(wrapped, kind="mergesort")
+    sorted_angles = wrapped[order]
+    step = (sorted_angles[n - 1] - sorted_angles[0]) / (n - 1) if n > 1 else 0.0
+    uniform = step > 0.0
+    for j in range(n):
+        if abs(sorted_angles[j] - (sorted_angles[0] + j * step)) > 1e-12 * _TWO_PI:
+            uniform = False
+            break
+    return sorted_angles, order, step if uniform else 0.0
 
-    ``beams`` is ``(sorted_angles, order, step, cos, sin)`` as for
-    :func:`lidar_env.ray_casting.cast_sensor`. Each circle updates only the beams within the
-    angle it subtends (the static circles' sweep), so M circles cost about M beams each.
+
+@lru_cache(maxsize=64)
+def beam_geometry(angle_bytes: bytes) -> tuple:
+    """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
+
+    Cached by the angles' bytes: a Lidar's beams are set up once, not on every scan.
     """
-    ox, oy, heading = pose
-    sorted_angles, order, step, cos_beam, sin_beam = beams
-    ch, sh = math.cos(heading), math.sin(heading)
-    heading = heading % (2.0 * math.pi)
+    angles = np.frombuffer(angle_bytes, dtype=np.float64)
+    if len(angles) == 0 or not np.all(np.isfinite(angles)):
+        raise ConfigError(
+            f"beam_angles: expected a non-empty finite 1-D array [rad], got {angles}"
+        )
+    sorted_angles, order, step = _beam_order(angles)
+    return sorted_angles, order, step, np.cos(angles), np.sin(angles)
+
+
+def pack_sensors(
+    sweep_angles: Sequence[NDArray[np.float64]], rows: Sequence[Sequence[float]]
+) -> tuple[tuple, NDArray[np.float64]]:
+    """The kernel's ``(beams, params)`` for K sensors.
+
+    ``sweep_angles[k]`` are sensor ``k``'s beam directions [rad] from its beam 0, ``rows[k]``
+    its ``(offset, max_range, noise_std, dropout_prob, housing_radius)`` (see :data:`OFFSET`).
+    ``beams`` is ``(table (3, total): sorted wrapped angles, cos, sin; order (total,))``.
+    """
+    parts = [beam_geometry(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+             for a in sweep_angles]
+    sizes = [len(p[0]) for p in parts]
+    ends = np.cumsum(sizes)
+    table = np.vstack([np.concatenate([p[i] for p in parts]) for i in (0, 3, 4)])
+    order = np.concatenate([p[1] for p in parts]).astype(np.int64)
+    params = np.array([
+        (end - size, end, part[2], offset, max_range,
+         float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing)
+        for part, size, end, (offset, max_range, noise, drop, housing)
+        in zip(parts, sizes, ends, rows, strict=True)], dtype=np.float64)
+    return (table, order), params
+
+
+@njit(cache=True, fastmath=False)
+def cast_movers(ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+                movers: NDArray[np.float64], own: tuple, max_range: float) -> None:
+    """Lower ``ranges`` (n,) of one sensor at world ``(ox, oy)`` (heading [rad] in [0, 2 pi))
+    to the exact hits on the moving circles ``movers`` (M, 3: x, y, radius [m]); all 0 when
+    the sensor is inside one. ``own`` is the sensor's beams from
+    :func:`lidar_env.ray_casting.beam_directions`; each circle updates only the beams within
+    the angle it subtends."""
+    sorted_angles, order, step, dir_x, dir_y = own
     for i in range(movers.shape[0]):
-        if not sweep_circle(ranges, ox, oy, ch, sh, heading, movers[i, 0], movers[i, 1],
-                            movers[i, 2], sorted_angles, order, step, cos_beam, sin_beam,
-                            max_range):
+        if not sweep_circle(ranges, ox, oy, heading, movers[i, 0], movers[i, 1], movers[i, 2],
+                            sorted_angles, order, step, dir_x, dir_y, max_range):
             return
 
 
 @njit(cache=True, fastmath=False)
-def scan_layout_kernel(
-    circles: NDArray[np.float64],
-    segments: NDArray[np.float64],
-    first_polygon_edge: int,
-    grid: PrimitiveGrid,
-    sensor_poses: NDArray[np.float64],
-    beams: tuple,
-    sensor_params: NDArray[np.float64],
-    gaussians: NDArray[np.float64],
-    uniforms: NDArray[np.float64],
-) -> NDArray[np.float32]:
-    """Packed float32 readings of K sensors at world ``sensor_poses`` (K, 3).
-
-    ``beams`` is ``(beam_start (K+1,), sorted_angles, order, steps (K,), cos, sin)``, each
-    sensor's part as :func:`lidar_env.ray_casting.beam_geometry` gives it; ``sensor_params``
-    (K, 5) holds per sensor: angle of beam 0 from forward [rad], max range [m], the largest
-    float32 below it, noise std [m], dropout probability. ``gaussians`` and ``uniforms`` hold
-    one draw per packed beam, or are empty when no sensor needs them.
-    """
-    return scan_layout_movers_kernel(circles, segments, first_polygon_edge, grid, sensor_poses,
-                                     beams, sensor_params, gaussians, uniforms,
-                                     np.empty((0, 3)))
+def car_outline(car: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The four edges (4, 4) [m] of the car's rectangle ``car`` = (x, y, yaw, half_length,
+    half_width) in the world frame, corners counter-clockwise from front left."""
+    x, y, yaw, hl, hw = car[0], car[1], car[2], car[3], car[4]
+    c, s = math.cos(yaw), math.sin(yaw)
+    corners = np.empty((4, 2))
+    for k, (u, v) in enumerate(((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))):
+        corners[k, 0] = x + c * u - s * v
+        corners[k, 1] = y + s * u + c * v
+    edges = np.empty((4, 4))
+    for k in range(4):
+        edges[k, :2] = corners[k]
+        edges[k, 2:] = corners[(k + 1) % 4]
+    return edges
 
 
 @njit(cache=True, fastmath=False)
-def scan_layout_movers_kernel(
+def cast_body(ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+              outline: NDArray[np.float64], housing: float, own: tuple,
+              max_range: float) -> None:
+    """Lower ``ranges`` to the hits on the car's ``outline`` (4, 4) farther than ``housing``
+    [m] from the sensor at ``(ox, oy)``: a self-occluded Lidar's view of its own car."""
+    sorted_angles, order, step, dir_x, dir_y = own
+    for k in range(4):
+        x1, y1, x2, y2 = outline[k, 0], outline[k, 1], outline[k, 2], outline[k, 3]
+        if point_segment_distance2(ox, oy, x1, y1, x2, y2) > housing * housing:
+            # The window misses this edge: every hit on it lies beyond the housing.
+            sweep_segment(ranges, ox, oy, heading, x1, y1, x2, y2, sorted_angles, order, step,
+                          dir_x, dir_y, max_range)
+            continue
+        for j in range(ranges.shape[0]):  # a line meets a ray once: drop a hit in the window
+            t = segment_hit(ox, oy, dir_x[j], dir_y[j], x1, y1, x2, y2, ranges[j])
+            if housing < t < ranges[j]:
+                ranges[j] = t
+
+
+@njit(cache=True, fastmath=False)
+def cast_packed(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
     first_polygon_edge: int,
-    grid: PrimitiveGrid,
+    grid: tuple,
     sensor_poses: NDArray[np.float64],
     beams: tuple,
-    sensor_params: NDArray[np.float64],
-    gaussians: NDArray[np.float64],
-    uniforms: NDArray[np.float64],
+    params: NDArray[np.float64],
     movers: NDArray[np.float64],
-) -> NDArray[np.float32]:
-    """:func:`scan_layout_kernel` in a world that also holds the moving circles ``movers``
-    (M, 3: x, y, radius [m]), seen exactly like static ones (:func:`cast_movers`)."""
-    beam_start, sorted_angles, order, steps, cos_beam, sin_beam = beams
-    exact = np.empty(beam_start[-1])
-    out = np.empty(beam_start[-1], dtype=np.float32)
-    scratch = new_scratch(circles, segments)
-    noisy, dropping = gaussians.size > 0, uniforms.size > 0
+    car: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Packed exact ranges [m] (float64) of K sensors whose beam 0 is at world pose
+    ``sensor_poses[k]`` turned by ``params[k, OFFSET]``; ``movers`` (M, 3) moving circles;
+    ``car`` (5,) the car's pose and half sizes, or empty (then no Lidar may self-occlude)."""
+    table, order = beams
+    exact = np.empty(table.shape[1])
+    seen = (np.zeros(circles.shape[0], dtype=np.int64),
+            np.zeros(segments.shape[0], dtype=np.int64))
+    outline = car_outline(car) if car.shape[0] == 5 else np.empty((0, 4))
     for k in range(sensor_poses.shape[0]):
-        a, b = beam_start[k], beam_start[k + 1]
-        offset, max_range, below_max, noise_std, dropout = sensor_params[k]
-        pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2] + offset)
-        own = (sorted_angles[a:b], order[a:b], steps[k], cos_beam[a:b], sin_beam[a:b])
-        cast_sensor(exact[a:b], pose, circles, segments, first_polygon_edge, grid, scratch,
-                    k + 1, own, max_range)
+        a, b = int(params[k, FIRST]), int(params[k, END])
+        max_range, housing = params[k, MAX_RANGE], params[k, HOUSING]
+        pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2] + params[k, OFFSET])
+        own = beam_directions(pose[2], (table[0, a:b], order[a:b], params[k, STEP],
+                                        table[1, a:b], table[2, a:b]))
+        ranges = exact[a:b]
+        cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen, k + 1,
+                    own, max_range)
+        heading = pose[2] % (2.0 * math.pi)
         if movers.shape[0] > 0:
-            cast_movers(exact[a:b], pose, movers, own, max_range)
-        for j in range(a, b):
+            cast_movers(ranges, pose[0], pose[1], heading, movers, own, max_range)
+        if housing >= 0.0:
+            if outline.shape[0] == 0:
+                raise ConfigError("car: a self-occluded Lidar needs the car's pose and size "
+                                  "(LidarLayout.scan(..., car_pose=...)), got none")
+            cast_body(ranges, pose[0], pose[1], heading, outline, housing, own, max_range)
+    return exact
+
+
+@njit(cache=True, fastmath=False)
+def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
+             gaussians: NDArray[np.float64], uniforms: NDArray[np.float64]) -> NDArray[np.float32]:
+    """Float32 readings of packed exact ranges: a hit gets ``noise_std * gaussians[j]`` (when
+    drawn and the sensor is noisy) and is clipped to ``[0, below_max]``; then a beam with
+    ``uniforms[j] < dropout_prob`` (when drawn) reads ``max_range``."""
+    out = np.empty(exact.shape[0], dtype=np.float32)
+    noisy, dropping = gaussians.size > 0, uniforms.size > 0
+    for k in range(params.shape[0]):
+        max_range, below_max = params[k, MAX_RANGE], params[k, BELOW_MAX]
+        noise_std, dropout = params[k, NOISE], params[k, DROPOUT]
+        for j in range(int(params[k, FIRST]), int(params[k, END])):
             r = exact[j]
             if r < max_range:
                 if noisy and noise_std > 0.0:
@@ -127,17 +254,58 @@ def scan_layout_movers_kernel(
     return out
 
 
+@njit(cache=True, fastmath=False)
+def scan_layout_body_kernel(
+    circles: NDArray[np.float64], segments: NDArray[np.float64], first_polygon_edge: int,
+    grid: tuple, sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
+    gaussians: NDArray[np.float64], uniforms: NDArray[np.float64],
+    movers: NDArray[np.float64], car: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """Packed float32 readings of K sensors (:func:`cast_packed`, then :func:`readings`);
+    ``gaussians`` and ``uniforms`` hold one draw per packed beam, or are empty when no sensor
+    needs them."""
+    exact = cast_packed(circles, segments, first_polygon_edge, grid, sensor_poses, beams,
+                        params, movers, car)
+    return readings(exact, params, gaussians, uniforms)
+
+
+@njit(cache=True, fastmath=False)
+def scan_layout_movers_kernel(
+    circles: NDArray[np.float64], segments: NDArray[np.float64], first_polygon_edge: int,
+    grid: tuple, sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
+    gaussians: NDArray[np.float64], uniforms: NDArray[np.float64], movers: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """:func:`scan_layout_body_kernel` without the car (no Lidar may self-occlude)."""
+    return scan_layout_body_kernel(circles, segments, first_polygon_edge, grid, sensor_poses,
+                                   beams, params, gaussians, uniforms, movers, np.empty(0))
+
+
+@njit(cache=True, fastmath=False)
+def scan_layout_kernel(
+    circles: NDArray[np.float64], segments: NDArray[np.float64], first_polygon_edge: int,
+    grid: tuple, sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
+    gaussians: NDArray[np.float64], uniforms: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """:func:`scan_layout_body_kernel` without movers and without the car."""
+    return scan_layout_body_kernel(circles, segments, first_polygon_edge, grid, sensor_poses,
+                                   beams, params, gaussians, uniforms, np.empty((0, 3)),
+                                   np.empty(0))
+
+
 class LidarLayout:
-    """K planar Lidars with no hidden state: ``scan(world, car_pose_or_sensor_poses, rng)``.
+    """K planar Lidars with no hidden state: ``scan(world, sensor_poses, rng)``.
 
     Args:
-        lidars: 1 or more :class:`LidarConfig` (their mounts are used by :meth:`sensor_poses`).
+        lidars: 1 or more :class:`LidarConfig` (their mounts are used by the env).
         noise_std, dropout_prob: ``(K,)`` noise [m] and dropout probability per Lidar (the
             config's per-Lidar values resolved against its env-wide defaults).
+        car_size: ``(length, width)`` [m] of the car's rectangle, needed when a Lidar has
+            ``self_occlusion``.
     """
 
     def __init__(
-        self, lidars: Sequence[LidarConfig], noise_std: ArrayLike, dropout_prob: ArrayLike
+        self, lidars: Sequence[LidarConfig], noise_std: ArrayLike, dropout_prob: ArrayLike,
+        car_size: tuple[float, float] | None = None,
     ) -> None:
         self.lidars = tuple(lidars)
         k = len(self.lidars)
@@ -149,10 +317,17 @@ class LidarLayout:
         self._slices = tuple(zip([0, *ends[:-1]], ends, strict=True))
         self._noisy = bool(np.any(self.noise_std > 0))
         self._dropping = bool(np.any(self.dropout_prob > 0))
+        self.self_occluded = any(lidar.self_occlusion for lidar in self.lidars)
+        self.car_size = None if car_size is None else (float(car_size[0]), float(car_size[1]))
+        if self.self_occluded and self.car_size is None:
+            raise ConfigError("car_size: expected the car's (length, width) [m] for a Lidar "
+                              "with self_occlusion, got None")
+        self._grid_of: tuple = (None, None)
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state.pop("_packed", None)  # numba-friendly arrays, rebuilt on demand
+        state["_grid_of"] = (None, None)
         return state
 
     @property
@@ -162,29 +337,29 @@ class LidarLayout:
 
     @cached_property
     def _packed(self) -> tuple[tuple, NDArray[np.float64]]:
-        parts = [beam_geometry(np.ascontiguousarray(lidar.sweep_angles).tobytes())
-                 for lidar in self.lidars]
-        beam_start = np.concatenate([[0], np.cumsum(self.sizes)]).astype(np.int64)
-        beams = (beam_start,
-                 np.concatenate([p[0] for p in parts]),
-                 np.concatenate([p[1] for p in parts]).astype(np.int64),
-                 np.array([p[2] for p in parts], dtype=np.float64),
-                 np.concatenate([p[3] for p in parts]),
-                 np.concatenate([p[4] for p in parts]))
-        params = np.array([
-            (lidar.beam_offset, lidar.max_range,
-             float(np.nextafter(np.float32(lidar.max_range), np.float32(0.0))), noise, drop)
-            for lidar, noise, drop in zip(self.lidars, self.noise_std, self.dropout_prob,
-                                          strict=True)], dtype=np.float64)
-        return beams, params
+        """``(beams, params)`` as :func:`scan_layout_kernel` takes them."""
+        return pack_sensors(
+            [lidar.sweep_angles for lidar in self.lidars],
+            [(lidar.beam_offset, lidar.max_range, noise, drop,
+              lidar.housing_radius if lidar.self_occlusion else -1.0)
+             for lidar, noise, drop in zip(self.lidars, self.noise_std, self.dropout_prob,
+                                           strict=True)])
+
+    def _grid(self, world: World) -> tuple:
+        """``world.grid`` as a plain tuple (numba takes it faster than the named tuple)."""
+        if self._grid_of[0] is not world:
+            self._grid_of = (world, tuple(world.grid))
+        return self._grid_of[1]
 
     def scan(
         self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator,
-        movers: NDArray[np.float64] | None = None,
+        movers: NDArray[np.float64] | None = None, car_pose: ArrayLike | None = None,
     ) -> list[NDArray[np.float32]]:
         """The K scans (float32 ``(n_k,)`` ranges [m]) from sensors at world ``sensor_poses``
         (K, 3); every call returns new arrays. ``movers`` (M, 3) are moving circles x, y,
-        radius [m] seen like the world's (None: none; the same draws either way)."""
+        radius [m] seen like the world's (None: none; the same draws either way).
+        ``car_pose`` (x, y, yaw) places the car's outline for Lidars with ``self_occlusion``
+        (required then, ignored otherwise)."""
         world, first_polygon_edge = as_world(world)
         poses = as_poses(sensor_poses)
         if len(poses) != len(self.lidars):
@@ -192,15 +367,24 @@ class LidarLayout:
                              f"got {len(poses)}")
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+        car = _NO_CAR
+        if self.self_occluded:
+            car = self._car(car_pose)
         total = self._slices[-1][1]
         gaussians = rng.standard_normal(total) if self._noisy else _NO_DRAWS
         uniforms = rng.random(total) if self._dropping else _NO_DRAWS
         beams, params = self._packed
-        if movers is None:
-            packed = scan_layout_kernel(world.circles, world.segments, first_polygon_edge,
-                                        world.grid, poses, beams, params, gaussians, uniforms)
-        else:
-            packed = scan_layout_movers_kernel(
-                world.circles, world.segments, first_polygon_edge, world.grid, poses, beams,
-                params, gaussians, uniforms, np.ascontiguousarray(movers, dtype=np.float64))
+        movers = (np.empty((0, 3)) if movers is None
+                  else np.ascontiguousarray(movers, dtype=np.float64))
+        packed = scan_layout_body_kernel(world.circles, world.segments, first_polygon_edge,
+                                         self._grid(world), poses, beams, params, gaussians,
+                                         uniforms, movers, car)
         return [packed[a:b] for a, b in self._slices]
+
+    def _car(self, car_pose: ArrayLike | None) -> NDArray[np.float64]:
+        pose = None if car_pose is None else np.asarray(car_pose, dtype=np.float64)
+        if pose is None or pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ConfigError("car_pose: expected the car's finite world pose (x, y, yaw) for "
+                              f"a Lidar with self_occlusion, got {car_pose!r}")
+        assert self.car_size is not None
+        return np.array([*pose, 0.5 * self.car_size[0], 0.5 * self.car_size[1]])

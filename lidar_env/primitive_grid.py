@@ -4,7 +4,10 @@
 (``x1, y1, x2, y2``), all in metres in the world frame, into square cells, so that a query
 visits only the cells near a point. The numba kernels here (:func:`segment_distance2`,
 :func:`grid_cell`, :func:`odd_crossings`, :func:`point_queries`) answer clearance and inside
-queries for :class:`~lidar_env.world.World`; the Lidar's ray caster reuses the first three.
+queries for :class:`~lidar_env.world.World`; the Lidar's ray caster reuses the first three and
+:func:`cell_block` (the cells under a sensor's sector). The kernels take the grid as a
+:class:`PrimitiveGrid` or as a plain tuple of its fields (``tuple(grid)``), which numba is
+handed several microseconds faster.
 """
 
 from __future__ import annotations
@@ -103,11 +106,12 @@ def build_grid(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> P
 
 
 @njit(cache=True, fastmath=False)
-def segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
-    """Squared distance [m^2] from a point to a segment ``x1, y1, x2, y2`` (no sqrt, at most
-    one division)."""
-    ex, ey = seg[2] - seg[0], seg[3] - seg[1]
-    wx, wy = px - seg[0], py - seg[1]
+def point_segment_distance2(px: float, py: float, x1: float, y1: float, x2: float,
+                            y2: float) -> float:
+    """Squared distance [m^2] from a point to the segment ``(x1, y1)-(x2, y2)`` (no sqrt, at
+    most one division)."""
+    ex, ey = x2 - x1, y2 - y1
+    wx, wy = px - x1, py - y1
     along = wx * ex + wy * ey
     if along <= 0.0:
         return wx * wx + wy * wy
@@ -119,9 +123,47 @@ def segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
 
 
 @njit(cache=True, fastmath=False)
+def segment_distance2(px: float, py: float, seg: NDArray[np.float64]) -> float:
+    """:func:`point_segment_distance2` to a segment row ``x1, y1, x2, y2``."""
+    return point_segment_distance2(px, py, seg[0], seg[1], seg[2], seg[3])
+
+
+@njit(cache=True, fastmath=False)
 def grid_cell(value: float, origin: float, cell: float, count: int) -> int:
     """Grid index of a coordinate [m], clipped to ``[0, count)``."""
     return min(max(int(math.floor((value - origin) / cell)), 0), count - 1)
+
+
+@njit(cache=True, fastmath=False)
+def cell_block(
+    px: float, py: float, reach: float, start: float, width: float, grid: tuple
+) -> tuple[int, int, int, int, int, int]:
+    """The cells ``[c0, c1] x [r0, r1]`` over the bounding box of the sector of radius
+    ``reach`` [m] around ``(px, py)`` between the world angles ``start`` and ``start + width``
+    [rad] (``width`` >= 2 pi: the whole disc), padded against rounding; and the point's cell
+    ``(sx, sy)``. ``grid`` is a :class:`PrimitiveGrid` or a plain tuple of its fields."""
+    x0, y0, size, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
+    lo_x, lo_y, hi_x, hi_y = px - reach, py - reach, px + reach, py + reach
+    if width < 2.0 * math.pi:
+        lo_x = hi_x = px
+        lo_y = hi_y = py
+        for k in range(6):  # the arc's two ends, then the axis directions it passes
+            if k < 2:
+                angle = start + k * width
+            else:
+                angle = (k - 2) * 0.5 * math.pi
+                offset = (angle - start) % (2.0 * math.pi)
+                if offset > width:
+                    continue
+            x, y = px + reach * math.cos(angle), py + reach * math.sin(angle)
+            lo_x, hi_x = min(lo_x, x), max(hi_x, x)
+            lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+        pad = 1e-9 * (reach + size)
+        lo_x, lo_y = max(lo_x - pad, px - reach), max(lo_y - pad, py - reach)
+        hi_x, hi_y = min(hi_x + pad, px + reach), min(hi_y + pad, py + reach)
+    return (grid_cell(lo_x, x0, size, nx), grid_cell(hi_x, x0, size, nx),
+            grid_cell(lo_y, y0, size, ny), grid_cell(hi_y, y0, size, ny),
+            grid_cell(px, x0, size, nx), grid_cell(py, y0, size, ny))
 
 
 @njit(cache=True, fastmath=False)
@@ -130,22 +172,27 @@ def odd_crossings(
     py: float,
     segments: NDArray[np.float64],
     first_polygon_edge: int,
-    grid: PrimitiveGrid,
+    grid: tuple,
     seen: NDArray[np.int64],
     stamp: int,
 ) -> bool:
     """Even-odd crossing test (ray towards +x) of the point against all polygon edges.
 
-    Only the grid row holding ``py`` can list edges that cross the ray's line; ``seen`` and
-    ``stamp`` make an edge listed in several cells of the row count once.
+    Only the grid row holding ``py`` can list edges that cross the ray's line, and only from
+    the point's column on (padded: a crossing rounded onto the point still counts); ``seen``
+    and ``stamp`` make an edge listed in several cells of the row count once. ``grid`` is a
+    :class:`PrimitiveGrid` or a plain tuple of its fields.
     """
     if first_polygon_edge >= segments.shape[0]:
         return False
-    row = grid_cell(py, grid.y0, grid.cell, grid.ny)
+    x0, y0, size, nx, ny, segment_start, segment_ids = (grid[0], grid[1], grid[2], grid[3],
+                                                        grid[4], grid[7], grid[8])
+    row = grid_cell(py, y0, size, ny)
+    first = row * nx + grid_cell(px - 1e-6 * size, x0, size, nx)
     inside = False
-    for c in range(row * grid.nx, (row + 1) * grid.nx):
-        for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
-            i = grid.segment_ids[p]
+    for c in range(first, (row + 1) * nx):
+        for p in range(segment_start[c], segment_start[c + 1]):
+            i = segment_ids[p]
             if i < first_polygon_edge or seen[i] == stamp:
                 continue
             seen[i] = stamp
@@ -174,7 +221,8 @@ def point_queries(
     segment_seen = np.zeros(segments.shape[0], dtype=np.int64)
     clearance = np.empty(points.shape[0])
     inside = np.zeros(points.shape[0], dtype=np.bool_)
-    x0, y0, size, nx, ny = grid.x0, grid.y0, grid.cell, grid.nx, grid.ny
+    x0, y0, size, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
+    circle_start, circle_ids, segment_start, segment_ids = grid[5], grid[6], grid[7], grid[8]
     for k in range(points.shape[0]):
         px, py = points[k, 0], points[k, 1]
         odd = odd_crossings(px, py, segments, first_polygon_edge, grid, segment_seen, -(k + 1))
@@ -194,14 +242,14 @@ def point_queries(
                     if column < 0 or column >= nx:  # that side of the ring is off the grid
                         continue
                     c = iy * nx + column
-                    for p in range(grid.circle_start[c], grid.circle_start[c + 1]):
-                        i = grid.circle_ids[p]
+                    for p in range(circle_start[c], circle_start[c + 1]):
+                        i = circle_ids[p]
                         if circle_seen[i] != k + 1:
                             circle_seen[i] = k + 1
                             d = math.sqrt((px - circles[i, 0]) ** 2 + (py - circles[i, 1]) ** 2)
                             nearest = min(nearest, d - circles[i, 2])
-                    for p in range(grid.segment_start[c], grid.segment_start[c + 1]):
-                        i = grid.segment_ids[p]
+                    for p in range(segment_start[c], segment_start[c + 1]):
+                        i = segment_ids[p]
                         if segment_seen[i] != k + 1:
                             segment_seen[i] = k + 1
                             d = math.sqrt(segment_distance2(px, py, segments[i]))

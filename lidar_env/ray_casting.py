@@ -1,31 +1,38 @@
 """The Lidar's compiled ray caster: exact beam ranges against circles and segments (numba).
 
-Instead of testing every beam against every primitive, :func:`cast_rays_kernel` sweeps the
+Instead of testing every beam against every primitive, :func:`cast_sensor` sweeps the
 primitives: each one within ``max_range`` updates only the beams inside the angular interval it
 subtends from the sensor, found by index arithmetic for uniformly spaced beams and by binary
 search otherwise. Every candidate beam then gets the exact ray-circle or ray-segment
 intersection, so the interval only has to be conservative (it is widened by
-:data:`_ANGLE_MARGIN`). The candidate primitives come from the cells of the world's
-:class:`~lidar_env.primitive_grid.PrimitiveGrid` that overlap the sensor's range box.
-:func:`scan_kernel` turns the exact ranges into noisy float32 readings in the same pass.
+:data:`_ANGLE_MARGIN`). Three culls keep the primitives a sensor touches few, none of which can
+change a range (each skips only primitives no beam can hit closer than it already reads):
+
+- the grid cells (:class:`~lidar_env.primitive_grid.PrimitiveGrid`) visited are those over the
+  bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
+  90-degree Lidar visits about a quarter of a 360-degree one's;
+- cells are visited in rings of growing distance from the sensor, and a cell whose every beam
+  already ends nearer than the cell's nearest point is skipped with its primitives (on a map
+  of thousands of edges, many cells behind the first walls);
+- a primitive wholly outside a narrow sensor's beam wedge is skipped before its bearings.
 
 Units and frames: positions and ranges in metres, angles in radians, world frame; a sensor pose
-is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. The
-callers' validated entry points are :func:`lidar_env.lidar.cast_rays` and
-:meth:`lidar_env.lidar.Lidar.scan`.
+is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
+sets come as ``(sorted_angles, order, step)`` from :func:`lidar_env.lidar_layout.beam_geometry`.
+The callers' entry points are :func:`lidar_env.lidar.cast_rays` and
+:meth:`lidar_env.lidar_layout.LidarLayout.scan`, through :func:`lidar_env.lidar_layout.cast_packed`.
 """
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
 from lidar_env.errors import ConfigError
-from lidar_env.primitive_grid import PrimitiveGrid, grid_cell, odd_crossings, segment_distance2
+from lidar_env.primitive_grid import cell_block, odd_crossings, point_segment_distance2
 
 #: Extra angle [rad] each subtended interval is widened by. It covers the error of
 #: :func:`_bearing` (< 1.7e-6 rad) so no beam that grazes a primitive is dropped; the exact
@@ -33,6 +40,10 @@ from lidar_env.primitive_grid import PrimitiveGrid, grid_cell, odd_crossings, se
 _ANGLE_MARGIN = 1e-5
 #: Relative tolerance on the segment parameter so a beam through an end point still hits it.
 _ENDPOINT_TOLERANCE = 1e-12
+#: [m] how far outside a sensor's widened beam wedge a primitive must lie to be skipped.
+_WEDGE_TOLERANCE = 1e-9
+#: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
+_MIN_CULLED_ANGLE = 0.2
 _TWO_PI = 2.0 * math.pi
 
 
@@ -66,24 +77,6 @@ def _wrap_positive(angle: float) -> float:
 
 
 @njit(cache=True, fastmath=False)
-def _beam_order(beam_angles: NDArray[np.float64]) -> tuple:
-    """Beam angles wrapped to [0, 2 pi), sorted; their order; and the uniform step (0 if not)."""
-    n = beam_angles.shape[0]
-    wrapped = np.empty(n)
-    for j in range(n):
-        wrapped[j] = beam_angles[j] % _TWO_PI
-    order = np.argsort(wrapped, kind="mergesort")
-    sorted_angles = wrapped[order]
-    step = (sorted_angles[n - 1] - sorted_angles[0]) / (n - 1) if n > 1 else 0.0
-    uniform = step > 0.0
-    for j in range(n):
-        if abs(sorted_angles[j] - (sorted_angles[0] + j * step)) > 1e-12 * _TWO_PI:
-            uniform = False
-            break
-    return sorted_angles, order, step if uniform else 0.0
-
-
-@njit(cache=True, fastmath=False)
 def _sorted_range(
     lo: float, hi: float, sorted_angles: NDArray[np.float64], step: float
 ) -> tuple[int, int]:
@@ -114,7 +107,24 @@ def _beam_span(
         f1, l1 = _sorted_range(0.0, b - _TWO_PI, sorted_angles, step)
     else:
         f1, l1 = 0, 0
-    return f0, l0, f1, max(l1, f1)
+    return f0, max(l0, f0), f1, max(l1, f1)
+
+
+@njit(cache=True, fastmath=False)
+def _subtended(v1x: float, v1y: float, v2x: float, v2y: float, heading: float):
+    """``(lo, width)``: the angles [rad] from ``heading`` (lo wrapped to [0, 2 pi)) of the
+    interval a segment from ``v1`` to ``v2`` (relative to the sensor, not through it) spans."""
+    a1 = _bearing(v1y, v1x)
+    a2 = _bearing(v2y, v2x)
+    # The sign of the cross product, not the rounded bearings, says which end is clockwise
+    # of the other; this stays right for a sensor next to a long wall (sweep near pi).
+    if v1x * v2y - v1y * v2x >= 0.0:
+        lo, width = a1, _wrap_positive(a2 - a1)
+    else:
+        lo, width = a2, _wrap_positive(a1 - a2)
+    if width > math.pi:  # rounding: the true sweep is ~pi (or ~0 when nearly collinear)
+        width = math.pi if width < 1.5 * math.pi else 0.0
+    return _wrap_positive(lo - heading), width
 
 
 @njit(cache=True, fastmath=False)
@@ -131,60 +141,40 @@ def _circle_hit(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float
 
 
 @njit(cache=True, fastmath=False)
-def _segment_hit(ox: float, oy: float, dx: float, dy: float, seg: NDArray[np.float64]):
-    """Distance along the unit ray ``o + t d`` to the segment, or inf (parallel rays miss)."""
-    ex, ey = seg[2] - seg[0], seg[3] - seg[1]
+def segment_hit(ox: float, oy: float, dx: float, dy: float, x1: float, y1: float, x2: float,
+                y2: float, nearer_than: float) -> float:
+    """Distance along the unit ray ``o + t d`` to the segment if below ``nearer_than``, else
+    inf (parallel rays miss). The segment parameter is only worked out for such a ``t``."""
+    ex, ey = x2 - x1, y2 - y1
     denom = dx * ey - dy * ex
     if denom == 0.0:
         return math.inf
-    wx, wy = seg[0] - ox, seg[1] - oy
+    wx, wy = x1 - ox, y1 - oy
     t = (wx * ey - wy * ex) / denom
+    if t < 0.0 or t >= nearer_than:
+        return math.inf
     u = (wx * dy - wy * dx) / denom
-    if t < 0.0 or u < -_ENDPOINT_TOLERANCE or u > 1.0 + _ENDPOINT_TOLERANCE:
+    if u < -_ENDPOINT_TOLERANCE or u > 1.0 + _ENDPOINT_TOLERANCE:
         return math.inf
     return t
 
 
-@njit(cache=True, fastmath=False)
-def _gather(
-    start: NDArray[np.int64],
-    ids: NDArray[np.int64],
-    columns: tuple[int, int],
-    rows: tuple[int, int],
-    nx: int,
-    seen: NDArray[np.int64],
-    stamp: int,
-    out: NDArray[np.int64],
-) -> int:
-    """Write the distinct ids listed in a block of grid cells to ``out``; return how many."""
-    count = 0
-    for row in range(rows[0], rows[1] + 1):
-        for c in range(row * nx + columns[0], row * nx + columns[1] + 1):
-            for p in range(start[c], start[c + 1]):
-                i = ids[p]
-                if seen[i] != stamp:
-                    seen[i] = stamp
-                    out[count] = i
-                    count += 1
-    return count
-
-
+# The sweeps take scalars and whole arrays only: unpacking a tuple of arrays, or taking a row
+# view, in a function called once per primitive costs atomic reference-count updates that
+# made the whole cast ~1.5x slower.
 @njit(cache=True, fastmath=False)
 def sweep_circle(
-    ranges: NDArray[np.float64],
-    ox: float, oy: float, ch: float, sh: float, heading: float,
-    cx: float, cy: float, r: float,
-    sorted_angles: NDArray[np.float64],
-    order: NDArray[np.int64],
-    step: float,
-    cos_beam: NDArray[np.float64],
-    sin_beam: NDArray[np.float64],
-    max_range: float,
+    ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+    cx: float, cy: float, r: float, sorted_angles: NDArray[np.float64],
+    order: NDArray[np.int64], step: float, dir_x: NDArray[np.float64],
+    dir_y: NDArray[np.float64], max_range: float,
 ) -> bool:
-    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi), its
-    cosine ``ch`` and sine ``sh``) to the exact hits on the circle ``(cx, cy, r)`` [m], for the
-    beams within the angle it subtends only. Returns False (all ranges 0) when the sensor is
-    inside the circle."""
+    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
+    exact hits on the circle ``(cx, cy, r)`` [m], for the beams within the angle it subtends
+    only. The beams are ``sorted_angles, order, step`` (see
+    :func:`lidar_env.lidar_layout.beam_geometry`) and their
+    world-frame unit directions ``dir_x, dir_y``. Returns False (all ranges 0) when the
+    sensor is inside the circle."""
     fx, fy = cx - ox, cy - oy
     d = math.sqrt(fx * fx + fy * fy)
     if d - r >= max_range:
@@ -195,80 +185,118 @@ def sweep_circle(
     half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
     lo = _wrap_positive(_bearing(fy, fx) - half - heading)
     f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
-    n0 = max(l0 - f0, 0)
-    for q in range(n0 + l1 - f1):
-        j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-        dx = ch * cos_beam[j] - sh * sin_beam[j]
-        dy = sh * cos_beam[j] + ch * sin_beam[j]
-        t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
+    for q in range(l0 - f0 + l1 - f1):
+        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        t = _circle_hit(ox, oy, dir_x[j], dir_y[j], cx, cy, r)
         if t < ranges[j]:
             ranges[j] = t
     return True
 
 
 @njit(cache=True, fastmath=False)
-def _scan_one(
-    ranges: NDArray[np.float64],
-    ox: float,
-    oy: float,
-    heading: float,
-    circles: NDArray[np.float64],
-    segments: NDArray[np.float64],
-    circle_ids: NDArray[np.int64],
-    segment_ids: NDArray[np.int64],
-    sorted_angles: NDArray[np.float64],
-    order: NDArray[np.int64],
-    step: float,
-    cos_beam: NDArray[np.float64],
-    sin_beam: NDArray[np.float64],
-    max_range: float,
-) -> None:
-    """Fill ``ranges`` (n,) for one sensor at ``(ox, oy, heading)`` from the candidate
-    primitives ``circle_ids`` and ``segment_ids``; see :func:`cast_rays`."""
-    ranges[:] = max_range
+def sweep_segment(
+    ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+    x1: float, y1: float, x2: float, y2: float, sorted_angles: NDArray[np.float64],
+    order: NDArray[np.int64], step: float, dir_x: NDArray[np.float64],
+    dir_y: NDArray[np.float64], max_range: float,
+) -> bool:
+    """:func:`sweep_circle` for the segment ``(x1, y1)-(x2, y2)`` [m]; False (all ranges 0)
+    when the sensor touches it."""
+    # A cheap bounding-box test first (few branches), then the exact distance.
+    gap_x = max(min(x1, x2) - ox, ox - max(x1, x2))
+    gap_y = max(min(y1, y2) - oy, oy - max(y1, y2))
+    if max(gap_x, gap_y) >= max_range:
+        return True
+    d2 = point_segment_distance2(ox, oy, x1, y1, x2, y2)
+    if d2 >= max_range * max_range:
+        return True
+    if d2 == 0.0:
+        ranges[:] = 0.0
+        return False
+    lo, width = _subtended(x1 - ox, y1 - oy, x2 - ox, y2 - oy, heading)
+    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+    for q in range(l0 - f0 + l1 - f1):
+        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        t = segment_hit(ox, oy, dir_x[j], dir_y[j], x1, y1, x2, y2, ranges[j])
+        if t < ranges[j]:
+            ranges[j] = t
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def _cell_hidden(
+    ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+    x0: float, y0: float, x1: float, y1: float, sorted_angles: NDArray[np.float64],
+    order: NDArray[np.int64], step: float, max_range: float,
+) -> bool:
+    """True when nothing in the cell ``[x0, x1] x [y0, y1]`` [m] (padded) can shorten a beam:
+    it lies beyond ``max_range``, or every beam towards it already ends nearer than it."""
+    gx = max(x0 - ox, ox - x1, 0.0)
+    gy = max(y0 - oy, oy - y1, 0.0)
+    if gx == 0.0 and gy == 0.0:
+        return False  # the sensor is in the cell
+    nearest2 = gx * gx + gy * gy  # squared: the pad keeps the comparison below safe
+    if nearest2 >= max_range * max_range:
+        return True
+    # The two corners that bound the cell's silhouette seen from the sensor.
+    if gy == 0.0:  # beside the cell: its near side
+        ax = bx = x0 if ox < x0 else x1
+        ay, by = y0, y1
+    elif gx == 0.0:  # above or below it
+        ay = by = y0 if oy < y0 else y1
+        ax, bx = x0, x1
+    elif (ox < x0) == (oy < y0):  # diagonal, lower left or upper right
+        ax, ay, bx, by = x0, y1, x1, y0
+    else:
+        ax, ay, bx, by = x0, y0, x1, y1
+    lo, width = _subtended(ax - ox, ay - oy, bx - ox, by - oy, heading)
+    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+    for q in range(l0 - f0 + l1 - f1):
+        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        if ranges[j] * ranges[j] > nearest2:
+            return False
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def _wedge(heading: float, sorted_angles: NDArray[np.float64]) -> tuple:
+    """The beams' world-angle interval widened by the margin: ``(start, width, ax, ay, bx,
+    by)``, with ``a``/``b`` the unit vectors of its first and last edge."""
+    start = heading + sorted_angles[0] - _ANGLE_MARGIN
+    width = sorted_angles[-1] - sorted_angles[0] + 2.0 * _ANGLE_MARGIN
+    return (start, width, math.cos(start), math.sin(start), math.cos(start + width),
+            math.sin(start + width))
+
+
+@njit(cache=True, fastmath=False)
+def _outside_wedge(wedge: tuple, px: float, py: float, qx: float, qy: float,
+                   r: float) -> bool:
+    """True when the segment p-q (relative to the sensor) thickened by ``r`` [m] lies wholly
+    outside the beam ``wedge`` (for a circle, p = q = its centre)."""
+    _, width, ax, ay, bx, by = wedge
+    tol = _WEDGE_TOLERANCE + r
+    left_of_first = max(ax * py - ay * px, ax * qy - ay * qx) < -tol
+    right_of_last = max(px * by - py * bx, qx * by - qy * bx) < -tol
+    if width <= math.pi:
+        return left_of_first or right_of_last
+    return left_of_first and right_of_last
+
+
+@njit(cache=True, fastmath=False)
+def beam_directions(heading: float, beams: tuple) -> tuple:
+    """``(sorted_angles, order, step, dir_x, dir_y)``: a sensor's beams ``(sorted_angles,
+    order, step, cos, sin)`` (see :func:`lidar_env.lidar_layout.beam_geometry`) with their
+    world-frame unit directions for a sensor heading [rad], as :func:`cast_sensor` and the
+    sweeps take them."""
+    sorted_angles, order, step, cos_beam, sin_beam = beams
+    n = cos_beam.shape[0]
     ch, sh = math.cos(heading), math.sin(heading)
-    heading = heading % _TWO_PI
-    for i in circle_ids:
-        cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
-        if max(abs(cx - ox), abs(cy - oy)) - r >= max_range:  # a cheap bounding-box test first
-            continue
-        if not sweep_circle(ranges, ox, oy, ch, sh, heading, cx, cy, r, sorted_angles, order,
-                            step, cos_beam, sin_beam, max_range):
-            return
-    for i in segment_ids:
-        seg = segments[i]
-        # A cheap bounding-box test first (few branches), then the exact distance.
-        gap_x = max(min(seg[0], seg[2]) - ox, ox - max(seg[0], seg[2]))
-        gap_y = max(min(seg[1], seg[3]) - oy, oy - max(seg[1], seg[3]))
-        if max(gap_x, gap_y) >= max_range:
-            continue
-        d2 = segment_distance2(ox, oy, seg)
-        if d2 >= max_range * max_range:
-            continue
-        if d2 == 0.0:
-            ranges[:] = 0.0
-            return
-        v1x, v1y, v2x, v2y = seg[0] - ox, seg[1] - oy, seg[2] - ox, seg[3] - oy
-        a1 = _bearing(v1y, v1x)
-        a2 = _bearing(v2y, v2x)
-        # The sign of the cross product, not the rounded bearings, says which end is clockwise
-        # of the other; this stays right for a sensor next to a long wall (sweep near pi).
-        if v1x * v2y - v1y * v2x >= 0.0:
-            lo, width = a1, _wrap_positive(a2 - a1)
-        else:
-            lo, width = a2, _wrap_positive(a1 - a2)
-        if width > math.pi:  # rounding: the true sweep is ~pi (or ~0 when nearly collinear)
-            width = math.pi if width < 1.5 * math.pi else 0.0
-        lo = _wrap_positive(lo - heading)
-        f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-        n0 = max(l0 - f0, 0)
-        for q in range(n0 + l1 - f1):
-            j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-            dx = ch * cos_beam[j] - sh * sin_beam[j]
-            dy = sh * cos_beam[j] + ch * sin_beam[j]
-            t = _segment_hit(ox, oy, dx, dy, seg)
-            if t < ranges[j]:
-                ranges[j] = t
+    dir_x = np.empty(n)
+    dir_y = np.empty(n)
+    for j in range(n):
+        dir_x[j] = ch * cos_beam[j] - sh * sin_beam[j]
+        dir_y[j] = sh * cos_beam[j] + ch * sin_beam[j]
+    return sorted_angles, order, step, dir_x, dir_y
 
 
 @njit(cache=True, fastmath=False)
@@ -278,119 +306,69 @@ def cast_sensor(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
     first_polygon_edge: int,
-    grid: PrimitiveGrid,
-    scratch: tuple,
+    grid: tuple,
+    seen: tuple,
     stamp: int,
-    beams: tuple,
+    own: tuple,
     max_range: float,
 ) -> None:
     """Fill ``ranges`` (n,) with the exact ranges of one sensor at world ``pose``.
 
-    ``scratch`` is ``(circle_seen, segment_seen, circle_ids, segment_ids)``, int64 arrays as
-    long as ``circles`` and ``segments``; ``stamp`` (>= 1) must differ between the sensors of
-    one call, so each gathers its candidates afresh without clearing ``seen``.
+    ``grid`` is a :class:`~lidar_env.primitive_grid.PrimitiveGrid` or a plain tuple of its
+    fields; ``own`` the sensor's beams from :func:`beam_directions` for ``pose``; ``seen``
+    ``(circle_seen, segment_seen)``, int64 arrays as long as ``circles`` and ``segments``
+    holding no value >= ``stamp`` (>= 1) and none <= ``-stamp``, so each sensor meets every
+    primitive once without clearing them.
     """
     ox, oy, heading = pose
     if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
         raise ConfigError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
-    circle_seen, segment_seen, circle_ids, segment_ids = scratch
+    circle_seen, segment_seen = seen
     if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -stamp):
         ranges[:] = 0.0
         return
-    # Only primitives in the grid cells that overlap the sensor's range box can be seen.
-    columns = (grid_cell(ox - max_range, grid.x0, grid.cell, grid.nx),
-               grid_cell(ox + max_range, grid.x0, grid.cell, grid.nx))
-    rows = (grid_cell(oy - max_range, grid.y0, grid.cell, grid.ny),
-            grid_cell(oy + max_range, grid.y0, grid.cell, grid.ny))
-    n_circles = _gather(grid.circle_start, grid.circle_ids, columns, rows, grid.nx,
-                        circle_seen, stamp, circle_ids)
-    n_segments = _gather(grid.segment_start, grid.segment_ids, columns, rows, grid.nx,
-                         segment_seen, stamp, segment_ids)
-    sorted_angles, order, step, cos_beam, sin_beam = beams
-    _scan_one(ranges, ox, oy, heading, circles, segments, circle_ids[:n_circles],
-              segment_ids[:n_segments], sorted_angles, order, step, cos_beam, sin_beam,
-              max_range)
-
-
-@njit(cache=True, fastmath=False)
-def new_scratch(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> tuple:
-    """The work arrays of :func:`cast_sensor` for one call over several sensors."""
-    return (np.zeros(circles.shape[0], dtype=np.int64),
-            np.zeros(segments.shape[0], dtype=np.int64),
-            np.empty(circles.shape[0], dtype=np.int64),
-            np.empty(segments.shape[0], dtype=np.int64))
-
-
-@njit(cache=True, fastmath=False)
-def cast_rays_kernel(
-    circles: NDArray[np.float64],
-    segments: NDArray[np.float64],
-    first_polygon_edge: int,
-    grid: PrimitiveGrid,
-    sensor_poses: NDArray[np.float64],
-    beams: tuple,
-    max_range: float,
-) -> NDArray[np.float64]:
-    """``(K, n)`` exact ranges of sensors at ``sensor_poses`` that share one beam set."""
-    out = np.empty((sensor_poses.shape[0], beams[3].shape[0]))
-    scratch = new_scratch(circles, segments)
-    for k in range(sensor_poses.shape[0]):
-        pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2])
-        cast_sensor(out[k], pose, circles, segments, first_polygon_edge, grid, scratch, k + 1,
-                    beams, max_range)
-    return out
-
-
-@njit(cache=True, fastmath=False)
-def scan_kernel(
-    circles: NDArray[np.float64],
-    segments: NDArray[np.float64],
-    first_polygon_edge: int,
-    grid: PrimitiveGrid,
-    sensor_poses: NDArray[np.float64],
-    beams: tuple,
-    max_range: float,
-    below_max: float,
-    noise_std: float,
-    gaussians: NDArray[np.float64],
-    dropout_prob: float,
-    uniforms: NDArray[np.float64],
-) -> NDArray[np.float32]:
-    """The exact ranges of :func:`cast_rays_kernel` turned into float32 readings in one pass.
-
-    A hit gets ``noise_std * gaussians[k, j]`` added (only when ``gaussians`` is not empty) and
-    is clipped to ``[0, below_max]``; then a beam with ``uniforms[k, j] < dropout_prob`` (only
-    when ``uniforms`` is not empty) reads ``max_range``. Returns a new ``(K, n)`` array.
-    """
-    ranges = cast_rays_kernel(
-        circles, segments, first_polygon_edge, grid, sensor_poses, beams, max_range
-    )
-    noisy = gaussians.size > 0
-    dropping = uniforms.size > 0
-    out = np.empty(ranges.shape, dtype=np.float32)
-    for k in range(ranges.shape[0]):
-        for j in range(ranges.shape[1]):
-            r = ranges[k, j]
-            if r < max_range:
-                if noisy:
-                    r += noise_std * gaussians[k, j]
-                r = min(max(r, 0.0), below_max)
-            if dropping and uniforms[k, j] < dropout_prob:
-                r = max_range
-            out[k, j] = r
-    return out
-
-
-@lru_cache(maxsize=16)
-def beam_geometry(angle_bytes: bytes) -> tuple:
-    """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
-
-    Cached by the angles' bytes: a Lidar's beams are set up once, not on every scan.
-    """
-    angles = np.frombuffer(angle_bytes, dtype=np.float64)
-    if len(angles) == 0 or not np.all(np.isfinite(angles)):
-        raise ConfigError(
-            f"beam_angles: expected a non-empty finite 1-D array [rad], got {angles}"
-        )
-    sorted_angles, order, step = _beam_order(angles)
-    return sorted_angles, order, step, np.cos(angles), np.sin(angles)
+    ranges[:] = max_range
+    heading = heading % _TWO_PI
+    sorted_angles, order, step, dir_x, dir_y = own
+    wedge = _wedge(heading, sorted_angles)
+    cull = wedge[1] < _TWO_PI - _MIN_CULLED_ANGLE
+    x0, y0, size, nx, ny, circle_start, circle_ids, segment_start, segment_ids = grid
+    c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge[0],
+                                        wedge[1] if cull else _TWO_PI, grid)
+    pad = 1e-9 * size
+    for ring in range(max(sx - c0, c1 - sx, sy - r0, r1 - sy) + 1):
+        for iy in range(max(r0, sy - ring), min(r1, sy + ring) + 1):
+            edge_row = iy == sy - ring or iy == sy + ring
+            ix = max(c0, sx - ring) if edge_row else sx - ring
+            while ix <= min(c1, sx + ring):
+                column = ix
+                ix += 1 if edge_row else 2 * ring
+                if column < c0 or (ring > 0 and _cell_hidden(
+                        ranges, ox, oy, heading, x0 + column * size - pad, y0 + iy * size - pad,
+                        x0 + (column + 1) * size + pad, y0 + (iy + 1) * size + pad,
+                        sorted_angles, order, step, max_range)):
+                    continue
+                c = iy * nx + column
+                for p in range(circle_start[c], circle_start[c + 1]):
+                    i = circle_ids[p]
+                    if circle_seen[i] == stamp:
+                        continue
+                    circle_seen[i] = stamp
+                    cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+                    if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
+                            cull and _outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
+                        continue
+                    if not sweep_circle(ranges, ox, oy, heading, cx, cy, r, sorted_angles, order,
+                                        step, dir_x, dir_y, max_range):
+                        return
+                for p in range(segment_start[c], segment_start[c + 1]):
+                    i = segment_ids[p]
+                    if segment_seen[i] == stamp:
+                        continue
+                    segment_seen[i] = stamp
+                    x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+                    if cull and _outside_wedge(wedge, x1 - ox, y1 - oy, x2 - ox, y2 - oy, 0.0):
+                        continue
+                    if not sweep_segment(ranges, ox, oy, heading, x1, y1, x2, y2, sorted_angles,
+                                         order, step, dir_x, dir_y, max_range):
+                        return
