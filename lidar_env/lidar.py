@@ -28,12 +28,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError
+from lidar_env.lidar_config import pack_sensors
 from lidar_env.lidar_layout import (
     Geometry,
     as_poses,
     as_world,
-    cast_packed,
-    pack_sensors,
+    exact_ranges_kernel,
     scan_layout_kernel,
 )
 from lidar_env.world import World
@@ -41,8 +41,6 @@ from lidar_env.world import World
 __all__ = ["Geometry", "Lidar", "World", "as_poses", "as_world", "cast_rays", "pymunk_cast_rays"]
 
 _NO_DRAWS = np.empty(0)
-_NO_MOVERS = np.empty((0, 3))
-_NO_CAR = np.empty(0)
 
 
 @lru_cache(maxsize=64)
@@ -93,8 +91,8 @@ def cast_rays(
         raise ConfigError(f"max_range: expected a positive finite number [m], got {max_range}")
     beams, params = _identical_sensors(angles.tobytes(), len(poses), max_range, 0.0, 0.0)
     # The kernel itself rejects non-finite poses: checking here would cost more than a scan.
-    exact = cast_packed(world.circles, world.segments, first_polygon_edge, tuple(world.grid),
-                        poses, beams, params, _NO_MOVERS, _NO_CAR)
+    exact = exact_ranges_kernel(world.circles, world.segments, first_polygon_edge,
+                                tuple(world.grid), poses, beams, params)
     return exact.reshape(len(poses), len(angles))
 
 

@@ -14,22 +14,27 @@ through the body); a beam meeting the outline farther out reads the distance to 
 5 cm inside both sides of the corner (0.35, 0.2 on the default 0.8 x 0.5 m car) with the
 default 0.1 m housing sees 210 degrees, its beams that graze along the two sides reading the
 car; a 360-degree one at body level in the car's middle reads only the car.
+
+For the compiled kernel (:mod:`lidar_env.lidar_layout`), :func:`beam_geometry` sorts a beam set
+and :func:`pack_sensors` packs K sensors' beams and parameters end to end.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from lidar_env.errors import ConfigError
 
+_TWO_PI = 2.0 * math.pi
 #: Most Lidars one car carries.
 MAX_LIDARS = 8
 #: [rad] a ``fov`` this close to 2 pi is a full turn.
@@ -164,6 +169,71 @@ def check_lidars(value: Any, reach: float) -> tuple[LidarConfig, ...]:
                 f"car's centre, outside its reach: expected within the car's half-diagonal "
                 f"{reach:.3f} m")
     return lidars
+
+
+#: Columns of the ``params`` rows of :func:`pack_sensors`: packed beam positions ``[first,
+#: end)``, uniform step [rad] (0: not uniform), angle of beam 0 from forward [rad], max range
+#: [m], the largest float32 below it, noise std [m], dropout probability, housing radius [m]
+#: (negative: no self-occlusion).
+FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING = range(9)
+
+
+@njit(cache=True, fastmath=False)
+def _beam_order(beam_angles: NDArray[np.float64]) -> tuple:
+    """Beam angles wrapped to [0, 2 pi), sorted; their order; and the uniform step (0 if not)."""
+    n = beam_angles.shape[0]
+    wrapped = np.empty(n)
+    for j in range(n):
+        wrapped[j] = beam_angles[j] % _TWO_PI
+    order = np.argsort(wrapped, kind="mergesort")
+    sorted_angles = wrapped[order]
+    step = (sorted_angles[n - 1] - sorted_angles[0]) / (n - 1) if n > 1 else 0.0
+    uniform = step > 0.0
+    for j in range(n):
+        if abs(sorted_angles[j] - (sorted_angles[0] + j * step)) > 1e-12 * _TWO_PI:
+            uniform = False
+            break
+    return sorted_angles, order, step if uniform else 0.0
+
+
+@lru_cache(maxsize=64)
+def beam_geometry(angle_bytes: bytes) -> tuple:
+    """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
+
+    Cached by the angles' bytes: a Lidar's beams are set up once, not on every scan.
+    """
+    angles = np.frombuffer(angle_bytes, dtype=np.float64)
+    if len(angles) == 0 or not np.all(np.isfinite(angles)):
+        raise ConfigError(
+            f"beam_angles: expected a non-empty finite 1-D array [rad], got {angles}"
+        )
+    sorted_angles, order, step = _beam_order(angles)
+    return sorted_angles, order, step, np.cos(angles), np.sin(angles)
+
+
+def pack_sensors(
+    sweep_angles: Sequence[NDArray[np.float64]], rows: Sequence[Sequence[float]]
+) -> tuple[tuple, NDArray[np.float64]]:
+    """The kernel's ``(beams, params)`` for K sensors.
+
+    ``sweep_angles[k]`` are sensor ``k``'s beam directions [rad] from its beam 0, ``rows[k]``
+    its ``(offset, max_range, noise_std, dropout_prob, housing_radius)`` (see :data:`OFFSET`).
+    ``beams`` is ``(table (6, total): sorted wrapped angles, cos, sin, then three rows of
+    work space (exact ranges, beam directions x and y); order (total,))``.
+    """
+    parts = [beam_geometry(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+             for a in sweep_angles]
+    sizes = [len(p[0]) for p in parts]
+    ends = np.cumsum(sizes)
+    table = np.vstack([np.concatenate([p[i] for p in parts]) for i in (0, 3, 4)]
+                      + [np.zeros((3, int(ends[-1])))])
+    order = np.concatenate([p[1] for p in parts]).astype(np.int64)
+    params = np.array([
+        (end - size, end, part[2], offset, max_range,
+         float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing)
+        for part, size, end, (offset, max_range, noise, drop, housing)
+        in zip(parts, sizes, ends, rows, strict=True)], dtype=np.float64)
+    return (table, order), params
 
 
 def _finite(value: Any) -> bool:

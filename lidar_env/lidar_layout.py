@@ -2,15 +2,17 @@
 
 :class:`LidarLayout` holds K Lidars (:class:`~lidar_env.lidar_config.LidarConfig`: mount, beams
 over a field of view, max range, noise, dropouts, self-occlusion) and :meth:`LidarLayout.scan`
-returns their K float32 scans from one call of :func:`scan_layout_body_kernel`. Every scan of
-the package goes through :func:`cast_packed` (exact float64 ranges of K sensors, each cast by
+returns their K float32 scans from one call of :func:`scan_packed_kernel`. Every scan of the
+package goes through :func:`cast_packed` (exact float64 ranges of K sensors, each cast by
 :func:`lidar_env.ray_casting.cast_sensor`, then the moving circles by :func:`cast_movers` and
 the car's own outline by :func:`cast_body`) and :func:`readings` (noise, clipping, dropouts,
-float32): :class:`lidar_env.lidar.Lidar` and :func:`lidar_env.lidar.cast_rays` pack their
-identical sensors the same way (:func:`pack_sensors`). :func:`scan_layout_movers_kernel` and
-:func:`scan_layout_kernel` (the vector env's) are that kernel without the car, and without
-movers too. The beams of all sensors are packed end to end (sensor ``k`` owns positions
-``[first, end)`` of its ``params`` row).
+float32). :class:`lidar_env.lidar.Lidar` and :func:`lidar_env.lidar.cast_rays` pack their
+identical sensors the same way (:func:`lidar_env.lidar_config.pack_sensors`: beams end to end,
+sensor ``k`` owning positions ``[first, end)`` of its ``params`` row). The kernels differ only
+in how the world comes: :func:`scan_packed_kernel` takes it packed once per world
+(:func:`lidar_env.primitive_grid.pack_scan_world`); :func:`scan_layout_body_kernel` as arrays
+and a grid, :func:`scan_layout_movers_kernel` without the car and :func:`scan_layout_kernel`
+(the vector env's) without movers either.
 
 Self-occlusion (``LidarConfig.self_occlusion``, for a Lidar at body level): the four edges of
 the car's ``car_length x car_width`` rectangle are walls to that Lidar, except where they pass
@@ -28,15 +30,32 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from functools import cached_property, lru_cache
+from functools import cached_property
 
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError
-from lidar_env.lidar_config import LidarConfig
-from lidar_env.primitive_grid import point_segment_distance2
+from lidar_env.lidar_config import (
+    BELOW_MAX,
+    DROPOUT,
+    END,
+    FIRST,
+    HOUSING,
+    MAX_RANGE,
+    NOISE,
+    OFFSET,
+    STEP,
+    LidarConfig,
+    pack_sensors,
+)
+from lidar_env.primitive_grid import (
+    STAMP,
+    pack_scan_world,
+    point_segment_distance2,
+    unpack_scan_world,
+)
 from lidar_env.ray_casting import (
     beam_directions,
     cast_sensor,
@@ -48,14 +67,9 @@ from lidar_env.world import World
 
 Geometry = World | tuple[ArrayLike, ArrayLike]
 
-_TWO_PI = 2.0 * math.pi
 _NO_DRAWS = np.empty(0)
 _NO_CAR = np.empty(0)
-#: Columns of the ``params`` rows of :func:`pack_sensors`: packed beam positions ``[first,
-#: end)``, uniform step [rad] (0: not uniform), angle of beam 0 from forward [rad], max range
-#: [m], the largest float32 below it, noise std [m], dropout probability, housing radius [m]
-#: (negative: no self-occlusion).
-FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING = range(9)
+_NO_MOVERS = np.empty((0, 3))
 
 
 def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
@@ -81,62 +95,6 @@ def as_world(world_or_arrays: Geometry) -> tuple[World, int]:
         )
     world = World(*world_or_arrays, bounds=(0.0, 0.0, 1.0, 1.0))
     return world, len(world.segments)
-
-
-@njit(cache=True, fastmath=False)
-def _beam_order(beam_angles: NDArray[np.float64]) -> tuple:
-    """Beam angles wrapped to [0, 2 pi), sorted; their order; and the uniform step (0 if not)."""
-    n = beam_angles.shape[0]
-    wrapped = np.empty(n)
-    for j in range(n):
-        wrapped[j] = beam_angles[j] % _TWO_PI
-    order = np.argsort(wrapped, kind="mergesort")
-    sorted_angles = wrapped[order]
-    step = (sorted_angles[n - 1] - sorted_angles[0]) / (n - 1) if n > 1 else 0.0
-    uniform = step > 0.0
-    for j in range(n):
-        if abs(sorted_angles[j] - (sorted_angles[0] + j * step)) > 1e-12 * _TWO_PI:
-            uniform = False
-            break
-    return sorted_angles, order, step if uniform else 0.0
-
-
-@lru_cache(maxsize=64)
-def beam_geometry(angle_bytes: bytes) -> tuple:
-    """Sorted wrapped angles, their order, the uniform step (0 if not uniform), cos and sin.
-
-    Cached by the angles' bytes: a Lidar's beams are set up once, not on every scan.
-    """
-    angles = np.frombuffer(angle_bytes, dtype=np.float64)
-    if len(angles) == 0 or not np.all(np.isfinite(angles)):
-        raise ConfigError(
-            f"beam_angles: expected a non-empty finite 1-D array [rad], got {angles}"
-        )
-    sorted_angles, order, step = _beam_order(angles)
-    return sorted_angles, order, step, np.cos(angles), np.sin(angles)
-
-
-def pack_sensors(
-    sweep_angles: Sequence[NDArray[np.float64]], rows: Sequence[Sequence[float]]
-) -> tuple[tuple, NDArray[np.float64]]:
-    """The kernel's ``(beams, params)`` for K sensors.
-
-    ``sweep_angles[k]`` are sensor ``k``'s beam directions [rad] from its beam 0, ``rows[k]``
-    its ``(offset, max_range, noise_std, dropout_prob, housing_radius)`` (see :data:`OFFSET`).
-    ``beams`` is ``(table (3, total): sorted wrapped angles, cos, sin; order (total,))``.
-    """
-    parts = [beam_geometry(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-             for a in sweep_angles]
-    sizes = [len(p[0]) for p in parts]
-    ends = np.cumsum(sizes)
-    table = np.vstack([np.concatenate([p[i] for p in parts]) for i in (0, 3, 4)])
-    order = np.concatenate([p[1] for p in parts]).astype(np.int64)
-    params = np.array([
-        (end - size, end, part[2], offset, max_range,
-         float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing)
-        for part, size, end, (offset, max_range, noise, drop, housing)
-        in zip(parts, sizes, ends, rows, strict=True)], dtype=np.float64)
-    return (table, order), params
 
 
 @njit(cache=True, fastmath=False)
@@ -202,24 +160,26 @@ def cast_packed(
     params: NDArray[np.float64],
     movers: NDArray[np.float64],
     car: NDArray[np.float64],
+    seen: tuple,
+    first_stamp: int,
 ) -> NDArray[np.float64]:
-    """Packed exact ranges [m] (float64) of K sensors whose beam 0 is at world pose
-    ``sensor_poses[k]`` turned by ``params[k, OFFSET]``; ``movers`` (M, 3) moving circles;
-    ``car`` (5,) the car's pose and half sizes, or empty (then no Lidar may self-occlude)."""
+    """Packed exact ranges [m] (float64, a view of the work rows of ``beams``) of K sensors
+    whose beam 0 is at world pose ``sensor_poses[k]`` turned by ``params[k, OFFSET]``;
+    ``movers`` (M, 3) moving circles; ``car`` (5,) the car's pose and half sizes, or empty
+    (then no Lidar may self-occlude). ``seen`` and stamps from ``first_stamp`` on as for
+    :func:`lidar_env.ray_casting.cast_sensor` (sensor ``k`` uses ``first_stamp + k``)."""
     table, order = beams
-    exact = np.empty(table.shape[1])
-    seen = (np.zeros(circles.shape[0], dtype=np.int64),
-            np.zeros(segments.shape[0], dtype=np.int64))
+    exact = table[3]
     outline = car_outline(car) if car.shape[0] == 5 else np.empty((0, 4))
     for k in range(sensor_poses.shape[0]):
         a, b = int(params[k, FIRST]), int(params[k, END])
         max_range, housing = params[k, MAX_RANGE], params[k, HOUSING]
         pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2] + params[k, OFFSET])
-        own = beam_directions(pose[2], (table[0, a:b], order[a:b], params[k, STEP],
-                                        table[1, a:b], table[2, a:b]))
+        own = beam_directions(pose[2], table[0, a:b], order[a:b], params[k, STEP],
+                              table[1, a:b], table[2, a:b], table[4, a:b], table[5, a:b])
         ranges = exact[a:b]
-        cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen, k + 1,
-                    own, max_range)
+        cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen,
+                    first_stamp + k, own, max_range)
         heading = pose[2] % (2.0 * math.pi)
         if movers.shape[0] > 0:
             cast_movers(ranges, pose[0], pose[1], heading, movers, own, max_range)
@@ -229,6 +189,22 @@ def cast_packed(
                                   "(LidarLayout.scan(..., car_pose=...)), got none")
             cast_body(ranges, pose[0], pose[1], heading, outline, housing, own, max_range)
     return exact
+
+
+@njit(cache=True, fastmath=False)
+def fresh_seen(circles: NDArray[np.float64], segments: NDArray[np.float64]) -> tuple:
+    """Zeroed ``seen`` marks for :func:`cast_packed` (stamps from 1 on)."""
+    return (np.zeros(circles.shape[0], dtype=np.int64),
+            np.zeros(segments.shape[0], dtype=np.int64))
+
+
+@njit(cache=True, fastmath=False)
+def exact_ranges_kernel(circles: NDArray[np.float64], segments: NDArray[np.float64],
+                        first_polygon_edge: int, grid: tuple, sensor_poses: NDArray[np.float64],
+                        beams: tuple, params: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A copy of :func:`cast_packed`'s exact ranges, without movers or the car."""
+    return cast_packed(circles, segments, first_polygon_edge, grid, sensor_poses, beams, params,
+                       np.empty((0, 3)), np.empty(0), fresh_seen(circles, segments), 1).copy()
 
 
 @njit(cache=True, fastmath=False)
@@ -265,7 +241,25 @@ def scan_layout_body_kernel(
     ``gaussians`` and ``uniforms`` hold one draw per packed beam, or are empty when no sensor
     needs them."""
     exact = cast_packed(circles, segments, first_polygon_edge, grid, sensor_poses, beams,
-                        params, movers, car)
+                        params, movers, car, fresh_seen(circles, segments), 1)
+    return readings(exact, params, gaussians, uniforms)
+
+
+@njit(cache=True, fastmath=False)
+def scan_packed_kernel(
+    world_floats: NDArray[np.float64], world_ints: NDArray[np.int64],
+    sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
+    gaussians: NDArray[np.float64], uniforms: NDArray[np.float64],
+    movers: NDArray[np.float64], car: NDArray[np.float64],
+) -> NDArray[np.float32]:
+    """:func:`scan_layout_body_kernel` on a world packed by
+    :func:`lidar_env.primitive_grid.pack_scan_world`, whose seen marks it keeps using: numba
+    is handed ten arrays instead of a dozen and a tuple, and nothing world-sized is zeroed."""
+    circles, segments, first_polygon_edge, grid, seen, stamp = unpack_scan_world(
+        world_floats, world_ints)
+    exact = cast_packed(circles, segments, first_polygon_edge, grid, sensor_poses, beams,
+                        params, movers, car, seen, stamp)
+    world_ints[STAMP] = stamp + sensor_poses.shape[0]
     return readings(exact, params, gaussians, uniforms)
 
 
@@ -322,12 +316,12 @@ class LidarLayout:
         if self.self_occluded and self.car_size is None:
             raise ConfigError("car_size: expected the car's (length, width) [m] for a Lidar "
                               "with self_occlusion, got None")
-        self._grid_of: tuple = (None, None)
+        self._world_of: tuple = (None, None)
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state.pop("_packed", None)  # numba-friendly arrays, rebuilt on demand
-        state["_grid_of"] = (None, None)
+        state["_world_of"] = (None, None)
         return state
 
     @property
@@ -345,11 +339,13 @@ class LidarLayout:
              for lidar, noise, drop in zip(self.lidars, self.noise_std, self.dropout_prob,
                                            strict=True)])
 
-    def _grid(self, world: World) -> tuple:
-        """``world.grid`` as a plain tuple (numba takes it faster than the named tuple)."""
-        if self._grid_of[0] is not world:
-            self._grid_of = (world, tuple(world.grid))
-        return self._grid_of[1]
+    def _packed_world(self, world: World, first_polygon_edge: int) -> tuple:
+        """``world`` packed for :func:`scan_packed_kernel` (kept until another world comes)."""
+        if self._world_of[0] is not world:
+            packed = pack_scan_world(world.circles, world.segments, first_polygon_edge,
+                                     world.grid)
+            self._world_of = (world, packed)
+        return self._world_of[1]
 
     def scan(
         self, world: Geometry, sensor_poses: ArrayLike, rng: np.random.Generator,
@@ -360,25 +356,27 @@ class LidarLayout:
         radius [m] seen like the world's (None: none; the same draws either way).
         ``car_pose`` (x, y, yaw) places the car's outline for Lidars with ``self_occlusion``
         (required then, ignored otherwise)."""
-        world, first_polygon_edge = as_world(world)
-        poses = as_poses(sensor_poses)
-        if len(poses) != len(self.lidars):
-            raise ConfigError(f"sensor_poses: expected {len(self.lidars)} poses (one per Lidar), "
-                             f"got {len(poses)}")
+        if world is self._world_of[0]:  # the env's case: the same World step after step
+            world_floats, world_ints = self._world_of[1]
+        else:
+            world_floats, world_ints = self._packed_world(*as_world(world))
+        poses = sensor_poses
+        if not (type(poses) is np.ndarray and poses.shape == self.mounts.shape
+                and poses.dtype == np.float64 and poses.flags.c_contiguous):
+            poses = as_poses(sensor_poses)
+            if len(poses) != len(self.lidars):
+                raise ConfigError(f"sensor_poses: expected {len(self.lidars)} poses (one per "
+                                  f"Lidar), got {len(poses)}")
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
-        car = _NO_CAR
-        if self.self_occluded:
-            car = self._car(car_pose)
+        car = self._car(car_pose) if self.self_occluded else _NO_CAR
         total = self._slices[-1][1]
         gaussians = rng.standard_normal(total) if self._noisy else _NO_DRAWS
         uniforms = rng.random(total) if self._dropping else _NO_DRAWS
         beams, params = self._packed
-        movers = (np.empty((0, 3)) if movers is None
-                  else np.ascontiguousarray(movers, dtype=np.float64))
-        packed = scan_layout_body_kernel(world.circles, world.segments, first_polygon_edge,
-                                         self._grid(world), poses, beams, params, gaussians,
-                                         uniforms, movers, car)
+        movers = _NO_MOVERS if movers is None else np.ascontiguousarray(movers, dtype=np.float64)
+        packed = scan_packed_kernel(world_floats, world_ints, poses, beams, params, gaussians,
+                                    uniforms, movers, car)
         return [packed[a:b] for a, b in self._slices]
 
     def _car(self, car_pose: ArrayLike | None) -> NDArray[np.float64]:

@@ -18,7 +18,7 @@ change a range (each skips only primitives no beam can hit closer than it alread
 
 Units and frames: positions and ranges in metres, angles in radians, world frame; a sensor pose
 is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
-sets come as ``(sorted_angles, order, step)`` from :func:`lidar_env.lidar_layout.beam_geometry`.
+sets come as ``(sorted_angles, order, step)`` from :func:`lidar_env.lidar_config.beam_geometry`.
 The callers' entry points are :func:`lidar_env.lidar.cast_rays` and
 :meth:`lidar_env.lidar_layout.LidarLayout.scan`, through :func:`lidar_env.lidar_layout.cast_packed`.
 """
@@ -172,7 +172,7 @@ def sweep_circle(
     """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
     exact hits on the circle ``(cx, cy, r)`` [m], for the beams within the angle it subtends
     only. The beams are ``sorted_angles, order, step`` (see
-    :func:`lidar_env.lidar_layout.beam_geometry`) and their
+    :func:`lidar_env.lidar_config.beam_geometry`) and their
     world-frame unit directions ``dir_x, dir_y``. Returns False (all ranges 0) when the
     sensor is inside the circle."""
     fx, fy = cx - ox, cy - oy
@@ -283,17 +283,16 @@ def _outside_wedge(wedge: tuple, px: float, py: float, qx: float, qy: float,
 
 
 @njit(cache=True, fastmath=False)
-def beam_directions(heading: float, beams: tuple) -> tuple:
-    """``(sorted_angles, order, step, dir_x, dir_y)``: a sensor's beams ``(sorted_angles,
-    order, step, cos, sin)`` (see :func:`lidar_env.lidar_layout.beam_geometry`) with their
-    world-frame unit directions for a sensor heading [rad], as :func:`cast_sensor` and the
-    sweeps take them."""
-    sorted_angles, order, step, cos_beam, sin_beam = beams
-    n = cos_beam.shape[0]
+def beam_directions(
+    heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
+    cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
+    dir_y: NDArray[np.float64],
+) -> tuple:
+    """``(sorted_angles, order, step, dir_x, dir_y)`` as :func:`cast_sensor` and the sweeps
+    take a sensor's beams (see :func:`lidar_env.lidar_config.beam_geometry`), ``dir_x`` and
+    ``dir_y`` filled with their world-frame unit directions for a sensor ``heading`` [rad]."""
     ch, sh = math.cos(heading), math.sin(heading)
-    dir_x = np.empty(n)
-    dir_y = np.empty(n)
-    for j in range(n):
+    for j in range(cos_beam.shape[0]):
         dir_x[j] = ch * cos_beam[j] - sh * sin_beam[j]
         dir_y[j] = sh * cos_beam[j] + ch * sin_beam[j]
     return sorted_angles, order, step, dir_x, dir_y

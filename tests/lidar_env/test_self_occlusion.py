@@ -19,6 +19,7 @@ from lidar_env.lidar_layout import (
     LidarLayout,
     car_outline,
     cast_packed,
+    fresh_seen,
     scan_layout_kernel,
 )
 from lidar_env.worlds import make_world
@@ -52,7 +53,8 @@ def exact_scan(layout, world, sensors, car_pose):
     beams, params = layout._packed
     return cast_packed(world.circles, world.segments, len(world.walls), tuple(world.grid),
                        sensors, beams, params, np.empty((0, 3)),
-                       layout._car(np.asarray(car_pose, dtype=np.float64)))
+                       layout._car(np.asarray(car_pose, dtype=np.float64)),
+                       fresh_seen(world.circles, world.segments), 1).copy()
 
 
 @pytest.mark.parametrize("mount, fov, housing", [
