@@ -27,6 +27,7 @@ within 10 m, so no estimator working from the scans alone can know that speed.
 
     python benchmarks/bench_layouts.py [--layouts corners front four paper]
         [--estimators lidar_odometry ...] [--seed 0] [--max-steps N]
+        [--set sideslip_sigma=6e-4 ...]   # estimator parameters over their defaults
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import argparse
 import math
 import platform
 
-from bench_synthetic import NOISE, record, replay
+from bench_synthetic import NOISE, Recording, record
 
 import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
@@ -53,18 +54,39 @@ LAYOUTS: dict[str, list[dict]] = {
 GROUPS = (("open_cylinders", "right_turn"), ("hallway", "zigzag"), ("closed_to_open", "zigzag"))
 
 
+def replay(recording: Recording, name: str, params: dict[str, float]):
+    """The trajectory (N, 3) of estimator ``name`` with ``params`` over ``recording``."""
+    estimator = estimators.make(name, **params)
+    estimator.reset(recording.setup, recording.truth[0])
+    for observation, t in zip(recording.observations, recording.times, strict=True):
+        estimator.update(observation, t)
+    return estimator.trajectory
+
+
+def parameter(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` (a float) from the command line."""
+    name, _, value = text.partition("=")
+    try:
+        return name, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=NUMBER, got {text!r}") from None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--layouts", nargs="+", default=list(LAYOUTS), choices=list(LAYOUTS))
     parser.add_argument("--estimators", nargs="+", default=["lidar_odometry"])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--max-steps", type=int, default=None)
+    parser.add_argument("--set", type=parameter, nargs="+", default=[], metavar="NAME=VALUE",
+                        help="estimator parameters over their defaults")
     args = parser.parse_args()
     unknown = sorted(set(args.estimators) - set(estimators.names()))
     if unknown:
         parser.error(f"unknown estimators {unknown}: expected some of {estimators.names()}")
     print(f"machine: {platform.processor() or platform.machine()}, {platform.python_version()}; "
-          f"seed {args.seed}, range noise {NOISE} m, sensor frame, scripted driver")
+          f"seed {args.seed}, range noise {NOISE} m, sensor frame, scripted driver; "
+          f"parameters {dict(args.set) or 'default'}")
     print(f"{'layout':<8} {'group':<28} {'estimator':<15} {'acc [%]':>8} {'ATE [m]':>8} "
           f"{'drift [%]':>9}")
     for layout in args.layouts:
@@ -72,12 +94,12 @@ def main() -> None:
             recording = record(world, trace, args.seed, args.max_steps, NOISE, LAYOUTS[layout])
             for name in args.estimators:
                 row = f"{layout:<8} {world + '+' + trace:<28} {name:<15}"
-                needed = estimators.make(name).min_lidars
+                needed = estimators.make(name, **dict(args.set)).min_lidars
                 if needed > recording.setup.n_lidars:
                     print(f"{row} n/a: needs {needed} Lidars", flush=True)
                     continue
                 try:
-                    trajectory, _, _ = replay(recording, name)
+                    trajectory = replay(recording, name, dict(args.set))
                 except ValueError as error:  # the estimator refuses this layout, and says why
                     print(f"{row} n/a: {error}", flush=True)
                     continue

@@ -104,9 +104,11 @@ def register(
 ) -> MatchResult:
     """Robust point-to-line ICP of ``query_points`` (M, 2, query frame) onto ``reference``.
 
-    ``prior_pose``/``prior_information`` (3,) add ``(x - prior)^T diag(L) (x - prior)`` to the
-    cost: a motion prior [1/m^2, 1/m^2, 1/rad^2] that holds the pose where the scan alone does
-    not (a long corridor). ``compiled`` runs the iterations in one numba call
+    ``prior_pose`` (3,) and ``prior_information`` ``L`` (3, 3), or (3,) for a diagonal one, add
+    ``(x - prior)^T L (x - prior)`` to the cost: a motion prior [1/m^2, 1/m^2, 1/rad^2] that
+    holds the pose where the scan alone does not (a long corridor); a full ``L`` can hold
+    sideways motion tighter than forward motion (a car does not slip sideways). ``compiled``
+    runs the iterations in one numba call
     (:func:`estimators.matching.normal_equations.register_loop`); ``False``, or a trimmed
     loss, steps in Python (the same math; the tests' reference).
     """
@@ -118,6 +120,11 @@ def register(
         raise EstimatorInputError(
             f"initial_guess: expected a pose (x, y, heading), got shape {pose.shape}")
     information = None if prior_information is None else np.asarray(prior_information, float)
+    if information is not None and information.shape not in ((3,), (3, 3)):
+        raise EstimatorInputError(
+            f"prior_information: expected shape (3,) or (3, 3), got {information.shape}")
+    if information is not None and information.ndim == 1:
+        information = np.diag(information)
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     if compiled and params.trim_ratio >= 1.0 and (information is None) == (prior is None):
         has_normals = reference.normals is not None
@@ -130,7 +137,7 @@ def register(
             np.ascontiguousarray(query_points), pose, params.max_iterations,
             params.max_correspondence_distance, LOSSES.index(params.loss), params.loss_scale,
             prior is not None, np.zeros(3) if prior is None else prior,
-            np.zeros(3) if information is None else information, params.min_information,
+            np.zeros((3, 3)) if information is None else information, params.min_information,
             params.tolerance_translation, params.tolerance_rotation)
         return _assess(reference, query_points, pose, params, iterations, converged)
     converged = False
@@ -157,6 +164,21 @@ def register(
             converged = True
             break
     return _assess(reference, query_points, pose, params, iterations, converged)
+
+
+def leaves_a_direction_free(reference: PointToLineReference, query_points: NDArray[np.float64],
+                            pose: ArrayLike, params: ICPParams) -> bool:
+    """Whether the pairs of ``query_points`` (M, 2) at ``pose`` (3,) carry less information than
+    ``params.min_information`` fully weighted points in some direction (rotation scaled by the
+    RMS lever arm): the directions :func:`register` leaves to the motion prior (a corridor's
+    axis). False with ``min_information`` 0 or fewer than 3 pairs."""
+    hessian, _, count, lever, _ = reference.normal_equations(
+        np.asarray(query_points, dtype=np.float64), np.asarray(pose, dtype=np.float64),
+        params.max_correspondence_distance, params.loss, params.loss_scale)
+    if params.min_information <= 0 or count < 3:
+        return False
+    scale = np.array([1.0, 1.0, lever or 1.0])
+    return bool(np.linalg.eigvalsh(hessian / np.outer(scale, scale))[0] < params.min_information)
 
 
 def _prior_offset(pose: NDArray[np.float64], information: NDArray[np.float64] | None,

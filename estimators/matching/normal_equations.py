@@ -171,7 +171,7 @@ def _solve_step(hessian: NDArray[np.float64], gradient: NDArray[np.float64], lev
                 has_prior: bool, prior_information: NDArray[np.float64],
                 prior_offset: NDArray[np.float64], min_information: float,
                 ) -> NDArray[np.float64]:
-    """``point_to_line.solve_normal_equations``, compiled."""
+    """``point_to_line.solve_normal_equations``, compiled; ``prior_information`` (3, 3)."""
     if min_information > 0 and has_prior:
         scale = np.array([1.0, 1.0, lever if lever != 0 else 1.0])
         outer = np.outer(scale, scale)
@@ -181,8 +181,8 @@ def _solve_step(hessian: NDArray[np.float64], gradient: NDArray[np.float64], lev
         hessian = outer * (projection @ (hessian / outer) @ projection)
         gradient = scale * (projection @ (gradient / scale))
     if has_prior:
-        hessian = hessian + np.diag(prior_information)
-        gradient = gradient + prior_information * prior_offset
+        hessian = hessian + prior_information
+        gradient = gradient + prior_information @ prior_offset
     return np.linalg.solve(hessian + 1e-9 * np.eye(3), gradient)
 
 
@@ -198,7 +198,7 @@ def register_loop(
     tolerance_translation: float, tolerance_rotation: float,
 ) -> tuple[NDArray[np.float64], int, bool]:
     """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
-    run and whether the step fell below the tolerances."""
+    run and whether the step fell below the tolerances. ``prior_information`` is (3, 3)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
     iterations = 0

@@ -61,7 +61,8 @@ def gauss_newton_step(
     min_information: float = 0.0,
 ) -> NDArray[np.float64]:
     """Pose increment (3,) minimising ``sum w (r + J d)^2 + (d - e)^T L (d - e)`` over ``d``,
-    with ``L = diag(prior_information)`` and ``e = prior_offset`` (prior pose minus current).
+    with ``L = prior_information`` ((3, 3), or (3,) for its diagonal) and ``e = prior_offset``
+    (prior pose minus current).
 
     With ``min_information`` > 0 and a prior, directions in which the data carry less
     information than that many fully weighted points facing that way (a corridor's axis) are
@@ -96,8 +97,10 @@ def solve_normal_equations(
                                             @ projection)
         gradient = scale * (projection @ (gradient / scale))
     if prior_information is not None:
-        hessian = hessian + np.diag(prior_information)
-        gradient = gradient + prior_information * prior_offset
+        information = np.asarray(prior_information, dtype=np.float64)
+        information = np.diag(information) if information.ndim == 1 else information
+        hessian = hessian + information
+        gradient = gradient + information @ prior_offset
     # A tiny damping keeps degenerate geometry (one wall) solvable; it moves nothing that the
     # data constrain.
     hessian = hessian + 1e-9 * np.eye(3)

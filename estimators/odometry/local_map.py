@@ -65,7 +65,7 @@ from numpy.typing import NDArray
 
 import estimators.odometry.motion_prior as motion_prior
 from estimators.base import Estimator
-from estimators.matching.icp import ICPParams
+from estimators.matching.icp import ICPParams, leaves_a_direction_free
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
@@ -168,6 +168,10 @@ class LocalMapOdometry(FarScanMatching, Estimator):
             cylinder's points are not pulled ~3 cm inwards).
         reject_dynamic, dynamic_margin: drop points on moving things (module docstring) lying
             this far inside space seen free (0.2 m). Off by default: it costs ACES dearly.
+        sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
+            scan leaves a direction free (``motion_prior.no_sideslip_information``); inf, the
+            default, for none of it (a holonomic base, or a car frame away from the wheels'
+            no-slip point, as a CARMEN log's laser frame). 6e-4 suits the simulated car.
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -204,6 +208,7 @@ class LocalMapOdometry(FarScanMatching, Estimator):
     dynamic_margin: float = 0.2
     max_speed: float = 1.5
     max_turn_rate: float = 1.5
+    sideslip_sigma: float = np.inf
 
     def __post_init__(self) -> None:
         for name in (
@@ -211,7 +216,7 @@ class LocalMapOdometry(FarScanMatching, Estimator):
             "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
             "search_angular_window", "search_resolution", "prediction_acceleration",
-            "dynamic_margin", "max_speed", "max_turn_rate",
+            "dynamic_margin", "max_speed", "max_turn_rate", "sideslip_sigma",
         ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
@@ -253,6 +258,7 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         self._search: GlobalSearch | None = None
         self._velocity = np.zeros(3)  # car frame, per second or per scan
         self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
+        self._degenerate = False  # the scan at the guess leaves a direction free
         self._last_time = 0.0
         self._time_steps: deque[float] = deque(maxlen=21)
         self._intervals: deque[float] = deque(maxlen=201)  # every finite interval [s]: the clock
@@ -323,25 +329,27 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
 
     def _prediction_information(self) -> NDArray[np.float64]:
-        """Prior information (3,) of the constant-velocity guess, in the units of the point
+        """Prior information (3, 3) of the constant-velocity guess, in the units of the point
         residuals. Its position misses by about ``prediction_acceleration * dt^2`` over a
         typical scan interval ``dt`` plus, when the model counts scans, speed times the
         interval's typical jitter (a scan arriving late has moved further); clipped to
         [``motion_prior.MIN_PREDICTION_SIGMA``, ``prior_sigma_translation``], which also
-        holds until the clock has been seen for a few scans or when it does not run forward."""
-        if len(self._intervals) < 5:
-            return self._prior_information
-        typical = float(np.median(self._intervals))
-        if not typical > 0:
-            return self._prior_information
-        speed = np.hypot(self._velocity[0], self._velocity[1])  # [m/s] or [m/scan]
-        if not self.use_timestamps:
-            speed /= typical
-        sigma = prediction_sigma(typical, speed, clock_jitter(self._intervals),
-                                 self.prediction_acceleration, self.prior_sigma_translation)
+        holds until the clock has been seen for a few scans or when it does not run forward.
+        Where the scan leaves a direction free, sideways motion is held to ``sideslip_sigma``
+        (a model assumption, the car frame at the wheels' no-slip point, so only where the
+        scan cannot overrule it: on every scan it cost ACES 0.033 -> 0.034 m per local
+        relation and 0.19 -> 0.29 m over all; only there, 0.0346 m and 0.22 m)."""
         information = self._prior_information.copy()
-        information[:2] = (self.noise_sigma / sigma) ** 2
-        return information
+        typical = float(np.median(self._intervals)) if len(self._intervals) >= 5 else 0.0
+        step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
+        if typical > 0:
+            sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
+                                     clock_jitter(self._intervals), self.prediction_acceleration,
+                                     self.prior_sigma_translation)
+            information[:2] = (self.noise_sigma / sigma) ** 2
+        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0
+        return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
+                                                    step[0], sideways)
 
     def _updated_velocity(self, increment: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
         """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
@@ -367,6 +375,8 @@ class LocalMapOdometry(FarScanMatching, Estimator):
             if len(points) >= 2:
                 self._add_keyframe(guess, points)
             return guess
+        self._degenerate = bool(np.isfinite(self.sideslip_sigma)) and leaves_a_direction_free(
+            self._reference, points, guess, self.params)
         pose = self._match(points, guess, predicted, interval).pose
         self._velocity = self._updated_velocity(relative(self.pose, pose), dt)
         self._remember(pose, scans, seen)

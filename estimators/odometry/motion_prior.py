@@ -41,6 +41,7 @@ __all__ = [
     "clock_jitter",
     "constant_velocity_increment",
     "midpoint_velocity",
+    "no_sideslip_information",
     "prediction_horizon",
     "prediction_information",
     "prediction_sigma",
@@ -117,3 +118,30 @@ def constant_velocity_increment(velocity: ArrayLike, dt: float = 1.0) -> FloatAr
     velocity = np.asarray(velocity, dtype=np.float64)
     turn = velocity[2] * dt
     return np.array([*rotate(0.5 * turn, velocity[:2] * dt), turn])
+
+
+
+def no_sideslip_information(
+    information: ArrayLike, heading: float, forward: float, sideslip_information: float
+) -> FloatArray:
+    """Information (3, 3) of a motion prior: ``diag(information)`` (3,) plus the linearised
+    non-holonomic constraint of a wheeled car, which does not slip sideways (Dissanayake et al.
+    2001, "The aiding of a low-cost strapdown IMU using vehicle model constraints"): the step's
+    translation has no component across the car's heading halfway through the step, held with
+    ``sideslip_information`` (same units as ``information[:2]``).
+
+    The constraint's residual ``n(phi) . d``, with ``d`` the translation, ``phi`` = ``heading``
+    [rad] (the predicted midpoint heading) and the predicted ``forward`` step [m], changes with
+    the pose as ``J = (-sin phi, cos phi, -forward / 2)``: turning further lets the chord turn
+    by half as much. Where the scan leaves one world direction free (a corridor's axis) and the
+    car moves at an angle to it, this ties the free motion to the seen one: how fast the car
+    closes on the walls and its heading say how far it went along them. 0 leaves the prior
+    diagonal (a holonomic base).
+    """
+    information = np.asarray(information, dtype=np.float64)
+    if information.shape != (3,) or not sideslip_information >= 0:
+        raise EstimatorInputError(
+            f"information, sideslip_information: expected shape (3,) and a value >= 0, got "
+            f"{information.shape} and {sideslip_information}")
+    jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
+    return np.diag(information) + sideslip_information * np.outer(jacobian, jacobian)
