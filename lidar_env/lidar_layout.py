@@ -169,14 +169,17 @@ def cast_packed(
     (then no Lidar may self-occlude). ``seen`` and stamps from ``first_stamp`` on as for
     :func:`lidar_env.ray_casting.cast_sensor` (sensor ``k`` uses ``first_stamp + k``)."""
     table, order = beams
-    exact = table[3]
+    total = table.shape[1]
+    rows = table.ravel()  # 1-D row slices stay contiguous for numba (2-D ones would not)
+    exact = rows[3 * total:4 * total]
     outline = car_outline(car) if car.shape[0] == 5 else np.empty((0, 4))
     for k in range(sensor_poses.shape[0]):
         a, b = int(params[k, FIRST]), int(params[k, END])
         max_range, housing = params[k, MAX_RANGE], params[k, HOUSING]
         pose = (sensor_poses[k, 0], sensor_poses[k, 1], sensor_poses[k, 2] + params[k, OFFSET])
-        own = beam_directions(pose[2], table[0, a:b], order[a:b], params[k, STEP],
-                              table[1, a:b], table[2, a:b], table[4, a:b], table[5, a:b])
+        own = beam_directions(pose[2], rows[a:b], order[a:b], params[k, STEP],
+                              rows[total + a:total + b], rows[2 * total + a:2 * total + b],
+                              rows[4 * total + a:4 * total + b], rows[5 * total + a:5 * total + b])
         ranges = exact[a:b]
         cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen,
                     first_stamp + k, own, max_range)

@@ -174,32 +174,27 @@ def grid_cell(value: float, origin: float, cell: float, count: int) -> int:
 
 
 @njit(cache=True, fastmath=False)
-def cell_block(
-    px: float, py: float, reach: float, start: float, width: float, grid: tuple
-) -> tuple[int, int, int, int, int, int]:
+def cell_block(px: float, py: float, reach: float, wedge: tuple,
+               grid: tuple) -> tuple[int, int, int, int, int, int]:
     """The cells ``[c0, c1] x [r0, r1]`` over the bounding box of the sector of radius
-    ``reach`` [m] around ``(px, py)`` between the world angles ``start`` and ``start + width``
-    [rad] (``width`` >= 2 pi: the whole disc), padded against rounding; and the point's cell
-    ``(sx, sy)``. ``grid`` is a :class:`PrimitiveGrid` or a plain tuple of its fields."""
+    ``reach`` [m] around ``(px, py)`` spanning ``wedge`` = ``(width [rad], ax, ay, bx, by)``
+    from the unit vector ``a`` counter-clockwise to ``b`` (``width`` >= 2 pi: the whole disc),
+    padded against rounding; and the point's cell ``(sx, sy)``. ``grid`` is a
+    :class:`PrimitiveGrid` or a plain tuple of its fields."""
     x0, y0, size, nx, ny = grid[0], grid[1], grid[2], grid[3], grid[4]
     lo_x, lo_y, hi_x, hi_y = px - reach, py - reach, px + reach, py + reach
+    width, ax, ay, bx, by = wedge
     if width < 2.0 * math.pi:
-        lo_x = hi_x = px
-        lo_y = hi_y = py
-        for k in range(6):  # the arc's two ends, then the axis directions it passes
-            if k < 2:
-                angle = start + k * width
-            else:
-                angle = (k - 2) * 0.5 * math.pi
-                offset = (angle - start) % (2.0 * math.pi)
-                if offset > width:
-                    continue
-            x, y = px + reach * math.cos(angle), py + reach * math.sin(angle)
-            lo_x, hi_x = min(lo_x, x), max(hi_x, x)
-            lo_y, hi_y = min(lo_y, y), max(hi_y, y)
+        lo_x, hi_x = min(0.0, ax, bx), max(0.0, ax, bx)
+        lo_y, hi_y = min(0.0, ay, by), max(0.0, ay, by)
+        for ux, uy in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)):
+            after_a, before_b = ax * uy - ay * ux >= 0.0, ux * by - uy * bx >= 0.0
+            if (after_a and before_b) if width <= math.pi else (after_a or before_b):
+                lo_x, hi_x = min(lo_x, ux), max(hi_x, ux)
+                lo_y, hi_y = min(lo_y, uy), max(hi_y, uy)
         pad = 1e-9 * (reach + size)
-        lo_x, lo_y = max(lo_x - pad, px - reach), max(lo_y - pad, py - reach)
-        hi_x, hi_y = min(hi_x + pad, px + reach), min(hi_y + pad, py + reach)
+        lo_x, hi_x = px + reach * lo_x - pad, px + reach * hi_x + pad
+        lo_y, hi_y = py + reach * lo_y - pad, py + reach * hi_y + pad
     return (grid_cell(lo_x, x0, size, nx), grid_cell(hi_x, x0, size, nx),
             grid_cell(lo_y, y0, size, ny), grid_cell(hi_y, y0, size, ny),
             grid_cell(px, x0, size, nx), grid_cell(py, y0, size, ny))

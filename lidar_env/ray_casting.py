@@ -45,6 +45,7 @@ _WEDGE_TOLERANCE = 1e-9
 #: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
 _MIN_CULLED_ANGLE = 0.2
 _TWO_PI = 2.0 * math.pi
+_COS_MARGIN, _SIN_MARGIN = math.cos(_ANGLE_MARGIN), math.sin(_ANGLE_MARGIN)
 
 
 @njit(cache=True, fastmath=False)
@@ -180,7 +181,7 @@ def sweep_circle(
     if d - r >= max_range:
         return True
     if d <= r:
-        ranges[:] = 0.0
+        ranges.fill(0.0)
         return False
     half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
     lo = _wrap_positive(_bearing(fy, fx) - half - heading)
@@ -211,7 +212,7 @@ def sweep_segment(
     if d2 >= max_range * max_range:
         return True
     if d2 == 0.0:
-        ranges[:] = 0.0
+        ranges.fill(0.0)
         return False
     lo, width = _subtended(x1 - ox, y1 - oy, x2 - ox, y2 - oy, heading)
     f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
@@ -259,13 +260,16 @@ def _cell_hidden(
 
 
 @njit(cache=True, fastmath=False)
-def _wedge(heading: float, sorted_angles: NDArray[np.float64]) -> tuple:
-    """The beams' world-angle interval widened by the margin: ``(start, width, ax, ay, bx,
-    by)``, with ``a``/``b`` the unit vectors of its first and last edge."""
-    start = heading + sorted_angles[0] - _ANGLE_MARGIN
-    width = sorted_angles[-1] - sorted_angles[0] + 2.0 * _ANGLE_MARGIN
-    return (start, width, math.cos(start), math.sin(start), math.cos(start + width),
-            math.sin(start + width))
+def _wedge(sorted_angles: NDArray[np.float64], order: NDArray[np.int64],
+           dir_x: NDArray[np.float64], dir_y: NDArray[np.float64]) -> tuple:
+    """The beams' angular interval widened by the margin, ``(width, ax, ay, bx, by)``: its
+    width [rad] and the unit vectors of its first and last edge (the first and last beam's
+    directions turned out by the margin, so no trigonometry)."""
+    first, last = order[0], order[-1]
+    c, s = _COS_MARGIN, _SIN_MARGIN
+    return (sorted_angles[-1] - sorted_angles[0] + 2.0 * _ANGLE_MARGIN,
+            c * dir_x[first] + s * dir_y[first], c * dir_y[first] - s * dir_x[first],
+            c * dir_x[last] - s * dir_y[last], c * dir_y[last] + s * dir_x[last])
 
 
 @njit(cache=True, fastmath=False)
@@ -273,10 +277,24 @@ def _outside_wedge(wedge: tuple, px: float, py: float, qx: float, qy: float,
                    r: float) -> bool:
     """True when the segment p-q (relative to the sensor) thickened by ``r`` [m] lies wholly
     outside the beam ``wedge`` (for a circle, p = q = its centre)."""
-    _, width, ax, ay, bx, by = wedge
+    width, ax, ay, bx, by = wedge
     tol = _WEDGE_TOLERANCE + r
     left_of_first = max(ax * py - ay * px, ax * qy - ay * qx) < -tol
     right_of_last = max(px * by - py * bx, qx * by - qy * bx) < -tol
+    if width <= math.pi:
+        return left_of_first or right_of_last
+    return left_of_first and right_of_last
+
+
+@njit(cache=True, fastmath=False)
+def _box_outside_wedge(wedge: tuple, x0: float, y0: float, x1: float, y1: float) -> bool:
+    """True when the box ``[x0, x1] x [y0, y1]`` (relative to the sensor) lies wholly outside
+    the beam ``wedge``: its four corners beyond the same edge line (both, for a wide wedge)."""
+    width, ax, ay, bx, by = wedge
+    left_of_first = right_of_last = True
+    for px, py in ((x0, y0), (x1, y0), (x0, y1), (x1, y1)):
+        left_of_first = left_of_first and ax * py - ay * px < -_WEDGE_TOLERANCE
+        right_of_last = right_of_last and px * by - py * bx < -_WEDGE_TOLERANCE
     if width <= math.pi:
         return left_of_first or right_of_last
     return left_of_first and right_of_last
@@ -324,16 +342,16 @@ def cast_sensor(
         raise ConfigError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
     circle_seen, segment_seen = seen
     if odd_crossings(ox, oy, segments, first_polygon_edge, grid, segment_seen, -stamp):
-        ranges[:] = 0.0
+        ranges.fill(0.0)
         return
-    ranges[:] = max_range
+    ranges.fill(max_range)
     heading = heading % _TWO_PI
     sorted_angles, order, step, dir_x, dir_y = own
-    wedge = _wedge(heading, sorted_angles)
-    cull = wedge[1] < _TWO_PI - _MIN_CULLED_ANGLE
+    wedge = _wedge(sorted_angles, order, dir_x, dir_y)
+    cull = wedge[0] < _TWO_PI - _MIN_CULLED_ANGLE
     x0, y0, size, nx, ny, circle_start, circle_ids, segment_start, segment_ids = grid
-    c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge[0],
-                                        wedge[1] if cull else _TWO_PI, grid)
+    c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
+                                        0.0, 1.0, 0.0), grid)
     pad = 1e-9 * size
     for ring in range(max(sx - c0, c1 - sx, sy - r0, r1 - sy) + 1):
         for iy in range(max(r0, sy - ring), min(r1, sy + ring) + 1):
@@ -342,12 +360,18 @@ def cast_sensor(
             while ix <= min(c1, sx + ring):
                 column = ix
                 ix += 1 if edge_row else 2 * ring
-                if column < c0 or (ring > 0 and _cell_hidden(
-                        ranges, ox, oy, heading, x0 + column * size - pad, y0 + iy * size - pad,
-                        x0 + (column + 1) * size + pad, y0 + (iy + 1) * size + pad,
-                        sorted_angles, order, step, max_range)):
-                    continue
                 c = iy * nx + column
+                listed = (circle_start[c + 1] - circle_start[c]
+                          + segment_start[c + 1] - segment_start[c])
+                if column < c0 or listed == 0:
+                    continue
+                if ring > 0 and listed > 2:  # the tests cost about what two primitives do
+                    bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
+                    bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
+                    if (cull and _box_outside_wedge(wedge, bx0, by0, bx1, by1)) or _cell_hidden(
+                            ranges, ox, oy, heading, bx0 + ox, by0 + oy, bx1 + ox, by1 + oy,
+                            sorted_angles, order, step, max_range):
+                        continue
                 for p in range(circle_start[c], circle_start[c + 1]):
                     i = circle_ids[p]
                     if circle_seen[i] == stamp:
