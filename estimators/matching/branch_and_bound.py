@@ -76,16 +76,18 @@ def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
 
 
 @njit(cache=True)
-def _rotated_cells(points: NDArray[np.float64], headings: NDArray[np.float64],
-                   shift: NDArray[np.float64], resolution: float,
+def _rotated_cells(points: NDArray[np.float64], cos: NDArray[np.float64],
+                   sin: NDArray[np.float64], center: NDArray[np.float64],
+                   origin: NDArray[np.float64], resolution: float,
                    padding: int) -> NDArray[np.int64]:  # pragma: no cover (numba)
-    """``(H, M, 2)`` cells of ``points`` turned by each heading and moved by ``shift`` (2,)."""
-    out = np.empty((len(headings), len(points), 2), np.int64)
-    for h in range(len(headings)):
-        c, s = np.cos(headings[h]), np.sin(headings[h])
+    """``(H, M, 2)`` cells of ``points`` turned by each heading (its ``cos``, ``sin``) and
+    moved to ``center`` (2,), on a grid whose cell ``(0, 0)`` starts at ``origin``."""
+    out = np.empty((len(cos), len(points), 2), np.int64)
+    for h in range(len(cos)):
+        c, s = cos[h], sin[h]
         for m in range(len(points)):
-            x = c * points[m, 0] - s * points[m, 1] + shift[0]
-            y = s * points[m, 0] + c * points[m, 1] + shift[1]
+            x = (c * points[m, 0] - s * points[m, 1] + center[0]) - origin[0]
+            y = (s * points[m, 0] + c * points[m, 1] + center[1]) - origin[1]
             out[h, m, 0] = int(np.floor(x / resolution)) + padding
             out[h, m, 1] = int(np.floor(y / resolution)) + padding
     return out
@@ -174,9 +176,10 @@ class GridPyramid:
               headings: FloatArray) -> NDArray[np.int64]:
         """``(H, M, 2)`` padded level-0 cells of ``points`` (M, 2) turned to each of
         ``headings`` (H,) and moved to ``center[:2]`` (no translation offset yet)."""
-        return _rotated_cells(np.ascontiguousarray(points, dtype=np.float64),
-                              np.asarray(headings, dtype=np.float64), center[:2] - self.origin,
-                              self.resolution, self.padding)
+        headings = np.asarray(headings, dtype=np.float64)
+        return _rotated_cells(np.ascontiguousarray(points, dtype=np.float64), np.cos(headings),
+                              np.sin(headings), np.asarray(center[:2], dtype=np.float64),
+                              self.origin, self.resolution, self.padding)
 
 
 @dataclass(frozen=True)

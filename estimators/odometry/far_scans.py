@@ -5,15 +5,20 @@ scans come a few centimetres apart (10 Hz), not when they come a metre and tens 
 apart (keyframe-only logs, 1-2 Hz scanners, dropped scans). Two searches give ICP its start
 on the likelihood field of the local map (Olson 2009):
 
-* **Far-apart search.** When the car moved at least a keyframe spacing per scan lately (the
-  constant-velocity guess then misses by a good part of a step: a 1 Hz car braking at
-  0.5 m/s^2 is 0.5 m off), ICP starts from the exact best pose of a multi-resolution
-  branch-and-bound search (:mod:`estimators.matching.branch_and_bound`) over every pose the
-  car can have reached: within ``max_speed * dt`` of the guess and turned by up to
-  ``max_turn_rate * dt`` (every heading beyond 180 deg), ``dt`` the scan interval, or the
-  typical one when the logged stamp says less (stamps glitch; a window too small loses the
-  car, one too large costs a few ms). The motion prior then weighs what a constant-velocity
-  guess is worth over that interval (``prediction_acceleration * dt^2``, unclipped).
+* **Far-apart search.** When the constant-velocity guess moves the car a keyframe spacing per
+  scan, or turns it by more than the fallback's heading window (the guess then misses by a
+  good part of a step: a 1 Hz car braking at 0.5 m/s^2 is 0.5 m off), ICP runs twice, from
+  the guess and from the exact best pose of a multi-resolution branch-and-bound search
+  (:mod:`estimators.matching.branch_and_bound`) over every pose the car can have reached:
+  within ``max_speed * dt`` of the guess, turned by up to ``max_turn_rate * dt`` (every
+  heading beyond 180 deg), ``dt`` the scan interval or the typical one when the stamp says
+  less (stamps glitch). A stalled clock does not move the car further, so the window is
+  also held to twice the longest step and turn of the last few scans plus ICP's pairing gate
+  and the fallback's heading window (keyframe-only logs: scans ~1 m apart, stamps up to 20 s
+  apart). The result explaining more points is kept; the motion prior weighs what the
+  guess is worth over the interval (``prediction_acceleration * dt^2``, unclipped). On the
+  first step, with no motion seen yet, a window wider than ICP's pairing gate counts as
+  far apart.
 * **Fallback** (:func:`fallback_match`), when a match explains too few points: a correlative
   search in a small window around the guess, then over every heading, then over the
   far-apart window. A turn faster than the motion model, or one spanning a gap in the scans,
@@ -77,11 +82,14 @@ def reach_window(max_speed: float, max_turn_rate: float, interval: float,
     return SearchWindow(max_speed * dt, min(max_turn_rate * dt, np.pi))
 
 
-def far_apart(increment: FloatArray, keyframe_distance: float, keyframe_angle: float) -> bool:
-    """Whether scans come far apart: the last increment (3,) per scan moved the car at least a
-    keyframe spacing (``keyframe_distance`` [m] or ``keyframe_angle`` [rad])."""
+def far_apart(increment: FloatArray, keyframe_distance: float, turn_window: float) -> bool:
+    """Whether scans come far apart: the predicted increment (3,) per scan moves the car at
+    least a keyframe spacing ``keyframe_distance`` [m], or turns it by at least
+    ``turn_window`` [rad], the fallback's heading window: the change of turn rate a
+    constant-velocity guess is trusted with. (Turning on the spot at 6 Hz, ACES's robot
+    turns up to 20 deg per scan, which ICP from the guess follows.)"""
     return bool(np.hypot(increment[0], increment[1]) >= keyframe_distance
-                or abs(increment[2]) >= keyframe_angle)
+                or abs(increment[2]) >= turn_window)
 
 
 class GlobalSearch:
@@ -176,7 +184,6 @@ class FarScanMatching:
     params: ICPParams
     min_quality: float
     keyframe_distance: float
-    keyframe_angle: float
     max_speed: float
     max_turn_rate: float
     search_linear_window: float
@@ -226,7 +233,7 @@ class FarScanMatching:
                 min(window.angular, 2.0 * sharpest + self.search_angular_window))
         # With no motion seen yet, a window wider than ICP's gate means scans far apart.
         unknown = len(self._poses) == 1 and window.linear > self.params.max_correspondence_distance
-        if unknown or far_apart(predicted, self.keyframe_distance, self.keyframe_angle):
+        if unknown or far_apart(predicted, self.keyframe_distance, self.search_angular_window):
             self.far_searches += 1
             result = far_match(self._global_search(), self._reference, points, guess, window,
                                self.params, self._far_prior(window))

@@ -8,8 +8,9 @@ Three stages, each a pure function of plain arrays:
    drift is small the candidates come from the pose uncertainty.
 2. **Verification** (:func:`verify_loop`): a correlative scan match (Olson, "Real-time
    correlative scan matching", ICRA 2009) over a window of headings and translations on a
-   likelihood field of the old place's points, searched exactly by a two-level
-   branch-and-bound (:func:`correlative_match`), then refined by robust point-to-line ICP
+   likelihood field of the old place's points, searched exactly by the multi-resolution
+   branch-and-bound of :mod:`estimators.matching.branch_and_bound` (:func:`correlative_match`),
+   then refined by robust point-to-line ICP
    (:func:`estimators.matching.icp.register`).
 3. **Rejection** of false loops: a match is accepted only if enough of the scan lands on the
    old map (ICP inlier share and likelihood-field score) and if the best match is clearly
@@ -26,10 +27,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
+from estimators.matching.branch_and_bound import GridPyramid, levels_for_window, match
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
@@ -67,8 +67,8 @@ class LoopClosureParams:
         resolution: likelihood-field cell and fine translation step (0.05 m, a few range-noise
             sigmas: finer gives no better pose, ICP refines anyway).
         sigma: likelihood-field width (0.1 m).
-        coarse_factor: the coarse level covers ``2 * coarse_factor + 1`` fine cells per axis
-            (2: 0.25 m cells, a 25x reduction of the translations scored at full resolution).
+        coarse_factor: the translation window is whole blocks of ``2 * coarse_factor + 1``
+            fine cells per axis (2: 0.25 m), and the ambiguity test compares blocks.
         angular_step: heading step (1 deg: a point 6 m away moves one 0.1 m field width).
         angular_window: heading window around the graph's guess (20 deg: the rotation drift a
             good front end accumulates over a loop of a few hundred metres).
@@ -175,8 +175,9 @@ class LoopVerification:
 
 
 class PlaceMap:
-    """The old place's points (reference frame) ready for matching: likelihood field, a
-    coarse max-pooled copy that bounds it from above, and a point-to-line ICP reference."""
+    """The old place's points (reference frame) ready for matching: likelihood field, its
+    max-pooled pyramid (built when a search first needs it, deepened for wider windows),
+    and a point-to-line ICP reference."""
 
     def __init__(self, points: ArrayLike, params: LoopClosureParams) -> None:
         points = np.asarray(points, dtype=np.float64)
@@ -186,61 +187,16 @@ class PlaceMap:
         if len(thinned) < 3:
             thinned = points
         self.field = LikelihoodField(thinned, params.resolution, params.sigma)
-        size = 2 * params.coarse_factor + 1
-        # Every cell holds the max over the +-coarse_factor cells around it: the score of a
-        # coarse translation bounds every fine translation it stands for.
-        self.coarse_grid = ndimage.maximum_filter(self.field.grid, size=size, mode="constant")
+        self._pyramid: GridPyramid | None = None
         self.reference = PointToLineReference.with_estimated_normals(
             thinned, params.normal_neighbours, params.denoise_reference,
             params.max_normal_neighbours)
 
-
-@njit(cache=True)
-def _mean_scores(grid: NDArray[np.float64], base: NDArray[np.int64],
-                 offsets: NDArray[np.int64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
-    """``(H, S)`` mean of ``grid`` over the cells ``base[h]`` (M, 2) moved by each of
-    ``offsets`` (S, 2); cells outside the grid count 0."""
-    n_rows, n_cols = grid.shape
-    n_headings, n_points = base.shape[0], base.shape[1]
-    out = np.zeros((n_headings, len(offsets)))
-    for h in range(n_headings):
-        for s in range(len(offsets)):
-            total = 0.0
-            for m in range(n_points):
-                i = base[h, m, 0] + offsets[s, 0]
-                j = base[h, m, 1] + offsets[s, 1]
-                if 0 <= i < n_rows and 0 <= j < n_cols:
-                    total += grid[i, j]
-            out[h, s] = total / max(n_points, 1)
-    return out
-
-
-@njit(cache=True)
-def _branch_and_bound(
-    grid: NDArray[np.float64], base: NDArray[np.int64], coarse: NDArray[np.int64],
-    fine: NDArray[np.int64], bounds: NDArray[np.float64], order: NDArray[np.int64],
-) -> tuple[float, int, int, int]:  # pragma: no cover (numba)
-    """Expand coarse nodes (heading h, shift k) = ``divmod(order[i], n_coarse)`` best bound
-    first, scoring their fine shifts, until no bound beats the best score; return it and its
-    (h, k, f)."""
-    n_rows, n_cols = grid.shape
-    n_coarse, n_points = len(coarse), base.shape[1]
-    best, best_h, best_k, best_f = -1.0, 0, 0, 0
-    for flat in order:
-        h, k = flat // n_coarse, flat % n_coarse
-        if bounds[h, k] <= best:
-            break
-        for f in range(len(fine)):
-            di, dj = coarse[k, 0] + fine[f, 0], coarse[k, 1] + fine[f, 1]
-            total = 0.0
-            for m in range(n_points):
-                i, j = base[h, m, 0] + di, base[h, m, 1] + dj
-                if 0 <= i < n_rows and 0 <= j < n_cols:
-                    total += grid[i, j]
-            score = total / max(n_points, 1)
-            if score > best:
-                best, best_h, best_k, best_f = score, h, k, f
-    return best, best_h, best_k, best_f
+    def pyramid(self, levels: int) -> GridPyramid:
+        """The field's pyramid with at least ``levels`` levels."""
+        if self._pyramid is None or self._pyramid.n_levels < levels:
+            self._pyramid = GridPyramid.from_field(self.field, levels)
+        return self._pyramid
 
 
 def correlative_match(
@@ -251,38 +207,32 @@ def correlative_match(
     params: LoopClosureParams,
 ) -> tuple[NDArray[np.float64], float, float]:
     """Best pose of ``points`` (M, 2, query frame) in ``place`` within ``guess[:2] ±
-    linear_window`` [m] and ``guess[2] ± params.angular_window``: two-level branch-and-bound,
-    exact on the fine grid (coarse scores are upper bounds, expanded best first).
+    linear_window`` [m] (rounded up to whole blocks of ``2 * coarse_factor + 1`` cells, plus
+    ``coarse_factor`` cells) and ``guess[2] ± params.angular_window``: the exact grid optimum
+    (:func:`estimators.matching.branch_and_bound.match`).
 
-    Returns the pose (3,), its mean likelihood score, and the best score of a pose at least
-    ``params.ambiguity_distance`` from it relative to that score (the ambiguity measure,
-    found by the same branch-and-bound over the far coarse cells).
+    Returns the pose (3,), its mean likelihood score, and the best score of a pose in a block
+    whose centre lies at least ``params.ambiguity_distance`` plus one block from the best
+    one's, relative to that score (the ambiguity measure, found by the same search over
+    those blocks' translations only).
     """
     guess = np.asarray(guess, dtype=np.float64)
     res, c = params.resolution, params.coarse_factor
-    n_coarse = int(np.ceil(linear_window / ((2 * c + 1) * res)))
-    coarse_axis = (2 * c + 1) * np.arange(-n_coarse, n_coarse + 1)
-    grid_x, grid_y = np.meshgrid(coarse_axis, coarse_axis, indexing="ij")
-    coarse = np.column_stack([grid_x.ravel(), grid_y.ravel()]).astype(np.int64)
-    fine_axis = np.arange(-c, c + 1)
-    fine_x, fine_y = np.meshgrid(fine_axis, fine_axis, indexing="ij")
-    fine = np.column_stack([fine_x.ravel(), fine_y.ravel()]).astype(np.int64)
+    block = 2 * c + 1
+    n = block * int(np.ceil(linear_window / (block * res))) + c  # cells either way
     n_ang = int(np.ceil(params.angular_window / params.angular_step))
-    headings = guess[2] + params.angular_step * np.arange(-n_ang, n_ang + 1)
-    cos, sin = np.cos(headings), np.sin(headings)
-    rotated = np.stack([cos[:, None] * points[:, 0] - sin[:, None] * points[:, 1],
-                        sin[:, None] * points[:, 0] + cos[:, None] * points[:, 1]], axis=-1)
-    base = np.floor((rotated + guess[:2] - place.field.origin) / res).astype(np.int64)
-    bounds = _mean_scores(place.coarse_grid, base, coarse)  # (headings, coarse shifts)
-    order = np.argsort(bounds, axis=None)[::-1].astype(np.int64)
-    best, h, k, f = _branch_and_bound(place.field.grid, base, coarse, fine, bounds, order)
-    shift = res * (coarse[k] + fine[f])
-    pose = np.array([guess[0] + shift[0], guess[1] + shift[1], float(wrap_angle(headings[h]))])
-    reach = params.ambiguity_distance / res + (2 * c + 1)
-    far = np.hypot(*(coarse - coarse[k]).T) >= reach
-    far_order = order[far[order % len(coarse)]]
-    runner_up = _branch_and_bound(place.field.grid, base, coarse, fine, bounds, far_order)[0]
-    return pose, best, max(runner_up, 0.0) / max(best, 1e-12)
+    pyramid = place.pyramid(levels_for_window(n * res, res))
+    window = (pyramid, points, guess, n * res, n_ang * params.angular_step,
+              params.angular_step, -0.5)  # every score (>= 0) counts
+    best = match(*window)
+    shift = np.round((best.pose[:2] - guess[:2]) / res).astype(int)
+    blocks = (np.arange(-n, n + 1) + c) // block  # the block each shift lies in
+    best_block = (shift + c) // block
+    reach = params.ambiguity_distance / res + block
+    far = np.hypot(block * (blocks[:, None] - best_block[0]),
+                   block * (blocks[None, :] - best_block[1])) >= reach
+    runner_up = match(*window, allowed=far).score if far.any() else 0.0
+    return best.pose, best.score, max(runner_up, 0.0) / max(best.score, 1e-12)
 
 
 def match_information(

@@ -99,9 +99,9 @@ def test_the_search_window_covers_the_reach_of_the_car() -> None:
     assert reach_window(1.5, 1.5, 0.01, 1.0) == SearchWindow(1.5, 1.5)
     assert reach_window(1.5, 1.5, float("nan"), 0.5).linear == pytest.approx(0.75)
     assert reach_window(1.5, 1.5, 4.0, 1.0).angular == pytest.approx(np.pi)
-    assert far_apart(np.array([0.3, 0.0, 0.0]), 0.25, np.radians(10))
-    assert far_apart(np.array([0.0, 0.0, np.radians(-12)]), 0.25, np.radians(10))
-    assert not far_apart(np.array([0.15, 0.02, 0.05]), 0.25, np.radians(10))
+    assert far_apart(np.array([0.3, 0.0, 0.0]), 0.25, np.radians(30))
+    assert far_apart(np.array([0.0, 0.0, np.radians(-32)]), 0.25, np.radians(30))
+    assert not far_apart(np.array([0.15, 0.02, np.radians(20)]), 0.25, np.radians(30))
 
 
 def test_speed_limits_must_be_positive() -> None:
