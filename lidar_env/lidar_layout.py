@@ -61,7 +61,6 @@ from lidar_env.ray_casting import (
     cast_sensor,
     segment_hit,
     sweep_circle,
-    sweep_segment,
 )
 from lidar_env.world import World
 
@@ -130,20 +129,17 @@ def car_outline(car: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 @njit(cache=True, fastmath=False)
-def cast_body(ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+def cast_body(ranges: NDArray[np.float64], ox: float, oy: float,
               outline: NDArray[np.float64], housing: float, own: tuple,
               max_range: float) -> None:
     """Lower ``ranges`` to the hits on the car's ``outline`` (4, 4) farther than ``housing``
     [m] from the sensor at ``(ox, oy)``: a self-occluded Lidar's view of its own car."""
-    sorted_angles, order, step, dir_x, dir_y = own
-    for k in range(4):
+    dir_x, dir_y = own[3], own[4]
+    for k in range(4):  # a line meets a ray once: a hit within the window is simply dropped
         x1, y1, x2, y2 = outline[k, 0], outline[k, 1], outline[k, 2], outline[k, 3]
-        if point_segment_distance2(ox, oy, x1, y1, x2, y2) > housing * housing:
-            # The window misses this edge: every hit on it lies beyond the housing.
-            sweep_segment(ranges, ox, oy, heading, x1, y1, x2, y2, sorted_angles, order, step,
-                          dir_x, dir_y, max_range)
+        if point_segment_distance2(ox, oy, x1, y1, x2, y2) >= max_range * max_range:
             continue
-        for j in range(ranges.shape[0]):  # a line meets a ray once: drop a hit in the window
+        for j in range(ranges.shape[0]):
             t = segment_hit(ox, oy, dir_x[j], dir_y[j], x1, y1, x2, y2, ranges[j])
             if housing < t < ranges[j]:
                 ranges[j] = t
@@ -190,7 +186,7 @@ def cast_packed(
             if outline.shape[0] == 0:
                 raise ConfigError("car: a self-occluded Lidar needs the car's pose and size "
                                   "(LidarLayout.scan(..., car_pose=...)), got none")
-            cast_body(ranges, pose[0], pose[1], heading, outline, housing, own, max_range)
+            cast_body(ranges, pose[0], pose[1], outline, housing, own, max_range)
     return exact
 
 
