@@ -3,6 +3,7 @@
 
     python benchmarks/bench_real_logs.py                      # icp and lidar_odometry, full logs
     python benchmarks/bench_real_logs.py --limit 1500 --estimators lidar_odometry
+    python benchmarks/bench_real_logs.py --estimators lidar_odometry --set reject_dynamic=true
 
 No estimator reads odometry. ``icp`` (scan-to-previous-scan PL-ICP from the identity) is the
 reference every ratio is measured against, in the same run on the same machine. ms/scan is
@@ -10,12 +11,15 @@ CPU time (``time.process_time``) per scan, the real-time factor the log's median
 over it. Intel's logger clock runs backwards 631 times, which the estimators refuse: they are
 fed the stamps made to run forward (``estimators.datasets.real_log.forward_clock``: a stamp
 that jumps back is moved 1 us past its predecessor) and scored on the logged ones.
+``--set NAME=VALUE`` (a number, ``true``/``false``) passes parameters to every estimator but
+the reference.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import platform
 import time
@@ -51,10 +55,13 @@ def _line(name: str, label: str, summary: object, run: LogRun) -> str:
     )
 
 
-def _cpu_run(name: str, log: CarmenLog, clock: str, limit: int | None) -> LogRun:
-    """``run_on_log`` with the CPU time per scan in place of its wall time."""
+def _cpu_run(name: str, log: CarmenLog, clock: str, limit: int | None,
+             params: dict[str, object]) -> LogRun:
+    """``run_on_log`` with the CPU time per scan in place of its wall time; ``params`` go to
+    every estimator but the reference."""
     start = time.process_time()
-    run = run_on_log(make(name), log, clock=clock, limit=limit)
+    run = run_on_log(make(name, **({} if name == REFERENCE else params)), log, clock=clock,
+                     limit=limit)
     return dataclasses.replace(run, seconds_per_scan=(time.process_time() - start)
                                / max(len(run.times), 1))
 
@@ -66,14 +73,14 @@ def _forward(log: CarmenLog) -> CarmenLog:
                                            for scan, t in zip(log.scans, stamps, strict=True)])
 
 
-def bench_aces(names: list[str], limit: int | None) -> None:
+def bench_aces(names: list[str], limit: int | None, params: dict[str, object]) -> None:
     log = load_log(DATA / "aces.clf.bz2")
     relations = load_relations(DATA / "aces.relations")
     print(f"ACES ({len(log.scans) if limit is None else limit} scans), Kümmerle relations:")
     print(f"  published: {PUBLISHED_ACES}")
     reference_ms = None
     for name in names:
-        run = _cpu_run(name, log, "ipc", limit)
+        run = _cpu_run(name, log, "ipc", limit, params)
         scores = score_relations(run, relations)
         for subset in ("local", "all"):
             print(_line(name, f"{subset}:", scores[subset], run))
@@ -82,7 +89,7 @@ def bench_aces(names: list[str], limit: int | None) -> None:
             print(f"  {name}: {run.seconds_per_scan / reference_ms:.2f}x the time of {REFERENCE}")
 
 
-def bench_intel(names: list[str], limit: int | None) -> None:
+def bench_intel(names: list[str], limit: int | None, params: dict[str, object]) -> None:
     log = load_log(DATA / "intel.clf.bz2")
     reference = pseudo_truth_relations(load_log(DATA / "intel-corrected.log.gz"), INTEL_WINDOWS)
     print(
@@ -92,7 +99,7 @@ def bench_intel(names: list[str], limit: int | None) -> None:
     forward = _forward(log)
     logged = log.scan_times("logger")
     for name in names:
-        run = _cpu_run(name, forward, "logger", limit)
+        run = _cpu_run(name, forward, "logger", limit, params)
         run = dataclasses.replace(run, times=logged[: len(run.times)])
         for label, relations in reference.items():
             inside = relations.select(
@@ -103,20 +110,37 @@ def bench_intel(names: list[str], limit: int | None) -> None:
             print(_line(name, f"{label}:", summary, run))
 
 
+def _parameter(text: str) -> tuple[str, object]:
+    """``NAME=VALUE`` from the command line; VALUE a JSON number or true/false."""
+    name, _, value = text.partition("=")
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        parsed = None
+    if not name or not isinstance(parsed, (bool, int, float)):
+        raise argparse.ArgumentTypeError(f"expected NAME=NUMBER or NAME=true/false, got {text!r}")
+    return name, parsed
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--estimators", nargs="+", default=[REFERENCE, "lidar_odometry"])
     parser.add_argument("--limit", type=int, default=None, help="first N scans of each log")
     parser.add_argument("--logs", nargs="+", default=["aces", "intel"], choices=["aces", "intel"])
+    parser.add_argument("--set", type=_parameter, nargs="+", default=[], metavar="NAME=VALUE",
+                        help="estimator parameters over their defaults (not for the reference)")
     args = parser.parse_args()
+    params = dict(args.set)
+    if params:
+        print(f"parameters of every estimator but {REFERENCE}: {params}")
     if not DATA.is_dir():
         raise SystemExit(f"real logs not found: expected them in {DATA}")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
           f"python {platform.python_version()}")
     if "aces" in args.logs:
-        bench_aces(args.estimators, args.limit)
+        bench_aces(args.estimators, args.limit, params)
     if "intel" in args.logs:
-        bench_intel(args.estimators, args.limit)
+        bench_intel(args.estimators, args.limit, params)
 
 
 if __name__ == "__main__":
