@@ -110,6 +110,10 @@ def test_large_map_through_the_grid_matches_pymunk_and_contains() -> None:
         pytest.param(np.array([0.3, 0.3, 1.0, 1.0]), id="duplicates"),
         pytest.param(np.array([0.3]), id="single-beam"),
         pytest.param(np.array([1e-17, -1e-17, 2 * np.pi, -2 * np.pi]), id="around-zero"),
+        # narrow wedges: the caster skips cells and primitives outside them
+        pytest.param(np.sort(np.random.default_rng(5).uniform(0.2, 0.9, 40)), id="narrow-random"),
+        pytest.param(np.linspace(2.0, 2.0 + np.pi / 2, 91), id="90-degree-fan"),
+        pytest.param(np.linspace(-np.pi / 2, np.pi / 2, 181), id="180-degree-fan"),
     ],
 )
 def test_general_beam_angles_match_pymunk(angles: np.ndarray) -> None:

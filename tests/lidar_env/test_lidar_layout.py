@@ -132,3 +132,32 @@ def test_rgb_rendering_draws_lidars_of_different_lengths():
     env.reset(seed=0)
     frame = env.render()
     assert frame.ndim == 3 and frame.dtype == np.uint8
+
+
+@pytest.mark.parametrize("lidars", [
+    [LidarConfig((sx * 0.35, sy * 0.2, math.atan2(sy, sx)), 91, math.pi / 2, 8.0)
+     for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))],
+    [LidarConfig((0.35, 0.0, 0.0), 181, math.pi, 8.0)],
+], ids=["4 x 90", "1 x 180"])
+def test_narrow_lidars_on_a_traced_map_agree_with_pymunk(lidars) -> None:
+    # the caster skips cells outside each wedge, cells hidden behind walls and primitives
+    # outside the wedge: none of that may lose a hit
+    image = np.zeros((200, 200), dtype=np.uint8)
+    image[:4], image[-4:], image[:, :4], image[:, -4:] = 255, 255, 255, 255
+    rows, cols = np.ogrid[:200, :200]
+    for r, c, radius in ((50, 60, 9), (120, 140, 14), (150, 40, 6), (90, 100, 4)):
+        image[(rows - r) ** 2 + (cols - c) ** 2 < radius**2] = 255
+    image[30:36, 100:170] = 255
+    world = World.from_image(image, 0.05)
+    space = world.build_space()
+    layout = LidarLayout(lidars, [0.0] * len(lidars), [0.0] * len(lidars))
+    rng = np.random.default_rng(2)
+    cars = np.column_stack([rng.uniform(1.0, 9.0, (60, 2)), rng.uniform(-np.pi, np.pi, 60)])
+    sensors = np.stack([se2.compose(cars, np.array(lidar.mount)) for lidar in lidars], axis=1)
+    free = np.all(world.clearance(sensors[..., :2].reshape(-1, 2)).reshape(60, -1) > 0.05,
+                  axis=1)
+    assert free.sum() >= 20
+    for poses in sensors[free][:20]:
+        for scan, lidar, pose in zip(layout.scan(world, poses, rng), lidars, poses, strict=True):
+            oracle = pymunk_cast_rays(space, pose, lidar.beam_angles, lidar.max_range)[0]
+            np.testing.assert_allclose(scan, oracle, atol=1e-5)  # float32 readings
