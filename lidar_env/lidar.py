@@ -6,10 +6,12 @@ kernels), so large maps (thousands of edges traced from an image) cost little mo
 ones. :class:`Lidar` is the sensor model (beams, range, noise, dropouts) on top of it, and
 :func:`pymunk_cast_rays` the slow independent reference.
 
-Speed (``python benchmarks/bench_lidar.py``, one AMD EPYC core): ~13 us per dual 360-beam scan
-on 144 primitives and ~20 us on 304, 85-120x faster than a per-beam pymunk ray query loop.
+Both run the one compiled sensor kernel of :mod:`lidar_env.lidar_layout` (the env's), their K
+identical sensors packed end to end. Speed (``python benchmarks/bench_lidar.py``, a shared,
+loaded Xeon): ~35 us per dual 360-beam scan on 144 primitives and ~49 us on 304, 114-148x
+faster than a per-beam pymunk ray query loop, 42x on a 4,800-edge image map.
 :meth:`Lidar.scan` adds noise, clipping, dropouts and the float32 conversion in the same compiled
-pass; with noise, its main extra cost is numpy drawing the Gaussian numbers (~6 us for 2 x 360).
+call; with noise, its main extra cost is numpy drawing the Gaussian numbers.
 
 Conventions: a pose is ``(x [m], y [m], heading [rad])`` in the world; beam ``j`` of sensor
 ``k`` points at world angle ``sensor_poses[k, 2] + beam_angles[j]``; a beam that hits nothing
