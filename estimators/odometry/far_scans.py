@@ -5,9 +5,12 @@ scans come a few centimetres apart (10 Hz), not when they come a metre and tens 
 apart (keyframe-only logs, 1-2 Hz scanners, dropped scans). Two searches give ICP its start
 on the likelihood field of the local map (Olson 2009):
 
-* **Far-apart search.** When the constant-velocity guess moves the car a keyframe spacing per
-  scan, or turns it by more than the fallback's heading window (the guess then misses by a
-  good part of a step: a 1 Hz car braking at 0.5 m/s^2 is 0.5 m off), ICP runs twice, from
+* **Far-apart search.** When the motion prior is weak (over the clock's typical interval ``dt``
+  the constant-velocity guess can miss by ``prediction_acceleration * dt^2``, more than the
+  weakest prior the ordinary path allows, ``prior_sigma_translation``: scans at 4 Hz or
+  slower; a 1 Hz car braking at 0.5 m/s^2 is 0.5 m off), or when the guess moves the car a
+  keyframe spacing per scan or turns it by more than the fallback's heading window, ICP runs
+  twice, from
   the guess and from the exact best pose of a multi-resolution branch-and-bound search
   (:mod:`estimators.matching.branch_and_bound`) over every pose the car can have reached:
   within ``max_speed * dt`` of the guess, turned by up to ``max_turn_rate * dt`` (every
@@ -16,9 +19,7 @@ on the likelihood field of the local map (Olson 2009):
   also held to twice the longest step and turn of the last few scans plus ICP's pairing gate
   and the fallback's heading window (keyframe-only logs: scans ~1 m apart, stamps up to 20 s
   apart). The result explaining more points is kept; the motion prior weighs what the
-  guess is worth over the interval (``prediction_acceleration * dt^2``, unclipped). On the
-  first step, with no motion seen yet, a window wider than ICP's pairing gate counts as
-  far apart.
+  guess is worth over the interval (``prediction_acceleration * dt^2``, unclipped).
 * **Fallback** (:func:`fallback_match`), when a match explains too few points: a correlative
   search in a small window around the guess, then over every heading, then over the
   far-apart window. A turn faster than the motion model, or one spanning a gap in the scans,
@@ -179,7 +180,8 @@ class FarScanMatching:
     ICP from the guess, from the far-apart search, or through the fallback. It reads the
     front end's settings (``params``, ``min_quality``, ``keyframe_*``, ``max_speed``,
     ``max_turn_rate``, ``search_*``, ``noise_sigma``, ``prior_sigma_translation``,
-    ``prediction_acceleration``) and state (``_reference``, ``_search``, ``_time_steps``)."""
+    ``prediction_acceleration``) and state (``_reference``, ``_search``, ``_time_steps``,
+    ``_intervals``)."""
 
     params: ICPParams
     min_quality: float
@@ -195,6 +197,7 @@ class FarScanMatching:
     _reference: PointToLineReference | None
     _search: GlobalSearch | None
     _time_steps: deque[float]
+    _intervals: deque[float]
     _far_steps: deque[tuple[float, float]]  # the last few steps' lengths [m] and turns [rad]
     _prior_information: FloatArray
     _poses: list[FloatArray]
@@ -231,9 +234,11 @@ class FarScanMatching:
             window = SearchWindow(
                 min(window.linear, 2.0 * longest + self.params.max_correspondence_distance),
                 min(window.angular, 2.0 * sharpest + self.search_angular_window))
-        # With no motion seen yet, a window wider than ICP's gate means scans far apart.
-        unknown = len(self._poses) == 1 and window.linear > self.params.max_correspondence_distance
-        if unknown or far_apart(predicted, self.keyframe_distance, self.search_angular_window):
+        # A guess worse than the weakest prior the ordinary path allows (slow scans: 4 Hz and
+        # below) or a predicted step of a keyframe spacing: scans far apart.
+        clock = float(np.median(self._intervals)) if len(self._intervals) >= 5 else typical
+        weak = self.prediction_acceleration * clock**2 > self.prior_sigma_translation
+        if weak or far_apart(predicted, self.keyframe_distance, self.search_angular_window):
             self.far_searches += 1
             result = far_match(self._global_search(), self._reference, points, guess, window,
                                self.params, self._far_prior(window))
