@@ -2,15 +2,15 @@
 on a likelihood grid over a window of translations and headings, at a fraction of the cost of
 scoring every pose.
 
-Olson, "Real-time correlative scan matching", ICRA 2009 (sec. III-C: the multi-resolution
-search); Hess et al., "Real-time loop closure in 2D LIDAR SLAM", ICRA 2016 (sec. V-C:
-branch-and-bound over precomputed grids, Cartographer's ``FastCorrelativeScanMatcher2D``).
+Olson, "Real-time correlative scan matching", ICRA 2009 (the multi-resolution
+search); Hess et al., "Real-time loop closure in 2D LIDAR SLAM", ICRA 2016 (branch-and-bound
+over precomputed grids, Cartographer's ``FastCorrelativeScanMatcher2D``).
 
 A candidate is a heading and a translation in whole cells; its score is the mean grid value
 under the scan's points (0 outside the grid). Level ``l`` of a :class:`GridPyramid` holds, in
 every cell, the maximum of the ``2^l x 2^l`` cells of level 0 starting there, so the score of a
 translation on level ``l`` bounds from above the score of every one of the ``4^l``
-translations it stands for (Hess et al., eq. 14-15). The search scores the coarsest level for
+translations it stands for (Hess et al. 2016). The search scores the coarsest level for
 every heading, then descends depth first, best child first, and drops every node whose bound
 does not beat the best leaf found so far: the result is the grid optimum the exhaustive search
 (:func:`brute_force_match`, the tests' oracle) finds. An ``allowed`` mask of translations
@@ -213,7 +213,8 @@ def search_headings(center_heading: float, angular_window: float,
 def angular_step_for(points: FloatArray, resolution: float, max_step: float = np.radians(1.0),
                      min_step: float = np.radians(0.1)) -> float:
     """Heading step [rad] at which the scan's far points (90th percentile of their ranges)
-    move by one grid cell (Hess et al. 2016, eq. 7), within [``min_step``, ``max_step``]."""
+    move by one grid cell (Hess et al. 2016 take the farthest point), within
+    [``min_step``, ``max_step``]."""
     ranges = np.hypot(points[:, 0], points[:, 1])
     far = float(np.percentile(ranges, 90)) if len(ranges) else 0.0
     if far <= resolution:

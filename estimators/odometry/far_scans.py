@@ -135,10 +135,11 @@ def far_match(
     """ICP of ``points`` from the guess and from the branch-and-bound's best pose in
     ``window`` around it, both held by the weak prior ``prior_information`` (3,) at ``guess``.
 
-    The search's result wins only if it explains more of the points by more than the count's
-    own noise (one standard error of the share, ``sqrt(q (1 - q) / M)``): where the scan
-    leaves a direction open (a corridor's axis) every pose along it scores about the same, the
-    search's best is one of them at random, and the guess is the better bet."""
+    The result explaining the larger share of the points wins (a tie: the search's). Keeping
+    the guess's result unless the search's explained more by the count's own noise (one
+    standard error of the share), on the grounds that along a corridor's axis every pose
+    scores about the same, was worse: the guess is as lost as the search there once one step
+    went wrong (ACES keyframes: 4.1 % vs 0.9 % of steps over 0.2 m)."""
     from_guess = register(reference, points, guess, params, guess, prior_information)
     found = search.search(points, guess, window)
     if not found.found:
