@@ -11,10 +11,10 @@ change a range (each skips only primitives no beam can hit closer than it alread
 - the grid cells (:class:`~lidar_env.primitive_grid.PrimitiveGrid`) visited are those over the
   bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
   90-degree Lidar visits about a quarter of a 360-degree one's;
-- cells are visited in rings of growing distance from the sensor, and a cell whose every beam
-  already ends nearer than the cell's nearest point is skipped with its primitives (on a map
-  of thousands of edges, many cells behind the first walls);
-- a primitive wholly outside a narrow sensor's beam wedge is skipped before its bearings.
+- cells are visited in rings of growing distance from the sensor, and a cell (listing three
+  or more primitives) whose every beam already ends nearer than the cell's nearest point is
+  skipped with its primitives (on a map of thousands of edges, many cells behind the walls);
+- a cell or primitive wholly outside a narrow sensor's beam wedge is skipped before bearings.
 
 Units and frames: positions and ranges in metres, angles in radians, world frame; a sensor pose
 is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
