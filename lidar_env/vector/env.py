@@ -37,6 +37,10 @@ def not_batched(config: EnvConfig) -> str | None:
     if movers:
         return (f"moving_obstacles: not batched yet; the batched env expected 0, got {movers!r}; "
                 "use vectorization_mode='sync' for moving obstacles")
+    occluded = [k for k, lidar in enumerate(config.lidars) if lidar.self_occlusion]
+    if occluded:
+        return (f"lidars[{occluded[0]}].self_occlusion: not batched yet; the batched env "
+                "expected False; use vectorization_mode='sync' for self-occluded Lidars")
     return None
 
 
