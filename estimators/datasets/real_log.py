@@ -40,17 +40,25 @@ def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetu
     if not log.scans:
         raise ValueError(f"{log.source}: expected laser scans, found none")
     first = log.scans[0]
-    for scan in log.scans:
-        if scan.angles.shape != first.angles.shape or not np.allclose(scan.angles, first.angles):
+    counts = np.array([len(scan.angles) for scan in log.scans])
+    limit = int(np.argmax(counts != len(first.angles))) if np.any(
+        counts != len(first.angles)) else len(counts)  # scans before the first count change
+    tail = len(counts) - limit
+    angles = np.stack([scan.angles for scan in log.scans[:limit]])
+    offsets = np.stack([scan.laser_offset for scan in log.scans[:limit]])
+    bad_beams = np.append(~np.all(np.isclose(angles, first.angles), axis=1), np.ones(tail, bool))
+    bad_mount = np.append(~np.all(np.isclose(offsets, first.laser_offset, atol=1e-6), axis=1),
+                          np.zeros(tail, bool))
+    if np.any(bad_beams | bad_mount):  # the first scan that differs, as a per-scan check would
+        index = int(np.argmax(bad_beams | bad_mount))
+        scan = log.scans[index]
+        if bad_beams[index]:
             raise ValueError(
                 f"{log.source}, line {scan.line_number}: beam geometry changes within the log "
                 f"({len(scan.angles)} beams vs {len(first.angles)}); expected one laser setup"
             )
-        if not np.allclose(scan.laser_offset, first.laser_offset, atol=1e-6):
-            raise ValueError(
-                f"{log.source}, line {scan.line_number}: laser mount changes within the log; "
-                "expected one fixed mount"
-            )
+        raise ValueError(f"{log.source}, line {scan.line_number}: laser mount changes within "
+                         "the log; expected one fixed mount")
     if max_range is None:
         stated = min(scan.max_range for scan in log.scans)
         max_range = stated if np.isfinite(stated) else max(s.ranges.max() for s in log.scans)

@@ -89,3 +89,22 @@ def test_a_clock_that_runs_back_is_nudged_forward_with_a_warning(aces):
         run = run_on_log(make("icp"), tampered, clock="logger")
     np.testing.assert_array_equal(run.times, stamps)  # scored on the logged stamps
     assert np.all(np.isfinite(run.poses)) and len(run.poses) == 30
+
+
+def _flaser(n: int, t: float) -> str:
+    return f"FLASER {n} {' '.join(['1.0'] * n)} 0 0 0 0 0 0 {t} host {t}\n"
+
+
+def test_a_log_whose_laser_changes_names_the_first_line_that_differs(tmp_path) -> None:
+    beams = tmp_path / "beams.log"
+    beams.write_text(_flaser(180, 1.0) + _flaser(180, 1.1) + _flaser(181, 1.2) + _flaser(180, 1.3))
+    with pytest.raises(ValueError, match=r"beams.log, line 3: beam geometry changes .*181 beams"):
+        setup_from_log(load_log(beams))
+    mount = tmp_path / "mount.log"
+    mount.write_text(_flaser(180, 1.0) + "PARAM robot_frontlaser_offset 0.2\n"
+                     + _flaser(180, 1.1) + _flaser(181, 1.2))
+    with pytest.raises(ValueError, match=r"mount.log, line 3: laser mount changes"):
+        setup_from_log(load_log(mount))
+    steady = tmp_path / "steady.log"
+    steady.write_text(_flaser(180, 1.0) + _flaser(180, 1.1))
+    assert setup_from_log(load_log(steady)).sensors[0].n_beams == 180
