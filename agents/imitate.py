@@ -6,8 +6,11 @@
 The expert is :class:`agents.scan_aware.ScanAwareDriver` (pure pursuit of the trace, braking for
 the returns in its corridor); the student is the Stable-Baselines3 PPO ``MlpPolicy`` the
 ``sb3`` driver loads, fed :class:`agents.observation.TraceFollowingObservation` (both scans
-pooled into sectors, the next trace points, the errors and its previous action: it sees the
-pedestrians through the scans only, never ``info["moving_obstacles"]``). DAgger (Ross, Gordon
+pooled into sectors, the next trace points, the errors, its previous action and, with
+``--sector-deltas``, each sector's change since the last frame, which is how a student of the
+"backing" expert can see a pedestrian closing in: it sees the pedestrians through the scans
+only, never ``info["moving_obstacles"]``). ``--expert`` picks the expert's settings
+(:data:`EXPERTS`); the defaults reproduce the shipped model. DAgger (Ross, Gordon
 and Bagnell, 2011): iteration 0 drives the expert; every later iteration drives the student as
 it now is, and every visited state is labelled with the expert's action, so the student learns
 to recover from its own mistakes; after each iteration the policy's mean action is fitted to
@@ -49,6 +52,13 @@ SCENES: tuple[tuple[int, str], ...] = (
     (5, "waypoints"), (10, "waypoints"), (10, "yielding"), (0, "waypoints"))
 WORLDS = ("open_cylinders", "hallway", "closed_to_open", "random")
 TRACES = ("straight", "right_turn", "zigzag")
+#: Settings of the expert by name: "braking" (it only brakes; the shipped model imitates it)
+#: and "backing" (:class:`~agents.scan_aware.ScanAwareDriver`'s defaults: it also backs off
+#: from a pedestrian closing in; its student needs ``sector_deltas``).
+EXPERTS: dict[str, dict[str, Any]] = {
+    "braking": {"side_margin": 0.2, "back_off": False},
+    "backing": {},
+}
 #: [s] episode time limit while collecting (the expert waits for pedestrians, but not for ever).
 EPISODE_TIME = 60.0
 
@@ -74,12 +84,14 @@ class IterationStats:
 class _Lane:
     """One env of the lockstep batch: the raw env, the student's view of it and the expert."""
 
-    def __init__(self, moving_obstacles: int, mover_model: str, rng: np.random.Generator) -> None:
+    def __init__(self, moving_obstacles: int, mover_model: str, rng: np.random.Generator,
+                 sector_deltas: bool, expert: str = "braking") -> None:
         config = {"moving_obstacles": moving_obstacles, "mover_model": mover_model,
                   "max_episode_time": EPISODE_TIME}
         self.env = gym.make("DualLidar-v0", config=config)
-        self.view = TraceFollowingObservation(self.env.unwrapped)
-        self.expert = ScanAwareDriver()
+        self.sector_deltas = sector_deltas
+        self.view = TraceFollowingObservation(self.env.unwrapped, sector_deltas=sector_deltas)
+        self.expert = ScanAwareDriver(**EXPERTS[expert])
         self.rng = rng
         self.features = np.zeros(self.view.observation_space.shape, np.float32)
         self._observation: dict[str, Any] = {}
@@ -95,7 +107,8 @@ class _Lane:
                 break
             except ConfigError:
                 seed = int(self.rng.integers(1_000_000))
-        self.view = TraceFollowingObservation(self.env.unwrapped)  # as SB3Driver.reset does
+        self.view = TraceFollowingObservation(  # a fresh view per episode, as SB3Driver's
+            self.env.unwrapped, sector_deltas=self.sector_deltas)
         self.expert.reset(self.env)
         self.features = self.view.observe(self._observation, self._info)
 
@@ -177,6 +190,7 @@ def imitate(
     seed: int = 0, out: Path = DEFAULT_OUT, iterations: int = 10, steps: int = 30_000,
     epochs: int = 4, batch_size: int = 256, learning_rate: float = 1e-3,
     net_arch: tuple[int, ...] = (64, 64), log_std: float = -2.0, overwrite: bool = False,
+    sector_deltas: bool = False, expert: str = "braking",
 ) -> Path:
     """Run DAgger (see the module docstring) and save the student as a PPO zip to ``out``.
 
@@ -193,11 +207,14 @@ def imitate(
     torch.set_num_threads(1)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    lanes = [_Lane(m, model, np.random.default_rng([seed, k]))
+    if expert not in EXPERTS:
+        raise ConfigError(f"expert: expected one of {', '.join(sorted(EXPERTS))}, got "
+                          f"{expert!r}")
+    lanes = [_Lane(m, model, np.random.default_rng([seed, k]), sector_deltas, expert)
              for k, (m, model) in enumerate(SCENES)]
     for lane in lanes:
         lane.reset()
-    env = TraceFollowingObservation(gym.make("DualLidar-v0"))
+    env = TraceFollowingObservation(gym.make("DualLidar-v0"), sector_deltas=sector_deltas)
     model = PPO("MlpPolicy", env, seed=seed, device="cpu",
                 policy_kwargs={"net_arch": {"pi": list(net_arch), "vf": [64, 64]}})
     with torch.no_grad():
@@ -227,8 +244,11 @@ def imitate(
     record = {"command": {"seed": seed, "iterations": iterations, "steps": steps,
                           "epochs": epochs, "batch_size": batch_size,
                           "learning_rate": learning_rate, "net_arch": list(net_arch),
-                          "log_std": log_std},
+                          "log_std": log_std, "sector_deltas": sector_deltas,
+                          "expert": expert},
               "scenes": [list(scene) for scene in SCENES],
+              "expert": {key: getattr(lanes[0].expert, key) for key in (
+                  "side_margin", "stop_gap", "headway", "reach", "back_off")},
               "wall_seconds": elapsed, "iterations": [asdict(s) for s in history]}
     out.with_suffix(".json").write_text(json.dumps(record, indent=1) + "\n")
     print(f"imitated for {elapsed / 60:.1f} min ({elapsed:.1f} s); saved {out}")
@@ -246,10 +266,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help=f"model .zip (default: %(default)s; shipped: {SHIPPED_MODEL})")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    parser.add_argument("--sector-deltas", action="store_true",
+                        help="add each sector's change since the last frame to the input")
+    parser.add_argument("--expert", choices=sorted(EXPERTS), default="braking",
+                        help="the expert's settings (default: %(default)s, the shipped model's)")
     args = parser.parse_args(argv)
     try:
         imitate(args.seed, args.out, args.iterations, args.steps, args.epochs,
-                net_arch=tuple(args.net_arch), overwrite=args.overwrite)
+                net_arch=tuple(args.net_arch), overwrite=args.overwrite,
+                sector_deltas=args.sector_deltas, expert=args.expert)
     except ImitationExistsError as error:
         parser.error(str(error))
 

@@ -1,7 +1,7 @@
-"""A driver that sees: pure pursuit of the trace, slowed and stopped by what its scans show ahead.
+"""A driver that sees: pure pursuit of the trace, braking and backing off for what its scans show.
 
 :class:`ScanAwareDriver` steers like :class:`~agents.scripted.PurePursuitDriver` (the trace
-from the true pose, ``info["pose"]``) but chooses its speed from the current scans alone: every
+from the true pose, ``info["pose"]``) but chooses its speed from the scans alone: every
 beam's return is put in the car frame (from each Lidar's mount), and of the returns in the
 *corridor* the car is about to sweep (the arc of the pure-pursuit command, as wide as the car
 plus ``side_margin``) the nearest one ahead of the nose limits the speed to what stops in time:
@@ -11,9 +11,16 @@ plus ``side_margin``) the nearest one ahead of the nose limits the speed to what
 with ``free`` [m] the arc length from the nose to that return. It never reads
 ``info["moving_obstacles"]``: a pedestrian is a cluster of returns like any other. It is the
 expert the learned driver imitates (:mod:`agents.imitate`) and a driver in its own right
-(``make_driver("scan_aware")``). It only brakes, never swerves, so it relies on pedestrians
-that give way (``config["mover_model"] = "yielding"``) not to stand in its lane for ever, and
-it cannot escape a mover that walks into it from the side or behind (``"waypoints"``).
+(``make_driver("scan_aware")``).
+
+Braking is not enough where pedestrians ignore the car (``config["mover_model"] =
+"waypoints"``): a car standing for one is walked into. So it also backs off (``back_off``):
+the free arc is compared with the last frame's less the car's own travel, and a return ahead
+closing in at over :data:`CLOSING_SPEED` within :data:`THREAT_RANGE` sends the car straight
+back at the closing speed + 0.3 m/s while the corridor behind is free. The wide
+``side_margin`` (0.4 m; 0.2 m let twice as many crossing pedestrians reach the front corner)
+makes it brake for a pedestrian about to cross before it is in the car's way. It never
+swerves, and it cannot escape a pedestrian that walks into it from the side or behind.
 """
 
 from __future__ import annotations
@@ -28,6 +35,11 @@ from numpy.typing import NDArray
 
 from agents.scripted import PurePursuitDriver
 
+#: [m/s] a return ahead closing in faster than this (beyond the car's own motion) is a threat.
+CLOSING_SPEED = 0.15
+#: [m] free arc below which a closing return makes the car back off.
+THREAT_RANGE = 2.5
+
 
 class ScanAwareDriver:
     """Pure pursuit with a speed limit from the scans (see the module docstring).
@@ -37,14 +49,18 @@ class ScanAwareDriver:
             1.5 m/s, the env's top speed, as fast as the PPO trace follower; braking keeps it
             safe (it finished 90 of 90 seeded episodes among yielding pedestrians at 1.5 as
             at 1.0 m/s).
-        side_margin: [m] added to the car's half width on each side of the corridor.
+        side_margin: [m] added to the car's half width on each side of the corridor (with
+            ``back_off``, a return beside the body, not ahead of the nose, stops the car only
+            within the body's own width: stopping would let it walk in).
         stop_gap: [m] free arc length ahead of the nose at which the car stops.
         headway: [s] the speed is at most (free - stop_gap) / headway.
         reach: [m] arc length ahead of the nose the corridor is checked over.
+        back_off: back away, straight, from a return ahead that closes in faster than the car
+            drives (see :meth:`act`), if the corridor behind is free.
     """
 
-    def __init__(self, speed: float = 1.5, side_margin: float = 0.2, stop_gap: float = 0.3,
-                 headway: float = 1.0, reach: float = 3.0) -> None:
+    def __init__(self, speed: float = 1.5, side_margin: float = 0.4, stop_gap: float = 0.3,
+                 headway: float = 1.0, reach: float = 3.0, back_off: bool = True) -> None:
         for name, value in (("speed", speed), ("side_margin", side_margin),
                             ("stop_gap", stop_gap), ("headway", headway), ("reach", reach)):
             if not math.isfinite(value) or value <= 0:
@@ -54,6 +70,11 @@ class ScanAwareDriver:
         self.stop_gap = stop_gap
         self.headway = headway
         self.reach = reach
+        self.back_off = back_off
+        self._previous_free = math.inf
+        self._previous_speed = 0.0
+        self._closing = 0.0  # [m/s] smoothed closing speed of the nearest return ahead
+        self._dt = 0.1
         self._keys: tuple[str, ...] = ()
         self._directions: list[NDArray[np.float64]] = []  # per Lidar, (n, 2) unit beams
         self._mounts: list[NDArray[np.float64]] = []
@@ -81,7 +102,11 @@ class ScanAwareDriver:
         self._half_width = 0.5 * float(config.car_width)
         self._max_speed = float(config.max_speed)
         self._max_yaw_rate = float(config.max_yaw_rate)
+        self._dt = float(config.control_dt)
         self.last_free = math.inf
+        self._previous_free = math.inf
+        self._previous_speed = 0.0
+        self._closing = 0.0
 
     def scan_points(self, observation: Mapping[str, Any], heading: float) -> NDArray[np.float64]:
         """``(N, 2)`` [m] every return (not the no-hit reading ``max_range``), car frame."""
@@ -112,23 +137,43 @@ class ScanAwareDriver:
             swept = np.arctan2(dx, -dy * np.sign(radius))  # [rad] turned from the car
             along = abs(radius) * np.where(swept < -0.5 * math.pi, swept + 2 * math.pi, swept)
         ahead = along - self._half_length
-        blocking = (np.abs(lateral) <= width) & (ahead > -self._half_length) & (
-            ahead < self.reach)
+        # in the corridor and ahead of the nose; beside the body too, but when backing off
+        # only within the body's width (stopping for a return just beside the car lets it in)
+        beside = ahead > -self._half_length
+        if self.back_off:
+            beside &= np.abs(lateral) <= self._half_width
+        blocking = (np.abs(lateral) <= width) & ((ahead > 0.0) | beside) & (ahead < self.reach)
         if not blocking.any():
             return self.reach + self.stop_gap
         return float(max(ahead[blocking].min(), 0.0))
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> NDArray[np.float32]:
-        """The pure-pursuit action with its speed capped by the free arc ahead."""
+        """The pure-pursuit action with its speed capped by the free arc ahead; with
+        ``back_off``, a reverse away from a return ahead closing in at over
+        :data:`CLOSING_SPEED` (the free arc shrinking faster than the car's own motion explains,
+        smoothed over frames) within :data:`THREAT_RANGE`."""
         action = self.pursuit.act(observation, info)
         speed = float(action[0]) * self._max_speed
         if speed <= 0.0:
             return action
         yaw_rate = float(action[1]) * self._max_yaw_rate
         heading = float(np.asarray(info["pose"], np.float64)[2])
-        self.last_free = self.free_arc(self.scan_points(observation, heading), yaw_rate / speed)
-        limit = max(self.last_free - self.stop_gap, 0.0) / self.headway
+        points = self.scan_points(observation, heading)
+        self.last_free = free = self.free_arc(points, yaw_rate / speed)
+        limit = max(free - self.stop_gap, 0.0) / self.headway
         if limit < speed:  # keep the arc: scale the yaw rate with the speed
             scale = limit / speed
             action = np.array([action[0] * scale, action[1] * scale], dtype=np.float32)
+        if self.back_off:
+            expected = self._previous_free - self._previous_speed * self._dt
+            seen = max(free, self._previous_free) < self.reach  # the same return, twice
+            step = (expected - free) / self._dt if seen and abs(expected - free) < 0.3 else 0.0
+            self._closing = 0.5 * self._closing + 0.5 * step
+            self._previous_free = free
+            if free < THREAT_RANGE and self._closing > CLOSING_SPEED:
+                behind = self.free_arc(points * np.array([-1.0, 1.0]), 0.0)
+                if behind > self.stop_gap + 0.2:
+                    back = min(self._closing + 0.3, self._max_speed, 2.0 * (behind - self.stop_gap))
+                    action = np.array([-back / self._max_speed, 0.0], dtype=np.float32)
+            self._previous_speed = float(action[0]) * self._max_speed
         return action

@@ -9,6 +9,7 @@ import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.evaluate import drive_episode
+from lidar_env.errors import ConfigError
 
 pytest.importorskip("stable_baselines3", reason="the agents extra is not installed")
 
@@ -46,3 +47,5 @@ def test_an_existing_model_is_refused_before_any_work(tmp_path):
     with pytest.raises(ImitationExistsError, match="--overwrite"):
         imitate(out=out, iterations=1, steps=10)
     assert out.read_bytes() == b"keep me"
+    with pytest.raises(ConfigError, match="expert: expected one of backing, braking"):
+        imitate(out=tmp_path / "new.zip", iterations=1, steps=10, expert="timid")

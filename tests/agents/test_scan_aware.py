@@ -21,7 +21,10 @@ def test_free_arc_is_the_arc_length_from_the_nose_to_the_first_return_in_the_cor
         assert driver.free_arc(point, curvature) == pytest.approx(math.pi / 2 - 0.4)
         outside = np.array([[0.0, -3.0 / curvature]])  # beside the car, away from the turn
         assert driver.free_arc(outside, curvature) == driver.reach + 0.3
-    assert driver.free_arc(np.array([[0.2, 0.4]]), 0.0) == 0.0  # beside the body: stop
+    assert driver.free_arc(np.array([[0.2, 0.2]]), 0.0) == 0.0  # against the body: stop
+    assert driver.free_arc(np.array([[0.2, 0.4]]), 0.0) == driver.reach + 0.3  # beside: go on
+    braking = ScanAwareDriver(side_margin=0.2, back_off=False)  # the shipped model's expert
+    assert braking.free_arc(np.array([[0.2, 0.4]]), 0.0) == 0.0  # it stops for that too
 
 
 def test_scan_points_put_each_return_in_the_car_frame_from_its_mount():
@@ -67,3 +70,29 @@ def test_without_movers_it_drives_like_pure_pursuit():
     reference = drive_episode(env, make_driver("scripted"), seed=0)
     assert episode.success and reference.success
     assert episode.time <= reference.time + 3.0
+
+
+@pytest.mark.parametrize(("name", "collides"), [("scripted", True), ("scan_aware", False)])
+def test_it_backs_off_from_a_pedestrian_walking_at_it_which_pure_pursuit_hits(name, collides):
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight",
+                   config={"moving_obstacles": 1, "mover_speed_range": (1.0, 1.0),
+                           "max_episode_time": 5.0})
+    observation, info = env.reset(seed=0)
+    x, y, heading = info["pose"]
+    ahead = np.array([math.cos(heading), math.sin(heading)])
+    crowd = env.unwrapped.crowd
+    crowd.positions[0] = (x, y) + 3.5 * ahead  # on the trace, walking straight at the car
+    crowd.waypoints[0] = (x, y) - 1.0 * ahead
+    crowd._needs[:] = False
+    observation = env.unwrapped._observe()
+    driver = make_driver(name)
+    driver.reset(env)
+    terminated = truncated = False
+    backed = 0.0
+    while not (terminated or truncated):
+        action = driver.act(observation, info)
+        backed = min(backed, float(action[0]))
+        observation, _, terminated, truncated, info = env.step(action)
+    assert info["collision"] == collides
+    if not collides:  # the pedestrian stopped at its waypoint, where the car had stood
+        assert backed < -0.3 and truncated
