@@ -20,7 +20,7 @@ DRIVERS: dict[str, str] = {
 
 def make_driver(name: str, pose_source: str = "true") -> Driver:
     """A fresh driver by name: ``scripted`` (pure pursuit), ``scan_aware`` (pure pursuit that
-    brakes for what its scans show ahead) or ``sb3`` (the shipped learned policy).
+    brakes and backs off for what its scans show ahead) or ``sb3`` (the shipped learned policy).
 
     ``pose_source`` is where the driver takes the car's pose from: ``"true"`` (the env's
     ``info["pose"]``) or the name of an estimator (``estimators.registry.names()``) that runs
