@@ -33,6 +33,8 @@ step draws for all). A crowd of ``M = 0`` is never built, so it draws nothing.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -70,16 +72,15 @@ def car_circles(
     ``hypot(s, half_width)``: the union holds the whole box.
     """
     x, y, heading = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
-    c, s = np.cos(heading), np.sin(heading)
+    c, s = math.cos(heading), math.sin(heading)  # scalar maths: this runs every env step
     half_slice = half_length / CAR_CIRCLES
-    offsets = half_slice * (2.0 * np.arange(CAR_CIRCLES) - (CAR_CIRCLES - 1))
-    out = np.empty((CAR_CIRCLES, 5))
-    out[:, 0] = x + offsets * c
-    out[:, 1] = y + offsets * s
-    out[:, 2] = speed * c - yaw_rate * offsets * s
-    out[:, 3] = speed * s + yaw_rate * offsets * c
-    out[:, 4] = np.hypot(half_slice, half_width)
-    return out
+    radius = math.hypot(half_slice, half_width)
+    rows = []
+    for k in range(CAR_CIRCLES):
+        offset = half_slice * (2 * k - (CAR_CIRCLES - 1))
+        rows.append((x + offset * c, y + offset * s, speed * c - yaw_rate * offset * s,
+                     speed * s + yaw_rate * offset * c, radius))
+    return np.array(rows, dtype=np.float64)
 
 
 class Crowd:
@@ -149,13 +150,13 @@ class Crowd:
              car: NDArray[np.float64] | None = None) -> None:
         """Advance every mover by ``dt`` [s]: new waypoints where needed, then one move each.
 
-        ``car``: the car's circles this step (:func:`car_circles`), which "yielding" movers
-        avoid; "waypoints" movers ignore it, as they do when it is None.
+        ``car``: the car's circles this step, a C-contiguous float64 ``(K, 5)`` array as
+        :func:`car_circles` returns, which "yielding" movers avoid; "waypoints" movers ignore
+        it, as they do when it is None.
         """
         waiting = int(np.count_nonzero(self._needs))
         draws = rng.random((waiting, WAYPOINT_TRIES, 2)) if waiting else _NO_DRAWS
-        seen = _NO_CAR if car is None or self.model == "waypoints" else np.ascontiguousarray(
-            car, dtype=np.float64).reshape(-1, 5)
+        seen = _NO_CAR if car is None or self.model == "waypoints" else car
         advance_crowd(self.positions, self.velocities, self.waypoints, self.speeds, self._stuck,
                       self._needs, draws, self.radius, float(dt), self._bounds, world.circles,
                       world.segments, world.grid, seen)
