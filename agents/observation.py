@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lidar_env import se2
+from lidar_env.errors import ConfigError
 
 
 class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -77,10 +78,11 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.Wrapper.__init__(self, env)
         n_beams = env.unwrapped.config.n_beams
         if n_sectors < 1 or n_beams % n_sectors:
-            raise ValueError(f"n_sectors: expected a divisor of n_beams={n_beams}, got {n_sectors}")
+            raise ConfigError(
+                f"n_sectors: expected a divisor of n_beams={n_beams}, got {n_sectors}")
         scales = (n_points, point_spacing, lookahead_scale, cross_track_scale, delta_scale)
         if min(scales) <= 0 or min(cross_track_weight, collision_penalty) < 0:
-            raise ValueError(
+            raise ConfigError(
                 "n_points, point_spacing, lookahead_scale, cross_track_scale and delta_scale must "
                 "be positive and cross_track_weight, collision_penalty >= 0, got "
                 f"{scales} and {cross_track_weight}, {collision_penalty}"

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.observation import TraceFollowingObservation
+from lidar_env.errors import ConfigError
 
 #: The policy shipped with the package (trained by ``python -m agents.imitate``: it imitates
 #: the scan-aware driver and gives way to pedestrians; ``ppo_driver.json`` beside it records
@@ -51,7 +52,7 @@ class SB3Driver:
         else:
             self._view = TraceFollowingObservation(env.unwrapped, sector_deltas=True)
         if self.model.observation_space.shape != self._view.observation_space.shape:
-            raise ValueError(
+            raise ConfigError(
                 f"model_path: {self.model_path} takes observations of shape "
                 f"{self.model.observation_space.shape}, expected "
                 f"{plain.observation_space.shape} or {self._view.observation_space.shape}")

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.scripted import PurePursuitDriver
+from lidar_env.errors import ConfigError
 
 #: [m/s] a return ahead closing in faster than this (beyond the car's own motion) is a threat.
 CLOSING_SPEED = 0.15
@@ -64,7 +65,7 @@ class ScanAwareDriver:
         for name, value in (("speed", speed), ("side_margin", side_margin),
                             ("stop_gap", stop_gap), ("headway", headway), ("reach", reach)):
             if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name}: expected a positive number, got {value!r}")
+                raise ConfigError(f"{name}: expected a positive number, got {value!r}")
         self.pursuit = PurePursuitDriver(speed=speed)
         self.side_margin = side_margin
         self.stop_gap = stop_gap

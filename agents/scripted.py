@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from lidar_env.errors import ConfigError
 from lidar_env.traces import Trace
 
 
@@ -38,7 +39,7 @@ class PurePursuitDriver:
     def __init__(self, speed: float = 1.0, lookahead: float = 0.6, window: float = 2.0) -> None:
         for name, value in (("speed", speed), ("lookahead", lookahead), ("window", window)):
             if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name}: expected a positive number, got {value!r}")
+                raise ConfigError(f"{name}: expected a positive number, got {value!r}")
         self.speed = speed
         self.lookahead = lookahead
         self.window = window
