@@ -318,6 +318,8 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
                           for seed in args.seeds]
                  for g in groups}
     logs = args.logs
+    if not logs and not args.no_real:
+        print(f"note: real-log results skipped: {DATA_DIR} has no ACES log and relations")
     table_i_runs = table_one_scenarios(groups, scenarios, specs)
     world_aligned = SideRun(
         side_scenarios(table_i_runs),

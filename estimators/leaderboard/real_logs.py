@@ -155,7 +155,8 @@ def add_real_log_arguments(parser: Any) -> None:
 def real_logs_from(args: Any, aces_dir: Path, aces_scans: int) -> list[RealLog]:
     """The real logs the parsed ``args`` ask for: none (``--no-real``), the user's
     ``--real-log``, or the ACES log of ``aces_dir`` (its first ``aces_scans`` scans by default)
-    when it is there. Raises :class:`ConfigError` naming the option at fault."""
+    when it is there (none when it is not). Raises :class:`ConfigError` naming the option at
+    fault."""
     if args.real_scans is not None and args.real_scans < 0:
         raise ConfigError(f"--real-scans: expected an integer >= 0, got {args.real_scans}")
     given = [name for name, value in (("--relations", args.relations), ("--truth-topic",
@@ -177,5 +178,4 @@ def real_logs_from(args: Any, aces_dir: Path, aces_scans: int) -> list[RealLog]:
     log = RealLog("aces", str(aces_dir / "aces.clf.bz2"), str(aces_dir / "aces.relations"), scans)
     if Path(log.log_path).exists() and Path(str(log.relations_path)).exists():
         return [log]
-    print(f"note: real-log results skipped: {aces_dir} has no ACES log and relations")
-    return []
+    return []  # the caller notes it (after its own checks)
