@@ -30,12 +30,11 @@ import platform
 import time
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numpy as np
+from bench_synthetic import record
 from numpy.typing import NDArray
 
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
-from agents.scripted import PurePursuitDriver
 from estimators import make
 from estimators.base import LIDAR_KEYS, SensorSetup
 from estimators.datasets.carmen import load_log
@@ -65,27 +64,15 @@ class Drive:
 
 def record_thinned(world: str, trace: str, seed: int, speed: float, every: int) -> Drive:
     """Drive ``trace`` in ``world`` at ``speed`` [m/s] with pure pursuit (env at 10 Hz, 1 cm
-    noise) and keep every ``every``-th scan, the first and the last included."""
-    env = gym.make("DualLidar-v0", world=world, trace=trace,
-                   config={"scan_frame": "sensor", "range_noise_std": 0.01})
-    driver = PurePursuitDriver(speed=speed)
-    observation, info = env.reset(seed=seed)
-    driver.reset(env)
-    observations, times, truth = [observation], [float(info["time"])], [info["pose"]]
-    done = False
-    while not done:
-        observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
-        observations.append(observation)
-        times.append(float(info["time"]))
-        truth.append(info["pose"])
-        done = terminated or truncated
-    setup = SensorSetup.from_env(env)
-    env.close()
-    keep = list(range(0, len(observations), every))
-    if keep[-1] != len(observations) - 1:
-        keep.append(len(observations) - 1)
-    return Drive(f"{world}:{trace}:s{seed}:{speed:g}m/s", setup, [observations[k] for k in keep],
-                 np.array(times)[keep], np.array(truth, dtype=np.float64)[keep])
+    noise: ``bench_synthetic.record``) and keep every ``every``-th scan, the first and the last
+    included."""
+    drive = record(world, trace, seed, None, noise=0.01, speed=speed)
+    keep = list(range(0, len(drive.observations), every))
+    if keep[-1] != len(drive.observations) - 1:
+        keep.append(len(drive.observations) - 1)
+    return Drive(f"{world}:{trace}:s{seed}:{speed:g}m/s", drive.setup,
+                 [drive.observations[k] for k in keep], np.array(drive.times)[keep],
+                 drive.truth[keep])
 
 
 def step_errors(estimated: NDArray[np.float64],

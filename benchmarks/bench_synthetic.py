@@ -57,10 +57,10 @@ class Recording:
 
 def record(
     world: str, trace: str, seed: int, max_steps: int | None, noise: float = NOISE,
-    lidars: list[dict] | None = None,
+    lidars: list[dict] | None = None, speed: float = 1.0,
 ) -> Recording:
-    """Drive ``trace`` in ``world`` with pure pursuit, ``noise`` [m] of range noise (1 sigma),
-    and the env's ``lidars`` layout if given; keep scans and ground truth."""
+    """Drive ``trace`` in ``world`` with pure pursuit at ``speed`` [m/s], ``noise`` [m] of range
+    noise (1 sigma), and the env's ``lidars`` layout if given; keep scans and ground truth."""
     layout = {} if lidars is None else {"lidars": lidars}
     env = gym.make(
         "DualLidar-v0",
@@ -68,7 +68,7 @@ def record(
         trace=trace,
         config={"scan_frame": "sensor", "range_noise_std": noise, **layout},
     )
-    driver = PurePursuitDriver()
+    driver = PurePursuitDriver(speed=speed)
     observation, info = env.reset(seed=seed)
     driver.reset(env)
     observations, times, truth = [observation], [float(info["time"])], [info["pose"]]
