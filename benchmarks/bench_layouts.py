@@ -65,13 +65,17 @@ def replay(recording: Recording, name: str, params: dict[str, float]):
     return estimator.trajectory
 
 
-def parameter(text: str) -> tuple[str, float]:
-    """``NAME=VALUE`` (a float) from the command line."""
+def parameter(text: str) -> tuple[str, float | bool]:
+    """``NAME=VALUE`` from the command line: VALUE a number (a float) or ``true``/``false``."""
     name, _, value = text.partition("=")
+    if name and value in ("true", "false"):
+        return name, value == "true"
     try:
-        return name, float(value)
+        if name:
+            return name, float(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NAME=NUMBER, got {text!r}") from None
+        pass
+    raise argparse.ArgumentTypeError(f"expected NAME=NUMBER or NAME=true/false, got {text!r}")
 
 
 def main() -> None:

@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import platform
 import time
+
+from bench_layouts import parameter
 
 from estimators import make
 from estimators.datasets.carmen import CarmenLog, load_log
@@ -110,24 +111,12 @@ def bench_intel(names: list[str], limit: int | None, params: dict[str, object]) 
             print(_line(name, f"{label}:", summary, run))
 
 
-def _parameter(text: str) -> tuple[str, object]:
-    """``NAME=VALUE`` from the command line; VALUE a JSON number or true/false."""
-    name, _, value = text.partition("=")
-    try:
-        parsed = json.loads(value)
-    except ValueError:
-        parsed = None
-    if not name or not isinstance(parsed, (bool, int, float)):
-        raise argparse.ArgumentTypeError(f"expected NAME=NUMBER or NAME=true/false, got {text!r}")
-    return name, parsed
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--estimators", nargs="+", default=[REFERENCE, "lidar_odometry"])
     parser.add_argument("--limit", type=int, default=None, help="first N scans of each log")
     parser.add_argument("--logs", nargs="+", default=["aces", "intel"], choices=["aces", "intel"])
-    parser.add_argument("--set", type=_parameter, nargs="+", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--set", type=parameter, nargs="+", default=[], metavar="NAME=VALUE",
                         help="estimator parameters over their defaults (not for the reference)")
     args = parser.parse_args()
     params = dict(args.set)
