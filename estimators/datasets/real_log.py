@@ -41,8 +41,8 @@ def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetu
         raise ValueError(f"{log.source}: expected laser scans, found none")
     first = log.scans[0]
     counts = np.array([len(scan.angles) for scan in log.scans])
-    limit = int(np.argmax(counts != len(first.angles))) if np.any(
-        counts != len(first.angles)) else len(counts)  # scans before the first count change
+    changed = np.flatnonzero(counts != len(first.angles))
+    limit = int(changed[0]) if len(changed) else len(counts)  # before the first count change
     tail = len(counts) - limit
     angles = np.stack([scan.angles for scan in log.scans[:limit]])
     offsets = np.stack([scan.laser_offset for scan in log.scans[:limit]])

@@ -100,9 +100,7 @@ class RealLog:
         """The ground-truth relations the runs are scored on."""
         if self.relations_path is not None:
             return load_relations(self.relations_path)
-        recording = self.load()
-        if recording.truth is None:  # pragma: no cover - load_bag raises first
-            raise ConfigError(f"{self.log_path}: truth_topic {self.truth_topic} gave no poses")
+        recording = self.load()  # with a truth_topic, load_bag gives truth or raises
         parts = [relations_from_trajectory(recording.times, recording.truth, window)
                  for window in (None, TRUTH_WINDOW)]
         return Relations(*(np.concatenate([getattr(p, key) for p in parts])
@@ -171,8 +169,7 @@ def real_logs_from(args: Any, aces_dir: Path, aces_scans: int) -> list[RealLog]:
                               f"bag (a bag ends in {', '.join(BAG_SUFFIXES)} or is a directory)")
         log = user_log(args.real_log, args.relations, args.real_scans or None,
                        args.truth_topic, None if args.topics is None else tuple(args.topics))
-        if log.n_lidars < 1:  # reads the log here, so a bad file fails before any run
-            raise ConfigError(f"--real-log: {log.log_path} has no Lidar scans")
+        log.load()  # read here, so that a bad file fails before any run
         return [log]
     scans = aces_scans if args.real_scans is None else args.real_scans or None
     log = RealLog("aces", str(aces_dir / "aces.clf.bz2"), str(aces_dir / "aces.relations"), scans)

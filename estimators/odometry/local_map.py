@@ -368,9 +368,9 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         predicted = motion_prior.constant_velocity_increment(self._velocity, dt)
         guess = compose(self.pose, predicted)
         points = seen = self._points(scans)
-        if self._moving is not None and (self._reference is None or len(points) < 3):
-            points = self._static_points(points, guess, scans)
         if self._reference is None or len(points) < 3:
+            if self._moving is not None:
+                points = self._static_points(points, guess, scans)
             self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
             self._remember(guess, scans, seen)
             if len(points) >= 2:
