@@ -116,3 +116,13 @@ def test_bad_log_sets_name_the_file(drive, tmp_path: Path) -> None:
         ("FLASER", 1.0), ("RLASER", 1.0), ("FLASER", 0.5), ("RLASER", 0.5))))
     with pytest.raises(LogFormatError, match="back.log, topic front laser: header stamps"):
         carmen_recording([backwards])
+
+
+def test_the_calibration_command_names_a_bad_carmen_log(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert calibrate_main(["--carmen", str(tmp_path / "missing.log")]) == 2
+    assert "missing.log" in capsys.readouterr().err
+    front_only = tmp_path / "front.log"
+    front_only.write_text(laser_line("FLASER", np.ones(180), 1.0) + "\n")
+    assert calibrate_main(["--carmen", str(front_only)]) == 2
+    assert "expected RLASER or ROBOTLASER2" in capsys.readouterr().err
