@@ -43,6 +43,7 @@ import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
 from agents.scan_aware import ScanAwareDriver
+from agents.train import TrainingExistsError, new_model_path
 from lidar_env.errors import ConfigError
 
 DEFAULT_OUT = Path("runs/imitation_driver.zip")
@@ -61,10 +62,6 @@ EXPERTS: dict[str, dict[str, Any]] = {
 }
 #: [s] episode time limit while collecting (the expert waits for pedestrians, but not for ever).
 EPISODE_TIME = 60.0
-
-
-class ImitationExistsError(FileExistsError):
-    """``--out`` names a model that exists and ``overwrite`` was not given."""
 
 
 @dataclass(frozen=True)
@@ -194,13 +191,10 @@ def imitate(
 ) -> Path:
     """Run DAgger (see the module docstring) and save the student as a PPO zip to ``out``.
 
-    Raises :class:`ImitationExistsError` before any work when ``out`` exists and ``overwrite``
-    is False.
+    Raises :class:`agents.train.TrainingExistsError` before any work when ``out`` exists and
+    ``overwrite`` is False.
     """
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise ImitationExistsError(f"out: {out} exists; pass overwrite=True (--overwrite) to "
-                                   "replace it")
+    out = new_model_path(out, overwrite)
     import torch
     from stable_baselines3 import PPO
 
@@ -275,7 +269,7 @@ def main(argv: list[str] | None = None) -> None:
         imitate(args.seed, args.out, args.iterations, args.steps, args.epochs,
                 net_arch=tuple(args.net_arch), overwrite=args.overwrite,
                 sector_deltas=args.sector_deltas, expert=args.expert)
-    except ImitationExistsError as error:
+    except TrainingExistsError as error:
         parser.error(str(error))
 
 

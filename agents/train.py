@@ -49,6 +49,18 @@ class TrainingExistsError(FileExistsError):
     """``--out`` names a model that exists and ``overwrite`` was not given."""
 
 
+def new_model_path(out: str | Path, overwrite: bool) -> Path:
+    """``out`` as a path, or :class:`TrainingExistsError` if a model is there and ``overwrite``
+    is False: checked before any work, so a run never replaces a model (the shipped one) by
+    accident."""
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise TrainingExistsError(
+            f"out: {out} exists; pass overwrite=True (--overwrite) to replace it"
+        )
+    return out
+
+
 def load_hyperparameters(path: Path = HYPERPARAMETERS) -> dict[str, Any]:
     """The ``DualLidar-v0`` entry of an rl-zoo3-style YAML file."""
     with open(path) as handle:
@@ -116,11 +128,7 @@ def train(
     Raises :class:`TrainingExistsError` before any training when ``out`` exists and
     ``overwrite`` is False, so a run never replaces the shipped model by accident.
     """
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise TrainingExistsError(
-            f"out: {out} exists; pass overwrite=True (--overwrite) to replace it"
-        )
+    out = new_model_path(out, overwrite)
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback

@@ -13,8 +13,9 @@ from lidar_env.errors import ConfigError
 
 pytest.importorskip("stable_baselines3", reason="the agents extra is not installed")
 
-from agents.imitate import ImitationExistsError, imitate  # noqa: E402
+from agents.imitate import imitate  # noqa: E402
 from agents.sb3_driver import SB3Driver  # noqa: E402
+from agents.train import TrainingExistsError  # noqa: E402
 
 
 def _weights(path):
@@ -44,7 +45,7 @@ def test_a_short_run_is_reproducible_and_drives_as_the_sb3_driver(tmp_path):
 def test_an_existing_model_is_refused_before_any_work(tmp_path):
     out = tmp_path / "model.zip"
     out.write_bytes(b"keep me")
-    with pytest.raises(ImitationExistsError, match="--overwrite"):
+    with pytest.raises(TrainingExistsError, match="--overwrite"):
         imitate(out=out, iterations=1, steps=10)
     assert out.read_bytes() == b"keep me"
     with pytest.raises(ConfigError, match="expert: expected one of backing, braking"):
