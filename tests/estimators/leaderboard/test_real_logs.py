@@ -13,7 +13,7 @@ import pytest
 from estimators.leaderboard import cli as leaderboard
 from estimators.leaderboard import real_logs
 from estimators.leaderboard.real_logs import RealLog, real_logs_from, user_log
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ConfigError, LogFormatError
 
 pytest.importorskip("rosbags")
 
@@ -113,3 +113,12 @@ def test_a_bag_without_truth_or_relations_is_refused_before_any_run(
     assert exit_info.value.code == 2
     assert "/no_such_topic" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_topics_choose_and_order_the_bag_lidars(bag: Path) -> None:
+    log, = real_logs_from(options(real_log=bag, truth_topic=TRUTH_TOPIC,
+                                  topics=["/lidar_2/scan"]), Path("/nonexistent"), 1000)
+    assert log.n_lidars == 1 and log.load().topics == ("/lidar_2/scan",)
+    with pytest.raises(LogFormatError, match="/no_such/scan"):
+        real_logs_from(options(real_log=bag, truth_topic=TRUTH_TOPIC, topics=["/no_such/scan"]),
+                       Path("/nonexistent"), 1000)
