@@ -291,7 +291,7 @@ class LidarLayout:
     Args:
         lidars: 1 or more :class:`LidarConfig` (their mounts are used by the env).
         noise_std, dropout_prob: ``(K,)`` noise [m] and dropout probability per Lidar (the
-            config's per-Lidar values resolved against its env-wide defaults).
+            env passes each LidarConfig's ``range_noise_std`` and ``dropout_prob``).
         car_size: ``(length, width)`` [m] of the car's rectangle, needed when a Lidar has
             ``self_occlusion``.
     """
