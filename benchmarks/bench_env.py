@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.utils.performance import benchmark_step
 
-import lidar_env  # noqa: F401 - registers DualLidar-v0
+import lidar_env  # registers DualLidar-v0
 from lidar_env.lidar import cast_rays
 from lidar_env.worlds import WORLD_NAMES
 
@@ -141,7 +141,8 @@ def main() -> None:
                   "   (a new world at every reset)")
             continue
         clean_wall, clean_cpu = rates(
-            partial(gym.make, "DualLidar-v0", world=world, config={"range_noise_std": 0.0}),
+            partial(gym.make, "DualLidar-v0", world=world,
+                    config={"lidars": lidar_env.lidars_with_noise(range_noise_std=0.0)}),
             args.seconds,
         )
         print(f"{world:<16}{wall:>10,.0f}{clean_wall:>11,.0f}{wall / wall_ref:>9.2f}"

@@ -23,6 +23,7 @@ import os
 import platform
 import time
 from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +36,7 @@ from estimators.leaderboard.matrix import DEFAULT_NOISE
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
 from estimators.paths import SHARED_DATA
+from lidar_env import lidars_with_noise
 from lidar_env.errors import EstimatorInputError
 
 REFERENCE = "icp"
@@ -66,7 +68,7 @@ def simulated(spec: str, max_episode_time: float | None = None) -> Data:
     """Record a leaderboard scenario ``world:trace:seed`` (cut after ``max_episode_time`` [s]
     of driving when given)."""
     world, trace, seed = spec.split(":")
-    config: dict[str, float] = {"range_noise_std": DEFAULT_NOISE}
+    config: dict[str, Any] = {"lidars": lidars_with_noise(range_noise_std=DEFAULT_NOISE)}
     if max_episode_time is not None:
         config["max_episode_time"] = max_episode_time
     dataset = record(Scenario(world, trace, int(seed), config=config))

@@ -49,6 +49,7 @@ from estimators.paths import SHARED_DATA
 from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.solver import optimize
+from lidar_env import lidars_with_noise
 from lidar_env.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"
@@ -183,7 +184,8 @@ def bench_sim(params: dict[str, Any], traces: list[str], seeds: list[int], draws
     for trace in traces:
         for seed in seeds:
             for world in WORLDS:
-                config = {} if noise is None else {"range_noise_std": noise}
+                config = {} if noise is None else {
+                    "lidars": lidars_with_noise(range_noise_std=noise)}
                 env = gym.make("DualLidar-v0", world=world, trace=trace, config=config)
                 obs, info = env.reset(seed=seed)
                 driver = PurePursuitDriver()

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import estimators
-import lidar_env  # noqa: F401  (registers DualLidar-v0)
+import lidar_env  # registers DualLidar-v0
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
@@ -61,12 +61,13 @@ def record(
 ) -> Recording:
     """Drive ``trace`` in ``world`` with pure pursuit at ``speed`` [m/s], ``noise`` [m] of range
     noise (1 sigma), and the env's ``lidars`` layout if given; keep scans and ground truth."""
-    layout = {} if lidars is None else {"lidars": lidars}
+    layout = None if lidars is None else {"lidars": lidars}
     env = gym.make(
         "DualLidar-v0",
         world=world,
         trace=trace,
-        config={"scan_frame": "sensor", "range_noise_std": noise, **layout},
+        config={"scan_frame": "sensor",
+                "lidars": lidar_env.lidars_with_noise(layout, range_noise_std=noise)},
     )
     driver = PurePursuitDriver(speed=speed)
     observation, info = env.reset(seed=seed)

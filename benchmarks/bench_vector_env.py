@@ -29,14 +29,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import lidar_env  # noqa: F401 - registers DualLidar-v0
+import lidar_env  # registers DualLidar-v0
 
 TARGET_STEPS_PER_SECOND = 200_000
 TARGET_RATIO = 5.0
 #: Noiseless Lidars of 8 beams: what is left of a step without draws and with few rays.
-FEW_BEAMS = {"range_noise_std": 0.0,
-             "lidars": [{"mount": (0.25, 0.0, 0.0), "n_beams": 8},
-                        {"mount": (-0.25, 0.0, 0.0), "n_beams": 8}]}
+FEW_BEAMS = {"lidars": [{"mount": (0.25, 0.0, 0.0), "n_beams": 8, "range_noise_std": 0.0},
+                        {"mount": (-0.25, 0.0, 0.0), "n_beams": 8, "range_noise_std": 0.0}]}
+#: The default Lidars without range noise.
+NOISELESS = {"lidars": lidar_env.lidars_with_noise(range_noise_std=0.0)}
 
 
 def make(mode: str, num_envs: int, config: dict[str, Any] | None = None) -> gym.vector.VectorEnv:
@@ -108,8 +109,7 @@ def main(argv: list[str] | None = None) -> None:
         rates[n], ratios[n] = batched, batched / sync
         print(f"{n:>5} {batched:>16,.0f} {sync:>13,.0f} {batched / sync:>5.1f}x")
     n = max(args.sizes)
-    noiseless = cpu_steps_per_second(make("vector_entry_point", n, {"range_noise_std": 0.0}),
-                                     args.seconds)
+    noiseless = cpu_steps_per_second(make("vector_entry_point", n, NOISELESS), args.seconds)
     few_env = make("vector_entry_point", n, FEW_BEAMS)
     few = cpu_steps_per_second(few_env, args.seconds)
     few_scan = scan_microseconds(few_env.unwrapped, args.seconds)

@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 import estimators
-import lidar_env  # noqa: F401  (registers DualLidar-v0)
+import lidar_env  # registers DualLidar-v0
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
@@ -51,7 +51,8 @@ def record_episode(world: str, trace: str, scan_frame: str, seed: int) -> tuple:
         "DualLidar-v0",
         world=world,
         trace=trace,
-        config={"range_noise_std": RANGE_NOISE, "scan_frame": scan_frame},
+        config={"lidars": lidar_env.lidars_with_noise(range_noise_std=RANGE_NOISE),
+                "scan_frame": scan_frame},
     )
     driver = PurePursuitDriver()
     observation, info = env.reset(seed=seed)

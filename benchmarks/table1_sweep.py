@@ -41,6 +41,7 @@ from estimators.leaderboard.records import Scenario, TraceRecord, package_versio
 from estimators.leaderboard.runner import SideRun, run_matrix
 from estimators.leaderboard.tables import current_records
 from estimators.leaderboard.tasks import EstimatorSpec
+from lidar_env import lidars_with_noise
 from lidar_env.feature_worlds import feature_world_name
 
 #: The two closed areas of Table I (the open area has its features already).
@@ -59,7 +60,8 @@ def sweep_scenarios(densities: Sequence[float], seeds: Sequence[int],
                     areas: Sequence[str] = AREAS) -> list[Scenario]:
     """Every (area, density, seed, scan frame) scenario; the features are placed from the seed."""
     return [Scenario(feature_world_name(area, density, seed), TRACE, seed,
-                     {"range_noise_std": DEFAULT_NOISE, "scan_frame": frame}, PAPER_DRIVER)
+                     {"lidars": lidars_with_noise(range_noise_std=DEFAULT_NOISE),
+                      "scan_frame": frame}, PAPER_DRIVER)
             for area in areas for density in densities for seed in seeds
             for frame in TABLE_I_FRAMES]
 

@@ -7,7 +7,7 @@ world, built-in or the user's own (a World, an image, a ROS map_server map).
 
 import gymnasium
 
-from lidar_env.config import EnvConfig
+from lidar_env.config import EnvConfig, lidars_with_noise
 from lidar_env.env import DualLidarEnv
 from lidar_env.lidar_config import LidarConfig
 from lidar_env.ros_map import save_ros_map
@@ -27,6 +27,7 @@ __all__ = [
     "LidarConfig",
     "Trace",
     "World",
+    "lidars_with_noise",
     "make_trace",
     "make_world",
     "save_ros_map",

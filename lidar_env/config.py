@@ -1,7 +1,9 @@
 """One typed, validated configuration for ``DualLidar-v0``.
 
 Units are in the field comments. ``EnvConfig.from_dict`` and ``EnvConfig.replace`` reject
-unknown keys by name, so a typo never silently falls back to a default.
+unknown keys by name, so a typo never silently falls back to a default. Each Lidar carries its
+own range noise and dropout; :func:`lidars_with_noise` gives a layout (the default one or a
+config's) with the same noise on every Lidar.
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ MAX_MOVER_SPEED = 10.0
 
 #: Keys of earlier versions, now set per Lidar in ``lidars``.
 MOVED_TO_LIDARS: tuple[str, ...] = ("lidar_mounts", "n_beams", "max_range")
+#: Keys of earlier versions that set every Lidar's noise, now set per Lidar too.
+NOISE_KEYS: tuple[str, ...] = ("range_noise_std", "dropout_prob")
 
 
 def _default_lidars() -> tuple[LidarConfig, ...]:
@@ -54,8 +58,9 @@ class EnvConfig:
           ``lidars`` holds 1 to 8 Lidars, each a :class:`~lidar_env.lidar_config.LidarConfig` or
           a dict ``{"mount": (x, y, heading), "n_beams", "fov", "max_range",
           "range_noise_std", "dropout_prob"}``; mounts lie within the car's half-diagonal.
-        * ``range_noise_std`` 0.01 m: the typical 1 sigma of a cheap time-of-flight Lidar; it and
-          ``dropout_prob`` apply to every Lidar that does not set its own.
+        * each Lidar's ``range_noise_std`` 0.01 m (the typical 1 sigma of a cheap time-of-flight
+          Lidar) and ``dropout_prob`` 0 are its own; :func:`lidars_with_noise` sets them on
+          every Lidar of a layout at once.
         * ``moving_obstacles`` 0: no movers, so every result without them stays as it was. Movers
           (:mod:`lidar_env.movers`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
           person's shoulders) walking at a speed drawn from ``mover_speed_range`` 0.5-1.5 m/s
@@ -74,8 +79,6 @@ class EnvConfig:
     car_width: float = 0.5  # [m] along the car's y (left) axis
     # lidar_1 .. lidar_K: mount (x [m] forward, y [m] left, heading [rad]), beams, fov, range
     lidars: tuple[LidarConfig, ...] = field(default_factory=_default_lidars)
-    range_noise_std: float = 0.01  # [m] std of the Gaussian noise added to each hit
-    dropout_prob: float = 0.0  # [-] probability that a beam reads max_range regardless
     scan_frame: str = "sensor"  # "sensor": beam 0 along the sensor's forward axis; "world": +x
     max_episode_time: float = 120.0  # [s] truncation time limit
     collision_penalty: float = 10.0  # [-] subtracted from the reward on the colliding step
@@ -105,7 +108,6 @@ class EnvConfig:
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{name}: expected a positive finite number, got {value!r}")
         non_negative = {
-            "range_noise_std": self.range_noise_std,
             "collision_penalty": self.collision_penalty,
             "cross_track_penalty": self.cross_track_penalty,
             "trace_margin": self.trace_margin,
@@ -117,10 +119,6 @@ class EnvConfig:
         for name, value, low in (("physics_substeps", self.physics_substeps, 1),):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise ConfigError(f"{name}: expected an integer >= {low}, got {value!r}")
-        if not isinstance(self.dropout_prob, (int, float)) or not 0 <= self.dropout_prob < 1:
-            raise ConfigError(
-                f"dropout_prob: expected a number in [0, 1), got {self.dropout_prob!r}"
-            )
         if self.scan_frame not in SCAN_FRAMES:
             raise ConfigError(
                 f"scan_frame: expected one of {', '.join(SCAN_FRAMES)}, got {self.scan_frame!r}"
@@ -156,6 +154,15 @@ class EnvConfig:
                 f"config key(s) {', '.join(map(repr, moved))} moved into 'lidars': expected "
                 "config={'lidars': [{'mount': (x, y, heading), 'n_beams': 360, 'fov': 2 pi, "
                 "'max_range': 10.0}, ...]}, one dict per Lidar")
+        noise = sorted(set(changes) & set(NOISE_KEYS))
+        if noise:
+            per_lidar = " and ".join(f"config['lidars'][k][{key!r}]" for key in noise)
+            keywords = ", ".join(f"{key}=..." for key in noise)
+            raise ConfigError(
+                f"config key(s) {', '.join(map(repr, noise))} moved into 'lidars': expected "
+                f"{per_lidar} per Lidar, or the same on every Lidar with config={{'lidars': "
+                f"lidar_env.lidars_with_noise(config, {keywords})}} (config: the rest of yours, "
+                "or None for the default two Lidars)")
         unknown = sorted(set(changes) - set(self.keys()))
         if unknown:
             raise ConfigError(
@@ -201,16 +208,6 @@ class EnvConfig:
                               f"expected per-Lidar access, config.lidars[k].{name}")
         return values.pop()
 
-    def noise_std(self, k: int) -> float:
-        """[m] range noise of Lidar ``k``: its own, else :attr:`range_noise_std`."""
-        own = self.lidars[k].range_noise_std
-        return self.range_noise_std if own is None else own
-
-    def dropout(self, k: int) -> float:
-        """Dropout probability of Lidar ``k``: its own, else :attr:`dropout_prob`."""
-        own = self.lidars[k].dropout_prob
-        return self.dropout_prob if own is None else own
-
     @property
     def car_half_diagonal(self) -> float:
         """[m] radius of the circle around the car's centre that holds the whole car body."""
@@ -220,6 +217,43 @@ class EnvConfig:
     def trace_clearance(self) -> float:
         """[m] clearance every trace waypoint keeps from obstacles: half-diagonal + margin."""
         return self.car_half_diagonal + self.trace_margin
+
+
+def lidars_with_noise(
+    config: EnvConfig | Mapping[str, Any] | None = None,
+    *,
+    range_noise_std: float | None = None,
+    dropout_prob: float | None = None,
+) -> list[dict[str, Any]]:
+    """The Lidars of ``config`` (None: the default two) with the same noise on every one.
+
+    Args:
+        config: an :class:`EnvConfig` or a dict of its fields; only its ``lidars`` are used
+            (the default layout where it sets none).
+        range_noise_std: [m] std of the Gaussian noise on each hit, >= 0; None keeps each
+            Lidar's own (0.01 m unless set).
+        dropout_prob: probability in [0, 1) that a beam reads ``max_range``; None keeps each
+            Lidar's own (0 unless set).
+
+    Returns:
+        A new ``lidars`` list, one dict of :class:`~lidar_env.lidar_config.LidarConfig`'s
+        fields per Lidar, in ``config``'s order.
+
+    Example (every default Lidar noiseless, world-aligned scans)::
+
+        config = {"scan_frame": "world", "lidars": lidars_with_noise(range_noise_std=0.0)}
+        env = gym.make("DualLidar-v0", config=config)
+    """
+    if isinstance(config, EnvConfig):
+        lidars = config.lidars
+    elif config is None or isinstance(config, Mapping):
+        lidars = EnvConfig.from_dict(config).lidars
+    else:
+        raise ConfigError(f"config: expected an EnvConfig, a dict or None, "
+                          f"got {type(config).__name__}")
+    noise = {"range_noise_std": range_noise_std, "dropout_prob": dropout_prob}
+    changes = {name: value for name, value in noise.items() if value is not None}
+    return [dataclasses.replace(lidar, **changes).to_dict() for lidar in lidars]
 
 
 def _speed_range(value: Any) -> tuple[float, float]:

@@ -81,11 +81,12 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     270-degree Lidar's beam 0 points at -135 degrees and its last beam at +135 degrees. Each
     value is the range [m] from that sensor's centre to the first obstacle along the beam, in
     [0, max_range]. A beam that hits nothing within ``max_range`` (or drops out, probability
-    ``dropout_prob``) reads exactly ``max_range``. Hits carry Gaussian noise of std
-    ``range_noise_std`` (0.01 m), clipped to [0, max_range). (*) With ``scan_frame="world"``
-    the beam angles are measured from world +x instead (the paper's simplification, as if the
-    heading were known); the ranges are then cast exactly along those world directions, not
-    interpolated from a sensor-frame scan.
+    the Lidar's ``dropout_prob``, 0 by default) reads exactly ``max_range``. Hits carry
+    Gaussian noise of std the Lidar's ``range_noise_std`` (0.01 m by default;
+    :func:`lidar_env.lidars_with_noise` sets both on every Lidar), clipped to [0, max_range).
+    (*) With ``scan_frame="world"`` the beam angles are measured from world +x instead (the
+    paper's simplification, as if the heading were known); the ranges are then cast exactly
+    along those world directions, not interpolated from a sensor-frame scan.
 
     ## Rewards
 
@@ -148,7 +149,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     |             |                  | (right_turn, zigzag, zigzag, zigzag; straight in a user  |
     |             |                  | world); or a route: (N, 2) waypoints [m] or a Trace,     |
     |             |                  | checked for clearance and rounded (lidar_env.user_traces)|
-    | config      | None             | an :class:`EnvConfig` or a dict of its fields            |
+    | config      | None             | an :class:`EnvConfig` or a dict of its fields; each      |
+    |             |                  | Lidar's noise is set in ``config["lidars"]``             |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
 
     ``reset(seed=..., options={"world": ..., "trace": ..., "start": (x, y, heading)})``
@@ -199,8 +201,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
             for key, lidar in zip(self.lidar_keys, cfg.lidars, strict=True)
         })
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.lidar = LidarLayout(cfg.lidars, [cfg.noise_std(k) for k in range(cfg.n_lidars)],
-                                 [cfg.dropout(k) for k in range(cfg.n_lidars)],
+        self.lidar = LidarLayout(cfg.lidars, [lidar.range_noise_std for lidar in cfg.lidars],
+                                 [lidar.dropout_prob for lidar in cfg.lidars],
                                  (cfg.car_length, cfg.car_width))
         self._mounts = cfg.mounts_array
         self._sensor_poses = np.zeros((cfg.n_lidars, 3))

@@ -92,6 +92,7 @@ from estimators.leaderboard.warmup import warm_up
 from estimators.leaderboard.workers import process_pool
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
+from lidar_env import lidars_with_noise
 from lidar_env.errors import DualLidarError
 
 DATA_DIR = SHARED_DATA / "radish"
@@ -312,9 +313,9 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
 
 def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
          specs: list[EstimatorSpec], start: float) -> int:
-    config = {"range_noise_std": args.noise}
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, {**config, **dict(g.config)},
-                                   args.driver)
+    configs = {g.name: {**dict(g.config), "lidars": lidars_with_noise(
+        dict(g.config), range_noise_std=args.noise)} for g in groups}
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, configs[g.name], args.driver)
                           for seed in args.seeds]
                  for g in groups}
     logs = args.logs

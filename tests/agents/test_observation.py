@@ -6,8 +6,10 @@ import pytest
 
 import lidar_env  # noqa: F401
 from agents.observation import TraceFollowingObservation
+from lidar_env import lidars_with_noise
 
-MOVERS = {"moving_obstacles": 10, "range_noise_std": 0.0}
+NOISELESS = {"lidars": lidars_with_noise(range_noise_std=0.0)}
+MOVERS = {"moving_obstacles": 10, **NOISELESS}
 
 
 def wrapped(config: dict | None = None, world: str = "open_cylinders",
@@ -55,7 +57,7 @@ def test_a_reset_starts_the_deltas_afresh() -> None:
 
 
 def test_a_stationary_car_among_static_obstacles_sees_no_motion() -> None:
-    view = wrapped({"range_noise_std": 0.0}, sector_deltas=True)
+    view = wrapped(NOISELESS, sector_deltas=True)
     view.reset(seed=0)
     for _ in range(5):
         observation, *_ = view.step(np.zeros(2, np.float32))

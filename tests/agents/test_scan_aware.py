@@ -10,6 +10,7 @@ import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.driver import make_driver
 from agents.evaluate import drive_episode
 from agents.scan_aware import ScanAwareDriver
+from lidar_env import lidars_with_noise
 
 
 def test_free_arc_is_the_arc_length_from_the_nose_to_the_first_return_in_the_corridor():
@@ -29,7 +30,7 @@ def test_free_arc_is_the_arc_length_from_the_nose_to_the_first_return_in_the_cor
 
 def test_scan_points_put_each_return_in_the_car_frame_from_its_mount():
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight",
-                   config={"range_noise_std": 0.0})
+                   config={"lidars": lidars_with_noise(range_noise_std=0.0)})
     observation, info = env.reset(seed=0)
     driver = ScanAwareDriver()
     driver.reset(env)

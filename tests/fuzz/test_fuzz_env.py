@@ -29,10 +29,8 @@ def finite_step(env, action) -> None:
         assert np.all(np.isfinite(scan)), key
 
 
-@settings(max_examples=scaled(15))
-@example(config={"car_length": 3.0})
-@given(config=st.dictionaries(st.sampled_from(KEYS), values, max_size=2))
-def test_env_configs_are_named_or_step_finitely(config):
+def named_or_steps_finitely(config) -> None:
+    """``config`` is refused by name, or the env it makes resets and steps finitely."""
     env = named_or_result(lambda: gym.make("DualLidar-v0", world="hallway", config=config))
     if env is None:
         return
@@ -41,6 +39,22 @@ def test_env_configs_are_named_or_step_finitely(config):
     for _ in range(3):
         if named_or_result(lambda: finite_step(env, np.array([1.0, 0.3]))) is None:
             return
+
+
+@settings(max_examples=scaled(15))
+@example(config={"car_length": 3.0})
+@given(config=st.dictionaries(st.sampled_from(KEYS), values, max_size=2))
+def test_env_configs_are_named_or_step_finitely(config):
+    named_or_steps_finitely(config)
+
+
+@settings(max_examples=scaled(15))
+@example(noise={"range_noise_std": 1e300, "dropout_prob": 0.999})
+@given(noise=st.dictionaries(st.sampled_from(["range_noise_std", "dropout_prob"]), values,
+                             max_size=2))
+def test_per_lidar_noise_is_named_or_steps_finitely(noise):
+    named_or_steps_finitely({"lidars": [{"mount": (0.25, 0.0, 0.0), **noise},
+                                        {"mount": (-0.25, 0.0, 0.0)}]})
 
 
 actions = st.one_of(

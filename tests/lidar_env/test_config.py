@@ -25,10 +25,10 @@ def test_from_dict_round_trips_and_replace_keeps_the_original():
               {"mount": (-0.3, 0, 0), "max_range": 8.0, "fov": np.pi, "range_noise_std": 0.0}]
     config = EnvConfig.from_dict({"lidars": lidars})
     assert EnvConfig.from_dict(config.to_dict()) == config
-    changed = config.replace(range_noise_std=0.0)
-    assert changed.range_noise_std == 0.0 and config.range_noise_std == 0.01
+    changed = config.replace(scan_frame="world")
+    assert changed.scan_frame == "world" and config.scan_frame == "sensor"
     assert changed.lidar_mounts == ((0.3, 0.1, 0.0), (-0.3, 0.0, 0.0))
-    assert config.noise_std(0) == 0.01 and config.noise_std(1) == 0.0  # own value wins
+    assert [lidar.range_noise_std for lidar in config.lidars] == [0.01, 0.0]  # default, own
     assert config.max_range == 8.0 and config.lidars[1].fov == pytest.approx(np.pi)
 
 
@@ -46,8 +46,6 @@ def test_unknown_keys_are_named_with_the_valid_ones():
         ("control_dt", float("nan"), "control_dt: expected a positive finite number"),
         ("physics_substeps", 0, r"physics_substeps: expected an integer >= 1, got 0"),
         ("physics_substeps", 2.5, r"physics_substeps: expected an integer >= 1, got 2.5"),
-        ("range_noise_std", -0.1, r"range_noise_std: expected a finite number >= 0"),
-        ("dropout_prob", 1.0, r"dropout_prob: expected a number in \[0, 1\), got 1.0"),
         ("scan_frame", "car", "scan_frame: expected one of sensor, world, got 'car'"),
         ("lidars", [], r"lidars: expected 1 to 8 Lidars, got 0"),
         ("lidars", [{"mount": (0, 0, 0)}] * 9, r"lidars: expected 1 to 8 Lidars, got 9"),
@@ -62,7 +60,12 @@ def test_unknown_keys_are_named_with_the_valid_ones():
         ("lidars", [{"mount": (0, np.inf, 0)}], r"lidars\[0\].mount: expected 3 finite numbers"),
         ("lidars", [{"mount": (0, 0)}], r"lidars\[0\].mount: expected 3 finite numbers"),
         ("lidars", [{"mount": (2.0, 0, 0)}], r"lidars\[0\].mount: \(2, 0\) lies 2.000 m .*reach"),
-        ("lidars", [{"mount": (0, 0, 0), "dropout_prob": 1.0}], r"lidars\[0\].dropout_prob"),
+        ("lidars", [{"mount": (0, 0, 0), "dropout_prob": 1.0}],
+         r"lidars\[0\].dropout_prob: expected a number in \[0, 1\), got 1.0"),
+        ("lidars", [{"mount": (0, 0, 0)}, {"mount": (0, 0, 0), "range_noise_std": -0.1}],
+         r"lidars\[1\].range_noise_std: expected a finite number >= 0 \[m\], got -0.1"),
+        ("lidars", [{"mount": (0, 0, 0), "range_noise_std": None}],
+         r"lidars\[0\].range_noise_std: expected a finite number >= 0 \[m\], got None"),
         ("lidar_mounts", [[0, 0, 0]], r"'lidar_mounts' moved into 'lidars'"),
         ("n_beams", 90, r"'n_beams' moved into 'lidars'"),
         ("max_range", 8.0, r"'max_range' moved into 'lidars'"),

@@ -15,12 +15,12 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from lidar_env import se2
+from lidar_env import lidars_with_noise, se2
 from lidar_env.car import Car
 from lidar_env.scenes import StartPoseError
 from lidar_env.worlds import WORLD_NAMES, make_world
 
-NOISELESS = {"range_noise_std": 0.0}
+NOISELESS = {"lidars": lidars_with_noise(range_noise_std=0.0)}
 
 
 @pytest.mark.parametrize("world", WORLD_NAMES)
@@ -50,7 +50,7 @@ def _rollout(env, seed, steps=60):
     return np.concatenate([np.asarray(r, dtype=np.float64).ravel() for r in record])
 
 
-NOISY = {"range_noise_std": 0.05, "dropout_prob": 0.1}
+NOISY = {"lidars": lidars_with_noise(range_noise_std=0.05, dropout_prob=0.1)}
 
 
 @pytest.mark.parametrize("trace", [None, "loop", "out_and_back"])

@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from lidar_env import se2
+from lidar_env import lidars_with_noise, se2
 from lidar_env.lidar import Lidar, pymunk_cast_rays
 from lidar_env.lidar_config import LidarConfig
 from lidar_env.lidar_layout import LidarLayout
@@ -94,7 +94,7 @@ def _rollout(env, seed, steps=30):
 
 @pytest.mark.parametrize("lidars", [ONE, THREE, CORNERS], ids=["K=1", "K=3", "corners"])
 def test_env_checks_determinism_and_pickle_for_other_layouts(lidars):
-    config = {"lidars": lidars, "dropout_prob": 0.05}
+    config = {"lidars": lidars_with_noise({"lidars": lidars}, dropout_prob=0.05)}
     env = gym.make("DualLidar-v0", world="closed_to_open", config=config)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

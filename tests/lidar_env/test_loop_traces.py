@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents import PurePursuitDriver
-from lidar_env import se2
+from lidar_env import lidars_with_noise, se2
 from lidar_env.trace_geometry import WAYPOINT_SPACING
 from lidar_env.traces import (
     LOOP_ASPECT,
@@ -120,7 +120,7 @@ def test_a_closed_trace_must_close():
 
 
 def test_the_env_counts_the_lap_not_the_distance_to_the_start():
-    config = {"range_noise_std": 0.0, "cross_track_penalty": 0.0}
+    config = {"lidars": lidars_with_noise(range_noise_std=0.0), "cross_track_penalty": 0.0}
     env = gym.make("DualLidar-v0", world="hallway", trace="loop", config=config)
     _, info = env.reset(seed=0)
     assert info["arc_position"] == 0.0

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
+from lidar_env import lidars_with_noise
 from lidar_env.car import Car, drive_arc, drive_arc_among_movers
 from lidar_env.errors import ConfigError
 from lidar_env.lidar import pymunk_cast_rays
@@ -25,7 +26,7 @@ from lidar_env.lidar_layout import LidarLayout
 from lidar_env.rendering import MOVER_COLOUR
 from lidar_env.world import World
 
-NOISELESS = {"range_noise_std": 0.0}
+NOISELESS = {"lidars": lidars_with_noise(range_noise_std=0.0)}
 
 
 def _crowd_env(world, movers, seed=0, **config):
@@ -78,7 +79,7 @@ def test_movers_never_overlap_walls_obstacles_or_each_other_over_a_long_rollout(
 def test_same_seed_gives_the_same_crowd_and_scans_bit_for_bit_other_seeds_differ():
     def rollout(seed):
         env, observation, info = _crowd_env("open_cylinders", 15, seed=seed,
-                                            range_noise_std=0.02)
+                                            lidars=lidars_with_noise(range_noise_std=0.02))
         record = [observation["lidar_1"], info["moving_obstacles"]]
         for _ in range(80):
             observation, reward, terminated, truncated, info = env.step(
@@ -97,7 +98,8 @@ def test_same_seed_gives_the_same_crowd_and_scans_bit_for_bit_other_seeds_differ
 def _mover_rollout(seed, steps=60):
     """Scans, poses and movers of a seeded random-action drive among 10 movers."""
     env = gym.make("DualLidar-v0", world="random",
-                   config={"moving_obstacles": 10, "range_noise_std": 0.05, "dropout_prob": 0.1})
+                   config={"moving_obstacles": 10,
+                           "lidars": lidars_with_noise(range_noise_std=0.05, dropout_prob=0.1)})
     observation, info = env.reset(seed=seed)
     env.action_space.seed(seed)
     record = [observation["lidar_1"], info["moving_obstacles"]]
@@ -110,7 +112,8 @@ def _mover_rollout(seed, steps=60):
 
 
 def test_crowd_is_bit_identical_across_processes():
-    script = ("import gymnasium as gym, numpy as np, sys\n" + inspect.getsource(_mover_rollout)
+    script = ("import gymnasium as gym, numpy as np, sys\n"
+              "from lidar_env import lidars_with_noise\n" + inspect.getsource(_mover_rollout)
               + "sys.stdout.write(_mover_rollout(4).tobytes().hex())\n")
     result = subprocess.run([sys.executable, "-c", "import lidar_env\n" + script],
                             capture_output=True, text=True, check=True, timeout=300)
@@ -118,7 +121,7 @@ def test_crowd_is_bit_identical_across_processes():
 
 
 def test_pickled_env_with_movers_continues_identically():
-    env, _, _ = _crowd_env("hallway", 8, seed=2, range_noise_std=0.03)
+    env, _, _ = _crowd_env("hallway", 8, seed=2, lidars=lidars_with_noise(range_noise_std=0.03))
     for _ in range(20):
         env.step(np.array([0.6, 0.1], dtype=np.float32))
     env.unwrapped.space  # noqa: B018 - a built space with mover bodies must not break pickling

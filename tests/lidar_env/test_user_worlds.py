@@ -11,6 +11,7 @@ from gymnasium.utils.env_checker import check_env
 from PIL import Image
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
+from lidar_env import lidars_with_noise
 from lidar_env.errors import ConfigError
 from lidar_env.ros_map import save_ros_map
 from lidar_env.scenes import StartPoseError
@@ -47,7 +48,8 @@ def _rollout(env, seed, steps=25):
 @pytest.mark.parametrize("kind", ["array", "ros_map"])
 def test_env_checks_on_user_worlds(kind, tmp_path):
     world = room() if kind == "array" else ros_room(tmp_path)
-    env = gym.make("DualLidar-v0", world=world, config={"dropout_prob": 0.05})
+    env = gym.make("DualLidar-v0", world=world,
+                   config={"lidars": lidars_with_noise(dropout_prob=0.05)})
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env.unwrapped, skip_render_check=True)
@@ -70,7 +72,8 @@ def test_every_world_form_gives_the_same_map(tmp_path):
     world = World.from_image(room(), 0.05)
     poses = []
     for value in (world, room(), str(tmp_path / "room.png"), tmp_path / "room.png"):
-        env = gym.make("DualLidar-v0", world=value, config={"range_noise_std": 0.0})
+        env = gym.make("DualLidar-v0", world=value,
+                       config={"lidars": lidars_with_noise(range_noise_std=0.0)})
         observation, info = env.reset(seed=0)
         poses.append(info["pose"])
         np.testing.assert_allclose(env.unwrapped.world.bounds, (0, 0, 16, 10))

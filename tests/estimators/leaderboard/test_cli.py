@@ -17,6 +17,7 @@ from estimators.leaderboard.records import Scenario, TraceDataset, TraceRecord
 from estimators.leaderboard.tasks import EstimatorSpec
 from estimators.paths import SHARED_DATA
 from estimators.registry import make, names
+from lidar_env import lidars_with_noise
 
 DATA = SHARED_DATA / "radish"
 TINY = ["--worlds", "open_cylinders", "--traces", "right_turn", "--seeds", "3",
@@ -248,7 +249,8 @@ def test_two_lidar_estimators_show_na_on_a_one_lidar_log_and_are_no_failures(
 
 def test_table_one_scenarios_add_world_aligned_copies_for_the_paper_estimators() -> None:
     groups = matrix.build_groups(None, None)
-    scenarios = {g.name: [Scenario(g.world, g.trace, seed, {"range_noise_std": 0.01}, "sb3")
+    config = {"lidars": lidars_with_noise(range_noise_std=0.01)}
+    scenarios = {g.name: [Scenario(g.world, g.trace, seed, config, "sb3")
                           for seed in (0, 1)] for g in groups}
     runs = matrix.table_one_scenarios(groups, scenarios, [EstimatorSpec("pc_pg")])
     cases = {(c.world, c.trace) for c in matrix.TABLE_I}

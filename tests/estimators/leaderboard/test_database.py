@@ -26,8 +26,9 @@ from estimators.leaderboard.schema import (
     NotADatabaseError,
     SchemaVersionError,
 )
+from lidar_env import lidars_with_noise
 
-SCENARIO = Scenario("hallway", "zigzag", 3, {"range_noise_std": 0.01})
+SCENARIO = Scenario("hallway", "zigzag", 3, {"lidars": lidars_with_noise(range_noise_std=0.01)})
 
 
 def synthetic_dataset(rng: np.random.Generator, n_steps: int = 40) -> SensorDataset:
@@ -41,7 +42,7 @@ def synthetic_dataset(rng: np.random.Generator, n_steps: int = 40) -> SensorData
                for key in setup.keys},
         poses=rng.normal(size=(n_steps, 3)),
         lidar_poses=rng.normal(size=(n_steps, 2, 3)),
-        env_config={"range_noise_std": 0.01, "lidar_mounts": [[0.25, 0, 0], [-0.25, 0, 0]]},
+        env_config={"lidars": lidars_with_noise(range_noise_std=0.01)},
         world={"name": "box", "circles": [[1.0, 2.0, 0.5]], "walls": [], "polygons": [],
                "bounds": [0.0, 0.0, 5.0, 5.0]},
     )

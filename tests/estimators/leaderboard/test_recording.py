@@ -22,11 +22,12 @@ from estimators.leaderboard.recording import (
     world_from_geometry,
 )
 from estimators.leaderboard.records import Scenario
+from lidar_env import lidars_with_noise
 from lidar_env.se2 import compose
 
 # 6 s of driving keeps the test short; the env truncates the episode there.
 SCENARIO = Scenario("open_cylinders", "right_turn", 7,
-                    {"range_noise_std": 0.01, "max_episode_time": 6.0})
+                    {"lidars": lidars_with_noise(range_noise_std=0.01), "max_episode_time": 6.0})
 
 
 def online_metrics(estimator: str) -> tuple[dict[str, float], np.ndarray]:

@@ -23,9 +23,10 @@ from estimators.leaderboard.runner import (
     run_scenarios,
 )
 from estimators.leaderboard.tasks import EstimatorSpec
+from lidar_env import lidars_with_noise
 
 # Short episodes (4 s of driving, 41 observations) keep the test quick.
-SHORT = {"range_noise_std": 0.01, "max_episode_time": 4.0}
+SHORT = {"lidars": lidars_with_noise(range_noise_std=0.01), "max_episode_time": 4.0}
 SCENARIOS = [Scenario(world, trace, seed, SHORT)
              for world, trace in (("open_cylinders", "right_turn"), ("hallway", "zigzag"))
              for seed in (0, 1, 2)]

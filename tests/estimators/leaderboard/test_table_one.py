@@ -11,11 +11,13 @@ from estimators.leaderboard import matrix
 from estimators.leaderboard.records import Scenario, TraceDataset, TraceRecord
 from estimators.leaderboard.table_one import table_one, table_one_markdown
 from estimators.leaderboard.tasks import EstimatorSpec
+from lidar_env import lidars_with_noise
 from lidar_env.feature_worlds import FEATURE_WORLDS, parse_world_name
 
 
 def _scenarios(groups):
-    return {g.name: [Scenario(g.world, g.trace, seed, {"range_noise_std": 0.01})
+    config = {"lidars": lidars_with_noise(range_noise_std=0.01)}
+    return {g.name: [Scenario(g.world, g.trace, seed, config)
                      for seed in (0, 1)] for g in groups}
 
 

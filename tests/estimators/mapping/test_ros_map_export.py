@@ -10,13 +10,15 @@ from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.mapping.occupancy import from_estimator_run
 from estimators.mapping.ros_map_export import save_grid_as_ros_map
+from lidar_env import lidars_with_noise
 from lidar_env.ros_map import read_ros_map
 from lidar_env.world import World
 
 
 def test_a_mapped_drive_saves_as_a_ros_map_that_drives_again(tmp_path):
     env = gym.make("DualLidar-v0", world="hallway", trace="straight",
-                   config={"range_noise_std": 0.0, "max_episode_time": 12.0})
+                   config={"lidars": lidars_with_noise(range_noise_std=0.0),
+                           "max_episode_time": 12.0})
     driver = PurePursuitDriver()
     observation, info = env.reset(seed=0)
     driver.reset(env)

@@ -13,6 +13,7 @@ from estimators.evaluation.metrics import evaluate
 from estimators.matching.curve_refinement import PRIOR_INFORMATION, CurveReference
 from estimators.matching.rotation_pc import RotationPhaseCorrelation, ScanMatcher
 from estimators.odometry.motion_prior import MIN_PREDICTION_SIGMA, prediction_information
+from lidar_env import lidars_with_noise
 from lidar_env.lidar import Lidar
 from lidar_env.se2 import compose, relative, wrap_angle
 from lidar_env.world import World
@@ -91,7 +92,8 @@ def test_curve_reference_has_zero_residual_on_a_sampled_circle() -> None:
 
 
 def drive(world: str, trace: str, steps: int, seed: int = 0):
-    env = gym.make("DualLidar-v0", world=world, trace=trace, config={"range_noise_std": 0.01})
+    env = gym.make("DualLidar-v0", world=world, trace=trace,
+                   config={"lidars": lidars_with_noise(range_noise_std=0.01)})
     driver = PurePursuitDriver()
     observation, info = env.reset(seed=seed)
     driver.reset(env)

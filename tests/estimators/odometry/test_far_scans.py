@@ -13,13 +13,15 @@ from agents.scripted import PurePursuitDriver
 from estimators import SensorSetup
 from estimators.odometry.far_scans import SearchWindow, far_apart, reach_window
 from estimators.odometry.local_map import LocalMapOdometry
+from lidar_env import lidars_with_noise
 from lidar_env.se2 import relative
 
 
 def drive(world: str, trace: str, seed: int, speed: float, steps: int):
     """Scans, times and true poses of a pure-pursuit drive at 10 Hz (1 cm noise)."""
     env = gym.make("DualLidar-v0", world=world, trace=trace,
-                   config={"scan_frame": "sensor", "range_noise_std": 0.01})
+                   config={"scan_frame": "sensor",
+                           "lidars": lidars_with_noise(range_noise_std=0.01)})
     driver = PurePursuitDriver(speed=speed)
     observation, info = env.reset(seed=seed)
     driver.reset(env)

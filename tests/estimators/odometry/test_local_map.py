@@ -17,6 +17,7 @@ from estimators.matching.scan_matching import (
     voxel_downsample,
 )
 from estimators.odometry.local_map import LocalMapOdometry
+from lidar_env import lidars_with_noise
 from lidar_env.lidar import Lidar
 from lidar_env.polygons import segment_distances
 from lidar_env.se2 import compose, relative, transform_points
@@ -35,7 +36,7 @@ def _distance_to_world(world, points: np.ndarray) -> np.ndarray:
 
 
 def test_both_lidars_merge_onto_the_world_through_their_mounts():
-    noiseless = {"range_noise_std": 0.0, "dropout_prob": 0.0}
+    noiseless = {"lidars": lidars_with_noise(range_noise_std=0.0, dropout_prob=0.0)}
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight", config=noiseless)
     observation, info = env.reset(seed=1)
     setup = SensorSetup.from_env(env)
@@ -59,7 +60,7 @@ CORNER_LIDARS = [
 
 
 def test_lidars_of_their_own_geometry_merge_onto_the_world():
-    config = {"range_noise_std": 0.0, "lidars": CORNER_LIDARS}
+    config = {"lidars": lidars_with_noise({"lidars": CORNER_LIDARS}, range_noise_std=0.0)}
     env = gym.make("DualLidar-v0", world="closed_to_open", config=config)
     observation, info = env.reset(seed=1)
     setup = SensorSetup.from_env(env)
@@ -78,7 +79,8 @@ def test_lidars_of_their_own_geometry_merge_onto_the_world():
 
 def test_lidar_odometry_tracks_a_car_with_two_270_degree_corner_lidars():
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
-                   config={"range_noise_std": 0.01, "lidars": CORNER_LIDARS[:2]})
+                   config={"lidars": lidars_with_noise({"lidars": CORNER_LIDARS[:2]},
+                                                       range_noise_std=0.01)})
     truth, estimator = _drive_with_odometry(env, max_steps=60)
     path = np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))
     end = relative(truth[-1], estimator.pose)
@@ -106,7 +108,8 @@ def _drive_with_odometry(env, max_steps: int | None = None):
 @pytest.mark.slow
 @pytest.mark.parametrize(("world", "trace"), [("open_cylinders", "right_turn")])
 def test_drift_on_the_simulated_car_stays_small(world: str, trace: str):
-    env = gym.make("DualLidar-v0", world=world, trace=trace, config={"range_noise_std": 0.01})
+    env = gym.make("DualLidar-v0", world=world, trace=trace,
+                   config={"lidars": lidars_with_noise(range_noise_std=0.01)})
     truth, estimator = _drive_with_odometry(env)
     travelled = np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))
     end = relative(truth[-1], estimator.pose)

@@ -19,6 +19,7 @@ from estimators.matching.scan_matching import scan_to_points, scans_to_car_point
 from estimators.slam.g2o import read_g2o
 from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.pose_graph import chain_covariance
+from lidar_env import lidars_with_noise
 from lidar_env.lidar import cast_rays
 from lidar_env.se2 import compose, inverse, relative, wrap_angle
 
@@ -195,7 +196,7 @@ def ate(estimate: np.ndarray, truth: np.ndarray) -> float:
 def run_slam_on_scenario(world: str, trace: str) -> tuple[GraphSlam, np.ndarray]:
     """``slam`` (default parameters) over one recorded leaderboard scenario (seed 0, 1 cm
     range noise); returns it and the true poses."""
-    dataset = record(Scenario(world, trace, 0, {"range_noise_std": 0.01}))
+    dataset = record(Scenario(world, trace, 0, {"lidars": lidars_with_noise(range_noise_std=0.01)}))
     slam = make("slam")
     assert isinstance(slam, GraphSlam)
     slam.reset(dataset.setup, dataset.poses[0])
@@ -235,7 +236,8 @@ def test_a_corridor_driven_out_and_back_is_closed_all_along_the_way_back() -> No
     # Ray-cast scans of the hallway drive, with a drifting odometry instead of the front end's
     # (whose drift depends on its version): 0.2 deg/m heading drift. (A scale error shared by
     # both legs is not observable here: the way back retraces the way out.)
-    dataset = record(Scenario("hallway", "out_and_back", 0, {"range_noise_std": 0.01}))
+    dataset = record(Scenario("hallway", "out_and_back", 0,
+                              {"lidars": lidars_with_noise(range_noise_std=0.01)}))
     truth = dataset.poses
     odometry = drifting_odometry(truth, scale=1.0, turn=0.2)
     slam = make("slam")

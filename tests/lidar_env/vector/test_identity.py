@@ -10,16 +10,18 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import lidar_env  # noqa: F401 - registers DualLidar-v0
+from lidar_env import lidars_with_noise  # importing lidar_env registers DualLidar-v0
 
 #: Short episodes, so 220 steps hold several time-limit ends besides the collisions.
 SHORT = {"max_episode_time": 6.0}
 
 THREE_LIDARS = {
-    **SHORT, "dropout_prob": 0.05, "scan_frame": "world",
-    "lidars": [{"mount": (0.3, 0.0, 0.0)},
-               {"mount": (-0.3, 0.1, 1.0), "n_beams": 100, "range_noise_std": 0.0},
-               {"mount": (0.0, -0.2, 3.0), "max_range": 4.0, "fov": 4.0, "n_beams": 61}],
+    **SHORT, "scan_frame": "world",
+    "lidars": lidars_with_noise({"lidars": [
+        {"mount": (0.3, 0.0, 0.0)},
+        {"mount": (-0.3, 0.1, 1.0), "n_beams": 100, "range_noise_std": 0.0},
+        {"mount": (0.0, -0.2, 3.0), "max_range": 4.0, "fov": 4.0, "n_beams": 61}]},
+        dropout_prob=0.05),
 }
 
 CASES = {
