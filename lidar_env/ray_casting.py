@@ -5,8 +5,9 @@ primitives: each one within ``max_range`` updates only the beams inside the angu
 subtends from the sensor, found by index arithmetic for uniformly spaced beams and by binary
 search otherwise. Every candidate beam then gets the exact ray-circle or ray-segment
 intersection, so the interval only has to be conservative (it is widened by
-:data:`_ANGLE_MARGIN`). Three culls keep the primitives a sensor touches few, none of which can
-change a range (each skips only primitives no beam can hit closer than it already reads):
+:data:`lidar_env.beam_wedge.ANGLE_MARGIN`). Four culls keep the primitives a sensor touches
+few, none of which can change a range (each skips only primitives no beam can hit closer than
+it already reads):
 
 - the grid cells (:class:`~lidar_env.primitive_grid.PrimitiveGrid`) visited are those over the
   bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
@@ -14,7 +15,10 @@ change a range (each skips only primitives no beam can hit closer than it alread
 - cells are visited in rings of growing distance from the sensor, and a cell (listing three
   or more primitives) whose every beam already ends nearer than the cell's nearest point is
   skipped with its primitives (on a map of thousands of edges, many cells behind the walls);
-- a cell or primitive wholly outside a narrow sensor's beam wedge is skipped before bearings.
+- a cell or primitive wholly outside a narrow sensor's beam wedge
+  (:mod:`lidar_env.beam_wedge`) is skipped before bearings;
+- a polygon edge whose filled side faces the sensor is skipped (back-face culling, with the
+  free sides from :func:`lidar_env.edge_facing.edge_facing`): about half of a traced map's.
 
 Units and frames: positions and ranges in metres, angles in radians, world frame; a sensor pose
 is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
@@ -31,21 +35,16 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from lidar_env.beam_wedge import ANGLE_MARGIN, beam_wedge, box_outside_wedge, outside_wedge
+from lidar_env.edge_facing import BACK_FACE_TOLERANCE
 from lidar_env.errors import ConfigError
 from lidar_env.primitive_grid import cell_block, odd_crossings, point_segment_distance2
 
-#: Extra angle [rad] each subtended interval is widened by. It covers the error of
-#: :func:`_bearing` (< 1.7e-6 rad) so no beam that grazes a primitive is dropped; the exact
-#: intersection test then decides the hit, so the margin costs only rare extra tests.
-_ANGLE_MARGIN = 1e-5
 #: Relative tolerance on the segment parameter so a beam through an end point still hits it.
 _ENDPOINT_TOLERANCE = 1e-12
-#: [m] how far outside a sensor's widened beam wedge a primitive must lie to be skipped.
-_WEDGE_TOLERANCE = 1e-9
 #: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
 _MIN_CULLED_ANGLE = 0.2
 _TWO_PI = 2.0 * math.pi
-_COS_MARGIN, _SIN_MARGIN = math.cos(_ANGLE_MARGIN), math.sin(_ANGLE_MARGIN)
 
 
 @njit(cache=True, fastmath=False)
@@ -99,8 +98,8 @@ def _beam_span(
 
     The second range is the part that wraps past 0 or 2 pi (empty when none does).
     """
-    a = lo - _ANGLE_MARGIN
-    b = lo + width + _ANGLE_MARGIN
+    a = lo - ANGLE_MARGIN
+    b = lo + width + ANGLE_MARGIN
     f0, l0 = _sorted_range(a, b, sorted_angles, step)
     if a < 0.0:
         f1, l1 = _sorted_range(a + _TWO_PI, _TWO_PI, sorted_angles, step)
@@ -230,47 +229,6 @@ def _cell_hidden(
 
 
 @njit(cache=True, fastmath=False)
-def _wedge(sorted_angles: NDArray[np.float64], order: NDArray[np.int64],
-           dir_x: NDArray[np.float64], dir_y: NDArray[np.float64]) -> tuple:
-    """The beams' angular interval widened by the margin, ``(width, ax, ay, bx, by)``: its
-    width [rad] and the unit vectors of its first and last edge (the first and last beam's
-    directions turned out by the margin, so no trigonometry)."""
-    first, last = order[0], order[-1]
-    c, s = _COS_MARGIN, _SIN_MARGIN
-    return (sorted_angles[-1] - sorted_angles[0] + 2.0 * _ANGLE_MARGIN,
-            c * dir_x[first] + s * dir_y[first], c * dir_y[first] - s * dir_x[first],
-            c * dir_x[last] - s * dir_y[last], c * dir_y[last] + s * dir_x[last])
-
-
-@njit(cache=True, fastmath=False)
-def _outside_wedge(wedge: tuple, px: float, py: float, qx: float, qy: float,
-                   r: float) -> bool:
-    """True when the segment p-q (relative to the sensor) thickened by ``r`` [m] lies wholly
-    outside the beam ``wedge`` (for a circle, p = q = its centre)."""
-    width, ax, ay, bx, by = wedge
-    tol = _WEDGE_TOLERANCE + r
-    left_of_first = max(ax * py - ay * px, ax * qy - ay * qx) < -tol
-    right_of_last = max(px * by - py * bx, qx * by - qy * bx) < -tol
-    if width <= math.pi:
-        return left_of_first or right_of_last
-    return left_of_first and right_of_last
-
-
-@njit(cache=True, fastmath=False)
-def _box_outside_wedge(wedge: tuple, x0: float, y0: float, x1: float, y1: float) -> bool:
-    """True when the box ``[x0, x1] x [y0, y1]`` (relative to the sensor) lies wholly outside
-    the beam ``wedge``: its four corners beyond the same edge line (both, for a wide wedge)."""
-    width, ax, ay, bx, by = wedge
-    left_of_first = right_of_last = True
-    for px, py in ((x0, y0), (x1, y0), (x0, y1), (x1, y1)):
-        left_of_first = left_of_first and ax * py - ay * px < -_WEDGE_TOLERANCE
-        right_of_last = right_of_last and px * by - py * bx < -_WEDGE_TOLERANCE
-    if width <= math.pi:
-        return left_of_first or right_of_last
-    return left_of_first and right_of_last
-
-
-@njit(cache=True, fastmath=False)
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
     cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
@@ -298,6 +256,7 @@ def cast_sensor(
     stamp: int,
     own: tuple,
     max_range: float,
+    facing: NDArray[np.int64],
 ) -> None:
     """Fill ``ranges`` (n,) with the exact ranges of one sensor at world ``pose``.
 
@@ -305,7 +264,8 @@ def cast_sensor(
     fields; ``own`` the sensor's beams from :func:`beam_directions` for ``pose``; ``seen``
     ``(circle_seen, segment_seen)``, int64 arrays as long as ``circles`` and ``segments``
     holding no value >= ``stamp`` (>= 1) and none <= ``-stamp``, so each sensor meets every
-    primitive once without clearing them.
+    primitive once without clearing them; ``facing`` :func:`lidar_env.edge_facing.edge_facing`'s
+    codes for the segments, or empty (then no edge is skipped as facing away).
     """
     ox, oy, heading = pose
     if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
@@ -317,8 +277,9 @@ def cast_sensor(
     ranges.fill(max_range)
     heading = heading % _TWO_PI
     sorted_angles, order, step, dir_x, dir_y = own
-    wedge = _wedge(sorted_angles, order, dir_x, dir_y)
+    wedge = beam_wedge(sorted_angles, order, dir_x, dir_y)
     cull = wedge[0] < _TWO_PI - _MIN_CULLED_ANGLE
+    culls_faces = facing.shape[0] > 0
     x0, y0, size, nx, ny, circle_start, circle_ids, segment_start, segment_ids = grid
     c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
                                         0.0, 1.0, 0.0), grid)
@@ -338,7 +299,7 @@ def cast_sensor(
                 if ring > 0 and listed > 2:  # the tests cost about what two primitives do
                     bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
                     bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
-                    if (cull and _box_outside_wedge(wedge, bx0, by0, bx1, by1)) or _cell_hidden(
+                    if (cull and box_outside_wedge(wedge, bx0, by0, bx1, by1)) or _cell_hidden(
                             ranges, ox, oy, heading, bx0 + ox, by0 + oy, bx1 + ox, by1 + oy,
                             sorted_angles, order, step, max_range):
                         continue
@@ -349,7 +310,7 @@ def cast_sensor(
                     circle_seen[i] = stamp
                     cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
                     if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
-                            cull and _outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
+                            cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
                         continue
                     if not sweep_circle(ranges, ox, oy, heading, cx, cy, r, sorted_angles, order,
                                         step, dir_x, dir_y, max_range):
@@ -360,7 +321,11 @@ def cast_sensor(
                         continue
                     segment_seen[i] = stamp
                     seg = segments[i]  # the segment's sweep (see sweep_circle)
-                    if cull and _outside_wedge(wedge, seg[0] - ox, seg[1] - oy, seg[2] - ox,
+                    if culls_faces and facing[i] != 0 and facing[i] * (
+                            (seg[2] - seg[0]) * (oy - seg[1]) - (seg[3] - seg[1]) * (ox - seg[0])
+                    ) < -BACK_FACE_TOLERANCE * (abs(seg[2] - seg[0]) + abs(seg[3] - seg[1])):
+                        continue  # the sensor is on its filled side: it faces away
+                    if cull and outside_wedge(wedge, seg[0] - ox, seg[1] - oy, seg[2] - ox,
                                                seg[3] - oy, 0.0):
                         continue
                     gap_x = max(min(seg[0], seg[2]) - ox, ox - max(seg[0], seg[2]))

@@ -54,7 +54,8 @@ def exact_scan(layout, world, sensors, car_pose):
     return cast_packed(world.circles, world.segments, len(world.walls), tuple(world.grid),
                        sensors, beams, params, np.empty((0, 3)),
                        layout._car(np.asarray(car_pose, dtype=np.float64)),
-                       fresh_seen(world.circles, world.segments), 1).copy()
+                       fresh_seen(world.circles, world.segments), 1,
+                       np.empty(0, dtype=np.int64)).copy()
 
 
 @pytest.mark.parametrize("mount, fov, housing", [
