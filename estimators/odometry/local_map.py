@@ -28,26 +28,18 @@ it must be the average of several increments, not the last one (one increment is
 for the constant-velocity guess to ~5 mm, which damps the step noise of every scan; a jittery
 one (Intel's) leaves it weak.
 
-Measured (sim: ``benchmarks/bench_synthetic.py``, 1 cm noise, seeds 0 and 1; real:
-``benchmarks/bench_real_logs.py``), before -> after denoised map, 9-neighbour normals, averaged
-velocity and clock-aware prior: sim eq.-11 accuracy 95.8-98.5 % -> 99.1-99.3 % on every case,
-hallway ATE 0.50-0.85 m -> 0.02-0.04 m; ACES local relations 0.0372 m / 0.345 deg / 1.0 %
-failures -> 0.0338 m / 0.324 deg / 0.4 % (over four rotated start frames 0.0371 m / 0.360 deg
--> 0.0343 m / 0.329 deg), all relations 0.174 -> 0.187 m (0.209 -> 0.183 m over the four);
-Intel unchanged (0.042 m / 1.67 deg per keyframe pair). Then grown neighbourhoods for noisy
-walls (``max_normal_neighbours``): sim at 1 cm identical; at 2 / 3 cm range noise
-(``--noise``) eq.-11 accuracy 95.97-98.29 / 93.70-97.41 % -> 98.21-98.59 / 97.53-97.96 %,
-hallway straight ATE 0.45-0.50 / 0.50-0.55 m -> 0.02-0.06 / 0.05-0.09 m (closed_to_open, 2 cm,
-seed 0: 0.014 -> 0.040 m); ACES local 0.0338 m / 0.324 deg / 0.4 % -> 0.0338 m / 0.301 deg /
-0.6 %, all 0.187 -> 0.172 m; Intel 0.0422 -> 0.0427 m per keyframe pair (5 s: 0.0600 ->
-0.0605 m).
+Measured before -> after each of these choices: ``benchmarks/bench_synthetic.py`` (sim eq.-11
+accuracy 95.8-98.5 % -> 99.1-99.3 %, hallway ATE 0.50-0.85 m -> 0.02-0.04 m) and
+``benchmarks/bench_real_logs.py`` (ACES local relations 0.0372 -> 0.0338 m); the README's
+odometry section has the table, with 2-3 cm range noise (``max_normal_neighbours``) too.
+
+A start down a bare corridor hides the start speed: measured later, the start is matched again
+(:mod:`estimators.odometry.unknown_start`).
 
 Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
 the car can have reached; a poor match gets correlative searches in ever wider windows, and
-one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`).
-
-Two Lidars are merged into one point set in the car frame through their known mounts
-(:func:`estimators.matching.scan_matching.scans_to_car_points`).
+one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). All
+Lidars are merged in the car frame (:func:`estimators.matching.scan_matching.scans_to_car_points`).
 
 Moving things (``reject_dynamic=True``, :class:`estimators.odometry.free_space.MovingPointFilter`):
 points in space recent scans saw as free, or next to points the new scan sees through, neither
@@ -76,11 +68,13 @@ from estimators.matching.scan_matching import (
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.free_space import MovingPointFilter
 from estimators.odometry.motion_prior import clock_jitter, prediction_sigma
+from estimators.odometry.unknown_start import UnknownStartSpeed
+from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
 
 
 @dataclass
-class LocalMapOdometry(FarScanMatching, Estimator):
+class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
     """Scan-to-local-map Lidar odometry with a robust loss, a constant-velocity motion prior
     and a correlative fallback. Distances [m], angles [rad]; defaults chosen for indoor 2D
     Lidars (1-3 cm range noise, 5-40 Hz), not for one log:
@@ -177,6 +171,13 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
+        start_speed_scans, max_start_replay: where the first scans cannot tell the start
+            velocity (:mod:`estimators.odometry.unknown_start`), it is measured as the mean
+            over this many scans in a row that pin down every direction without the prior
+            (20: the mean of n increments is the displacement over n scans divided by n, so
+            its error falls as 1/n; a few mm over 20 steps of 0.1 m is ~1 %), and the scans
+            kept until then, at most ``max_start_replay`` (300: 30 s at 10 Hz; 0: never), are
+            matched again with it.
 
     After a run, ``fallbacks`` counts the correlative searches that were needed, ``far_searches``
     the far-apart ones, and ``poor_matches`` lists the scans still matched poorly (flagged).
@@ -211,6 +212,8 @@ class LocalMapOdometry(FarScanMatching, Estimator):
     max_speed: float = 1.5
     max_turn_rate: float = 1.5
     sideslip_sigma: float = np.inf
+    start_speed_scans: int = 20
+    max_start_replay: int = 300
 
     def __post_init__(self) -> None:
         for name in (
@@ -221,36 +224,24 @@ class LocalMapOdometry(FarScanMatching, Estimator):
             "dynamic_margin", "max_speed", "max_turn_rate", "sideslip_sigma",
         ):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
-        if self.normal_neighbours < 3:
-            raise ValueError(f"normal_neighbours: expected >= 3, got {self.normal_neighbours}")
-        if self.max_normal_neighbours < self.normal_neighbours:
-            raise ValueError(
-                f"max_normal_neighbours: expected >= normal_neighbours "
-                f"({self.normal_neighbours}), got {self.max_normal_neighbours}"
-            )
-        if self.velocity_window < 1:
-            raise ValueError(f"velocity_window: expected >= 1, got {self.velocity_window}")
-        if self.n_keyframes < 1:
-            raise ValueError(f"n_keyframes: expected >= 1, got {self.n_keyframes}")
+                raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        lowest = {"normal_neighbours": 3, "max_normal_neighbours": self.normal_neighbours,
+                  "velocity_window": 1, "start_speed_scans": 1, "max_start_replay": 0,
+                  "n_keyframes": 1}
+        for name, least in lowest.items():
+            if not getattr(self, name) >= least:
+                said = f"{least} (normal_neighbours)" if name.startswith("max_") else least
+                raise ConfigError(f"{name}: expected >= {said}, got {getattr(self, name)}")
         if not 0 <= self.min_quality <= 1:
-            raise ValueError(f"min_quality: expected a share in [0, 1], got {self.min_quality}")
+            raise ConfigError(f"min_quality: expected a share in [0, 1], got {self.min_quality}")
         self.params = ICPParams(
             max_iterations=self.max_iterations,
-            max_correspondence_distance=self.max_correspondence_distance,
-            loss=self.loss,
-            loss_scale=self.loss_scale,
-            trim_ratio=1.0,
-            min_information=self.min_information,
-        )
+            max_correspondence_distance=self.max_correspondence_distance, loss=self.loss,
+            loss_scale=self.loss_scale, trim_ratio=1.0, min_information=self.min_information)
         # Prior information in the units of the point residuals (cost scaled by noise_sigma^2).
-        self._prior_information = np.array(
-            [
-                (self.noise_sigma / self.prior_sigma_translation) ** 2,
-                (self.noise_sigma / self.prior_sigma_translation) ** 2,
-                (self.noise_sigma / self.prior_sigma_rotation) ** 2,
-            ]
-        )
+        self._prior_information = (self.noise_sigma / np.array(
+            [self.prior_sigma_translation, self.prior_sigma_translation,
+             self.prior_sigma_rotation])) ** 2
 
     def _reset_state(self) -> None:
         self._keyframes: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque(
@@ -315,6 +306,7 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         points = self._points(scans)
         self._add_keyframe(self._initial_pose, points)
         self._remember(self._initial_pose, scans, points)
+        self._watch_start(scans, t)
 
     def _time_step(self, t: float) -> float:
         """Scans since the last one (1), or with ``use_timestamps`` the time since it [s],
@@ -331,16 +323,20 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
 
     def _prediction_information(self) -> NDArray[np.float64]:
-        """Prior information (3, 3) of the constant-velocity guess, in the units of the point
-        residuals. Its position misses by about ``prediction_acceleration * dt^2`` over a
-        typical scan interval ``dt`` plus, when the model counts scans, speed times the
-        interval's typical jitter (a scan arriving late has moved further); clipped to
-        [``motion_prior.MIN_PREDICTION_SIGMA``, ``prior_sigma_translation``], which also
-        holds until the clock has been seen for a few scans or when it does not run forward.
-        Where the scan leaves a direction free, sideways motion is held to ``sideslip_sigma``
-        (a model assumption, the car frame at the wheels' no-slip point, so only where the
-        scan cannot overrule it: on every scan it cost ACES 0.033 -> 0.034 m per local
-        relation and 0.19 -> 0.29 m over all; only there, 0.0346 m and 0.22 m)."""
+        """The motion prior's information (3, 3): none while the start velocity is unknown."""
+        return np.zeros((3, 3)) if self.speed_unknown else self._model_information()
+
+    def _model_information(self) -> NDArray[np.float64]:
+        """Information (3, 3) of the constant-velocity guess and the no-sideslip prior, in the
+        point residuals' units. The guess misses by ``prediction_acceleration * dt^2`` over a
+        typical scan interval ``dt`` plus, counting scans, speed times the interval's typical
+        jitter (a late scan has moved further); clipped to [``motion_prior.MIN_PREDICTION_
+        SIGMA``, ``prior_sigma_translation``], which also holds until the clock has been seen
+        for a few scans or when it does not run forward. Where the scan leaves a direction
+        free, sideways motion is held to ``sideslip_sigma`` (an assumption, the car frame at
+        the wheels' no-slip point, so only where the scan cannot overrule it: on every scan it
+        cost ACES 0.033 -> 0.034 m per local relation and 0.19 -> 0.29 m over all; only there,
+        0.0346 m and 0.22 m)."""
         information = self._prior_information.copy()
         typical = float(np.median(self._intervals)) if len(self._intervals) >= 5 else 0.0
         step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
@@ -363,6 +359,10 @@ class LocalMapOdometry(FarScanMatching, Estimator):
         return np.array([*np.mean(self._translations, axis=0), increment[2] / dt])
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
+        return (self._watched_step if self._kept is not None else self._odometry_step)(scans, t)
+
+    def _odometry_step(self, scans: dict[str, NDArray[np.float64]],
+                       t: float) -> NDArray[np.float64]:
         interval = t - self._last_time
         dt = self._time_step(t)
         predicted = motion_prior.constant_velocity_increment(self._velocity, dt)

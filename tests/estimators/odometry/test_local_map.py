@@ -18,6 +18,7 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.local_map import LocalMapOdometry
 from lidar_env import lidars_with_noise
+from lidar_env.errors import ConfigError
 from lidar_env.lidar import Lidar
 from lidar_env.polygons import segment_distances
 from lidar_env.se2 import compose, relative, transform_points
@@ -242,7 +243,7 @@ def test_bad_parameters_are_named():
         LocalMapOdometry(n_keyframes=0)
     with pytest.raises(ValueError, match="normal_neighbours: expected >= 3"):
         LocalMapOdometry(normal_neighbours=2)
-    with pytest.raises(ValueError, match="max_normal_neighbours: expected >= normal_neighbours"):
+    with pytest.raises(ValueError, match=r"max_normal_neighbours: expected >= 9 \(normal_"):
         LocalMapOdometry(max_normal_neighbours=5)
     with pytest.raises(ValueError, match="prediction_acceleration: expected a positive value"):
         LocalMapOdometry(prediction_acceleration=-1.0)
@@ -250,6 +251,8 @@ def test_bad_parameters_are_named():
         LocalMapOdometry(search_resolution=0.0)
     with pytest.raises(ValueError, match="velocity_window: expected >= 1"):
         LocalMapOdometry(velocity_window=0)
+    with pytest.raises(ConfigError, match="start_speed_scans: expected >= 1"):
+        LocalMapOdometry(start_speed_scans=0)
     with pytest.raises(ValueError, match="min_quality: expected a share"):
         LocalMapOdometry(min_quality=1.5)
     with pytest.raises(ValueError, match="unknown loss 'l1'"):

@@ -109,13 +109,14 @@ def test_a_car_that_does_not_slip_finds_its_speed_down_a_corridor_from_its_weavi
     # slip to 0.6 mm (a wheeled car's frame at its no-slip point, as the simulated car's) the
     # speed follows from the weave within the first bend: 0.24-0.33 m behind after 25 m, all of
     # it lost in the first metres (seeds 0-3); a holonomic prior stays at the start's speed,
-    # zero, and is 19.9 m behind.
+    # zero, and was 19.9 m behind; it is 9.7 m behind now that the start speed is measured
+    # (``unknown_start``) from scans the wall ends at the range limit slow down.
     corners = np.array([(-100.0, -2.5), (100.0, -2.5), (100.0, 2.5), (-100.0, 2.5)])
     world = World(segments=np.hstack([corners, np.roll(corners, -1, axis=0)]))
     truth = _zigzag(251)
     for seed in (0, 1):
         assert abs(_drive(world, truth, seed, sideslip_sigma=6e-4)[0]) < 0.5
-    assert abs(_drive(world, truth, 0)[0]) > 15.0  # the default: no sideslip term
+    assert abs(_drive(world, truth, 0)[0]) > 5.0  # the default: no sideslip term
 
 
 def test_a_zigzag_down_a_corridor_keeps_its_speed_along_the_unseen_axis() -> None:

@@ -1,0 +1,136 @@
+"""The speed a drive starts at, where the first scans cannot tell it: ``lidar_odometry``'s start.
+
+The constant-velocity model starts at rest. A car already moving when the scans begin, down a
+corridor whose two walls are all that is in range (a forward 180-degree Lidar facing along
+it), shows nothing of its speed along the corridor: the scans read the same at any speed, and
+the estimate stands still until a surface across the axis comes into view, metres behind for
+good. So the start is watched:
+
+* While the prior is in place, a scan whose registration pins some direction down less than
+  the prior does (:func:`~estimators.matching.icp.leaves_a_direction_free` with the prior's
+  information in points, ``min_information`` at least) is one where the start speed, zero,
+  decided; the start velocity then counts as unknown and the prior is dropped.
+* With no prior the data decide wherever they carry ``min_information``; the map is the
+  newest keyframe alone (keyframes taken while the estimate stalls sit at one place, so their
+  copies of what came into view would spread along the free axis). The velocity is measured as
+  the mean midpoint-frame translation over ``start_speed_scans`` scans in a row that pin every
+  direction down (its turn rate zero).
+* The kept scans are then matched again from the first with that velocity, the clock they
+  showed, and, up to the last scan that left a direction free, the prior deciding every
+  direction the data pin down less than it (so the sensor-fixed pull of the range-limited wall
+  ends, a few points' worth towards standing still, cannot wear the speed down).
+
+That is the constant-velocity assumption the model makes forward in time, applied back over the
+stretch the scans could not see: a smoother's answer where a filter has none. A car that stood
+still before it drove off down such a corridor is placed as if it had driven at that speed all
+along: nothing in the scans tells the two apart. A start that stays unobservable for
+``max_start_replay`` scans keeps its estimate and the prior returns; one whose velocity is
+measured before anything left it unknown (the real logs, every built-in drive with a
+360-degree Lidar) is left exactly as it was, and so is every start with a no-sideslip prior
+(``sideslip_sigma``: the weave gives the speed away). The trajectory (``Estimator.trajectory``) is
+revised by the replay; the poses ``update`` returned during the start were the guess of the
+time.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.icp import ICPParams, leaves_a_direction_free
+from estimators.matching.point_to_line import PointToLineReference
+
+FloatArray = NDArray[np.float64]
+Scans = dict[str, FloatArray]
+
+
+class UnknownStartSpeed:
+    """The start of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin: it
+    reads ``velocity_window``, ``max_start_replay``, ``params`` and the front end's state, and
+    drives its ``_start``, ``_reset_state`` and ``_odometry_step`` (one scan matched)."""
+
+    velocity_window: int
+    start_speed_scans: int
+    max_start_replay: int
+    sideslip_sigma: float
+    params: ICPParams
+    _reference: PointToLineReference | None
+    _poses: list[FloatArray]
+    _velocity: FloatArray
+    _translations: deque[FloatArray]
+    _intervals: deque[float]
+    _keyframes: deque[tuple[FloatArray, FloatArray]]
+    _build_reference: Callable[[], None]
+    _points: Callable[[Scans], FloatArray]
+    _start: Callable[[Scans, float], None]
+    _reset_state: Callable[[], None]
+    _odometry_step: Callable[[Scans, float], FloatArray]
+    _model_information: Callable[[], FloatArray]
+
+    def _watch_start(self, scans: Scans, t: float) -> None:
+        """Keep the first scans (called by ``_start``)."""
+        watch = self.max_start_replay > 0 and not np.isfinite(self.sideslip_sigma)
+        self._kept: list[tuple[Scans, float]] | None = [(scans, t)] if watch else None
+        self.speed_unknown = False  # the start velocity is not known yet
+        self._measured: list[FloatArray] = []  # translations of the scans in a row that
+        # pinned down every direction, without the prior: per scan (or second), midpoint frame
+
+    def _watched_step(self, scans: Scans, t: float) -> FloatArray:
+        """``_odometry_step`` while the start is watched: the pose of ``scans`` at ``t``."""
+        reference = self._reference
+        pose = self._odometry_step(scans, t)
+        assert self._kept is not None
+        self._kept.append((scans, t))
+        points = self._points(scans)
+        # With the prior in place a direction the data pin down less than it does is decided by
+        # the start speed (standing still); without it the data decide where they carry anything.
+        least = self.params.min_information if self.speed_unknown else max(
+            self.params.min_information, float(np.min(np.diag(self._model_information())[:2])))
+        if reference is None or len(points) < 3 or leaves_a_direction_free(
+                reference, points, pose, replace(self.params, min_information=least)):
+            self.speed_unknown, self._measured = True, []
+        else:
+            self._measured.append(self._translations[-1].copy())
+        if len(self._measured) >= self.start_speed_scans:
+            if self.speed_unknown:
+                return self._replay_start()
+            self._kept = None  # measured before anything left it unknown: nothing to do
+            return pose
+        if len(self._kept) > self.max_start_replay:
+            self._kept, self.speed_unknown = None, False
+        elif self.speed_unknown and len(self._keyframes) > 1:
+            # Keyframes taken while the estimate stalls sit at one place: their copies of what
+            # came into view would spread along the free axis. The newest alone is the map.
+            self._keyframes = deque([self._keyframes[-1]], maxlen=self._keyframes.maxlen)
+            self._build_reference()
+        return pose
+
+    def _replay_start(self) -> FloatArray:
+        """Match the kept scans again from the first at the velocity measured since; the pose
+        of the last of them."""
+        assert self._kept is not None
+        kept, velocity = self._kept, np.array([*np.mean(self._measured, axis=0), 0.0])
+        unseen = len(kept) - len(self._measured)  # scans whose speed the scans did not show
+        del self._poses[1:]
+        self._reset_state()
+        self._start(*kept[0])
+        self._kept, self.speed_unknown = None, False
+        self._velocity = velocity
+        self._translations.extend([velocity[:2].copy()] * self.velocity_window)
+        stamps = np.array([t for _, t in kept])
+        self._intervals.extend(np.diff(stamps)[np.isfinite(np.diff(stamps))])  # the clock seen
+        params = self.params  # over the unseen stretch the prior decides what the data did not
+        self.params = replace(params, min_information=max(
+            params.min_information, float(np.min(np.diag(self._model_information())[:2]))))
+        try:
+            for k, (scans, t) in enumerate(kept[1:-1], start=1):
+                if k == unseen:
+                    self.params = params
+                self._poses.append(np.asarray(self._odometry_step(scans, t), dtype=np.float64))
+        finally:
+            self.params = params
+        return self._odometry_step(*kept[-1])
