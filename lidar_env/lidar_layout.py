@@ -10,9 +10,9 @@ float32). :class:`lidar_env.lidar.Lidar` and :func:`lidar_env.lidar.cast_rays` p
 identical sensors the same way (:func:`lidar_env.lidar_config.pack_sensors`: beams end to end,
 sensor ``k`` owning positions ``[first, end)`` of its ``params`` row). The kernels differ only
 in how the world comes: :func:`scan_packed_kernel` takes it packed once per world
-(:func:`lidar_env.primitive_grid.pack_scan_world`); :func:`scan_layout_body_kernel` as arrays
-and a grid, :func:`scan_layout_movers_kernel` without the car and :func:`scan_layout_kernel`
-(the vector env's) without movers either.
+(:func:`lidar_env.primitive_grid.pack_scan_world`, with the edges' free sides for back-face
+culling); :func:`scan_layout_body_kernel` takes it as arrays and a grid, and
+:func:`scan_layout_kernel` (the vector env's) the same without movers or the car.
 
 Self-occlusion (``LidarConfig.self_occlusion``, for a Lidar at body level): the four edges of
 the car's ``car_length x car_width`` rectangle are walls to that Lidar, except where they pass
@@ -70,6 +70,8 @@ Geometry = World | tuple[ArrayLike, ArrayLike]
 _NO_DRAWS = np.empty(0)
 _NO_CAR = np.empty(0)
 _NO_MOVERS = np.empty((0, 3))
+_NO_WORLD = (None, (None, None))  # LidarLayout._world_of before the first scan
+_FLOAT64 = np.dtype(np.float64)  # numpy's one instance (another float64 dtype is converted)
 
 
 def as_poses(sensor_poses: ArrayLike) -> NDArray[np.float64]:
@@ -273,17 +275,6 @@ def scan_packed_kernel(
 
 
 @njit(cache=True, fastmath=False)
-def scan_layout_movers_kernel(
-    circles: NDArray[np.float64], segments: NDArray[np.float64], first_polygon_edge: int,
-    grid: tuple, sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
-    gaussians: NDArray[np.float64], uniforms: NDArray[np.float64], movers: NDArray[np.float64],
-) -> NDArray[np.float32]:
-    """:func:`scan_layout_body_kernel` without the car (no Lidar may self-occlude)."""
-    return scan_layout_body_kernel(circles, segments, first_polygon_edge, grid, sensor_poses,
-                                   beams, params, gaussians, uniforms, movers, np.empty(0))
-
-
-@njit(cache=True, fastmath=False)
 def scan_layout_kernel(
     circles: NDArray[np.float64], segments: NDArray[np.float64], first_polygon_edge: int,
     grid: tuple, sensor_poses: NDArray[np.float64], beams: tuple, params: NDArray[np.float64],
@@ -325,12 +316,13 @@ class LidarLayout:
         if self.self_occluded and self.car_size is None:
             raise ConfigError("car_size: expected the car's (length, width) [m] for a Lidar "
                               "with self_occlusion, got None")
-        self._world_of: tuple = (None, None)
+        self._world_of: tuple = _NO_WORLD
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state.pop("_packed", None)  # numba-friendly arrays, rebuilt on demand
-        state["_world_of"] = (None, None)
+        state.pop("_call", None)
+        state["_world_of"] = _NO_WORLD
         return state
 
     @property
@@ -347,6 +339,15 @@ class LidarLayout:
               lidar.housing_radius if lidar.self_occlusion else -1.0)
              for lidar, noise, drop in zip(self.lidars, self.noise_std, self.dropout_prob,
                                            strict=True)])
+
+    @cached_property
+    def _call(self) -> tuple:
+        """What :meth:`scan` hands the kernel besides the world and the draws, in one lookup:
+        the beam count, the poses' shape, ``beams``, ``params``, and each scan's slice of the
+        packed readings (none for one Lidar: it gets them all)."""
+        (table, order), params = self._packed
+        slices = tuple(slice(a, b) for a, b in self._slices) if len(self._slices) > 1 else ()
+        return self._slices[-1][1], self.mounts.shape, table, order, params, slices
 
     def _packed_world(self, world: World, first_polygon_edge: int) -> tuple:
         """``world`` packed for :func:`scan_packed_kernel` (kept until another world comes)."""
@@ -366,13 +367,13 @@ class LidarLayout:
         radius [m] seen like the world's (None: none; the same draws either way).
         ``car_pose`` (x, y, yaw) places the car's outline for Lidars with ``self_occlusion``
         (required then, ignored otherwise)."""
-        if world is self._world_of[0]:  # the env's case: the same World step after step
-            world_floats, world_ints = self._world_of[1]
-        else:
+        known, (world_floats, world_ints) = self._world_of
+        if world is not known:  # the env's case is the same World step after step
             world_floats, world_ints = self._packed_world(*as_world(world))
+        total, shape, table, order, params, slices = self._call
         poses = sensor_poses
-        if not (type(poses) is np.ndarray and poses.shape == self.mounts.shape
-                and poses.dtype == np.float64 and poses.flags.c_contiguous):
+        if not (type(poses) is np.ndarray and poses.dtype is _FLOAT64 and poses.shape == shape
+                and poses.flags.c_contiguous):
             poses = as_poses(sensor_poses)
             if len(poses) != len(self.lidars):
                 raise ConfigError(f"sensor_poses: expected {len(self.lidars)} poses (one per "
@@ -380,15 +381,13 @@ class LidarLayout:
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
         car = self._car(car_pose) if self.self_occluded else _NO_CAR
-        total = self._slices[-1][1]
         gaussians = rng.standard_normal(total) if self._noisy else _NO_DRAWS
         uniforms = rng.random(total) if self._dropping else _NO_DRAWS
-        (table, order), params = self._packed
         movers = _NO_MOVERS if movers is None else np.ascontiguousarray(movers, dtype=np.float64)
         packed = np.empty(total, np.float32)
         scan_packed_kernel(world_floats, world_ints, poses, table, order, params, gaussians,
                            uniforms, movers, car, packed)
-        return [packed[a:b] for a, b in self._slices]
+        return [packed[part] for part in slices] if slices else [packed]
 
     def _car(self, car_pose: ArrayLike | None) -> NDArray[np.float64]:
         pose = None if car_pose is None else np.asarray(car_pose, dtype=np.float64)

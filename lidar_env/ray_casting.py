@@ -44,6 +44,13 @@ from lidar_env.primitive_grid import cell_block, odd_crossings, point_segment_di
 _ENDPOINT_TOLERANCE = 1e-12
 #: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
 _MIN_CULLED_ANGLE = 0.2
+#: A hit at ``t * denom`` beyond ``range * denom`` times this is surely farther than ``range``
+#: (far above the rounding of the products and of the division skipped).
+_SURELY_FARTHER = 1.0 + 1e-12
+#: [m] a segment's bounding box farther than this from the sensor cannot touch it, and one
+#: whose nearest end lies within ``max_range`` times the square root of :data:`_IN_RANGE`
+#: is surely within range: its exact distance is not needed.
+_NEAR, _IN_RANGE = 1e-9, 1.0 - 1e-9
 _TWO_PI = 2.0 * math.pi
 
 
@@ -187,6 +194,9 @@ def sweep_circle(
     f0, l0, f1, l1 = _beam_span(lo, 2.0 * half, sorted_angles, step)
     for q in range(l0 - f0 + l1 - f1):
         j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        b = fx * dir_x[j] + fy * dir_y[j]  # as in _circle_hit, whose t is >= b - r
+        if b - r - ranges[j] > 1e-9 * (b + r):
+            continue  # surely not nearer: skip the square root
         t = _circle_hit(ox, oy, dir_x[j], dir_y[j], cx, cy, r)
         if t < ranges[j]:
             ranges[j] = t
@@ -320,25 +330,28 @@ def cast_sensor(
                     if segment_seen[i] == stamp:
                         continue
                     segment_seen[i] = stamp
-                    seg = segments[i]  # the segment's sweep (see sweep_circle)
-                    if culls_faces and facing[i] != 0 and facing[i] * (
-                            (seg[2] - seg[0]) * (oy - seg[1]) - (seg[3] - seg[1]) * (ox - seg[0])
-                    ) < -BACK_FACE_TOLERANCE * (abs(seg[2] - seg[0]) + abs(seg[3] - seg[1])):
+                    # the segment's sweep (see sweep_circle), on scalars: a row view costs
+                    x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+                    v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
+                    ex, ey = x2 - x1, y2 - y1
+                    if culls_faces and facing[i] != 0 and facing[i] * (ex * -v1y + ey * v1x) < (
+                            -BACK_FACE_TOLERANCE * (abs(ex) + abs(ey))):
                         continue  # the sensor is on its filled side: it faces away
-                    if cull and outside_wedge(wedge, seg[0] - ox, seg[1] - oy, seg[2] - ox,
-                                               seg[3] - oy, 0.0):
+                    if cull and outside_wedge(wedge, v1x, v1y, v2x, v2y, 0.0):
                         continue
-                    gap_x = max(min(seg[0], seg[2]) - ox, ox - max(seg[0], seg[2]))
-                    gap_y = max(min(seg[1], seg[3]) - oy, oy - max(seg[1], seg[3]))
-                    if max(gap_x, gap_y) >= max_range:
+                    gap = max(min(v1x, v2x), -max(v1x, v2x), min(v1y, v2y), -max(v1y, v2y))
+                    if gap >= max_range:
                         continue
-                    d2 = point_segment_distance2(ox, oy, seg[0], seg[1], seg[2], seg[3])
-                    if d2 >= max_range * max_range:
-                        continue
-                    if d2 == 0.0:
-                        ranges.fill(0.0)
-                        return
-                    v1x, v1y, v2x, v2y = seg[0] - ox, seg[1] - oy, seg[2] - ox, seg[3] - oy
+                    # Its distance only matters when the sensor may touch it or it may lie out
+                    # of range: both are ruled out cheaply for most segments.
+                    if gap <= _NEAR or min(v1x * v1x + v1y * v1y, v2x * v2x + v2y * v2y) >= (
+                            max_range * max_range * _IN_RANGE):
+                        d2 = point_segment_distance2(ox, oy, x1, y1, x2, y2)
+                        if d2 >= max_range * max_range:
+                            continue
+                        if d2 == 0.0:
+                            ranges.fill(0.0)
+                            return
                     a1 = _bearing(v1y, v1x)
                     a2 = _bearing(v2y, v2x)
                     if v1x * v2y - v1y * v2x >= 0.0:
@@ -350,16 +363,18 @@ def cast_sensor(
                     lo = _wrap_positive(lo - heading)
                     f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
                     n0 = max(l0 - f0, 0)
+                    along = v1x * ey - v1y * ex  # t * denom
                     for q in range(n0 + l1 - f1):
                         j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-                        ex, ey = seg[2] - seg[0], seg[3] - seg[1]
                         denom = dir_x[j] * ey - dir_y[j] * ex
                         if denom == 0.0:
                             continue
-                        wx, wy = seg[0] - ox, seg[1] - oy
-                        t = (wx * ey - wy * ex) / denom
+                        reach = ranges[j] * denom * _SURELY_FARTHER
+                        if along >= reach if denom > 0.0 else along <= reach:
+                            continue  # t > ranges[j] for sure: skip the division
+                        t = along / denom
                         if t < 0.0 or t >= ranges[j]:
                             continue
-                        u = (wx * dir_y[j] - wy * dir_x[j]) / denom
+                        u = (v1x * dir_y[j] - v1y * dir_x[j]) / denom
                         if -_ENDPOINT_TOLERANCE <= u <= 1.0 + _ENDPOINT_TOLERANCE:
                             ranges[j] = t
