@@ -15,7 +15,7 @@ import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env import lidars_with_noise, se2
 from lidar_env.lidar import Lidar, pymunk_cast_rays
 from lidar_env.lidar_config import LidarConfig
-from lidar_env.lidar_layout import LidarLayout
+from lidar_env.lidar_layout import LidarLayout, scan_layout_body_kernel
 from lidar_env.world import World
 from lidar_env.worlds import make_world
 
@@ -161,3 +161,25 @@ def test_narrow_lidars_on_a_traced_map_agree_with_pymunk(lidars) -> None:
         for scan, lidar, pose in zip(layout.scan(world, poses, rng), lidars, poses, strict=True):
             oracle = pymunk_cast_rays(space, pose, lidar.beam_angles, lidar.max_range)[0]
             np.testing.assert_allclose(scan, oracle, atol=1e-5)  # float32 readings
+
+
+def test_the_packed_scan_is_the_arrays_kernel_bit_for_bit() -> None:
+    # LidarLayout.scan packs world, beams, car and draws into two arrays once per world and
+    # draws in place; the arrays kernel takes them one by one and draws afresh
+    lidars = [LidarConfig((0.3, 0.1, 0.4), 200, 4.0, 7.0, self_occlusion=True),
+              LidarConfig((-0.3, 0.0, math.pi), 91, math.pi / 2)]
+    layout = LidarLayout(lidars, [0.02, 0.0], [0.0, 0.1], (0.8, 0.5))
+    world = make_world("closed_to_open")
+    assert layout.pack(world) is layout.pack(world)  # packed once
+    rng, reference_rng = np.random.default_rng(5), np.random.default_rng(5)
+    beams, params = layout._packed
+    for car in [(3.0, 0.0, 0.2), (10.0, 4.0, -2.0), (15.0, -3.0, 1.0)]:
+        sensors = np.stack([se2.compose(np.array(car), np.array(lidar.mount)) for lidar in lidars])
+        movers = np.array([[car[0] + 2.0, car[1], 0.25]])
+        total = params[-1, 1].astype(int)
+        draws = reference_rng.standard_normal(total), reference_rng.random(total)
+        expected = scan_layout_body_kernel(
+            world.circles, world.segments, len(world.walls), tuple(world.grid), sensors, beams,
+            params, *draws, movers, layout._car(car))
+        got = layout.scan(world, sensors, rng, movers, car)
+        assert np.concatenate(got).tobytes() == expected.tobytes()
