@@ -27,7 +27,6 @@ trajectory, every scan re-anchored on its keyframe's final pose after a last opt
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -38,8 +37,6 @@ from estimators.base import Estimator
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
-from estimators.slam.figure import save_slam_figure
-from estimators.slam.g2o import write_g2o
 from estimators.slam.keyframe_matching import Keyframe, KeyframeMatching
 from estimators.slam.loop_closure import (
     LoopClosureParams,
@@ -47,14 +44,16 @@ from estimators.slam.loop_closure import (
     PlaceMap,
     range_histogram,
 )
+from estimators.slam.outputs import SlamOutputs
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import optimize
-from lidar_env.se2 import compose, relative, transform_points
+from lidar_env.errors import ConfigError
+from lidar_env.se2 import compose, relative
 
 
 @dataclass
-class GraphSlam(KeyframeMatching, Estimator):
+class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     """Front end + loop closure + pose-graph optimisation. Distances [m], angles [rad].
 
     Defaults are for 2D Lidars indoors driven at walking speed, not tuned to one log:
@@ -173,28 +172,25 @@ class GraphSlam(KeyframeMatching, Estimator):
     loop_params: LoopClosureParams = field(default_factory=LoopClosureParams)
 
     def __post_init__(self) -> None:
-        for name in ("keyframe_distance", "keyframe_angle", "odometry_sigma",
-                     "odometry_sigma_rotation", "loop_radius", "max_search_window",
-                     "loss_scale", "loop_gate", "max_loop_sigma", "overlap_radius"):
+        positive = ("keyframe_distance", "keyframe_angle", "odometry_sigma",
+                    "odometry_sigma_rotation", "loop_radius", "max_search_window", "loss_scale",
+                    "loop_gate", "max_loop_sigma", "overlap_radius")
+        lowest = {**dict.fromkeys(("odometry_drift", "odometry_drift_rotation", "loop_drift",
+                                   "min_loop_separation", "min_overlap_separation",
+                                   "global_every", "submap_neighbours"), 0),
+                  **dict.fromkeys(("max_candidates", "optimize_every", "global_candidates",
+                                   "global_confirmation"), 1)}
+        for name in positive:
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
-        for name in ("odometry_drift", "odometry_drift_rotation", "loop_drift",
-                     "min_loop_separation", "min_overlap_separation"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name}: expected a value >= 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        for name, least in lowest.items():
+            if not getattr(self, name) >= least:
+                raise ConfigError(f"{name}: expected >= {least}, got {getattr(self, name)}")
         if self.min_overlap_separation > self.min_loop_separation:
-            raise ValueError("min_overlap_separation: expected at most min_loop_separation "
-                             f"({self.min_loop_separation}), got {self.min_overlap_separation}")
-        if self.global_every < 0:
-            raise ValueError(f"global_every: expected >= 0 (0 = off), got {self.global_every}")
-        for name in ("max_candidates", "optimize_every", "global_candidates",
-                     "global_confirmation"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name}: expected an integer >= 1, got {getattr(self, name)}")
-        if self.submap_neighbours < 0:
-            raise ValueError(f"submap_neighbours: expected >= 0, got {self.submap_neighbours}")
+            raise ConfigError("min_overlap_separation: expected at most min_loop_separation "
+                              f"({self.min_loop_separation}), got {self.min_overlap_separation}")
         if self.frontend == "slam":
-            raise ValueError("frontend: expected an odometry estimator, got 'slam' itself")
+            raise ConfigError("frontend: expected an odometry estimator, got 'slam' itself")
         make(self.frontend, **self.frontend_params)  # unknown names fail here, listing valid ones
 
     # ------------------------------------------------------------------ Estimator hooks
@@ -202,6 +198,10 @@ class GraphSlam(KeyframeMatching, Estimator):
         assert self.setup is not None
         self._frontend = make(self.frontend, **self.frontend_params)
         self._frontend.reset(self.setup, self._initial_pose)
+        self._start_points: list[NDArray[np.float64]] | None = []  # while the start may change
+        self._reset_graph()
+
+    def _reset_graph(self) -> None:
         self.graph = PoseGraph()
         self.keyframes: list[Keyframe] = []
         # covariance of the odometry edge into each keyframe (keyframe 0: none)
@@ -229,12 +229,22 @@ class GraphSlam(KeyframeMatching, Estimator):
         )
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
-        self._frontend.update(scans, t)
-        self.add_scan(scans_to_car_points(scans, self.setup, self.min_range), self._initial_pose)
+        self._step(scans, t)
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         odometry = self._frontend.update(scans, t)
-        return self.add_scan(scans_to_car_points(scans, self.setup, self.min_range), odometry)
+        points = scans_to_car_points(scans, self.setup, self.min_range)
+        if self._start_points is not None:  # the front end may still match its start again
+            self._start_points.append(points)
+            if getattr(self._frontend, "start_replays", 0):  # it did: build the graph anew
+                kept, self._start_points = self._start_points, None
+                self._reset_graph()
+                for scan_points, pose in zip(kept, self._frontend.trajectory, strict=True):
+                    odometry = self.add_scan(scan_points, pose)
+                return odometry
+            if not getattr(self._frontend, "start_pending", False):
+                self._start_points = None
+        return self.add_scan(points, odometry)
 
     # ------------------------------------------------------------------ the pipeline
     def add_scan(self, points: NDArray[np.float64], odometry: NDArray[np.float64]
@@ -355,27 +365,6 @@ class GraphSlam(KeyframeMatching, Estimator):
             np.array(self._scan_keyframe, dtype=np.int64),
             self.keyframe_distance / self.keyframe_angle,
         )
-
-    def corrected_map(self) -> NDArray[np.float64]:
-        """``(M, 2)`` every keyframe's points in the world frame at its optimised pose [m]."""
-        if self._dirty:
-            self.optimize()
-        poses = self.graph.poses
-        return np.concatenate([transform_points(pose, k.points)
-                               for pose, k in zip(poses, self.keyframes, strict=True)])
-
-    def save_g2o(self, path: str | os.PathLike[str]) -> None:
-        """Write the keyframe graph (optimised poses, odometry and loop edges) as g2o."""
-        if self._dirty:
-            self.optimize()
-        write_g2o(self.graph, path)
-
-    def render(self, path: str | os.PathLike[str], truth: NDArray[np.float64] | None = None,
-               ) -> None:
-        """Save a picture of the corrected map (grey points), the front end's path (dotted),
-        the smoothed path, odometry edges and loop edges (red), and ``truth`` (N, 3) poses
-        if given. Needs matplotlib (``pip install duallidar[plots]``)."""
-        save_slam_figure(self, path, truth)
 
     @property
     def odometry_trajectory(self) -> NDArray[np.float64]:

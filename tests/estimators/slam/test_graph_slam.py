@@ -128,7 +128,7 @@ def test_bad_settings_are_named() -> None:
         GraphSlam(overlap_radius=0.0)
     with pytest.raises(ValueError, match="min_overlap_separation: expected at most"):
         GraphSlam(min_overlap_separation=12.0)
-    with pytest.raises(ValueError, match="min_overlap_separation: expected a value >= 0"):
+    with pytest.raises(ValueError, match="min_overlap_separation: expected >= 0"):
         GraphSlam(min_overlap_separation=-1.0)
 
 
