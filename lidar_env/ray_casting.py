@@ -51,6 +51,9 @@ _SURELY_FARTHER = 1.0 + 1e-12
 #: whose nearest end lies within ``max_range`` times the square root of :data:`_IN_RANGE`
 #: is surely within range: its exact distance is not needed.
 _NEAR, _IN_RANGE = 1e-9, 1.0 - 1e-9
+#: A circle's ``b - r`` beyond a range by more than this times ``b + r`` surely hits farther
+#: (far above the rounding of ``b - sqrt(disc)``): its square root is not needed.
+_CIRCLE_SLACK = 1e-9
 _TWO_PI = 2.0 * math.pi
 
 
@@ -195,7 +198,7 @@ def sweep_circle(
     for q in range(l0 - f0 + l1 - f1):
         j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
         b = fx * dir_x[j] + fy * dir_y[j]  # as in _circle_hit, whose t is >= b - r
-        if b - r - ranges[j] > 1e-9 * (b + r):
+        if b - r - ranges[j] > _CIRCLE_SLACK * (b + r):
             continue  # surely not nearer: skip the square root
         t = _circle_hit(ox, oy, dir_x[j], dir_y[j], cx, cy, r)
         if t < ranges[j]:
