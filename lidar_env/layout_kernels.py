@@ -132,9 +132,9 @@ def cast_packed(
         ranges = exact[a:b]
         cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen,
                     first_stamp + k, own, max_range, facing)
-        heading = pose[2] % (2.0 * math.pi)
         if movers.shape[0] > 0:
-            cast_movers(ranges, pose[0], pose[1], heading, movers, own, max_range)
+            cast_movers(ranges, pose[0], pose[1], pose[2] % (2.0 * math.pi), movers, own,
+                        max_range)
         if housing >= 0.0:
             if outline.shape[0] == 0:
                 raise ConfigError("car: a self-occluded Lidar needs the car's pose and size "
