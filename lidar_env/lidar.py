@@ -6,10 +6,10 @@ kernels), so large maps (thousands of edges traced from an image) cost little mo
 ones. :class:`Lidar` is the sensor model (beams, range, noise, dropouts) on top of it, and
 :func:`pymunk_cast_rays` the slow independent reference.
 
-Both run the one compiled sensor kernel of :mod:`lidar_env.lidar_layout` (the env's), their K
-identical sensors packed end to end. Speed (``python benchmarks/bench_lidar.py``, a shared,
-loaded Xeon): ~35 us per dual 360-beam scan on 144 primitives and ~49 us on 304, 114-148x
-faster than a per-beam pymunk ray query loop, 42x on a 4,800-edge image map.
+Both run the one compiled sensor kernel of :mod:`lidar_env.layout_kernels` (the env's), their
+K identical sensors packed end to end. Speed (``python benchmarks/bench_lidar.py``, a shared,
+loaded 2-core machine): 14-20 us per dual 360-beam scan on 144 primitives and 19-25 us on 304,
+125-175x faster than a per-beam pymunk ray query loop, 50-53x on a 4,800-edge image map.
 :meth:`Lidar.scan` adds noise, clipping, dropouts and the float32 conversion in the same compiled
 call; with noise, its main extra cost is numpy drawing the Gaussian numbers.
 
