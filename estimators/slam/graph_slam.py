@@ -199,6 +199,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._frontend = make(self.frontend, **self.frontend_params)
         self._frontend.reset(self.setup, self._initial_pose)
         self._start_points: list[NDArray[np.float64]] | None = []  # while the start may change
+        self._start_replays = 0  # the front end's start replays the graph was built on
         self._reset_graph()
 
     def _reset_graph(self) -> None:
@@ -236,14 +237,15 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         points = scans_to_car_points(scans, self.setup, self.min_range)
         if self._start_points is not None:  # the front end may still match its start again
             self._start_points.append(points)
-            if getattr(self._frontend, "start_replays", 0):  # it did: build the graph anew
-                kept, self._start_points = self._start_points, None
+            replays, kept = getattr(self._frontend, "start_replays", 0), self._start_points
+            if not getattr(self._frontend, "start_pending", False):
+                self._start_points = None
+            if replays > self._start_replays:  # it did: build the graph anew
+                self._start_replays = replays
                 self._reset_graph()
                 for scan_points, pose in zip(kept, self._frontend.trajectory, strict=True):
                     odometry = self.add_scan(scan_points, pose)
                 return odometry
-            if not getattr(self._frontend, "start_pending", False):
-                self._start_points = None
         return self.add_scan(points, odometry)
 
     # ------------------------------------------------------------------ the pipeline
