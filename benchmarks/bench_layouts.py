@@ -15,15 +15,11 @@ for one that cannot). Layouts:
 Targets (issue 15): ``lidar_odometry`` >= 99 % and drift <= 0.3 % on ``corners``, >= 98.5 % and
 <= 0.5 % on ``front``, in every group; ``four`` reported.
 
-Measured (the README's layouts table has every number): ``corners``, ``four`` and ``paper``
-meet them (seed 0); ``front`` does in open_cylinders and the hallway (seeds 0-2: 98.78-99.15 %,
-drift <= 0.45 %), in closed_to_open its accuracy (98.79-98.94 %) but not quite its drift
-(0.33-0.58 %; 0.47 % given the true start speed). The car
-starts at 1 m/s down two parallel walls; the start speed, which those scans cannot show, is
-measured once something across the corridor is in view and the start matched again with it
-(``estimators.odometry.unknown_start``; before it: hallway 89.41 %, closed_to_open 80.73 %);
-in closed_to_open the first measure, from the hall's cylinders first seen sparse at the range
-limit, is 1-3 % slow, and is taken again with the map the first replay built.
+Measured (the README's layouts table has every number): all four layouts meet them, ``front``
+on seeds 0-2 (98.78-99.14 %, drift <= 0.46 %). The car starts at 1 m/s down two parallel walls;
+the start speed, which those scans cannot show, is measured once something across the corridor
+is in view and the start matched again with it (``estimators.odometry.unknown_start``; before
+it: hallway 89.41 %, closed_to_open 80.73 %).
 
     python benchmarks/bench_layouts.py [--layouts corners front four paper]
         [--estimators lidar_odometry ...] [--seed 0] [--max-steps N]
