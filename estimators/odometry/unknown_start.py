@@ -87,8 +87,8 @@ class UnknownStartSpeed:
         self._kept: list[tuple[Scans, float]] | None = [(scans, t)] if watch else None
         self.speed_unknown = False  # the start velocity is not known yet
         self.start_replays = 0  # times the start was matched again (a pipeline's cue)
-        self._measured: list[FloatArray] = []  # translations of the scans in a row that
-        # pinned down every direction, without the prior: per scan (or second), midpoint frame
+        self._measured: list[FloatArray] = []  # translations (midpoint frame, per scan or
+        # second) of the latest scans in a row that pinned every direction down
 
     @property
     def start_pending(self) -> bool:
