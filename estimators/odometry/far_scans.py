@@ -223,6 +223,13 @@ class FarScanMatching:
         information[:2] = (self.noise_sigma / sigma) ** 2
         return information
 
+    def _slow_clock(self, typical: float) -> bool:
+        """Whether over the clock's typical interval (the median of the last ones, else
+        ``typical`` [s]) the constant-velocity guess can miss by more than the weakest prior
+        the ordinary path allows (scans 4 Hz and slower)."""
+        clock = float(np.median(self._intervals)) if len(self._intervals) >= 5 else typical
+        return self.prediction_acceleration * clock**2 > self.prior_sigma_translation
+
     def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,
                interval: float) -> MatchResult:
         """The registration of ``points`` (M, 2, car frame) near ``guess`` (3,), the car
@@ -237,9 +244,8 @@ class FarScanMatching:
                 min(window.angular, 2.0 * sharpest + self.search_angular_window))
         # A guess worse than the weakest prior the ordinary path allows (slow scans: 4 Hz and
         # below) or a predicted step of a keyframe spacing: scans far apart.
-        clock = float(np.median(self._intervals)) if len(self._intervals) >= 5 else typical
-        weak = self.prediction_acceleration * clock**2 > self.prior_sigma_translation
-        if weak or far_apart(predicted, self.keyframe_distance, self.search_angular_window):
+        if self._slow_clock(typical) or far_apart(predicted, self.keyframe_distance,
+                                                  self.search_angular_window):
             self.far_searches += 1
             result = far_match(self._global_search(), self._reference, points, guess, window,
                                self.params, self._far_prior(window))
