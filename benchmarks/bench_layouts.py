@@ -59,16 +59,18 @@ def replay(recording: Recording, name: str, params: dict[str, float]):
     return estimator.trajectory
 
 
-def parameter(text: str) -> tuple[str, float | bool]:
-    """``NAME=VALUE`` from the command line: VALUE a number (a float) or ``true``/``false``."""
+def parameter(text: str) -> tuple[str, int | float | bool]:
+    """``NAME=VALUE`` from the command line: VALUE an integer (``20``), a float (``6e-4``) or
+    ``true``/``false``."""
     name, _, value = text.partition("=")
     if name and value in ("true", "false"):
         return name, value == "true"
-    try:
-        if name:
-            return name, float(value)
-    except ValueError:
-        pass
+    for kind in (int, float):
+        try:
+            if name:
+                return name, kind(value)
+        except ValueError:
+            pass
     raise argparse.ArgumentTypeError(f"expected NAME=NUMBER or NAME=true/false, got {text!r}")
 
 

@@ -172,11 +172,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
         start_speed_scans, max_start_replay: where the first scans cannot tell the start
-            velocity (:mod:`estimators.odometry.unknown_start`), it is measured as the mean
-            over this many scans in a row that pin down every direction without the prior
-            (20: the mean of n increments is the displacement over n scans divided by n, so
-            its error falls as 1/n; a few mm over 20 steps of 0.1 m is ~1 %), and the scans
-            kept until then, at most ``max_start_replay`` (300: 30 s at 10 Hz; 0: never), are
+            velocity (:mod:`estimators.odometry.unknown_start`), it is the mean over this many
+            scans in a row that pin every direction down (20: the mean of n increments is the
+            displacement over n scans over n, its error falls as 1/n), and the scans kept
+            until then, at most ``max_start_replay`` (300: 30 s at 10 Hz; 0: never), are
             matched again with it.
 
     After a run, ``fallbacks`` counts the correlative searches that were needed, ``far_searches``
@@ -229,9 +228,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
                   "velocity_window": 1, "start_speed_scans": 1, "max_start_replay": 0,
                   "n_keyframes": 1}
         for name, least in lowest.items():
-            if not getattr(self, name) >= least:
-                said = f"{least} (normal_neighbours)" if name.startswith("max_") else least
-                raise ConfigError(f"{name}: expected >= {said}, got {getattr(self, name)}")
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+                said = f"{least} (normal_neighbours)" if name == "max_normal_neighbours" else least
+                raise ConfigError(f"{name}: expected an integer >= {said}, got {value!r}")
         if not 0 <= self.min_quality <= 1:
             raise ConfigError(f"min_quality: expected a share in [0, 1], got {self.min_quality}")
         self.params = ICPParams(

@@ -239,19 +239,19 @@ def test_voxel_downsample_keeps_one_point_per_cell():
 def test_bad_parameters_are_named():
     with pytest.raises(ValueError, match="keyframe_distance: expected a positive value"):
         LocalMapOdometry(keyframe_distance=0.0)
-    with pytest.raises(ValueError, match="n_keyframes: expected >= 1"):
+    with pytest.raises(ValueError, match="n_keyframes: expected an integer >= 1"):
         LocalMapOdometry(n_keyframes=0)
-    with pytest.raises(ValueError, match="normal_neighbours: expected >= 3"):
+    with pytest.raises(ValueError, match="normal_neighbours: expected an integer >= 3"):
         LocalMapOdometry(normal_neighbours=2)
-    with pytest.raises(ValueError, match=r"max_normal_neighbours: expected >= 9 \(normal_"):
+    with pytest.raises(ValueError, match=r"max_normal_neighbours: expected an integer >= 9 \("):
         LocalMapOdometry(max_normal_neighbours=5)
     with pytest.raises(ValueError, match="prediction_acceleration: expected a positive value"):
         LocalMapOdometry(prediction_acceleration=-1.0)
     with pytest.raises(ValueError, match="search_resolution: expected a positive value"):
         LocalMapOdometry(search_resolution=0.0)
-    with pytest.raises(ValueError, match="velocity_window: expected >= 1"):
+    with pytest.raises(ValueError, match="velocity_window: expected an integer >= 1"):
         LocalMapOdometry(velocity_window=0)
-    with pytest.raises(ConfigError, match="start_speed_scans: expected >= 1"):
+    with pytest.raises(ConfigError, match="start_speed_scans: expected an integer >= 1"):
         LocalMapOdometry(start_speed_scans=0)
     with pytest.raises(ValueError, match="min_quality: expected a share"):
         LocalMapOdometry(min_quality=1.5)

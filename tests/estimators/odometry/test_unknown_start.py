@@ -87,7 +87,8 @@ def test_a_start_the_scans_pin_down_is_left_exactly_as_it_was() -> None:
     np.testing.assert_array_equal(watched, unwatched)
 
 
-@pytest.mark.parametrize(("name", "value"), [("start_speed_scans", 0), ("max_start_replay", -1)])
-def test_bad_start_settings_are_named(name: str, value: int) -> None:
-    with pytest.raises(ConfigError, match=name):
+@pytest.mark.parametrize(("name", "value"), [("start_speed_scans", 0), ("start_speed_scans", 2.5),
+                                           ("max_start_replay", -1), ("max_start_replay", True)])
+def test_bad_start_settings_are_named(name: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=rf"{name}: expected an integer >= \d+, got"):
         LocalMapOdometry(**{name: value})
