@@ -24,7 +24,8 @@ Units and frames: positions and ranges in metres, angles in radians, world frame
 is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
 sets come as ``(sorted_angles, order, step)`` from :func:`lidar_env.lidar_config.beam_geometry`.
 The callers' entry points are :func:`lidar_env.lidar.cast_rays` and
-:meth:`lidar_env.lidar_layout.LidarLayout.scan`, through :func:`lidar_env.lidar_layout.cast_packed`.
+:meth:`lidar_env.lidar_layout.LidarLayout.scan`, through
+:func:`lidar_env.layout_kernels.cast_packed`.
 """
 
 from __future__ import annotations
