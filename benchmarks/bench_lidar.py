@@ -162,7 +162,7 @@ def bench_layout(world: World, cars: np.ndarray, name: str, lidars: list[LidarCo
     """Time :meth:`LidarLayout.scan` (all K scans in one call, noiseless) against pymunk's
     per-beam queries for each Lidar, on the same car poses in turns; print one line and return
     the speed-up."""
-    layout = LidarLayout(lidars, [0.0] * len(lidars), [0.0] * len(lidars))
+    layout = LidarLayout.exact(lidars)
     sensors = np.stack([compose(cars, np.array(lidar.mount)) for lidar in lidars], axis=1)
     clear = np.all(world.clearance(sensors[..., :2].reshape(-1, 2)).reshape(len(cars), -1) > 0.05,
                    axis=1)

@@ -70,7 +70,7 @@ def bench_world(name: str, world: World, cases: list[tuple[np.ndarray, np.ndarra
     """Time the scan with and without movers and pymunk per beam; print one line, return the
     speed-up."""
     cfg = EnvConfig()
-    layout = LidarLayout(cfg.lidars, [0.0, 0.0], [0.0, 0.0])
+    layout = LidarLayout.exact(cfg.lidars)
     rng = np.random.default_rng(0)
     layout.scan(world, cases[0][0], rng, cases[0][1])  # compile (or load the numba cache)
     layout.scan(world, cases[0][0], rng)
@@ -99,7 +99,7 @@ def bench_world(name: str, world: World, cases: list[tuple[np.ndarray, np.ndarra
     pymunk_cpu = (time.process_time() - cpu) / count * 1e6
     worst = max(np.max(np.abs(a - b)) for got, want in zip(scans, reference, strict=False)
                 for a, b in zip(got, want, strict=True))
-    static = LidarLayout(cfg.lidars, [0.0, 0.0], [0.0, 0.0])
+    static = LidarLayout.exact(cfg.lidars)
     on_movers = np.mean([np.mean(np.concatenate(got) < np.concatenate(
         static.scan(world, sensors, rng)) - 1e-6) for got, (sensors, _) in zip(scans, cases,
                                                                                 strict=True)])

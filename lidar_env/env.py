@@ -201,9 +201,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
             for key, lidar in zip(self.lidar_keys, cfg.lidars, strict=True)
         })
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.lidar = LidarLayout(cfg.lidars, [lidar.range_noise_std for lidar in cfg.lidars],
-                                 [lidar.dropout_prob for lidar in cfg.lidars],
-                                 (cfg.car_length, cfg.car_width))
+        self.lidar = LidarLayout(cfg.lidars, (cfg.car_length, cfg.car_width))
         self._mounts = cfg.mounts_array
         self._sensor_poses = np.zeros((cfg.n_lidars, 3))
         self._world_aligned = cfg.scan_frame == "world"

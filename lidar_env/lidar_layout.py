@@ -21,6 +21,7 @@ the same scans bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from functools import cached_property
 
@@ -115,21 +116,18 @@ class LidarLayout:
     """K planar Lidars with no hidden state: ``scan(world, sensor_poses, rng)``.
 
     Args:
-        lidars: 1 or more :class:`LidarConfig` (their mounts are used by the env).
-        noise_std, dropout_prob: ``(K,)`` noise [m] and dropout probability per Lidar (the
-            env passes each LidarConfig's ``range_noise_std`` and ``dropout_prob``).
+        lidars: 1 or more :class:`LidarConfig`, each with its mount, beams, range, noise and
+            dropout (:meth:`exact`: the same without noise and dropout).
         car_size: ``(length, width)`` [m] of the car's rectangle, needed when a Lidar has
             ``self_occlusion``.
     """
 
     def __init__(
-        self, lidars: Sequence[LidarConfig], noise_std: ArrayLike, dropout_prob: ArrayLike,
-        car_size: tuple[float, float] | None = None,
+        self, lidars: Sequence[LidarConfig], car_size: tuple[float, float] | None = None,
     ) -> None:
         self.lidars = tuple(lidars)
-        k = len(self.lidars)
-        self.noise_std = np.asarray(noise_std, dtype=np.float64).reshape(k)
-        self.dropout_prob = np.asarray(dropout_prob, dtype=np.float64).reshape(k)
+        self.noise_std = np.array([lidar.range_noise_std for lidar in self.lidars])
+        self.dropout_prob = np.array([lidar.dropout_prob for lidar in self.lidars])
         self.mounts = np.array([lidar.mount for lidar in self.lidars], dtype=np.float64)
         self.sizes = tuple(lidar.n_beams for lidar in self.lidars)
         ends = np.cumsum(self.sizes).tolist()
@@ -142,6 +140,14 @@ class LidarLayout:
             raise ConfigError("car_size: expected the car's (length, width) [m] for a Lidar "
                               "with self_occlusion, got None")
         self._world_of: tuple = _NO_WORLD
+
+    @classmethod
+    def exact(cls, lidars: Sequence[LidarConfig],
+              car_size: tuple[float, float] | None = None) -> LidarLayout:
+        """The layout of ``lidars`` without range noise or dropouts: the exact ranges (what
+        pymunk's ray queries give, to float32)."""
+        return cls([dataclasses.replace(lidar, range_noise_std=0.0, dropout_prob=0.0)
+                    for lidar in lidars], car_size)
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()

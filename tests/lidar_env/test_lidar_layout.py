@@ -41,7 +41,7 @@ def test_a_270_degree_lidar_agrees_with_pymunk_ray_queries():
     world = make_world("closed_to_open")
     space = world.build_space()
     lidar = LidarConfig((0.35, 0.2, math.pi / 4), n_beams=271, fov=1.5 * math.pi, max_range=8.0)
-    layout = LidarLayout([lidar], [0.0], [0.0])
+    layout = LidarLayout.exact([lidar])
     rng = np.random.default_rng(0)
     for pose in ([16.0, 3.0, 0.4], [5.0, 1.0, -2.0], [24.0, -2.0, 3.0]):
         sensor = se2.compose(np.array(pose), np.array(lidar.mount))[None, :]
@@ -56,7 +56,8 @@ def test_identical_lidars_scan_bit_for_bit_like_the_single_lidar_model():
                   segments=[[-5.0, -3.0, 6.0, -3.0]], bounds=(-6, -4, 7, 4))
     poses = np.array([[0.0, 0.0, 0.3], [0.5, -0.2, 2.0]])
     lidar = Lidar(360, 6.0, noise_std=0.05, dropout_prob=0.2)
-    layout = LidarLayout([LidarConfig((0, 0, 0), 360, max_range=6.0)] * 2, [0.05] * 2, [0.2] * 2)
+    layout = LidarLayout([LidarConfig((0, 0, 0), 360, max_range=6.0, range_noise_std=0.05,
+                                      dropout_prob=0.2)] * 2)
     single = lidar.scan(world, poses, np.random.default_rng(4))
     packed = layout.scan(world, poses, np.random.default_rng(4))
     assert single.tobytes() == np.stack(packed).tobytes()
@@ -150,7 +151,7 @@ def test_narrow_lidars_on_a_traced_map_agree_with_pymunk(lidars) -> None:
     image[30:36, 100:170] = 255
     world = World.from_image(image, 0.05)
     space = world.build_space()
-    layout = LidarLayout(lidars, [0.0] * len(lidars), [0.0] * len(lidars))
+    layout = LidarLayout.exact(lidars)
     rng = np.random.default_rng(2)
     cars = np.column_stack([rng.uniform(1.0, 9.0, (60, 2)), rng.uniform(-np.pi, np.pi, 60)])
     sensors = np.stack([se2.compose(cars, np.array(lidar.mount)) for lidar in lidars], axis=1)
@@ -166,9 +167,10 @@ def test_narrow_lidars_on_a_traced_map_agree_with_pymunk(lidars) -> None:
 def test_the_packed_scan_is_the_arrays_kernel_bit_for_bit() -> None:
     # LidarLayout.scan packs world, beams, car and draws into two arrays once per world and
     # draws in place; the arrays kernel takes them one by one and draws afresh
-    lidars = [LidarConfig((0.3, 0.1, 0.4), 200, 4.0, 7.0, self_occlusion=True),
-              LidarConfig((-0.3, 0.0, math.pi), 91, math.pi / 2)]
-    layout = LidarLayout(lidars, [0.02, 0.0], [0.0, 0.1], (0.8, 0.5))
+    lidars = [LidarConfig((0.3, 0.1, 0.4), 200, 4.0, 7.0, 0.02, 0.0, self_occlusion=True),
+              LidarConfig((-0.3, 0.0, math.pi), 91, math.pi / 2, range_noise_std=0.0,
+                          dropout_prob=0.1)]
+    layout = LidarLayout(lidars, (0.8, 0.5))
     world = make_world("closed_to_open")
     assert layout.pack(world) is layout.pack(world)  # packed once
     rng, reference_rng = np.random.default_rng(5), np.random.default_rng(5)

@@ -169,7 +169,7 @@ def test_layout_scan_with_movers_matches_pymunk_and_reads_zero_inside_a_mover():
     rng = np.random.default_rng(0)
     movers = np.column_stack([rng.uniform(-5, 5, (25, 2)), rng.uniform(0.1, 0.6, 25)])
     lidars = [LidarConfig((0.0, 0.0, 0.0), 360), LidarConfig((0.0, 0.0, 1.0), 181, math.pi)]
-    layout = LidarLayout(lidars, [0.0, 0.0], [0.0, 0.0])
+    layout = LidarLayout.exact(lidars)
     space = _space_with_movers(world, movers)
     free = np.array([[x, y] for x, y in rng.uniform(-5, 5, (400, 2))
                      if np.all(np.hypot(*(movers[:, :2] - (x, y)).T) > movers[:, 2] + 0.05)

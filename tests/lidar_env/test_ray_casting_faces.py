@@ -69,8 +69,8 @@ def test_skipping_edges_that_face_away_changes_no_range(seed: int) -> None:
                   polygons=random_polygons(rng, 40), bounds=(-12, -12, 12, 12))
     codes = facing(world)
     assert np.count_nonzero(codes) > 0.5 * len(world.polygon_edges)
-    layout = LidarLayout([LidarConfig((0.0, 0.0, 0.0), 360),
-                          LidarConfig((0.0, 0.0, 1.0), 91, np.pi / 2, 6.0)], [0.0] * 2, [0.0] * 2)
+    layout = LidarLayout.exact([LidarConfig((0.0, 0.0, 0.0), 360),
+                          LidarConfig((0.0, 0.0, 1.0), 91, np.pi / 2, 6.0)])
     beams, params = layout._packed
     poses = np.column_stack([rng.uniform(-12, 12, (300, 2)), rng.uniform(-4, 4, 300)])
     for pose in poses:

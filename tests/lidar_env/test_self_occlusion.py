@@ -69,7 +69,7 @@ def test_self_occluded_ranges_agree_with_pymunk_on_the_world_and_the_car_box(mou
     space = world.build_space()
     lidar = LidarConfig(mount, n_beams=181, fov=fov, max_range=8.0, self_occlusion=True,
                         housing_radius=housing)
-    layout = LidarLayout([lidar], [0.0], [0.0], CAR)
+    layout = LidarLayout.exact([lidar], CAR)
     for car_pose in ([2.0, 0.0, 0.3], [6.0, 0.4, -2.5], [10.0, -0.3, 1.6]):
         sensor = se2.compose(np.array(car_pose), np.array(mount))
         exact = exact_scan(layout, world, sensor[None, :], car_pose)
@@ -86,8 +86,8 @@ def car_frame_angles(lidar: LidarConfig) -> np.ndarray:
 
 
 def scans(lidar: LidarConfig, car_pose, world):
-    plain = LidarLayout([LidarConfig(lidar.mount, lidar.n_beams, lidar.fov)], [0.0], [0.0])
-    occluded = LidarLayout([lidar], [0.0], [0.0], CAR)
+    plain = LidarLayout.exact([LidarConfig(lidar.mount, lidar.n_beams, lidar.fov)])
+    occluded = LidarLayout.exact([lidar], CAR)
     sensor = se2.compose(np.array(car_pose), np.array(lidar.mount))[None, :]
     rng = np.random.default_rng(0)
     return (plain.scan(world, sensor, rng)[0],
@@ -154,8 +154,8 @@ def test_bad_self_occlusion_settings_are_named():
                                                      "housing_radius": -0.1}]})
     lidar = LidarConfig((0.35, 0.2, 0.0), self_occlusion=True)
     with pytest.raises(ConfigError, match="car_size"):
-        LidarLayout([lidar], [0.0], [0.0])
-    layout = LidarLayout([lidar], [0.0], [0.0], CAR)
+        LidarLayout.exact([lidar])
+    layout = LidarLayout.exact([lidar], CAR)
     world = make_world("hallway")
     with pytest.raises(ConfigError, match="car_pose: expected the car's finite world pose"):
         layout.scan(world, [[2.0, 0.0, 0.0]], np.random.default_rng(0))
