@@ -4,7 +4,7 @@
     python -m agents.evaluate --episodes 10 --pose-sources true lidar_odometry slam
     python -m agents.evaluate --moving-obstacles 10 --worlds open_cylinders random
     python -m agents.evaluate --drivers sb3 --sb3-model runs/ppo_driver.zip
-    python -m agents.evaluate --moving-obstacles 10 --mover-model yielding --worlds random
+    python -m agents.evaluate --moving-obstacles 10 --mover-model waypoints --worlds random
 
 An episode succeeds when the car reaches the trace's end without touching an obstacle and
 before the time limit. Each (world, trace, episode) uses reset seed ``base_seed + episode``;
@@ -14,9 +14,10 @@ pose source other than ``true`` the driver steers by an estimator's poses
 (:mod:`agents.pose_source`); the scores always use the env's ground truth. With
 ``--moving-obstacles M`` every episode has M pedestrians (``config["moving_obstacles"]``, drawn
 from the same reset seed, so every driver meets the same crowd), walking by
-``--mover-model`` (``config["mover_model"]``: "waypoints", the default, ignore the car;
-"yielding" keep clear of it); the closest a mover's edge came to the car's centre is reported
-so that a success among movers is seen to mean something.
+``--mover-model`` (``config["mover_model"]``: "yielding", the default, keep clear of where
+the car stands; "waypoints" ignore it and walk into a standing car); the closest a mover's
+edge came to the car's centre is reported so that a success among movers is seen to mean
+something.
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ def _closest_mover(info: dict[str, Any]) -> float:
 
 def evaluate(
     driver: Driver, world: str, trace: str, episodes: int, base_seed: int = 1_000_000,
-    moving_obstacles: int = 0, mover_model: str = "waypoints",
+    moving_obstacles: int = 0, mover_model: str = "yielding",
 ) -> DrivingScore:
     """Score ``driver`` over ``episodes`` seeded episodes of ``world`` and ``trace`` with
     ``moving_obstacles`` pedestrians walking by ``mover_model``."""
@@ -144,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--base-seed", type=int, default=1_000_000)
     parser.add_argument("--moving-obstacles", type=int, default=0,
                         help="pedestrians per episode (config moving_obstacles; default 0)")
-    parser.add_argument("--mover-model", choices=MOVER_MODELS, default="waypoints",
+    parser.add_argument("--mover-model", choices=MOVER_MODELS, default="yielding",
                         help="how the pedestrians walk (config mover_model; default %(default)s)")
     parser.add_argument("--sb3-model", type=Path, default=None,
                         help="the sb3 driver's model .zip (default: the shipped one)")

@@ -3,13 +3,17 @@ without them.
 
     python benchmarks/bench_movers_estimators.py               # the three paper groups, seed 0
     python benchmarks/bench_movers_estimators.py --seeds 0 1
+    python benchmarks/bench_movers_estimators.py --mover-model waypoints --defaults
 
 Each paper group (G1 ``open_cylinders`` + ``right_turn`` with 10 pedestrians, G2 ``hallway`` +
 ``zigzag`` with 5, G3 ``closed_to_open`` + ``zigzag`` with 5) is driven by the scripted driver
-twice with the same seed: without movers and with them. A mover the driver (which ignores the
-scans) walks into ends the episode, so both drives are scored over the steps they share. Per
+twice with the same seed: without movers and with them (``--mover-model``, default the
+env's: "yielding" pedestrians keep clear of where the car stands, "waypoints" ones ignore it).
+A mover the driver (which ignores the scans) walks into ends the episode, so both drives are
+scored over the steps they share. Per
 drive: eq.-11 accuracy and ATE of ``lidar_odometry`` and ``slam`` (both with
-``reject_dynamic=True``, also on the static drive, so like is compared with like); the
+``reject_dynamic=True``, also on the static drive, so like is compared with like; with
+``--defaults`` as registered); the
 occupancy map's IoU and the static cylinders' precision at the ``lidar_odometry`` poses
 (against the static world); and the moving-obstacle tracker
 (:func:`estimators.leaderboard.recording.score_movers`: a
@@ -40,6 +44,7 @@ from estimators.leaderboard.recording import (
     world_geometry,
 )
 from estimators.leaderboard.records import SensorDataset
+from lidar_env.config import MOVER_MODELS, EnvConfig
 
 GROUPS = (("open_cylinders", "right_turn", 10), ("hallway", "zigzag", 5),
           ("closed_to_open", "zigzag", 5))
@@ -49,10 +54,12 @@ DYNAMIC = {"lidar_odometry": {"reject_dynamic": True},
            "slam": {"frontend_params": {"reject_dynamic": True}}}
 
 
-def drive(world: str, trace: str, seed: int, movers: int) -> tuple[SensorDataset, list[Any]]:
-    """The scripted drive's sensor dataset and the true movers (M, 5) at every observation."""
+def drive(world: str, trace: str, seed: int, movers: int, model: str
+          ) -> tuple[SensorDataset, list[Any]]:
+    """The scripted drive's sensor dataset and the true movers (M, 5) at every observation,
+    among ``movers`` pedestrians walking by mover model ``model``."""
     env = gym.make("DualLidar-v0", world=world, trace=trace,
-                   config={"moving_obstacles": movers})
+                   config={"moving_obstacles": movers, "mover_model": model})
     driver = make_driver("scripted")
     observation, info = env.reset(seed=seed)
     driver.reset(env)
@@ -82,9 +89,10 @@ def prefix(dataset: SensorDataset, n: int) -> SensorDataset:
         scans={key: scan[:n] for key, scan in dataset.scans.items()})
 
 
-def run(name: str, dataset: SensorDataset) -> np.ndarray:
-    """The estimator's trajectory (N, 3), started at the true first pose."""
-    estimator = make(name, **DYNAMIC[name])
+def run(name: str, dataset: SensorDataset, params: dict[str, Any]) -> np.ndarray:
+    """The trajectory (N, 3) of estimator ``name`` with ``params``, started at the true first
+    pose."""
+    estimator = make(name, **params)
     estimator.reset(dataset.setup, dataset.poses[0])
     for step, observation in enumerate(dataset.observations()):
         estimator.update(observation, float(dataset.times[step]))
@@ -94,19 +102,24 @@ def run(name: str, dataset: SensorDataset) -> np.ndarray:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--mover-model", choices=MOVER_MODELS, default=EnvConfig.mover_model,
+                        help="how the pedestrians walk (default %(default)s)")
+    parser.add_argument("--defaults", action="store_true",
+                        help="the estimators as registered (moving-point filter off)")
     args = parser.parse_args()
+    params = {name: {} if args.defaults else DYNAMIC[name] for name in ESTIMATORS}
     print("| group | seed | movers | steps | " + " | ".join(
         f"{n} acc [%] | {n} ATE [m]" for n in ESTIMATORS) + " | map IoU | cylinder prec. | "
           "mover recall | pos. err [m] | vel. err [m/s] | id sw. | moving prec. |")
     print("|---" * (11 + 2 * len(ESTIMATORS)) + "|")
     for world, trace, count in GROUPS:
         for seed in args.seeds:
-            with_movers, movers = drive(world, trace, seed, count)
-            without, _ = drive(world, trace, seed, 0)
+            with_movers, movers = drive(world, trace, seed, count, args.mover_model)
+            without, _ = drive(world, trace, seed, 0, args.mover_model)
             n = min(len(with_movers), len(without))
             for dataset, m in ((prefix(without, n), 0), (prefix(with_movers, n), count)):
                 cells = []
-                trajectories = {name: run(name, dataset) for name in ESTIMATORS}
+                trajectories = {name: run(name, dataset, params[name]) for name in ESTIMATORS}
                 for name in ESTIMATORS:
                     metrics = evaluate(trajectories[name], dataset.poses)
                     cells += [f"{metrics.accuracy_percent:.2f}", f"{metrics.ate_rmse_m:.4f}"]

@@ -23,7 +23,7 @@ from lidar_env.lidar_config import LidarConfig, check_lidars
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
 #: Valid values of :attr:`EnvConfig.mover_model` (see :mod:`lidar_env.movers`).
-MOVER_MODELS: tuple[str, ...] = ("waypoints", "yielding")
+MOVER_MODELS: tuple[str, ...] = ("yielding", "waypoints")
 
 #: Most moving obstacles an env may hold (each costs a little per step and per beam).
 MAX_MOVERS = 256
@@ -65,10 +65,10 @@ class EnvConfig:
           (:mod:`lidar_env.movers`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
           person's shoulders) walking at a speed drawn from ``mover_speed_range`` 0.5-1.5 m/s
           (slow to brisk walking), placed at least ``mover_clearance`` 1 m from the car.
-        * ``mover_model`` "waypoints": movers ignore the car, the harder case for a driver and
-          the model every published mover result (leaderboard, bench_movers_estimators) was
-          made with; "yielding" movers keep clear of the car's box like real pedestrians (they
-          never walk into it; it can still drive into them).
+        * ``mover_model`` "yielding": movers keep clear of the car's box where it stands, like
+          real pedestrians (they never walk into it; a car that drives on can still hit them);
+          "waypoints" movers ignore the car and walk into it even where it stands still, the
+          harder crowd (the one every mover result before session 8 was made with).
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)
@@ -90,7 +90,7 @@ class EnvConfig:
     mover_radius: float = 0.25  # [m] radius of each moving circle
     mover_speed_range: tuple[float, float] = (0.5, 1.5)  # [m/s] (min, max) of a mover's speed
     mover_clearance: float = 1.0  # [m] least gap between a mover and the car's box at reset
-    mover_model: str = "waypoints"  # "waypoints": movers ignore the car; "yielding": they avoid it
+    mover_model: str = "yielding"  # "yielding": movers avoid the car; "waypoints": they ignore it
 
     def __post_init__(self) -> None:
         positive = {

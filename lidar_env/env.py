@@ -50,8 +50,9 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     are what Lidar-only motion estimators are scored against. With
     ``config["moving_obstacles"]`` M > 0, M pedestrians (circles of ``mover_radius``) walk
     between random free waypoints at their own speeds (:mod:`lidar_env.movers`): the Lidars
-    see them exactly and touching one ends the episode like a wall; ``config["mover_model"]``
-    "yielding" makes them keep clear of where the car stands (by default they ignore it).
+    see them exactly and touching one ends the episode like a wall. They keep clear of where the
+    car stands (``config["mover_model"]`` "yielding"), but do not guess where it goes;
+    "waypoints" pedestrians ignore the car altogether.
 
     ## Action Space
 

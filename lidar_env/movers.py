@@ -4,8 +4,8 @@
 kernels of :mod:`lidar_env.mover_kernels` (motion, the no-overlap guarantee, waypoints,
 placement). Units: metres, seconds, radians; world frame.
 
-Motion models (``config["mover_model"]``, :data:`~lidar_env.config.MOVER_MODELS`). "waypoints"
-(the default): each mover walks in a straight line at its own
+Motion models (``config["mover_model"]``, :data:`~lidar_env.config.MOVER_MODELS`). "waypoints":
+each mover walks in a straight line at its own
 speed (drawn uniformly from ``speed_range`` at spawn) to a waypoint it can see, a free point
 :data:`WAYPOINT_REACH` away in a random direction; at the waypoint, or after being stuck for a
 second, it draws the next one. On the way it turns away from walls and other movers it would
@@ -19,10 +19,11 @@ closer), so a standing car is never walked into. They do not read the driver's i
 car's motion is not extrapolated): a car that drives on into a crossing pedestrian still hits
 it, so giving way stays the driver's job. (Movers that also dodged the car's commanded motion
 were tried: then pure pursuit, blind to the scans, finished about 95 % of its runs among them,
-and there was nothing left for a seeing driver to show.) The default
-stays "waypoints" so that every mover result made before "yielding" existed (the leaderboard's
-movers group, ``bench_movers_estimators``) is unchanged, bit for bit; it is also the harder
-crowd for a driver, since standing still is no escape.
+and there was nothing left for a seeing driver to show.) "yielding" is the default: a
+pedestrian does not walk into a standing car, and a crowd that does scores a driver for
+crashes it did not cause. "waypoints" stays as the harder
+crowd (standing still is no escape from it; every mover result before session 8 was made
+with it).
 
 Random numbers, all from the generator passed in, in a fixed order so that the same seed gives
 the same crowd bit for bit: at :meth:`Crowd.spawn`, ``(SPAWN_TRIES * M, 2)`` uniforms for the
@@ -91,7 +92,7 @@ class Crowd:
     """
 
     def __init__(self, count: int, radius: float, speed_range: tuple[float, float],
-                 model: str = "waypoints") -> None:
+                 model: str = "yielding") -> None:
         if model not in MOVER_MODELS:
             raise ConfigError(f"mover_model: expected one of {', '.join(MOVER_MODELS)}, got "
                               f"{model!r}")

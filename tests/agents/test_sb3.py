@@ -115,7 +115,7 @@ def test_the_driver_feeds_sector_deltas_to_a_model_trained_on_them(tmp_path) -> 
 
 def test_evaluation_reports_how_close_the_movers_came() -> None:
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="right_turn",
-                   config={"moving_obstacles": 10})
+                   config={"moving_obstacles": 10, "mover_model": "waypoints"})
     # Seed 1_000_000: pure pursuit, blind to the scans, walks into a pedestrian after 3.7 s.
     episode = drive_episode(env, make_driver("scripted"), seed=1_000_000)
     assert episode.collided and not episode.success and episode.time < 5.0

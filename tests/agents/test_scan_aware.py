@@ -77,7 +77,7 @@ def test_without_movers_it_drives_like_pure_pursuit():
 def test_it_backs_off_from_a_pedestrian_walking_at_it_which_pure_pursuit_hits(name, collides):
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight",
                    config={"moving_obstacles": 1, "mover_speed_range": (1.0, 1.0),
-                           "max_episode_time": 5.0})
+                           "mover_model": "waypoints", "max_episode_time": 5.0})
     observation, info = env.reset(seed=0)
     x, y, heading = info["pose"]
     ahead = np.array([math.cos(heading), math.sin(heading)])

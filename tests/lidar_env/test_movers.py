@@ -188,7 +188,8 @@ def test_layout_scan_with_movers_matches_pymunk_and_reads_zero_inside_a_mover():
 
 
 def test_a_mover_walking_into_the_standing_car_terminates_the_episode():
-    env, _, info = _crowd_env("open_cylinders", 1, seed=0, mover_speed_range=(1.0, 1.0))
+    env, _, info = _crowd_env("open_cylinders", 1, seed=0, mover_speed_range=(1.0, 1.0),
+                              mover_model="waypoints")
     crowd, car = env.unwrapped.crowd, env.unwrapped.car
     x, y, heading = info["pose"]
     ahead = np.array([math.cos(heading), math.sin(heading)])
@@ -404,10 +405,10 @@ def test_car_circles_cover_the_car_box():
     np.testing.assert_allclose(circles[:, 3], 1.0 * s + 0.5 * offsets * c)
 
 
-def test_mover_model_is_validated_and_waypoints_is_the_default():
-    with pytest.raises(ConfigError, match="mover_model: expected one of waypoints, yielding"):
+def test_mover_model_is_validated_and_yielding_is_the_default():
+    with pytest.raises(ConfigError, match="mover_model: expected one of yielding, waypoints"):
         gym.make("DualLidar-v0", config={"mover_model": "polite"})
-    assert gym.make("DualLidar-v0").unwrapped.config.mover_model == "waypoints"
+    assert gym.make("DualLidar-v0").unwrapped.config.mover_model == "yielding"
     a, _, _ = _crowd_env("hallway", 6, seed=2, mover_model="yielding")
     b, _, _ = _crowd_env("hallway", 6, seed=2, mover_model="yielding")
     for _ in range(40):
