@@ -124,6 +124,8 @@ class DualLidarVectorEnv(VectorEnv):
         self._cross_track = np.zeros(n)
         self._collision = np.zeros(n, dtype=np.bool_)
         self._scans = np.zeros((n, int(ends[-1])), dtype=np.float32)
+        self._cast_from = np.zeros((k, 3))  # the scans' scratch: sensor poses [m, rad], draws
+        self._draws = np.zeros(2 * int(ends[-1]))
         self._rewards = np.zeros(n)
         self._terminations = np.zeros(n, dtype=np.bool_)
         self._truncations = np.zeros(n, dtype=np.bool_)
@@ -221,7 +223,13 @@ class DualLidarVectorEnv(VectorEnv):
     def _observe(self, envs: NDArray[np.int64]) -> None:
         if len(envs):
             self._observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
-                         self._slots.scene, self._slots.rngs, self._sensors)
+                               self._slots.scene, self._slots.rngs, self._sensors, self._work())
+
+    def _work(self) -> tuple:
+        """The scans' scratch, as :func:`~lidar_env.vector.kernel.observe_envs` takes it."""
+        slots = self._slots
+        return (self._cast_from, self._draws, slots.circle_seen, slots.segment_seen,
+                slots.stamp)
 
     # ------------------------------------------------------------------ step
     def step(
@@ -247,7 +255,7 @@ class DualLidarVectorEnv(VectorEnv):
                      self._collision, self._scans)
             outcome = (self._rewards, self._terminations, self._truncations)
             self._step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
-                      self._slots.rngs, self._sensors, self._constants)
+                            self._slots.rngs, self._sensors, self._work(), self._constants)
         self._autoreset_envs = self._terminations | self._truncations
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), self._infos(None))

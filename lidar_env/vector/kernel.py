@@ -6,7 +6,8 @@ grid, its trace) and random generator are items of numba typed lists (:mod:`.slo
 is the single env's own compiled functions, called in its order: :func:`lidar_env.car.drive_arc`
 for the motion and collision, :func:`lidar_env.trace_geometry.project_onto_polyline` for the
 progress, :func:`lidar_env.car.mount_poses` and
-:func:`lidar_env.lidar_layout.scan_layout_kernel` for the scans. Each env draws its noise from
+:func:`lidar_env.layout_kernels.cast_packed` and :func:`~lidar_env.layout_kernels.readings`
+for the scans. Each env draws its noise from
 its own ``numpy.random.Generator`` inside the kernel (numba draws bit-identically to numpy and
 advances the same state), so an env's stream is the one a single env seeded alike would use.
 
@@ -24,7 +25,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from lidar_env.car import drive_arc, mount_poses
-from lidar_env.lidar_layout import scan_layout_kernel
+from lidar_env.layout_kernels import cast_packed, readings
 from lidar_env.primitive_grid import segment_distance2
 from lidar_env.trace_geometry import project_onto_polyline
 
@@ -43,6 +44,7 @@ def observe_envs(
     scene: tuple,
     rngs: object,
     sensors: tuple,
+    work: tuple,
 ) -> None:
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
@@ -50,24 +52,35 @@ def observe_envs(
     ``(circles, segments, first_polygon_edge, grids, waypoints, arc, closed, length)`` (lists
     and (N,) arrays, see :class:`~lidar_env.vector.slots.SceneSlots`); ``rngs`` a typed list of
     N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
-    with ``beams`` and ``params`` as :func:`~lidar_env.lidar_layout.scan_layout_kernel` takes
-    them. Draws per env: a standard normal per beam if any Lidar is noisy, then a uniform per
-    beam if any drops out (the order of :meth:`lidar_env.lidar_layout.LidarLayout.scan`).
+    with ``beams`` and ``params`` as :func:`~lidar_env.layout_kernels.cast_packed` takes them;
+    ``work`` the scratch of :attr:`~lidar_env.vector.slots.SceneSlots.work` (nothing is
+    allocated per env). Draws per env: a standard normal per beam if any Lidar is noisy, then
+    a uniform per beam if any drops out (the order of
+    :meth:`lidar_env.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws are
+    the steps of its (and numpy's) array draws.
     """
     circles, segments, first_edge, grids = scene[0], scene[1], scene[2], scene[3]
     mounts, world_aligned, noisy, dropping, beams, params = sensors
-    total = scans.shape[1]
-    none = np.empty(0)
+    cast_from, draws, circle_seen, segment_seen, stamp = work
+    total, k = scans.shape[1], mounts.shape[0]
+    gaussians = draws[:total] if noisy else draws[:0]
+    uniforms = draws[total:2 * total] if dropping else draws[:0]
+    no_movers, no_car, no_facing = np.empty((0, 3)), np.empty(0), np.empty(0, dtype=np.int64)
     for i in envs:
         mount_poses(pose[i], mounts, sensor_poses[i])
-        cast_from = sensor_poses[i].copy()
+        cast_from[:] = sensor_poses[i]
         if world_aligned:
             cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
         rng = rngs[i]
-        gaussians = rng.standard_normal(total) if noisy else none
-        uniforms = rng.random(total) if dropping else none
-        scans[i] = scan_layout_kernel(circles[i], segments[i], first_edge[i], grids[i],
-                                      cast_from, beams, params, gaussians, uniforms)
+        for j in range(gaussians.shape[0]):
+            gaussians[j] = rng.standard_normal()
+        for j in range(uniforms.shape[0]):
+            uniforms[j] = rng.random()
+        exact = cast_packed(circles[i], segments[i], first_edge[i], grids[i], cast_from, beams,
+                            params, no_movers, no_car, (circle_seen, segment_seen), stamp[0],
+                            no_facing)
+        stamp[0] += k
+        readings(exact, params, gaussians, uniforms, scans[i])
 
 
 @njit(cache=True)
@@ -109,6 +122,7 @@ def step_envs(
     scene: tuple,
     rngs: object,
     sensors: tuple,
+    work: tuple,
     constants: NDArray[np.float64],
 ) -> None:
     """One control step of the cars of ``envs`` (the single env's ``step`` after its action
@@ -117,7 +131,8 @@ def step_envs(
     ``speed`` [m/s], ``yaw_rate`` [rad/s] and ``checks`` (collision checks) are (N,) per env.
     ``state`` is ``(pose (N, 3), sensor_poses (N, K, 3), time (N,), arc (N,), cross_track
     (N,), collision (N,), scans (N, total))``; ``outcome`` ``(reward, terminated, truncated)``
-    (N,) each. ``constants``: control_dt [s], car half length and half width [m],
+    (N,) each; ``scene``, ``rngs``, ``sensors`` and ``work`` as :func:`observe_envs` takes
+    them. ``constants``: control_dt [s], car half length and half width [m],
     cross_track_penalty [1/s], collision_penalty, goal_tolerance [m], the truncation time
     [s] (``max_episode_time - 1e-9``), the progress window [m].
     """
@@ -149,7 +164,7 @@ def step_envs(
         done = hit or position >= length[i] - goal_tolerance
         terminated[i] = done
         truncated[i] = not done and time[i] >= time_limit
-    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors)
+    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors, work)
 
 
 @njit(cache=True)

@@ -66,6 +66,12 @@ class SceneSlots:
         self.first_edge = np.zeros(n, dtype=np.int64)
         self.closed = np.zeros(n, dtype=np.bool_)
         self.length = np.ones(n, dtype=np.float64)  # [m]
+        #: seen marks for the casts (lidar_env.ray_casting.cast_sensor), as long as the
+        #: largest world's circles and segments, and the next free stamp (stamps only grow,
+        #: so the marks are never cleared)
+        self.circle_seen = np.zeros(0, dtype=np.int64)
+        self.segment_seen = np.zeros(0, dtype=np.int64)
+        self.stamp = np.ones(1, dtype=np.int64)
         self._lists: tuple[Any, ...] | None = None
         self._rngs: Any = None
 
@@ -84,6 +90,10 @@ class SceneSlots:
             for values, item in zip(self._lists, items, strict=True):
                 _set_item(values, i, item)
         self.worlds[i], self.traces[i] = world, trace
+        if len(world.circles) > len(self.circle_seen):
+            self.circle_seen = np.zeros(len(world.circles), dtype=np.int64)
+        if len(world.segments) > len(self.segment_seen):
+            self.segment_seen = np.zeros(len(world.segments), dtype=np.int64)
         self.first_edge[i] = len(world.walls)
         self.closed[i] = trace.closed
         self.length[i] = trace.length
