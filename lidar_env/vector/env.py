@@ -226,10 +226,13 @@ class DualLidarVectorEnv(VectorEnv):
                                self._slots.scene, self._slots.rngs, self._sensors, self._work())
 
     def _work(self) -> tuple:
-        """The scans' scratch, as :func:`~lidar_env.vector.kernel.observe_envs` takes it."""
+        """The kernels' scratch: ``(sensor poses (K, 3), draws (2 total beams,), circle and
+        segment seen marks, next stamp (1,), near circles, near segments)`` (see
+        :class:`~lidar_env.vector.slots.SceneSlots`); :func:`~lidar_env.vector.kernel.
+        observe_envs` uses the first five."""
         slots = self._slots
         return (self._cast_from, self._draws, slots.circle_seen, slots.segment_seen,
-                slots.stamp)
+                slots.stamp, slots.near_circles, slots.near_segments)
 
     # ------------------------------------------------------------------ step
     def step(

@@ -53,7 +53,7 @@ def observe_envs(
     and (N,) arrays, see :class:`~lidar_env.vector.slots.SceneSlots`); ``rngs`` a typed list of
     N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.layout_kernels.cast_packed` takes them;
-    ``work`` the scratch of :attr:`~lidar_env.vector.slots.SceneSlots.work` (nothing is
+    ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
     allocated per env). Draws per env: a standard normal per beam if any Lidar is noisy, then
     a uniform per beam if any drops out (the order of
     :meth:`lidar_env.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws are
@@ -61,7 +61,7 @@ def observe_envs(
     """
     circles, segments, first_edge, grids = scene[0], scene[1], scene[2], scene[3]
     mounts, world_aligned, noisy, dropping, beams, params = sensors
-    cast_from, draws, circle_seen, segment_seen, stamp = work
+    cast_from, draws, circle_seen, segment_seen, stamp = work[:5]
     total, k = scans.shape[1], mounts.shape[0]
     gaussians = draws[:total] if noisy else draws[:0]
     uniforms = draws[total:2 * total] if dropping else draws[:0]
@@ -85,9 +85,12 @@ def observe_envs(
 
 @njit(cache=True)
 def obstacles_within(
-    x: float, y: float, reach: float, circles: NDArray[np.float64], segments: NDArray[np.float64]
+    x: float, y: float, reach: float, circles: NDArray[np.float64], segments: NDArray[np.float64],
+    near_circles: NDArray[np.float64], near_segments: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The circles (N, 3) and segments (M, 4) that come within ``reach`` [m] of (x, y).
+    """The circles (n, 3) and segments (m, 4) that come within ``reach`` [m] of (x, y), as
+    views of the first rows of ``near_circles`` and ``near_segments`` (at least as long as
+    ``circles`` and ``segments``), which they overwrite.
 
     Every pose of one control step keeps the car's centre within ``|speed| dt`` of its start
     (a chord is never longer than its arc) and the box within its half-diagonal of the centre,
@@ -95,20 +98,20 @@ def obstacles_within(
     collision check over the rest gives the same answer as over all (the culling is the
     broad phase the single car does not need).
     """
-    near_circles = np.empty(circles.shape[0], dtype=np.int64)
     n_circles = 0
     for j in range(circles.shape[0]):
         dx, dy, r = circles[j, 0] - x, circles[j, 1] - y, circles[j, 2] + reach
         if dx * dx + dy * dy <= r * r:
-            near_circles[n_circles] = j
+            for c in range(3):
+                near_circles[n_circles, c] = circles[j, c]
             n_circles += 1
-    near_segments = np.empty(segments.shape[0], dtype=np.int64)
     n_segments = 0
     for j in range(segments.shape[0]):
         if segment_distance2(x, y, segments[j]) <= reach * reach:
-            near_segments[n_segments] = j
+            for c in range(4):
+                near_segments[n_segments, c] = segments[j, c]
             n_segments += 1
-    return circles[near_circles[:n_circles]], segments[near_segments[:n_segments]]
+    return near_circles[:n_circles], near_segments[:n_segments]
 
 
 @njit(cache=True)
@@ -147,7 +150,7 @@ def step_envs(
     for i in envs:
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(pose[i, 0], pose[i, 1], reach,
-                                                       circles[i], segments[i])
+                                                       circles[i], segments[i], work[5], work[6])
         hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length, half_width,
                         near_circles, near_segments)
         time[i] += dt

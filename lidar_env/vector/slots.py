@@ -68,9 +68,10 @@ class SceneSlots:
         self.length = np.ones(n, dtype=np.float64)  # [m]
         #: seen marks for the casts (lidar_env.ray_casting.cast_sensor), as long as the
         #: largest world's circles and segments, and the next free stamp (stamps only grow,
-        #: so the marks are never cleared)
+        #: so the marks are never cleared); room for the obstacles near a car [m]
         self.circle_seen = np.zeros(0, dtype=np.int64)
         self.segment_seen = np.zeros(0, dtype=np.int64)
+        self.near_circles, self.near_segments = np.zeros((0, 3)), np.zeros((0, 4))
         self.stamp = np.ones(1, dtype=np.int64)
         self._lists: tuple[Any, ...] | None = None
         self._rngs: Any = None
@@ -92,8 +93,10 @@ class SceneSlots:
         self.worlds[i], self.traces[i] = world, trace
         if len(world.circles) > len(self.circle_seen):
             self.circle_seen = np.zeros(len(world.circles), dtype=np.int64)
+            self.near_circles = np.zeros((len(world.circles), 3))
         if len(world.segments) > len(self.segment_seen):
             self.segment_seen = np.zeros(len(world.segments), dtype=np.int64)
+            self.near_segments = np.zeros((len(world.segments), 4))
         self.first_edge[i] = len(world.walls)
         self.closed[i] = trace.closed
         self.length[i] = trace.length
