@@ -8,6 +8,8 @@ Prints, in one run on this machine:
 * where a batched env step goes at the largest N, from the same loop with less work: without
   range noise (no Gaussian draws), and noiseless with 8-beam Lidars (nearly no ray casting),
   so the differences are the cost of the range noise and of the exact rays [us per env step];
+  the scan call of the 8-beam Lidars is split into its cost per call (the same Lidars in a
+  world with no obstacles) and the cost of the circles and edges in range (the rest);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
@@ -30,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import lidar_env  # registers DualLidar-v0
+from lidar_env.world import World
 
 TARGET_STEPS_PER_SECOND = 200_000
 TARGET_RATIO = 5.0
@@ -38,11 +41,15 @@ FEW_BEAMS = {"lidars": [{"mount": (0.25, 0.0, 0.0), "n_beams": 8, "range_noise_s
                         {"mount": (-0.25, 0.0, 0.0), "n_beams": 8, "range_noise_std": 0.0}]}
 #: The default Lidars without range noise.
 NOISELESS = {"lidars": lidar_env.lidars_with_noise(range_noise_std=0.0)}
+#: [m] a 60 m square with nothing in it, driven along its middle: a scan with no primitives.
+EMPTY_WORLD = {"world": World(np.empty((0, 3)), np.empty((0, 4)), bounds=(0.0, 0.0, 60.0, 60.0)),
+               "trace": np.array([[5.0, 30.0], [55.0, 30.0]])}
 
 
-def make(mode: str, num_envs: int, config: dict[str, Any] | None = None) -> gym.vector.VectorEnv:
+def make(mode: str, num_envs: int, config: dict[str, Any] | None = None,
+         **kwargs: Any) -> gym.vector.VectorEnv:
     return gym.make_vec("DualLidar-v0", num_envs=num_envs, vectorization_mode=mode,
-                        config=config or {})
+                        config=config or {}, **kwargs)
 
 
 def cpu_steps_per_second(env: gym.vector.VectorEnv, seconds: float, seed: int = 0) -> float:
@@ -113,12 +120,16 @@ def main(argv: list[str] | None = None) -> None:
     few_env = make("vector_entry_point", n, FEW_BEAMS)
     few = cpu_steps_per_second(few_env, args.seconds)
     few_scan = scan_microseconds(few_env.unwrapped, args.seconds)
+    call_scan = scan_microseconds(make("vector_entry_point", n, FEW_BEAMS, **EMPTY_WORLD).unwrapped,
+                                  args.seconds)
     full_us, noiseless_us, few_us = (1e6 / r for r in (rates[n], noiseless, few))
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
           f"  {full_us - noiseless_us:5.2f} the range noise (720 Gaussian draws, adding them)\n"
           f"  {noiseless_us - few_us:5.2f} the other 704 exact rays and their noise pass\n"
-          f"  {few_scan:5.2f} the scan call's fixed cost (2 Lidars x 8 beams: gathering the "
-          "candidates in range, the inside-a-polygon test)\n"
+          f"  {few_scan - call_scan:5.2f} the scan's obstacles (2 Lidars x 8 beams: the circles and"
+          " edges in range, their bearings, the inside-a-polygon test)\n"
+          f"  {call_scan:5.2f} the scan call per env (2 Lidars x 8 beams, no obstacles: beam "
+          "directions, grid bounds, readings)\n"
           f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     env = make("vector_entry_point", n)

@@ -49,8 +49,8 @@ def observe_envs(
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
     ``sensor_poses`` (N, K, 3) receives the Lidars' world poses. ``scene`` is
-    ``(circles, segments, first_polygon_edge, grids, waypoints, arc, closed, length)`` (lists
-    and (N,) arrays, see :class:`~lidar_env.vector.slots.SceneSlots`); ``rngs`` a typed list of
+    :attr:`lidar_env.vector.slots.SceneSlots.scene` (an env's items are taken from its typed
+    lists only where its world differs from the env before); ``rngs`` a typed list of
     N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.layout_kernels.cast_packed` takes them;
     ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
@@ -59,14 +59,22 @@ def observe_envs(
     :meth:`lidar_env.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws are
     the steps of its (and numpy's) array draws.
     """
-    circles, segments, first_edge, grids = scene[0], scene[1], scene[2], scene[3]
+    circles, segments, first_edge, grids, world_key = scene[0], scene[1], scene[2], scene[3], \
+        scene[8]
     mounts, world_aligned, noisy, dropping, beams, params = sensors
     cast_from, draws, circle_seen, segment_seen, stamp = work[:5]
     total, k = scans.shape[1], mounts.shape[0]
     gaussians = draws[:total] if noisy else draws[:0]
     uniforms = draws[total:2 * total] if dropping else draws[:0]
     no_movers, no_car, no_facing = np.empty((0, 3)), np.empty(0), np.empty(0, dtype=np.int64)
+    if envs.shape[0] == 0:
+        return
+    last = envs[0]  # the env whose world items are held
+    env_circles, env_segments, env_grid = circles[last], segments[last], grids[last]
     for i in envs:
+        if world_key[i] != world_key[last]:
+            last = i
+            env_circles, env_segments, env_grid = circles[i], segments[i], grids[i]
         mount_poses(pose[i], mounts, sensor_poses[i])
         cast_from[:] = sensor_poses[i]
         if world_aligned:
@@ -76,9 +84,9 @@ def observe_envs(
             gaussians[j] = rng.standard_normal()
         for j in range(uniforms.shape[0]):
             uniforms[j] = rng.random()
-        exact = cast_packed(circles[i], segments[i], first_edge[i], grids[i], cast_from, beams,
-                            params, no_movers, no_car, (circle_seen, segment_seen), stamp[0],
-                            no_facing)
+        exact = cast_packed(env_circles, env_segments, first_edge[i], env_grid, cast_from,
+                            beams, params, no_movers, no_car, (circle_seen, segment_seen),
+                            stamp[0], no_facing)
         stamp[0] += k
         readings(exact, params, gaussians, uniforms, scans[i])
 
@@ -142,20 +150,31 @@ def step_envs(
     pose, sensor_poses, time, arc, cross_track, collision, scans = state
     reward, terminated, truncated = outcome
     circles, segments, waypoints, trace_arc = scene[0], scene[1], scene[4], scene[5]
-    closed, length = scene[6], scene[7]
+    closed, length, world_key, trace_key = scene[6], scene[7], scene[8], scene[9]
     dt, half_length, half_width = constants[0], constants[1], constants[2]
     cross_penalty, collision_penalty, goal_tolerance = constants[3], constants[4], constants[5]
     time_limit, window = constants[6], constants[7]
     half_diagonal = math.hypot(half_length, half_width)
+    if envs.shape[0] == 0:
+        return
+    world, trace = envs[0], envs[0]  # the envs whose world and trace items are held
+    env_circles, env_segments = circles[world], segments[world]
+    env_waypoints, env_arc = waypoints[trace], trace_arc[trace]
     for i in envs:
+        if world_key[i] != world_key[world]:
+            world = i
+            env_circles, env_segments = circles[i], segments[i]
+        if trace_key[i] != trace_key[trace]:
+            trace = i
+            env_waypoints, env_arc = waypoints[i], trace_arc[i]
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(pose[i, 0], pose[i, 1], reach,
-                                                       circles[i], segments[i], work[5], work[6])
+                                                       env_circles, env_segments, work[5], work[6])
         hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length, half_width,
                         near_circles, near_segments)
         time[i] += dt
         previous = arc[i]
-        position, error = project_onto_polyline(waypoints[i], trace_arc[i], pose[i, 0],
+        position, error = project_onto_polyline(env_waypoints, env_arc, pose[i, 0],
                                                 pose[i, 1], previous, window, closed[i])
         arc[i] = position
         cross_track[i] = error
