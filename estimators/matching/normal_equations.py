@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from estimators.matching.nearest import search
+from estimators.matching.nearest import STACK, search
 
 #: Loss codes of the kernels, in the order of :data:`estimators.matching.point_to_line.LOSSES`.
 CAUCHY, HUBER, SQUARED = 0, 1, 2
@@ -71,13 +71,14 @@ def point_to_line_system(
     gradient = np.zeros(3)
     count = 0
     rotation_squares = 0.0
+    pending = np.empty(STACK, np.int64)
     for i in range(query.shape[0]):
         residuals[i] = np.nan
         wx = query[i, 0] * c - query[i, 1] * s + pose[0]
         wy = query[i, 0] * s + query[i, 1] * c + pose[1]
         k = 1 if has_normals else 2
         d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
-                                wx, wy, k, bound)
+                                wx, wy, k, bound, pending)
         if i0 == n:
             continue
         if has_normals and valid[i0]:
@@ -86,7 +87,7 @@ def point_to_line_system(
         else:
             if has_normals:  # a stored normal that is not valid: the two-nearest-point line
                 d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
-                                        wx, wy, 2, bound)
+                                        wx, wy, 2, bound, pending)
             ax, ay = points[i0, 0], points[i0, 1]
             has_line = i1 != n
             second = i1 if has_line else i0
@@ -121,9 +122,10 @@ def nearest_on_surfaces(
     nearest = np.empty(query.shape[0], np.int64)
     count = 0
     bound = max_distance * max_distance
+    pending = np.empty(STACK, np.int64)
     for i in range(query.shape[0]):
         _, i0, _, _ = search(order, tree_points, start, end, child, box,
-                             query[i, 0], query[i, 1], 1, bound)
+                             query[i, 0], query[i, 1], 1, bound, pending)
         if i0 != n and not pointlike[i0]:
             index[count], nearest[count] = i, i0
             count += 1
