@@ -10,7 +10,10 @@ tracks' predicted positions by global nearest neighbour within ``gate``; each tr
 Kalman filter on (x, y, vx, vy) with white-noise acceleration (Bar-Shalom, Li & Kirubarajan,
 "Estimation with Applications to Tracking and Navigation", 2001, sec. 6.3.2). A track is
 *moving* once it has ``min_hits`` detections and its speed exceeds ``moving_speed``, and static
-again only below half of it (hysteresis, so noise at the threshold does not flip the label).
+again only below half of it (hysteresis, so noise at the threshold does not flip the label);
+while its velocity is uncertain by more than half of ``moving_speed`` (1 sigma: a new track,
+or one just after a maneuver) the label stays as it was. A measurement far from the
+prediction (``maneuver_gate``) is taken as a maneuver, the velocity covariance reset.
 Extended clusters (walls, boxes) are not tracked here: their centroid slides as the car
 passes, so they would look like movers; :class:`estimators.mapping.tracking.ObstacleTracker`
 maps them as static obstacles.
@@ -30,6 +33,7 @@ from numpy.typing import NDArray
 
 from estimators.mapping.circle_fit import fit_circle
 from estimators.mapping.obstacles import Obstacle
+from lidar_env.errors import EstimatorInputError
 
 
 @dataclass
@@ -89,6 +93,11 @@ class MotionTracker:
         acceleration_sigma: [m/s^2] 1-sigma white-noise acceleration (1.0: walking people
             turn and change pace).
         initial_speed_sigma: [m/s] prior 1-sigma of a new track's velocity (1.5: walking pace).
+        maneuver_gate: a measurement farther than this many sigmas (Mahalanobis distance of
+            the innovation) from a track's prediction is a maneuver, an abrupt turn or stop:
+            the track's velocity covariance is reset to ``initial_speed_sigma`` before the
+            update, so the velocity follows at once instead of over many steps (Bar-Shalom
+            et al., sec. 11.2, covariance resetting). ``inf`` turns it off.
         moving_speed: [m/s] speed above which a track is moving (0.3: slow walking is 0.5-1).
         min_hits: detections before a track can be labelled moving.
         max_age: [s] a track not detected for longer is dropped (1.0: bridges short
@@ -100,6 +109,7 @@ class MotionTracker:
     measurement_sigma: float = 0.03
     acceleration_sigma: float = 1.0
     initial_speed_sigma: float = 1.5
+    maneuver_gate: float = 4.0
     moving_speed: float = 0.3
     min_hits: int = 3
     max_age: float = 1.0
@@ -109,19 +119,20 @@ class MotionTracker:
 
     def __post_init__(self) -> None:
         for name in ("gate", "merge_distance", "measurement_sigma", "acceleration_sigma",
-                     "initial_speed_sigma", "moving_speed", "max_age"):
+                     "initial_speed_sigma", "moving_speed", "max_age", "maneuver_gate"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: expected a positive number, got {value!r}")
+            if not (isinstance(value, int | float) and not math.isnan(value) and value > 0
+                    and (math.isfinite(value) or name == "maneuver_gate")):
+                raise EstimatorInputError(f"{name}: expected a positive number, got {value!r}")
         if not isinstance(self.min_hits, int) or self.min_hits < 1:
-            raise ValueError(f"min_hits: expected an integer >= 1, got {self.min_hits!r}")
+            raise EstimatorInputError(f"min_hits: expected an integer >= 1, got {self.min_hits!r}")
 
     def update(self, obstacles: list[Obstacle], t: float) -> list[int | None]:
         """Take one step's detections (from any number of Lidars) made at time ``t`` [s];
         return each detection's track id (``None`` for an extended, untracked one)."""
         t = float(t)
         if not math.isfinite(t) or (self._time is not None and t <= self._time):
-            raise ValueError(f"t: expected a finite time after {self._time}, got {t!r}")
+            raise EstimatorInputError(f"t: expected a finite time after {self._time}, got {t!r}")
         self._time = t
         self.tracks = [tr for tr in self.tracks if t - tr.last_time <= self.max_age]
         for track in self.tracks:  # an undetected track coasts on its prediction
@@ -136,7 +147,8 @@ class MotionTracker:
             if track is None:
                 track = self._new_track(centre, radius, t)
             else:
-                _correct(track, centre, self.measurement_sigma)
+                _correct(track, centre, self.measurement_sigma, self.maneuver_gate,
+                         self.initial_speed_sigma)
                 track.radius, track.hits, track.last_time = radius, track.hits + 1, t
             self._label(track)
             for i in groups[g]:
@@ -193,6 +205,8 @@ class MotionTracker:
     def _label(self, track: MovingTrack) -> None:
         if track.hits < self.min_hits:
             track.moving = False
+        elif max(track.covariance[2, 2], track.covariance[3, 3]) > (0.5 * self.moving_speed) ** 2:
+            pass  # the velocity is too uncertain (just after a maneuver) to change the label
         elif track.moving:
             track.moving = track.speed > 0.5 * self.moving_speed
         else:
@@ -223,10 +237,22 @@ def _predict(track: MovingTrack, dt: float, acceleration_sigma: float) -> None:
     track.covariance = transition @ track.covariance @ transition.T + noise
 
 
-def _correct(track: MovingTrack, centre: NDArray[np.float64], sigma: float) -> None:
-    """Kalman update with a measured centre (2,) [m] of 1-sigma ``sigma`` [m]."""
+def _correct(track: MovingTrack, centre: NDArray[np.float64], sigma: float,
+             maneuver_gate: float, speed_sigma: float) -> None:
+    """Kalman update with a measured centre (2,) [m] of 1-sigma ``sigma`` [m]; an innovation
+    beyond ``maneuver_gate`` sigmas first resets the velocity covariance to ``speed_sigma``
+    [m/s] (see :class:`MotionTracker`)."""
     innovation = centre - track.state[:2]
     gain_denominator = track.covariance[:2, :2] + np.eye(2) * sigma ** 2
+    if innovation @ np.linalg.solve(gain_denominator, innovation) > maneuver_gate ** 2:
+        # As if the velocity had been unknown (1-sigma speed_sigma) since the last detection,
+        # dt ago: the position inherits dt times that uncertainty, and the two correlate.
+        dt, q = track.time - track.last_time, speed_sigma ** 2
+        covariance = track.covariance
+        covariance[:2, :2] += np.eye(2) * dt * dt * q
+        covariance[:2, 2:] = covariance[2:, :2] = np.eye(2) * dt * q
+        covariance[2:, 2:] = np.eye(2) * q
+        gain_denominator = covariance[:2, :2] + np.eye(2) * sigma ** 2
     gain = track.covariance[:, :2] @ np.linalg.inv(gain_denominator)
     track.state = track.state + gain @ innovation
     track.covariance = (np.eye(4) - gain @ np.eye(2, 4)) @ track.covariance

@@ -58,6 +58,33 @@ def test_a_diagonal_walker_is_labelled_moving_after_min_hits() -> None:
     np.testing.assert_allclose(walker.velocity, (0.5, 0.8), atol=0.1)
 
 
+def turning(tracker: MotionTracker, turn_step: int = 30, steps: int = 32) -> None:
+    """A pedestrian walks at 1 m/s along +y, then turns back at once (-y) at ``turn_step``,
+    as the env's walkers do at a waypoint."""
+    rng = np.random.default_rng(1)
+    y = -2.0
+    for k in range(steps):
+        y += 0.1 * (1.0 if k < turn_step else -1.0) if k else 0.0
+        world = World(circles=[(3.0, y, 0.25)], segments=WALLS)
+        detections = []
+        for scan, pose in zip(cast_rays(world, SENSORS, ANGLES, 10.0), SENSORS, strict=True):
+            noisy = np.where(scan < 10.0, scan + 0.01 * rng.standard_normal(scan.shape), scan)
+            detections += detect_obstacles(noisy, ANGLES, pose, 10.0)
+        tracker.update(detections, 0.1 * k)
+
+
+def test_an_abrupt_turn_is_followed_at_once() -> None:
+    tracker = MotionTracker()
+    turning(tracker)
+    (walker,) = tracker.tracks
+    assert walker.hits == 32
+    np.testing.assert_allclose(walker.velocity, (0.0, -1.0), atol=0.1)  # 2 steps after
+    assert walker.moving
+    slow = MotionTracker(maneuver_gate=float("inf"))  # no maneuver detection: still turning
+    turning(slow)
+    assert abs(slow.tracks[0].velocity[1] + 1.0) > 0.5
+
+
 def test_extended_detections_get_no_track() -> None:
     tracker = MotionTracker()
     world = World(segments=WALLS)
@@ -76,7 +103,10 @@ def test_a_track_not_seen_for_max_age_is_dropped() -> None:
 
 
 @pytest.mark.parametrize(("key", "value"), [("gate", 0.0), ("moving_speed", -1.0),
-                                            ("max_age", float("nan")), ("min_hits", 0)])
+                                            ("max_age", float("nan")), ("min_hits", 0),
+                                            ("maneuver_gate", 0.0),
+                                            ("maneuver_gate", float("nan")),
+                                            ("max_age", float("inf"))])
 def test_bad_parameters_name_themselves(key: str, value: float) -> None:
     with pytest.raises(ValueError, match=key):
         MotionTracker(**{key: value})
