@@ -78,18 +78,19 @@ def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
 @njit(cache=True)
 def _rotated_cells(points: NDArray[np.float64], cos: NDArray[np.float64],
                    sin: NDArray[np.float64], center: NDArray[np.float64],
-                   origin: NDArray[np.float64], resolution: float,
-                   padding: int) -> NDArray[np.int64]:  # pragma: no cover (numba)
+                   origin: NDArray[np.float64], resolution: float, row_offset: int,
+                   col_offset: int) -> NDArray[np.int64]:  # pragma: no cover (numba)
     """``(H, M, 2)`` cells of ``points`` turned by each heading (its ``cos``, ``sin``) and
-    moved to ``center`` (2,), on a grid whose cell ``(0, 0)`` starts at ``origin``."""
+    moved to ``center`` (2,), on a grid whose cell ``(0, 0)`` starts at ``origin``, plus the
+    offsets (padding, and the start of a kept window)."""
     out = np.empty((len(cos), len(points), 2), np.int64)
     for h in range(len(cos)):
         c, s = cos[h], sin[h]
         for m in range(len(points)):
             x = (c * points[m, 0] - s * points[m, 1] + center[0]) - origin[0]
             y = (s * points[m, 0] + c * points[m, 1] + center[1]) - origin[1]
-            out[h, m, 0] = int(np.floor(x / resolution)) + padding
-            out[h, m, 1] = int(np.floor(y / resolution)) + padding
+            out[h, m, 0] = int(np.floor(x / resolution)) + row_offset
+            out[h, m, 1] = int(np.floor(y / resolution)) + col_offset
     return out
 
 
@@ -141,12 +142,15 @@ class GridPyramid:
         levels: 1 (only the grid: exhaustive) to ``MAX_LEVELS``; a window ``2n + 1`` cells
             wide is searched fastest with ``2^(levels - 1)`` about a quarter of it.
 
+        window: ``((row_start, row_stop), (col_start, col_stop))``: the padded grid's cells
+            to keep (default all); a search reading only those finds what it finds on all.
+
     The levels are padded with ``2^(levels - 1) - 1`` empty cells on the low side, so that a
     coarse cell reaching into the grid from outside still bounds the cells it covers.
     """
 
-    def __init__(self, grid: ArrayLike, origin: ArrayLike, resolution: float,
-                 levels: int) -> None:
+    def __init__(self, grid: ArrayLike, origin: ArrayLike, resolution: float, levels: int,
+                 window: tuple[tuple[int, int], tuple[int, int]] | None = None) -> None:
         grid = np.asarray(grid, dtype=np.float64)
         if grid.ndim != 2 or grid.size == 0:
             raise EstimatorInputError(f"grid: expected a non-empty 2-D array, got {grid.shape}")
@@ -158,9 +162,16 @@ class GridPyramid:
             raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
         self.origin = np.asarray(origin, dtype=np.float64).reshape(2)
         self.resolution = float(resolution)
-        self.padding = 2 ** (levels - 1) - 1
-        padded = np.pad(grid, ((self.padding, 0), (self.padding, 0)))
-        self.levels = max_pool_levels(padded, levels)
+        self.padding = pad = 2 ** (levels - 1) - 1
+        (r0, r1), (c0, c1) = window or ((0, grid.shape[0] + pad), (0, grid.shape[1] + pad))
+        if not (0 <= r0 < r1 <= grid.shape[0] + pad and 0 <= c0 < c1 <= grid.shape[1] + pad):
+            raise ConfigError(f"window: expected a non-empty part of the padded grid, got {window}")
+        self.start = (r0, c0)
+        kept = np.zeros((r1 - r0, c1 - c0))
+        i0, j0 = max(r0, pad), max(c0, pad)  # the grid's first kept cell, padded
+        if i0 < r1 and j0 < c1:
+            kept[i0 - r0:, j0 - c0:] = grid[i0 - pad:r1 - pad, j0 - pad:c1 - pad]
+        self.levels = max_pool_levels(kept, levels)
 
     @classmethod
     def from_field(cls, field: object, levels: int) -> GridPyramid:
@@ -174,12 +185,13 @@ class GridPyramid:
 
     def cells(self, points: FloatArray, center: FloatArray,
               headings: FloatArray) -> NDArray[np.int64]:
-        """``(H, M, 2)`` padded level-0 cells of ``points`` (M, 2) turned to each of
-        ``headings`` (H,) and moved to ``center[:2]`` (no translation offset yet)."""
+        """``(H, M, 2)`` level-0 cells (of the kept window) of ``points`` (M, 2) turned to
+        each of ``headings`` (H,) and moved to ``center[:2]`` (no translation offset yet)."""
         headings = np.asarray(headings, dtype=np.float64)
         return _rotated_cells(np.ascontiguousarray(points, dtype=np.float64), np.cos(headings),
                               np.sin(headings), np.asarray(center[:2], dtype=np.float64),
-                              self.origin, self.resolution, self.padding)
+                              self.origin, self.resolution, self.padding - self.start[0],
+                              self.padding - self.start[1])
 
 
 @dataclass(frozen=True)

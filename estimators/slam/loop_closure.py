@@ -32,7 +32,8 @@ from numpy.typing import ArrayLike, NDArray
 from estimators.matching.branch_and_bound import GridPyramid, levels_for_window, match
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
-from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
+from estimators.matching.scan_matching import voxel_downsample
+from estimators.slam.place_grid import PlaceField, search_pyramid
 from lidar_env.se2 import transform_points, wrap_angle
 
 
@@ -175,9 +176,9 @@ class LoopVerification:
 
 
 class PlaceMap:
-    """The old place's points (reference frame) ready for matching: likelihood field, its
-    max-pooled pyramid (built when a search first needs it, deepened for wider windows),
-    and a point-to-line ICP reference."""
+    """The old place's points (reference frame) ready for matching: likelihood field
+    (:class:`~estimators.slam.place_grid.PlaceField`), the part of its max-pooled pyramid
+    each search reads (:meth:`pyramid`), and a point-to-line ICP reference."""
 
     def __init__(self, points: ArrayLike, params: LoopClosureParams) -> None:
         points = np.asarray(points, dtype=np.float64)
@@ -186,17 +187,22 @@ class PlaceMap:
         thinned = voxel_downsample(points, params.resolution)
         if len(thinned) < 3:
             thinned = points
-        self.field = LikelihoodField(thinned, params.resolution, params.sigma)
-        self._pyramid: GridPyramid | None = None
+        self.field = PlaceField(thinned, params.resolution, params.sigma)
+        self._levels = 0
         self.reference = PointToLineReference.with_estimated_normals(
             thinned, params.normal_neighbours, params.denoise_reference,
             params.max_normal_neighbours)
 
-    def pyramid(self, levels: int) -> GridPyramid:
-        """The field's pyramid with at least ``levels`` levels."""
-        if self._pyramid is None or self._pyramid.n_levels < levels:
-            self._pyramid = GridPyramid.from_field(self.field, levels)
-        return self._pyramid
+    def pyramid(self, levels: int, points: NDArray[np.float64], center: NDArray[np.float64],
+                linear_window: float, angular_window: float,
+                angular_step: float) -> GridPyramid:
+        """The field's pyramid where a search of ``points`` (M, 2) around ``center`` (3,)
+        reads it (:func:`~estimators.slam.place_grid.search_pyramid`), with at least
+        ``levels`` levels: as many as the deepest search of this place asked for (the
+        depth orders the search, which decides between equal scores)."""
+        self._levels = max(self._levels, levels)
+        return search_pyramid(self.field, self._levels, points, center, linear_window,
+                              angular_window, angular_step)
 
 
 def correlative_match(
@@ -221,9 +227,9 @@ def correlative_match(
     block = 2 * c + 1
     n = block * int(np.ceil(linear_window / (block * res))) + c  # cells either way
     n_ang = int(np.ceil(params.angular_window / params.angular_step))
-    pyramid = place.pyramid(levels_for_window(n * res, res))
-    window = (pyramid, points, guess, n * res, n_ang * params.angular_step,
-              params.angular_step, -0.5)  # every score (>= 0) counts
+    search = (points, guess, n * res, n_ang * params.angular_step, params.angular_step)
+    window = (place.pyramid(levels_for_window(n * res, res), *search), *search,
+              -0.5)  # every score (>= 0) counts
     best = match(*window)
     shift = np.round((best.pose[:2] - guess[:2]) / res).astype(int)
     blocks = (np.arange(-n, n + 1) + c) // block  # the block each shift lies in
