@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from agents.interface import Driver
 from estimators import registry
 from estimators.base import Estimator, SensorSetup
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError
 
 #: ``pose_source`` value for the env's ground-truth pose (no estimator).
 TRUE_POSE = "true"
@@ -54,7 +54,7 @@ class EstimatedPoseDriver:
         if isinstance(estimator, str):
             estimator = registry.make(check_pose_source(estimator))
         if not isinstance(estimator, Estimator):
-            raise TypeError(f"estimator: expected an estimator name or an Estimator, got "
+            raise ArgumentTypeError(f"estimator: expected an estimator name or an Estimator, got "
                             f"{type(estimator).__name__}")
         self.driver = driver
         self.estimator = estimator

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.observation import TraceFollowingObservation
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ConfigError, ResetNeededError
 
 #: The policy shipped with the package (trained by ``python -m agents.imitate``: it imitates
 #: the scan-aware driver and gives way to pedestrians; ``ppo_driver.json`` beside it records
@@ -59,7 +59,7 @@ class SB3Driver:
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]) -> NDArray[np.float32]:
         if self._view is None:
-            raise RuntimeError("call reset(env) before act()")
+            raise ResetNeededError("call reset(env) before act()")
         features = self._view.observe(observation, info)
         action, _ = self.model.predict(features, deterministic=self.deterministic)
         self._view.last_action = np.clip(np.asarray(action, np.float32), -1.0, 1.0)

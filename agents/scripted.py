@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
 from lidar_env.traces import Trace
 
 
@@ -53,7 +53,7 @@ class PurePursuitDriver:
         unwrapped = env.unwrapped
         trace = getattr(unwrapped, "trace", None)
         if not isinstance(trace, Trace):
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"env: expected a DualLidar-v0 env reset to a trace, got {type(unwrapped).__name__}"
                 f" with trace {trace!r}"
             )
@@ -65,7 +65,7 @@ class PurePursuitDriver:
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> NDArray[np.float32]:
         """The (speed, yaw rate) action, as fractions of the env's limits, from ``info["pose"]``."""
         if self.trace is None:
-            raise RuntimeError("call reset(env) before act()")
+            raise ResetNeededError("call reset(env) before act()")
         x, y, heading = (float(v) for v in np.asarray(info["pose"], dtype=np.float64))
         self._arc = self.trace.project((x, y), self._arc, self.window).arc_position
         target = self.trace.point_at(self._arc + self.lookahead)

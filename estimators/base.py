@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.clock import check_time
-from lidar_env.errors import EstimatorInputError
+from lidar_env.errors import EstimatorInputError, ResetNeededError
 
 #: Observation keys ``lidar_1 .. lidar_8``; sensor ``k`` of a setup reads ``LIDAR_KEYS[k]``.
 LIDAR_KEYS: tuple[str, ...] = tuple(f"lidar_{k}" for k in range(1, 9))
@@ -242,7 +242,8 @@ class Estimator(ABC):
             setup = SensorSetup(np.asarray(setup, dtype=np.float64), default_beam_angles(360), 10.0)
         pose = np.asarray(initial_pose, dtype=np.float64)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"initial_pose: expected 3 finite numbers (x, y, heading), got {pose}")
+            raise EstimatorInputError(
+                f"initial_pose: expected 3 finite numbers (x, y, heading), got {pose}")
         self.setup = setup
         self._poses = []
         self._times = []
@@ -252,7 +253,7 @@ class Estimator(ABC):
     def update(self, observation: Mapping[str, Any], t: float) -> NDArray[np.float64]:
         """Feed the scans taken at time ``t`` [s]; return the car pose estimate (3,)."""
         if self.setup is None:
-            raise RuntimeError("call reset(setup, initial_pose) before update()")
+            raise ResetNeededError("call reset(setup, initial_pose) before update()")
         t = check_time(t, self._times[-1] if self._times else None)
         scans = self.setup.check_observation(observation)
         if not self._poses:

@@ -10,6 +10,7 @@ import importlib
 from typing import Any
 
 from estimators.base import Estimator
+from lidar_env.errors import UnknownNameError
 
 #: name -> ("module:Class", default keyword parameters)
 _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
@@ -36,7 +37,7 @@ def names() -> list[str]:
 
 def _check_name(name: str) -> None:
     if name not in _ENTRIES:
-        raise KeyError(f"unknown estimator {name!r}: expected one of {', '.join(names())}")
+        raise UnknownNameError(f"unknown estimator {name!r}: expected one of {', '.join(names())}")
 
 
 def defaults(name: str) -> dict[str, Any]:

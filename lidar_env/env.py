@@ -15,7 +15,7 @@ from lidar_env.actions import checked_action
 from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
 from lidar_env.env_views import EnvViews
-from lidar_env.errors import ConfigError, ResetNeededError
+from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
 from lidar_env.lidar_layout import LidarLayout
 from lidar_env.movers import Crowd, car_circles
 from lidar_env.scenes import SceneCache, check_reset_options
@@ -185,7 +185,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         elif config is None or isinstance(config, Mapping):
             self.config = EnvConfig.from_dict(config)
         else:
-            raise TypeError(f"config: expected an EnvConfig or a dict, got {type(config).__name__}")
+            raise ArgumentTypeError(
+                f"config: expected an EnvConfig or a dict, got {type(config).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(
                 f"render_mode: expected one of {', '.join(self.metadata['render_modes'])} or "
@@ -256,7 +257,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         self, action: ArrayLike
     ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
         if self.car is None or self.trace is None:
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeededError("call reset() before step()")
         if self._episode_over:
             raise ResetNeededError(
                 "step() after the episode ended (terminated or truncated): call reset() first")

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
 
 #: ``collision_type`` of the movers' pymunk shapes.
 MOVER_COLLISION_TYPE: int = 3
@@ -53,7 +53,7 @@ class EnvViews:
         :mod:`lidar_env.car` and :mod:`lidar_env.movers`).
         """
         if self.world is None or self.car is None:
-            raise RuntimeError("call reset() before reading space")
+            raise ResetNeededError("call reset() before reading space")
         if self._space is None or self._space_world is not self.world:
             self._space = self.world.build_space()
             self._space_world = self.world
@@ -117,8 +117,9 @@ class EnvViews:
         from lidar_env.rendering import OccupancyMap
 
         if grid is not None and not isinstance(grid, OccupancyMap):
-            raise TypeError("render map: expected an estimators.mapping.occupancy.OccupancyGrid or "
-                            f"None, got {type(grid).__name__}")
+            raise ArgumentTypeError(
+                "render map: expected an estimators.mapping.occupancy.OccupancyGrid or "
+                f"None, got {type(grid).__name__}")
         self._render_map = grid
 
     def render(self) -> NDArray[np.uint8] | None:
@@ -129,7 +130,7 @@ class EnvViews:
             )
             return None
         if self.car is None or self._last_scans is None:
-            raise RuntimeError("call reset() before render()")
+            raise ResetNeededError("call reset() before render()")
         from lidar_env.rendering import Renderer, show_in_window
 
         if self._renderer is None or self._renderer.world is not self.world:

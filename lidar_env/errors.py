@@ -2,7 +2,10 @@
 :class:`DualLidarError`, so a user can catch ours and tell them apart from bugs.
 
 ``DualLidarError`` subclasses ``ValueError`` (bad input is a bad value), and each area has its
-own subclass. Messages name the argument, or the file and line, and say what was expected::
+own subclass. Three also keep the built-in kind Python code expects of them:
+:class:`ArgumentTypeError` is a ``TypeError``, :class:`UnknownNameError` a ``KeyError`` and
+:class:`ResetNeededError` a ``RuntimeError``. Messages name the argument, or the file and
+line, and say what was expected::
 
     try:
         env = gym.make("DualLidar-v0", config={"max_speed": -1})
@@ -24,9 +27,22 @@ class ConfigError(DualLidarError):
     """An env config, reset option, action, or an estimator's or tool's parameter is invalid."""
 
 
-class ResetNeededError(DualLidarError):
-    """``step()`` was called after the episode ended; Gymnasium leaves that undefined, we
-    refuse it so that a car never drives on past a wall or the goal unnoticed."""
+class ResetNeededError(DualLidarError, RuntimeError):
+    """A call out of order: ``step()`` (or ``act()``, ``update()``, ``render()``) before the
+    first ``reset()``, or ``step()`` after the episode ended (Gymnasium leaves that undefined;
+    we refuse it so that a car never drives on past a wall or the goal unnoticed)."""
+
+
+class ArgumentTypeError(DualLidarError, TypeError):
+    """An argument of the wrong type (a list where a config dict or a Generator belongs)."""
+
+
+class UnknownNameError(DualLidarError, KeyError):
+    """A name that is not registered (an estimator, a stored scenario or trace); the message
+    lists what is."""
+
+    def __str__(self) -> str:  # KeyError's own would quote the message
+        return str(self.args[0]) if self.args else ""
 
 
 class MapError(DualLidarError):

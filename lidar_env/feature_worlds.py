@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ConfigError, MapError
 from lidar_env.polygons import segment_distances
 from lidar_env.world import World
 
@@ -293,7 +293,7 @@ def add_features(world: World, outline: NDArray[np.float64], options: FeatureOpt
         return world, ()
     edges = _edges_of(outline)
     if not np.array_equal(edges, world.walls):
-        raise ValueError(f"outline: expected the walls of world {world.name!r}")
+        raise MapError(f"outline: expected the walls of world {world.name!r}")
     inward = _inward_normals(outline)
     perimeter = float(np.sum(np.hypot(*(edges[:, 2:] - edges[:, :2]).T)))
     wanted = round(options.density * perimeter / 10.0)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError
 from lidar_env.lidar_config import pack_sensors
 from lidar_env.lidar_layout import (
     Geometry,
@@ -192,5 +192,5 @@ class Lidar:
 
 def _check_rng(rng: object) -> np.random.Generator:
     if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+        raise ArgumentTypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
     return rng

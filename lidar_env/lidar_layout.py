@@ -30,7 +30,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.edge_facing import edge_facing
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError
 from lidar_env.layout_kernels import (
     car_outline,
     cast_packed,
@@ -72,7 +72,7 @@ def as_world(world_or_arrays: Geometry) -> tuple[World, int]:
     if isinstance(world_or_arrays, World):
         return world_or_arrays, len(world_or_arrays.walls)
     if not isinstance(world_or_arrays, tuple) or len(world_or_arrays) != 2:
-        raise TypeError(
+        raise ArgumentTypeError(
             "world_or_arrays: expected a World or a (circles (N,3), segments (M,4)) tuple, "
             f"got {type(world_or_arrays).__name__}"
         )
@@ -228,7 +228,8 @@ class LidarLayout:
                 raise ConfigError(f"sensor_poses: expected {len(self.lidars)} poses (one per "
                                   f"Lidar), got {len(poses)}")
         if not isinstance(rng, np.random.Generator):
-            raise TypeError(f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
+            raise ArgumentTypeError(
+                f"rng: expected a numpy.random.Generator, got {type(rng).__name__}")
         if self.self_occluded:
             car[:] = self._car(car_pose)
         if self._noisy:

@@ -24,6 +24,7 @@ from gymnasium.error import DependencyNotInstalled
 from numpy.typing import ArrayLike, NDArray
 from PIL import Image
 
+from lidar_env.errors import ConfigError
 from lidar_env.world import World
 
 Bounds = tuple[float, float, float, float]
@@ -113,7 +114,7 @@ class Renderer:
 
     def __init__(self, world: World, max_size: int = DEFAULT_MAX_SIZE) -> None:
         if max_size < 16:
-            raise ValueError(f"max_size: expected at least 16 pixels, got {max_size}")
+            raise ConfigError(f"max_size: expected at least 16 pixels, got {max_size}")
         self.world = world
         xmin, ymin, xmax, ymax = world.bounds
         self.resolution = max(xmax - xmin, ymax - ymin) / max_size
@@ -313,7 +314,7 @@ def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> 
 def tile_frames(frames: Sequence[NDArray[np.uint8]], columns: int = 3) -> NDArray[np.uint8]:
     """RGB ``frames`` laid out row by row in a grid of ``columns``, on white."""
     if not frames:
-        raise ValueError("frames: expected at least one (H, W, 3) frame, got none")
+        raise ConfigError("frames: expected at least one (H, W, 3) frame, got none")
     height = max(f.shape[0] for f in frames)
     width = max(f.shape[1] for f in frames)
     rows = math.ceil(len(frames) / columns)
@@ -329,5 +330,5 @@ def write_png(path: str | os.PathLike, image: ArrayLike) -> None:
     """Save an ``(H, W, 3)`` uint8 RGB image as a PNG file."""
     rgb = np.asarray(image)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
-        raise ValueError(f"image: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+        raise ConfigError(f"image: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
     Image.fromarray(np.ascontiguousarray(rgb)).save(path, format="PNG")

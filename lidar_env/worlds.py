@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError
 from lidar_env.feature_worlds import add_features, feature_world_name, parse_world_name
 from lidar_env.polygons import segment_distances
 from lidar_env.traces import TRACE_NAMES, Trace, build_trace, check_trace_name, make_trace
@@ -316,7 +316,7 @@ def make_scene(
     trace = check_trace_name(trace if trace is not None else PAPER_TRACES[name])
     if name == "random":
         if not isinstance(rng, np.random.Generator):
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"rng: world 'random' needs a numpy.random.Generator, got {type(rng).__name__}"
             )
         return _random_scene(trace, rng, clearance, start)

@@ -26,6 +26,7 @@ from estimators.evaluation.relations import (
     relation_errors,
     relations_from_trajectory,
 )
+from lidar_env.errors import ConfigError, LogFormatError
 
 
 def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetup:
@@ -38,7 +39,7 @@ def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetu
     81.83 m in the Radish logs) that marks "no return".
     """
     if not log.scans:
-        raise ValueError(f"{log.source}: expected laser scans, found none")
+        raise LogFormatError(f"{log.source}: expected laser scans, found none")
     first = log.scans[0]
     counts = np.array([len(scan.angles) for scan in log.scans])
     changed = np.flatnonzero(counts != len(first.angles))
@@ -53,11 +54,11 @@ def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetu
         index = int(np.argmax(bad_beams | bad_mount))
         scan = log.scans[index]
         if bad_beams[index]:
-            raise ValueError(
+            raise LogFormatError(
                 f"{log.source}, line {scan.line_number}: beam geometry changes within the log "
                 f"({len(scan.angles)} beams vs {len(first.angles)}); expected one laser setup"
             )
-        raise ValueError(f"{log.source}, line {scan.line_number}: laser mount changes within "
+        raise LogFormatError(f"{log.source}, line {scan.line_number}: laser mount changes within "
                          "the log; expected one fixed mount")
     if max_range is None:
         stated = min(scan.max_range for scan in log.scans)
@@ -117,7 +118,7 @@ def run_on_log(
         return _run_on_recording(estimator, log, limit, setup)
     setup = setup_from_log(log) if setup is None else setup
     if setup.n_lidars != 1:
-        raise ValueError(f"setup: expected one Lidar for a CARMEN log, got {setup.n_lidars}")
+        raise ConfigError(f"setup: expected one Lidar for a CARMEN log, got {setup.n_lidars}")
     times = log.scan_times(clock)
     scans = log.scans if limit is None else log.scans[:limit]
     times = times[: len(scans)]
@@ -139,7 +140,7 @@ def _run_on_recording(estimator: Estimator, recording: Recording, limit: int | N
                       setup: SensorSetup | None) -> LogRun:
     setup = recording.setup if setup is None else setup
     if setup.n_lidars != recording.setup.n_lidars:
-        raise ValueError(f"setup: expected {recording.setup.n_lidars} Lidars for "
+        raise ConfigError(f"setup: expected {recording.setup.n_lidars} Lidars for "
                          f"{recording.source}, got {setup.n_lidars}")
     count = len(recording) if limit is None else min(limit, len(recording))
     times = recording.times[:count]

@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, relative, wrap_angle
 
 #: Steps of the true car shorter than this [m] are left out of eq. 11, which divides by the
@@ -31,11 +32,12 @@ def _check_trajectories(
     true = np.asarray(truth, dtype=np.float64)
     for name, poses in (("estimated", est), ("truth", true)):
         if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) < 2:
-            raise ValueError(f"{name}: expected poses of shape (N, 3), N >= 2; got {poses.shape}")
+            raise EstimatorInputError(
+                f"{name}: expected poses of shape (N, 3), N >= 2; got {poses.shape}")
         if not np.all(np.isfinite(poses)):
-            raise ValueError(f"{name}: expected finite poses, got NaN or inf")
+            raise EstimatorInputError(f"{name}: expected finite poses, got NaN or inf")
     if est.shape != true.shape:
-        raise ValueError(
+        raise EstimatorInputError(
             f"estimated and truth: expected equal numbers of poses, got {len(est)} and {len(true)}"
         )
     return est, true
@@ -135,9 +137,9 @@ def evaluate(
     eq. 11 compare steps and do not depend on it).
     """
     if align not in ALIGNMENTS:
-        raise ValueError(f"unknown align {align!r}: expected one of {', '.join(ALIGNMENTS)}")
+        raise ConfigError(f"unknown align {align!r}: expected one of {', '.join(ALIGNMENTS)}")
     if not np.isfinite(min_step) or min_step <= 0:
-        raise ValueError(f"min_step: expected a positive number [m], got {min_step!r}")
+        raise ConfigError(f"min_step: expected a positive number [m], got {min_step!r}")
     est, true = _check_trajectories(estimated, truth)
     eq11 = eq11_error(est, true, min_step)
     true_steps = np.linalg.norm(np.diff(true[:, :2], axis=0), axis=1)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError, LogFormatError
 from lidar_env.se2 import relative
 
 #: Relations shorter than this [s] are "local" (scan-matching accuracy, no drift).
@@ -58,14 +59,15 @@ def load_relations(path: str | Path) -> Relations:
             if not fields or fields[0].startswith("#"):
                 continue
             if len(fields) != 8:
-                raise ValueError(
+                raise LogFormatError(
                     f"{path}, line {number}: expected 8 fields (t1 t2 x y z roll pitch yaw), "
                     f"got {len(fields)}"
                 )
             try:
                 rows.append([float(v) for v in fields])
             except ValueError:
-                raise ValueError(f"{path}, line {number}: expected numbers, got {line!r}") from None
+                raise LogFormatError(
+                    f"{path}, line {number}: expected numbers, got {line!r}") from None
     table = np.array(rows, dtype=np.float64).reshape(-1, 8)
     return Relations(table[:, 0], table[:, 1], table[:, [2, 3, 7]])
 
@@ -81,14 +83,15 @@ def relations_from_trajectory(
     times = np.asarray(times, dtype=np.float64)
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     if len(times) != len(poses):
-        raise ValueError(f"times and poses: expected equal lengths, got {len(times)}, {len(poses)}")
+        raise EstimatorInputError(
+            f"times and poses: expected equal lengths, got {len(times)}, {len(poses)}")
     if np.any(np.diff(times) <= 0):
-        raise ValueError("times: expected strictly increasing timestamps")
+        raise EstimatorInputError("times: expected strictly increasing timestamps")
     if window is None:
         first, second = np.arange(len(times) - 1), np.arange(1, len(times))
     else:
         if window <= 0:
-            raise ValueError(f"window: expected a positive duration [s], got {window}")
+            raise ConfigError(f"window: expected a positive duration [s], got {window}")
         second = np.searchsorted(times, times + window, side="left")
         first = np.flatnonzero(second < len(times))
         second = second[first]
@@ -104,7 +107,7 @@ def match_times(
     times = np.asarray(times, dtype=np.float64)
     queries = np.asarray(queries, dtype=np.float64)
     if len(times) == 0:
-        raise ValueError("times: expected at least one timestamp, got none")
+        raise EstimatorInputError("times: expected at least one timestamp, got none")
     order = np.argsort(times, kind="stable")
     ordered = times[order]
     right = np.clip(np.searchsorted(ordered, queries), 0, len(times) - 1)
@@ -116,7 +119,7 @@ def match_times(
     missing = np.flatnonzero(gap > tolerance)
     if len(missing):
         q = queries[missing[0]]
-        raise ValueError(
+        raise EstimatorInputError(
             f"{len(missing)} relation time(s) have no scan within {tolerance} s, e.g. t={q:.6f} "
             f"(nearest scan at {ordered[nearest[missing[0]]]:.6f}); expected every relation "
             "time to be a scan time"
@@ -135,7 +138,7 @@ class RelationErrors:
     def summary(self) -> RelationSummary:
         """Means, standard deviations and failure rate."""
         if len(self.translation) == 0:
-            raise ValueError("no relations to summarise")
+            raise EstimatorInputError("no relations to summarise")
         return RelationSummary(
             count=len(self.translation),
             translation_mean=float(np.mean(self.translation)),
@@ -175,7 +178,7 @@ def relation_errors(
     times = np.asarray(times, dtype=np.float64)
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) != len(times):
-        raise ValueError(
+        raise EstimatorInputError(
             f"poses: expected shape ({len(times)}, 3) to match times, got {poses.shape}"
         )
     i = match_times(times, relations.t1, tolerance)

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from estimators.base import Estimator, SensorSetup
 from estimators.evaluation.metrics import ALIGNMENTS, DEFAULT_MIN_STEP, TrajectoryMetrics, evaluate
 from estimators.registry import make
+from lidar_env.errors import ArgumentTypeError, ConfigError
 
 if TYPE_CHECKING:  # numba loads only when a map is built
     from estimators.mapping.occupancy import OccupancyGrid
@@ -77,16 +78,16 @@ class ScoreEstimator(gym.Wrapper):
         elif isinstance(estimator, Estimator):
             self.estimator_name = type(estimator).__name__
         else:
-            raise TypeError(
+            raise ArgumentTypeError(
                 f"estimator: expected an Estimator or a registered name, got {type(estimator)}"
             )
         if align not in ALIGNMENTS:
-            raise ValueError(f"unknown align {align!r}: expected one of {', '.join(ALIGNMENTS)}")
+            raise ConfigError(f"unknown align {align!r}: expected one of {', '.join(ALIGNMENTS)}")
         if not np.isfinite(min_step) or min_step <= 0:
-            raise ValueError(f"min_step: expected a positive number [m], got {min_step!r}")
+            raise ConfigError(f"min_step: expected a positive number [m], got {min_step!r}")
         if map_resolution is not None and not (np.isfinite(map_resolution)
                                                and map_resolution > 0):
-            raise ValueError(f"map_resolution: expected a positive cell side [m] or None, "
+            raise ConfigError(f"map_resolution: expected a positive cell side [m] or None, "
                              f"got {map_resolution!r}")
         self.map_resolution = map_resolution
         self.grid: OccupancyGrid | None = None

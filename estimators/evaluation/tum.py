@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import EstimatorInputError, LogFormatError
 from lidar_env.se2 import wrap_angle
 
 #: Largest z [m] or roll/pitch quaternion component accepted as planar when reading.
@@ -22,11 +23,11 @@ def write_tum(path: str | Path, times: ArrayLike, poses: ArrayLike) -> None:
     times = np.asarray(times, dtype=np.float64)
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3:
-        raise ValueError(f"poses: expected shape (N, 3), got {poses.shape}")
+        raise EstimatorInputError(f"poses: expected shape (N, 3), got {poses.shape}")
     if times.shape != (len(poses),):
-        raise ValueError(f"times: expected shape ({len(poses)},), got {times.shape}")
+        raise EstimatorInputError(f"times: expected shape ({len(poses)},), got {times.shape}")
     if not (np.all(np.isfinite(times)) and np.all(np.isfinite(poses))):
-        raise ValueError("times and poses: expected finite values, got NaN or inf")
+        raise EstimatorInputError("times and poses: expected finite values, got NaN or inf")
     half = poses[:, 2] / 2.0
     zeros = np.zeros(len(poses))
     rows = np.column_stack([times, poses[:, :2], zeros, zeros, zeros, np.sin(half), np.cos(half)])
@@ -41,17 +42,18 @@ def read_tum(path: str | Path) -> tuple[NDArray[np.float64], NDArray[np.float64]
     """
     rows = np.loadtxt(path, comments="#", ndmin=2)
     if rows.size == 0:
-        raise ValueError(f"{path}: expected TUM lines 't x y z qx qy qz qw', found none")
+        raise LogFormatError(f"{path}: expected TUM lines 't x y z qx qy qz qw', found none")
     if rows.shape[1] != 8:
-        raise ValueError(f"{path}: expected 8 columns 't x y z qx qy qz qw', got {rows.shape[1]}")
+        raise LogFormatError(
+            f"{path}: expected 8 columns 't x y z qx qy qz qw', got {rows.shape[1]}")
     t, x, y, z, qx, qy, qz, qw = rows.T
     norm = np.sqrt(qx**2 + qy**2 + qz**2 + qw**2)
     if np.any(norm == 0):
-        raise ValueError(f"{path}: expected unit quaternions, got a zero quaternion")
+        raise LogFormatError(f"{path}: expected unit quaternions, got a zero quaternion")
     off_plane = np.maximum.reduce([np.abs(z), np.abs(qx) / norm, np.abs(qy) / norm])
     if np.any(off_plane > PLANAR_TOLERANCE):
         line = int(np.argmax(off_plane > PLANAR_TOLERANCE))
-        raise ValueError(
+        raise LogFormatError(
             f"{path}: expected a planar trajectory (z = qx = qy = 0), pose {line} leaves the plane"
         )
     heading = 2.0 * np.arctan2(qz, qw)

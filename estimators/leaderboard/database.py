@@ -74,6 +74,7 @@ from estimators.leaderboard.schema import (
     check_writable,
     inspect_existing,
 )
+from lidar_env.errors import UnknownNameError
 
 
 def _blob(array: NDArray[Any], dtype: str) -> bytes:
@@ -215,7 +216,7 @@ class ExperimentDatabase:
             "world FROM sensor_datasets WHERE scenario_id = ?", (scenario_id,)
         ).fetchone()
         if header is None:
-            raise KeyError(f"no sensor dataset recorded for scenario {scenario.label}")
+            raise UnknownNameError(f"no sensor dataset recorded for scenario {scenario.label}")
         assert scenario_id is not None
         verify_checksum(self._conn, self.path, "sensor_dataset", scenario_id, scenario.label)
         n_steps, n_beams, max_range, world_aligned, mounts, angles, env_config, world = header
@@ -377,7 +378,7 @@ class ExperimentDatabase:
             (trace_id,),
         ).fetchall()
         if not rows:
-            raise KeyError(f"no trace with id {trace_id} in {self.path}")
+            raise UnknownNameError(f"no trace with id {trace_id} in {self.path}")
         table = np.array(rows, dtype=np.float64)
         out = Path(path)
         write_tum(out, table[:, 0], table[:, 1:4])

@@ -32,7 +32,7 @@ from agents.driver import make_driver
 from estimators.base import SensorSetup
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
-from lidar_env.errors import DatabaseError
+from lidar_env.errors import ConfigError, DatabaseError
 
 if TYPE_CHECKING:
     from estimators.mapping.run_maps import MapTruth
@@ -57,7 +57,7 @@ def make_env(scenario: Scenario) -> Any:
     import lidar_env  # noqa: F401  (registers DualLidar-v0)
 
     if scenario.kind != "sim":
-        raise ValueError(f"scenario {scenario.label} is a {scenario.kind!r} log, not a simulation")
+        raise ConfigError(f"scenario {scenario.label} is a {scenario.kind!r} log, not a simulation")
     return gym.make(ENV_ID, world=scenario.world, trace=scenario.trace,
                     config=dict(scenario.config))
 
@@ -220,7 +220,7 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
 
     if isinstance(obstacle_stride, bool) or not isinstance(obstacle_stride, int) \
             or obstacle_stride < 1:
-        raise ValueError(f"obstacle_stride: expected an integer >= 1, got {obstacle_stride!r}")
+        raise ConfigError(f"obstacle_stride: expected an integer >= 1, got {obstacle_stride!r}")
     observations = list(dataset.observations())
     grid = from_estimator_run(poses, observations, dataset.setup, reference.resolution,
                               bounds=reference.bounds)

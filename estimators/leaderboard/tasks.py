@@ -28,6 +28,7 @@ from estimators.leaderboard.recording import (
 )
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import defaults, make, names
+from lidar_env.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -39,7 +40,7 @@ class EstimatorSpec:
 
     def __post_init__(self) -> None:
         if self.name not in names():
-            raise ValueError(
+            raise ConfigError(
                 f"unknown estimator {self.name!r}: expected one of {', '.join(names())}"
             )
 

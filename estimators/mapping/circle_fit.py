@@ -14,6 +14,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import EstimatorInputError
+
 # columns of the per-cluster statistics of _cluster_statistics
 _CX, _CY, _AXIS, _LENGTH, _WIDTH, _SPREAD, _FIT_X, _FIT_Y, _FIT_R, _FIT_RMS, _CORNER_RMS = range(11)
 
@@ -107,7 +109,7 @@ def fit_circle(points: ArrayLike) -> CircleFit | None:
     """
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
-        raise ValueError(f"points: expected shape (N >= 3, 2), got {points.shape}")
+        raise EstimatorInputError(f"points: expected shape (N >= 3, 2), got {points.shape}")
     origin = points.mean(axis=0)
     cx, cy, radius, rms = _kasa_circle(*_kasa_moments(points, origin), points, origin)
     return None if math.isnan(radius) else CircleFit(cx, cy, radius, rms)

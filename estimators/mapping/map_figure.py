@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.mapping.occupancy import Bounds, OccupancyGrid
 from lidar_env import rendering
+from lidar_env.errors import EstimatorInputError
 
 
 def _panel_image(
@@ -28,10 +29,12 @@ def _panel_image(
         return panel.probabilities(), extent
     image = np.asarray(panel)
     if image.ndim != 2:
-        raise ValueError(f"map panel: expected an OccupancyGrid or a 2-D image, got {image.shape}")
+        raise EstimatorInputError(
+            f"map panel: expected an OccupancyGrid or a 2-D image, got {image.shape}")
     if bounds is None:
-        raise ValueError("bounds: expected (xmin, ymin, xmax, ymax) [m] to place an image panel, "
-                         "got None")
+        raise EstimatorInputError(
+            "bounds: expected (xmin, ymin, xmax, ymax) [m] to place an image panel, "
+            "got None")
     xmin, ymin, xmax, ymax = bounds
     probability = image / 255.0 if image.dtype == np.uint8 else image.astype(np.float64)
     return probability, (xmin, xmax, ymin, ymax)
@@ -67,7 +70,7 @@ def save_map_figure(
         raise ImportError("save_map_figure needs matplotlib: pip install 'duallidar[plots]'") \
             from error
     if not panels:
-        raise ValueError("panels: expected at least one map to draw, got none")
+        raise EstimatorInputError("panels: expected at least one map to draw, got none")
     images = {name: _panel_image(panel, bounds) for name, panel in panels.items()}
     aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())  # height / width
     n_cols = min(len(images), math.ceil(math.sqrt(len(images) / aspect)))  # near square

@@ -44,6 +44,7 @@ from scipy.optimize import linear_sum_assignment
 
 from estimators.base import SensorSetup
 from estimators.mapping.occupancy import OccupancyGrid, sensor_poses
+from lidar_env.errors import ConfigError, EstimatorInputError
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,8 @@ def truth_mask(image: ArrayLike) -> NDArray[np.bool_]:
     the paper's convention (0 = nothing, above 0 = obstacle)."""
     image = np.asarray(image)
     if image.ndim != 2:
-        raise ValueError(f"truth image: expected a 2-D (rows, cols) array, got {image.shape}")
+        raise EstimatorInputError(
+            f"truth image: expected a 2-D (rows, cols) array, got {image.shape}")
     return image > 0
 
 
@@ -100,15 +102,17 @@ def score_occupancy(
     occupied = np.asarray(occupied, dtype=bool)
     true = truth_mask(truth)
     if occupied.shape != true.shape:
-        raise ValueError(f"occupied map {occupied.shape} and truth image {true.shape}: expected "
-                         "the same shape (build the map over world.bounds at the image resolution)")
+        raise EstimatorInputError(
+            f"occupied map {occupied.shape} and truth image {true.shape}: expected "
+            "the same shape (build the map over world.bounds at the image resolution)")
     if isinstance(tolerance_cells, bool) or not isinstance(tolerance_cells, (int, np.integer)) \
             or tolerance_cells < 0:
-        raise ValueError(f"tolerance_cells: expected an integer >= 0, got {tolerance_cells!r}")
+        raise ConfigError(f"tolerance_cells: expected an integer >= 0, got {tolerance_cells!r}")
     if evaluated is not None:
         evaluated = np.asarray(evaluated, dtype=bool)
         if evaluated.shape != true.shape:
-            raise ValueError(f"evaluated: expected shape {true.shape}, got {evaluated.shape}")
+            raise EstimatorInputError(
+                f"evaluated: expected shape {true.shape}, got {evaluated.shape}")
         true_evaluated = true & evaluated
     else:
         true_evaluated = true
@@ -159,8 +163,9 @@ def true_occupancy(world: Any, grid: OccupancyGrid) -> NDArray[np.bool_]:
     marking (at one-cell tolerance) while the true cells one further in were never hit."""
     true = truth_mask(world.to_image(grid.resolution))
     if true.shape != grid.shape:
-        raise ValueError(f"grid {grid.shape} and world image {true.shape}: expected the same "
-                         f"shape; build the grid over world.bounds {world.bounds}")
+        raise EstimatorInputError(
+            f"grid {grid.shape} and world image {true.shape}: expected the same "
+            f"shape; build the grid over world.bounds {world.bounds}")
     slack = 1e-9 * grid.resolution  # a return on a cell's edge belongs to both cells
     for cx, cy, r in np.asarray(world.circles, dtype=np.float64).reshape(-1, 3):
         window = _cell_window(grid, np.array([cx - r, cy - r]), np.array([cx + r, cy + r]))
@@ -268,12 +273,12 @@ def score_cylinders(
     found = np.asarray(detected, dtype=np.float64).reshape(-1, 3)
     true = np.asarray(true_circles, dtype=np.float64).reshape(-1, 3)
     if not (math.isfinite(match_distance) and match_distance > 0):
-        raise ValueError(
+        raise ConfigError(
             f"match_distance: expected a positive distance [m], got {match_distance!r}"
         )
     counted = np.ones(len(true), bool) if observable is None else np.asarray(observable, bool)
     if counted.shape != (len(true),):
-        raise ValueError(f"observable: expected shape ({len(true)},), got {counted.shape}")
+        raise EstimatorInputError(f"observable: expected shape ({len(true)},), got {counted.shape}")
     distances = np.hypot(found[:, None, 0] - true[None, :, 0], found[:, None, 1] - true[None, :, 1])
     rows, cols = linear_sum_assignment(np.where(distances <= match_distance, distances, 1e9))
     keep = distances[rows, cols] <= match_distance
@@ -308,8 +313,9 @@ def return_agreement(
     that cell, which consistent poses do not do. Returns outside the grid disagree."""
     trajectory = np.asarray(trajectory, dtype=np.float64)
     if len(observations) != len(trajectory):
-        raise ValueError(f"observations: expected one per trajectory row ({len(trajectory)}), "
-                         f"got {len(observations)}")
+        raise EstimatorInputError(
+            f"observations: expected one per trajectory row ({len(trajectory)}), "
+            f"got {len(observations)}")
     points = []
     for observation, step_poses in zip(observations, sensor_poses(trajectory, setup),
                                        strict=True):

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from estimators.mapping.circle_fit import fit_circle
 from estimators.mapping.obstacles import Obstacle
-from lidar_env.errors import EstimatorInputError
+from lidar_env.errors import ConfigError, EstimatorInputError
 
 
 @dataclass
@@ -123,9 +123,9 @@ class MotionTracker:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and not math.isnan(value) and value > 0
                     and (math.isfinite(value) or name == "maneuver_gate")):
-                raise EstimatorInputError(f"{name}: expected a positive number, got {value!r}")
+                raise ConfigError(f"{name}: expected a positive number, got {value!r}")
         if not isinstance(self.min_hits, int) or self.min_hits < 1:
-            raise EstimatorInputError(f"min_hits: expected an integer >= 1, got {self.min_hits!r}")
+            raise ConfigError(f"min_hits: expected an integer >= 1, got {self.min_hits!r}")
 
     def update(self, obstacles: list[Obstacle], t: float) -> list[int | None]:
         """Take one step's detections (from any number of Lidars) made at time ``t`` [s];

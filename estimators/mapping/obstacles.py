@@ -53,6 +53,7 @@ from estimators.mapping.circle_fit import (
     _longest_arc,
 )
 from estimators.mapping.occupancy import sensor_poses
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points
 
 
@@ -114,15 +115,15 @@ class DetectorParams:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.range_sigma) and self.range_sigma >= 0):
-            raise ValueError(f"range_sigma: expected a number >= 0 [m], got {self.range_sigma!r}")
+            raise ConfigError(f"range_sigma: expected a number >= 0 [m], got {self.range_sigma!r}")
         if not 0.0 < self.grazing_angle < math.pi / 2:
-            raise ValueError(f"grazing_angle: expected an angle in (0, pi/2) [rad], "
+            raise ConfigError(f"grazing_angle: expected an angle in (0, pi/2) [rad], "
                              f"got {self.grazing_angle!r}")
         if self.min_points < 1 or self.min_circle_points < 4:
-            raise ValueError(f"expected min_points >= 1 and min_circle_points >= 4, got "
+            raise ConfigError(f"expected min_points >= 1 and min_circle_points >= 4, got "
                              f"{self.min_points} and {self.min_circle_points}")
         if not (self.max_radius > 0 and self.max_circle_rms > 0):
-            raise ValueError(f"expected max_radius > 0 and max_circle_rms > 0, got "
+            raise ConfigError(f"expected max_radius > 0 and max_circle_rms > 0, got "
                              f"{self.max_radius} and {self.max_circle_rms}")
 
 
@@ -138,7 +139,7 @@ def split_scan(
     ranges = np.asarray(ranges, dtype=np.float64)
     angles = np.asarray(beam_angles, dtype=np.float64)
     if angles.ndim != 1 or ranges.shape != angles.shape:
-        raise ValueError(f"ranges: expected shape {angles.shape} like beam_angles, "
+        raise EstimatorInputError(f"ranges: expected shape {angles.shape} like beam_angles, "
                          f"got {ranges.shape}")
     order = np.argsort(np.mod(angles, 2 * np.pi), kind="stable")
     r = ranges[order]
@@ -276,7 +277,8 @@ def detect_obstacles(
     params = DetectorParams() if params is None else params
     pose = np.asarray(sensor_pose, dtype=np.float64)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise ValueError(f"sensor_pose: expected 3 finite numbers (x, y, heading), got {pose}")
+        raise EstimatorInputError(
+            f"sensor_pose: expected 3 finite numbers (x, y, heading), got {pose}")
     ranges = np.asarray(ranges, dtype=np.float64)
     angles = np.asarray(beam_angles, dtype=np.float64)
     clusters = [c for c in split_scan(ranges, angles, max_range, params)

@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import SensorSetup
 from lidar_env import rendering
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose
 
 #: ``(xmin, ymin, xmax, ymax)`` [m] of an axis-aligned world rectangle.
@@ -216,19 +217,19 @@ class OccupancyGrid:
     def __post_init__(self) -> None:
         bounds = np.asarray(self.bounds, dtype=np.float64)
         if bounds.shape != (4,) or not np.all(np.isfinite(bounds)):
-            raise ValueError(f"bounds: expected 4 finite numbers (xmin, ymin, xmax, ymax), "
+            raise ConfigError(f"bounds: expected 4 finite numbers (xmin, ymin, xmax, ymax), "
                              f"got {self.bounds!r}")
         if not (bounds[2] > bounds[0] and bounds[3] > bounds[1]):
-            raise ValueError(f"bounds: expected xmax > xmin and ymax > ymin, got {self.bounds!r}")
+            raise ConfigError(f"bounds: expected xmax > xmin and ymax > ymin, got {self.bounds!r}")
         if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise ValueError(f"resolution: expected a positive number [m/cell], "
+            raise ConfigError(f"resolution: expected a positive number [m/cell], "
                              f"got {self.resolution!r}")
         for name in ("p_hit", "p_miss", "p_min", "p_max"):
             value = getattr(self, name)
             if not 0.0 < value < 1.0:
-                raise ValueError(f"{name}: expected a probability in (0, 1), got {value!r}")
+                raise ConfigError(f"{name}: expected a probability in (0, 1), got {value!r}")
         if not (self.p_min < 0.5 < self.p_max and self.p_miss < 0.5 < self.p_hit):
-            raise ValueError(
+            raise ConfigError(
                 "expected p_min < 0.5 < p_max and p_miss < 0.5 < p_hit, got "
                 f"p_min={self.p_min}, p_max={self.p_max}, p_miss={self.p_miss}, p_hit={self.p_hit}"
             )
@@ -237,13 +238,14 @@ class OccupancyGrid:
         if self.free_margin is None:
             self.free_margin = self.resolution
         if not (math.isfinite(self.free_margin) and self.free_margin >= 0):
-            raise ValueError(f"free_margin: expected a distance >= 0 [m], got {self.free_margin!r}")
+            raise ConfigError(f"free_margin: expected a distance >= 0 [m], "
+                              f"got {self.free_margin!r}")
         if not (math.isfinite(self.clear_radius) and self.clear_radius >= 0):
-            raise ValueError(f"clear_radius: expected a distance >= 0 [cells], "
+            raise ConfigError(f"clear_radius: expected a distance >= 0 [cells], "
                              f"got {self.clear_radius!r}")
         shape = self.shape
         if shape[0] * shape[1] > 200_000_000:
-            raise ValueError(f"grid of {shape} cells is too large: coarsen the resolution "
+            raise ConfigError(f"grid of {shape} cells is too large: coarsen the resolution "
                              f"({self.resolution} m) or shrink the bounds {self.bounds}")
         self.log_odds = np.zeros(shape, dtype=np.float64)
         self._marks = np.zeros(shape, dtype=np.int32)
@@ -287,17 +289,18 @@ class OccupancyGrid:
         angles = np.asarray(beam_angles, dtype=np.float64)
         poses = np.atleast_2d(np.asarray(sensor_pose, dtype=np.float64))
         if angles.ndim != 1 or ranges.ndim != 2 or ranges.shape[1] != len(angles):
-            raise ValueError(f"ranges: expected shape (n,) or (K, n) with n = {angles.shape} "
-                             f"beam angles, got {np.shape(ranges)}")
+            raise EstimatorInputError(f"ranges: expected shape (n,) or (K, n), n = {angles.shape} "
+                                      f"beam angles, got {np.shape(ranges)}")
         if poses.shape != (len(ranges), 3):
-            raise ValueError(f"sensor_pose: expected shape (3,) or ({len(ranges)}, 3), one pose "
-                             f"per scan, got {np.shape(sensor_pose)}")
+            raise EstimatorInputError(
+                f"sensor_pose: expected shape (3,) or ({len(ranges)}, 3), one pose "
+                f"per scan, got {np.shape(sensor_pose)}")
         if not (np.all(np.isfinite(ranges)) and np.all(ranges >= 0)):
-            raise ValueError("ranges: expected finite ranges >= 0 [m]")
+            raise EstimatorInputError("ranges: expected finite ranges >= 0 [m]")
         if not (np.all(np.isfinite(poses)) and np.all(np.isfinite(angles))):
-            raise ValueError("sensor_pose and beam_angles: expected finite numbers")
+            raise EstimatorInputError("sensor_pose and beam_angles: expected finite numbers")
         if not (math.isfinite(max_range) and max_range > 0):
-            raise ValueError(f"max_range: expected a positive number [m], got {max_range!r}")
+            raise EstimatorInputError(f"max_range: expected a number > 0 [m], got {max_range!r}")
         if self._n_updates >= 2**30 - 1:  # marks are int32 (2 per call): start them afresh
             self._marks[:] = 0
             self._n_updates = 0
@@ -333,13 +336,13 @@ class OccupancyGrid:
     def occupied(self, threshold: float = 0.5) -> NDArray[np.bool_]:
         """``(rows, cols)`` cells whose occupancy probability exceeds ``threshold``."""
         if not 0.0 < threshold < 1.0:
-            raise ValueError(f"threshold: expected a probability in (0, 1), got {threshold!r}")
+            raise ConfigError(f"threshold: expected a probability in (0, 1), got {threshold!r}")
         return self.log_odds > logit(threshold)
 
     def free(self, threshold: float = 0.5) -> NDArray[np.bool_]:
         """``(rows, cols)`` cells whose occupancy probability is below ``threshold``."""
         if not 0.0 < threshold < 1.0:
-            raise ValueError(f"threshold: expected a probability in (0, 1), got {threshold!r}")
+            raise ConfigError(f"threshold: expected a probability in (0, 1), got {threshold!r}")
         return self.log_odds < logit(threshold)
 
 
@@ -382,10 +385,11 @@ def from_estimator_run(
     holds every return. ``grid_params`` go to :class:`OccupancyGrid` (``p_hit``, ...)."""
     trajectory = np.asarray(trajectory, dtype=np.float64)
     if trajectory.ndim != 2 or trajectory.shape[1] != 3:
-        raise ValueError(f"trajectory: expected shape (N, 3), got {trajectory.shape}")
+        raise EstimatorInputError(f"trajectory: expected shape (N, 3), got {trajectory.shape}")
     if len(observations) != len(trajectory):
-        raise ValueError(f"observations: expected one per trajectory row ({len(trajectory)}), "
-                         f"got {len(observations)}")
+        raise EstimatorInputError(
+            f"observations: expected one per trajectory row ({len(trajectory)}), "
+            f"got {len(observations)}")
     poses = sensor_poses(trajectory, setup)
     if bounds is None:
         reach = max(sensor.max_range for sensor in setup.sensors)

@@ -26,6 +26,7 @@ from estimators.mapping.map_scoring import (
 from estimators.mapping.obstacles import DetectorParams, detect_in_observation
 from estimators.mapping.occupancy import Bounds, OccupancyGrid, from_estimator_run, sensor_poses
 from estimators.mapping.tracking import ObstacleTracker
+from lidar_env.errors import EstimatorInputError
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,8 @@ def map_truth(
     to count as observable (the detector's own threshold by default)."""
     true_trajectory = np.asarray(true_trajectory, dtype=np.float64)
     if true_trajectory.ndim != 2 or true_trajectory.shape[1] != 3:
-        raise ValueError(f"true_trajectory: expected shape (N, 3), got {true_trajectory.shape}")
+        raise EstimatorInputError(
+            f"true_trajectory: expected shape (N, 3), got {true_trajectory.shape}")
     true_poses = sensor_poses(true_trajectory, setup).reshape(-1, 3)
     grid = OccupancyGrid(world.bounds, resolution)
     true = true_occupancy(world, grid)

@@ -24,6 +24,7 @@ from estimators.mapping.circle_fit import (
     _solve_kasa,
 )
 from estimators.mapping.obstacles import Obstacle
+from lidar_env.errors import ConfigError
 
 
 @numba.njit(cache=True)
@@ -171,7 +172,7 @@ class ObstacleTracker:
         for name in ("gate", "surface_gate"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: expected a positive distance [m], got {value!r}")
+                raise ConfigError(f"{name}: expected a positive distance [m], got {value!r}")
 
     def update(self, obstacles: list[Obstacle]) -> list[int]:
         """Associate one step's detections (from any number of Lidars); return their track ids."""
@@ -234,7 +235,7 @@ class ObstacleTracker:
         convex corner of a box or of two walls in a few percent (a short arc of returns around
         it fits a circle), at most 11 % in the built-in worlds."""
         if not 0.0 <= min_round_share <= 1.0:
-            raise ValueError(
+            raise ConfigError(
                 f"min_round_share: expected a share in [0, 1], got {min_round_share!r}"
             )
         circles = [
