@@ -128,7 +128,7 @@ def register(
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     if compiled and params.trim_ratio >= 1.0 and (information is None) == (prior is None):
         has_normals = reference.normals is not None
-        pose, iterations, converged = register_loop(
+        pose, iterations, converged, residuals = register_loop(
             *reference.search_tree.arrays, reference.points,
             np.ascontiguousarray(reference.normals if has_normals else reference.points,
                                  dtype=np.float64),
@@ -138,8 +138,8 @@ def register(
             params.max_correspondence_distance, LOSSES.index(params.loss), params.loss_scale,
             prior is not None, np.zeros(3) if prior is None else prior,
             np.zeros((3, 3)) if information is None else information, params.min_information,
-            params.tolerance_translation, params.tolerance_rotation)
-        return _assess(reference, query_points, pose, params, iterations, converged)
+            params.tolerance_translation, params.tolerance_rotation, params.inlier_distance)
+        return _assess(residuals, pose, params, iterations, converged)
     converged = False
     iterations = 0
     while iterations < params.max_iterations:
@@ -163,7 +163,9 @@ def register(
         ):
             converged = True
             break
-    return _assess(reference, query_points, pose, params, iterations, converged)
+    *_, residuals = reference.normal_equations(
+        query_points, pose, params.inlier_distance, params.loss, params.loss_scale)
+    return _assess(residuals, pose, params, iterations, converged)
 
 
 def leaves_a_direction_free(reference: PointToLineReference, query_points: NDArray[np.float64],
@@ -211,19 +213,14 @@ def _trimmed_step(
                              _prior_offset(pose, information, prior), params.min_information)
 
 
-def _assess(
-    reference: PointToLineReference,
-    query_points: NDArray[np.float64],
-    pose: NDArray[np.float64],
-    params: ICPParams,
-    iterations: int,
-    converged: bool,
-) -> MatchResult:
-    *_, residuals = reference.normal_equations(
-        query_points, pose, params.inlier_distance, params.loss, params.loss_scale)
+def _assess(residuals: NDArray[np.float64], pose: NDArray[np.float64], params: ICPParams,
+            iterations: int, converged: bool) -> MatchResult:
+    """The match at ``pose`` from each query point's residual [m] against its pair within
+    ``params.inlier_distance`` (NaN for none)."""
+    count = len(residuals)
     residuals = np.abs(residuals[np.isfinite(residuals)])
     inliers = residuals[residuals < params.inlier_distance]
-    quality = len(inliers) / max(len(query_points), 1)
+    quality = len(inliers) / max(count, 1)
     rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else float("inf")
     return MatchResult(pose, quality, rmse, iterations, converged)
 

@@ -9,7 +9,11 @@ queries 10-30 times per scan, and from inside one numba loop each query costs no
 
 The tree splits the longer side of each node's bounding box at the median until at most
 ``LEAF_SIZE`` points remain; a query descends nearest child first and skips every node whose
-box lies further than its k-th best candidate or the pairing distance. (A hashed uniform grid
+box lies further than its k-th best candidate or the pairing distance. ICP asks again for the
+same query points after each small step: :func:`search_near` keeps each query's three nearest
+points and answers from them while the triangle inequality says no other point can have come
+nearer, and seeds the search with them where it cannot (the same answer, bit for bit; hallway
+scans: half the queries after the first iteration need no search). (A hashed uniform grid
 was tried first: on sparse scans, where the second-nearest point of a 1-degree scan of a
 wall 5 m away is 10-20 cm off, its many empty-cell look-ups cost more than scipy's tree.)
 """
@@ -23,6 +27,11 @@ from numpy.typing import ArrayLike, NDArray
 #: Points per leaf of the tree: about what a few cache lines hold.
 LEAF_SIZE = 8
 STACK = 128  # depth bound of a search: a median-split tree of n points is log2(n) deep
+#: Nearest points :func:`search_near` keeps per query: one more than the two a pair needs, so
+#: that a query that moved less than the gap to the third keeps its pair without a search.
+KEPT = 3
+#: [m] slack of :func:`search_near`'s reuse test for the rounding of its distances.
+REUSE_MARGIN = 1e-9
 
 
 @njit(cache=True)
@@ -77,27 +86,47 @@ def _box_gap(box: NDArray[np.float64], node: int, qx: float, qy: float) -> float
     return dx * dx + dy * dy
 
 
-@njit(cache=True)
-def search(
+@njit(cache=True, inline="always")
+def _ranked(d2: float, original: int, best0: float, at0: int, best1: float, at1: int,
+            best2: float, at2: int) -> tuple[float, int, float, int, float, int]:
+    """The three best (squared distance, index) pairs with one more candidate ranked in:
+    nearer first, equally distant ones by index."""
+    if d2 < best0 or (d2 == best0 and original < at0):
+        return d2, original, best0, at0, best1, at1
+    if d2 < best1 or (d2 == best1 and original < at1):
+        return best0, at0, d2, original, best1, at1
+    if d2 < best2 or (d2 == best2 and original < at2):
+        return best0, at0, best1, at1, d2, original
+    return best0, at0, best1, at1, best2, at2
+
+
+@njit(cache=True, inline="always")
+def search_from(
     order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
     end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
     qx: float, qy: float, k: int, bound: float, pending: NDArray[np.int64],
-) -> tuple[float, int, float, int]:
-    """The squared distances and indices of the ``k`` (1 or 2) points nearest (qx, qy) with
-    squared distance below ``bound``: ``(d0, i0, d1, i1)``, ``inf`` and ``n`` where there is
-    none (``d1, i1`` stay so for ``k=1``). Equally distant points rank by index. The tree is
-    the tuple a :class:`PointIndex` holds (``PointIndex.arrays``), for compiled callers;
-    ``pending`` is scratch space for the nodes still to visit, ``(STACK,)``, allocated once by
-    the caller for all its queries (a fresh array per query cost a fifth of ICP's time)."""
+    best0: float, at0: int, best1: float, at1: int, best2: float, at2: int,
+) -> tuple[float, int, float, int, float, int]:
+    """The squared distances and indices of the ``k`` (1 to 3) points nearest (qx, qy) with
+    squared distance below ``bound``: ``(d0, i0, d1, i1, d2, i2)``, ``inf`` and ``n`` where
+    there is none (entries past the ``k``-th are not meaningful). Equally distant points rank
+    by index. The tree is the tuple a :class:`PointIndex` holds (``PointIndex.arrays``), for
+    compiled callers; ``pending`` is scratch space for the nodes still to visit, ``(STACK,)``,
+    allocated once by the caller for all its queries (a fresh array per query cost a fifth of
+    ICP's time).
+
+    ``best0, at0, ...`` seed the search: distinct points ranked as :func:`_ranked` ranks them,
+    with their squared distances to (qx, qy) (``inf`` and ``n`` for none), e.g. the nearest
+    points of a query that has moved a little. The answer is the same; the closer the seeds,
+    the more of the tree is skipped (a node whose box lies further than the ``k``-th best so
+    far)."""
     n = tree_points.shape[0]
-    best0, best1 = np.inf, np.inf
-    at0, at1 = n, n
     pending[0] = 0
     top = 1
     while top > 0:
         top -= 1
         node = pending[top]
-        worst = best0 if k == 1 else best1
+        worst = best0 if k == 1 else best1 if k == 2 else best2
         # ties with the k-th best still count (ranked by index), points at the bound do not
         gap = _box_gap(box, node, qx, qy)
         if gap > worst or gap >= bound:
@@ -109,11 +138,10 @@ def search(
                 dy = tree_points[p, 1] - qy
                 d2 = dx * dx + dy * dy
                 original = order[p]
-                if d2 < best0 or (d2 == best0 and original < at0):
-                    best1, at1 = best0, at0
-                    best0, at0 = d2, original
-                elif k == 2 and (d2 < best1 or (d2 == best1 and original < at1)):
-                    best1, at1 = d2, original
+                if d2 <= worst and original != at0 and original != at1 and original != at2:
+                    best0, at0, best1, at1, best2, at2 = _ranked(
+                        d2, original, best0, at0, best1, at1, best2, at2)
+                    worst = best0 if k == 1 else best1 if k == 2 else best2
             continue
         # nearer child on top of the stack: searched first, it tightens the bound soonest
         if _box_gap(box, first, qx, qy) <= _box_gap(box, first + 1, qx, qy):
@@ -125,7 +153,74 @@ def search(
         best0, at0 = np.inf, n
     if not best1 < bound:
         best1, at1 = np.inf, n
-    return best0, at0, best1, at1
+    if not best2 < bound:
+        best2, at2 = np.inf, n
+    return best0, at0, best1, at1, best2, at2
+
+
+@njit(cache=True, inline="always")
+def search(
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    qx: float, qy: float, k: int, bound: float, pending: NDArray[np.int64],
+) -> tuple[float, int, float, int, float, int]:
+    """:func:`search_from` without seeds: the ``k`` (1 to 3) nearest points of (qx, qy)."""
+    n = tree_points.shape[0]
+    return search_from(order, tree_points, start, end, child, box, qx, qy, k, bound, pending,
+                       np.inf, n, np.inf, n, np.inf, n)
+
+
+@njit(cache=True, inline="always")
+def search_near(
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    points: NDArray[np.float64], qx: float, qy: float, k: int, bound: float,
+    pending: NDArray[np.int64], row: int, seen: NDArray[np.float64], near: NDArray[np.int64],
+    reach: NDArray[np.float64],
+) -> tuple[float, int, float, int, float, int]:
+    """:func:`search` (``k`` 1 or 2) for query ``row`` of a set of queries asked again as they
+    move (ICP's iterations), with the same answer, from the points last found nearest where
+    they suffice.
+
+    Each search of a query keeps its ``KEPT`` nearest points (``near`` (M, 3), ``n`` for none),
+    where it stood (``seen`` (M, 2) [m], NaN for never searched) and ``reach`` (M,) [m], the
+    distance within which those were all the points (the third's distance, or the bound's).
+    A query that has moved ``m`` since lies at least ``reach - m`` from every other point
+    (triangle inequality), so when its ``k``-th nearest kept point, or the bound where there
+    is none, lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept points hold
+    the answer: their distances are computed as :func:`search` computes them, so it is
+    bit-identical. Else the query is searched again. ``points`` (N, 2) are the tree's points
+    in their original order."""
+    n = tree_points.shape[0]
+    moved = np.hypot(qx - seen[row, 0], qy - seen[row, 1])
+    if moved < np.inf:  # NaN: never searched
+        best0 = best1 = best2 = np.inf
+        at0 = at1 = at2 = n
+        for j in range(KEPT):
+            original = near[row, j]
+            if original < n:
+                dx = points[original, 0] - qx
+                dy = points[original, 1] - qy
+                best0, at0, best1, at1, best2, at2 = _ranked(
+                    dx * dx + dy * dy, original, best0, at0, best1, at1, best2, at2)
+        last = best0 if k == 1 else best1
+        if np.sqrt(min(last, bound)) + moved + REUSE_MARGIN <= reach[row]:
+            if not best0 < bound:
+                best0, at0 = np.inf, n
+            if not best1 < bound:
+                best1, at1 = np.inf, n
+            return best0, at0, best1, at1, np.inf, n
+        # seeded by the kept points: the search then skips most of the tree
+        best0, at0, best1, at1, best2, at2 = search_from(
+            order, tree_points, start, end, child, box, qx, qy, KEPT, bound, pending,
+            best0, at0, best1, at1, best2, at2)
+    else:
+        best0, at0, best1, at1, best2, at2 = search(order, tree_points, start, end, child,
+                                                    box, qx, qy, KEPT, bound, pending)
+    seen[row, 0], seen[row, 1] = qx, qy
+    near[row, 0], near[row, 1], near[row, 2] = at0, at1, at2
+    reach[row] = np.sqrt(min(best2, bound))
+    return best0, at0, best1, at1, best2, at2
 
 
 @njit(cache=True)
@@ -142,8 +237,8 @@ def _nearest(
     bound = max_distance * max_distance
     pending = np.empty(STACK, np.int64)
     for q in range(m):
-        d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
-                                queries[q, 0], queries[q, 1], k, bound, pending)
+        d0, i0, d1, i1, _, _ = search(order, tree_points, start, end, child, box,
+                                      queries[q, 0], queries[q, 1], k, bound, pending)
         distances[q, 0], index[q, 0] = np.sqrt(d0), i0
         if k == 2:
             distances[q, 1], index[q, 1] = np.sqrt(d1), i1

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from estimators.matching.nearest import STACK, search
+from estimators.matching.nearest import KEPT, STACK, search, search_near
 
 #: Loss codes of the kernels, in the order of :data:`estimators.matching.point_to_line.LOSSES`.
 CAUCHY, HUBER, SQUARED = 0, 1, 2
@@ -49,20 +49,32 @@ def _accumulate(hessian: NDArray[np.float64], gradient: NDArray[np.float64], nx:
 
 
 @njit(cache=True)
+def fresh_neighbours(m: int) -> tuple[NDArray[np.float64], NDArray[np.int64],
+                                      NDArray[np.float64]]:
+    """``seen``, ``near``, ``reach`` for ``m`` query points not searched yet
+    (:func:`estimators.matching.nearest.search_near`)."""
+    return np.full((m, 2), np.nan), np.empty((m, KEPT), np.int64), np.empty(m)
+
+
+@njit(cache=True)
 def point_to_line_system(
     order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
     end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
     points: NDArray[np.float64], normals: NDArray[np.float64], valid: NDArray[np.bool_],
     anchors: NDArray[np.float64], has_normals: bool,
     query: NDArray[np.float64], pose: NDArray[np.float64], max_distance: float, loss: int,
-    scale: float, residuals: NDArray[np.float64],
+    scale: float, residuals: NDArray[np.float64], seen: NDArray[np.float64],
+    near: NDArray[np.int64], reach: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float]:
     """One point-to-line iteration of ``query`` (M, 2) at ``pose`` onto a reference (its tree,
     ``points``, and with ``has_normals`` its stored ``normals``/``valid``/``anchors``).
 
     Returns the normal equations ``H = sum w J^T J`` (3, 3), ``g = -sum w J^T r`` (3,), the
     number of pairs and the sum of the squared rotation column of J; ``residuals`` (M,) is
-    filled with each query point's residual [m], NaN where it has no pair.
+    filled with each query point's residual [m], NaN where it has no pair. ``seen``, ``near``
+    and ``reach`` are the query points' neighbours from the previous iterations
+    (:func:`estimators.matching.nearest.search_near`; :func:`fresh_neighbours` before the
+    first), updated where they are searched again.
     """
     n = points.shape[0]
     c, s = np.cos(pose[2]), np.sin(pose[2])
@@ -77,8 +89,8 @@ def point_to_line_system(
         wx = query[i, 0] * c - query[i, 1] * s + pose[0]
         wy = query[i, 0] * s + query[i, 1] * c + pose[1]
         k = 1 if has_normals else 2
-        d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
-                                wx, wy, k, bound, pending)
+        d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box, points,
+                                           wx, wy, k, bound, pending, i, seen, near, reach)
         if i0 == n:
             continue
         if has_normals and valid[i0]:
@@ -86,8 +98,9 @@ def point_to_line_system(
             nx, ny = normals[i0, 0], normals[i0, 1]
         else:
             if has_normals:  # a stored normal that is not valid: the two-nearest-point line
-                d0, i0, d1, i1 = search(order, tree_points, start, end, child, box,
-                                        wx, wy, 2, bound, pending)
+                d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box,
+                                                   points, wx, wy, 2, bound, pending, i, seen,
+                                                   near, reach)
             ax, ay = points[i0, 0], points[i0, 1]
             has_line = i1 != n
             second = i1 if has_line else i0
@@ -124,8 +137,8 @@ def nearest_on_surfaces(
     bound = max_distance * max_distance
     pending = np.empty(STACK, np.int64)
     for i in range(query.shape[0]):
-        _, i0, _, _ = search(order, tree_points, start, end, child, box,
-                             query[i, 0], query[i, 1], 1, bound, pending)
+        i0 = search(order, tree_points, start, end, child, box,
+                    query[i, 0], query[i, 1], 1, bound, pending)[1]
         if i0 != n and not pointlike[i0]:
             index[count], nearest[count] = i, i0
             count += 1
@@ -197,18 +210,22 @@ def register_loop(
     initial: NDArray[np.float64], max_iterations: int, max_distance: float, loss: int,
     scale: float, has_prior: bool, prior: NDArray[np.float64],
     prior_information: NDArray[np.float64], min_information: float,
-    tolerance_translation: float, tolerance_rotation: float,
-) -> tuple[NDArray[np.float64], int, bool]:
+    tolerance_translation: float, tolerance_rotation: float, inlier_distance: float,
+) -> tuple[NDArray[np.float64], int, bool, NDArray[np.float64]]:
     """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
-    run and whether the step fell below the tolerances. ``prior_information`` is (3, 3)."""
+    run, whether the step fell below the tolerances, and each query point's residual [m] at
+    that pose against its pair within ``inlier_distance`` (NaN for none), which the match is
+    assessed on. ``prior_information`` is (3, 3)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
+    seen, near, reach = fresh_neighbours(query.shape[0])
     iterations = 0
+    converged = False
     while iterations < max_iterations:
         iterations += 1
         hessian, gradient, count, rotation_squares = point_to_line_system(
             order, tree_points, start, end, child, box, points, normals, valid, anchors,
-            has_normals, query, pose, max_distance, loss, scale, residuals)
+            has_normals, query, pose, max_distance, loss, scale, residuals, seen, near, reach)
         if count < 3:
             break
         offset = prior - pose
@@ -219,5 +236,9 @@ def register_loop(
         pose[2] = (pose[2] + np.pi) % (2.0 * np.pi) - np.pi
         if np.hypot(step[0], step[1]) < tolerance_translation and (
                 abs(step[2]) < tolerance_rotation):
-            return pose, iterations, True
-    return pose, iterations, False
+            converged = True
+            break
+    point_to_line_system(order, tree_points, start, end, child, box, points, normals, valid,
+                         anchors, has_normals, query, pose, inlier_distance, loss, scale,
+                         residuals, seen, near, reach)
+    return pose, iterations, converged, residuals

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from estimators.matching.nearest import PointIndex
-from estimators.matching.normal_equations import point_to_line_system
+from estimators.matching.normal_equations import fresh_neighbours, point_to_line_system
 from estimators.matching.scan_matching import (
     estimate_normals,
     fit_local_curves,
@@ -248,7 +248,7 @@ class PointToLineReference:
             valid, np.ascontiguousarray(self.anchors), has_normals,
             np.ascontiguousarray(query_points, dtype=np.float64),
             np.asarray(pose, dtype=np.float64), float(max_distance), LOSSES.index(loss),
-            float(scale), residuals,
+            float(scale), residuals, *fresh_neighbours(len(query_points)),
         )
         lever = float(np.sqrt(rotation_squares / count)) if count else 0.0
         return hessian, gradient, count, lever, residuals

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from estimators.matching.nearest import PointIndex
+from estimators.matching.nearest import KEPT, STACK, PointIndex, search, search_from, search_near
 
 
 def _brute(points: np.ndarray, queries: np.ndarray, k: int, bound: float):
@@ -75,3 +75,41 @@ def test_bad_arguments_are_named() -> None:
         PointIndex(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="points: expected shape"):
         PointIndex(np.zeros((0, 2)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(1, 200), seed=st.integers(0, 2**31), spread=st.floats(0.05, 20.0),
+    step=st.floats(1e-4, 5.0), bound=st.floats(1e-3, 20.0), duplicates=st.booleans(),
+)
+def test_kept_neighbours_give_the_searchs_answer_as_queries_move(
+    n: int, seed: int, spread: float, step: float, bound: float, duplicates: bool,
+) -> None:
+    """``search_near`` over queries that move as ICP's do (small steps, some large, some
+    back onto a point) answers as a fresh ``search`` does, bit for bit, for one and two
+    neighbours and any bound, and a seeded ``search_from`` too."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-spread, spread, (n, 2))
+    if duplicates:
+        points[n // 2:] = points[: n - n // 2]
+    index = PointIndex(points)
+    m = 12
+    queries = rng.uniform(-spread, spread, (m, 2))
+    seen, near, reach = np.full((m, 2), np.nan), np.empty((m, KEPT), np.int64), np.empty(m)
+    pending = np.empty(STACK, np.int64)
+    for _ in range(15):
+        queries = queries + rng.normal(0.0, step * rng.choice([0.01, 0.1, 1.0]), (m, 2))
+        queries[rng.random(m) < 0.1] = points[rng.integers(0, n)]  # exactly on a point
+        for row in range(m):
+            qx, qy = queries[row]
+            for k, b in ((1, bound**2), (2, bound**2), (2, (0.3 * bound) ** 2)):
+                expected = search(*index.arrays, qx, qy, k, b, pending)
+                found = search_near(*index.arrays, points, qx, qy, k, b, pending, row, seen,
+                                    near, reach)
+                assert found[: 2 * k] == expected[: 2 * k]
+            fresh = search(*index.arrays, qx, qy, 3, bound**2, pending)
+            seeds = search(*index.arrays, qx + step, qy, 3, np.inf, pending)
+            moved = [(float(np.sum((points[i] - (qx, qy)) ** 2)) if i < n else np.inf, i)
+                     for i in seeds[1::2]]
+            ranked = [value for pair in sorted(moved, key=lambda pair: pair) for value in pair]
+            assert search_from(*index.arrays, qx, qy, 3, bound**2, pending, *ranked) == fresh
