@@ -13,7 +13,7 @@ translation on level ``l`` bounds from above the score of every one of the ``4^l
 translations it stands for (Hess et al. 2016). The search scores the coarsest level for
 every heading, then descends depth first, best child first, and drops every node whose bound
 does not beat the best leaf found so far: the result is the grid optimum the exhaustive search
-(:func:`brute_force_match`, the tests' oracle) finds. An ``allowed`` mask of translations
+(the tests' oracle) finds. An ``allowed`` mask of translations
 (e.g. "at least 0.5 m from the best", for an ambiguity test) is pooled the same way, so a node
 with no allowed translation is never expanded.
 
@@ -235,17 +235,29 @@ def angular_step_for(points: FloatArray, resolution: float, max_step: float = np
 
 
 @njit(cache=True)
-def _node_score(grid: NDArray[np.float64], cells: NDArray[np.int64], h: int, di: int,
-                dj: int) -> float:  # pragma: no cover (numba)
-    """Mean of ``grid`` under the points of heading ``h`` moved by ``(di, dj)`` cells."""
+def _square_scores(grid: NDArray[np.float64], cells: NDArray[np.int64], h: int, di: int,
+                   dj: int, width: int,
+                   out: NDArray[np.float64]) -> None:  # pragma: no cover (numba)
+    """``out[2 a + b]``: mean of ``grid`` under the points of heading ``h`` moved by ``(di + a
+    width, dj + b width)`` cells, ``a, b`` in 0, 1: four sums in one pass, each in point order
+    (each sum's additions wait for one another; four of them interleave)."""
     n_rows, n_cols = grid.shape
     n_points = cells.shape[1]
-    total = 0.0
+    t00 = t01 = t10 = t11 = 0.0
     for m in range(n_points):
         i, j = cells[h, m, 0] + di, cells[h, m, 1] + dj
-        if 0 <= i < n_rows and 0 <= j < n_cols:
-            total += grid[i, j]
-    return total / max(n_points, 1)
+        low_i, high_i = 0 <= i < n_rows, 0 <= i + width < n_rows
+        low_j, high_j = 0 <= j < n_cols, 0 <= j + width < n_cols
+        if low_i and low_j:
+            t00 += grid[i, j]
+        if low_i and high_j:
+            t01 += grid[i, j + width]
+        if high_i and low_j:
+            t10 += grid[i + width, j]
+        if high_i and high_j:
+            t11 += grid[i + width, j + width]
+    count = max(n_points, 1)
+    out[0], out[1], out[2], out[3] = t00 / count, t01 / count, t10 / count, t11 / count
 
 
 @njit(cache=True)
@@ -262,14 +274,16 @@ def _branch_and_bound(
     starts = np.arange(-n, n + 1, width)
     n_starts = len(starts)
     roots = np.empty(n_headings * n_starts * n_starts)
+    square = np.empty(4)
     for h in range(n_headings):
-        for a in range(n_starts):
-            for b in range(n_starts):
-                k = (h * n_starts + a) * n_starts + b
-                if allowed[top, starts[a] + n, starts[b] + n]:
-                    roots[k] = _node_score(levels[top], cells, h, starts[a], starts[b])
-                else:
-                    roots[k] = -1.0
+        for a0 in range(0, n_starts, 2):
+            for b0 in range(0, n_starts, 2):
+                _square_scores(levels[top], cells, h, starts[a0], starts[b0], width, square)
+                for a in range(a0, min(a0 + 2, n_starts)):
+                    for b in range(b0, min(b0 + 2, n_starts)):
+                        k = (h * n_starts + a) * n_starts + b
+                        allow = allowed[top, starts[a] + n, starts[b] + n]
+                        roots[k] = square[2 * (a - a0) + b - b0] if allow else -1.0
     nodes = len(roots)
     order = np.argsort(-roots, kind="mergesort")
     best, best_h, best_i, best_j = min_score, -1, 0, 0
@@ -300,6 +314,7 @@ def _branch_and_bound(
                 best, best_h, best_i, best_j = score, stack_h[size], di, dj
                 continue
             half = 2 ** (level - 1)
+            _square_scores(levels[level - 1], cells, h, di, dj, half, square)
             count = 0
             for a in range(2):
                 for b in range(2):
@@ -307,7 +322,7 @@ def _branch_and_bound(
                     if ci > n or cj > n or not allowed[level - 1, ci + n, cj + n]:
                         continue
                     child_i[count], child_j[count] = ci, cj
-                    child_score[count] = _node_score(levels[level - 1], cells, h, ci, cj)
+                    child_score[count] = square[2 * a + b]
                     count += 1
             nodes += count
             # Push the best child last, so that it is expanded first.
@@ -363,30 +378,6 @@ def match(
     pose = np.array([center[0] + di * pyramid.resolution, center[1] + dj * pyramid.resolution,
                      float(wrap_angle(headings[h]))])
     return Match(pose, float(best), True, int(nodes))
-
-
-def brute_force_match(
-    pyramid: GridPyramid, points: ArrayLike, center: ArrayLike, linear_window: float,
-    angular_window: float, angular_step: float,
-) -> Match:
-    """The exhaustive search :func:`match` must agree with: every heading and translation of
-    the same window scored on the grid (level 0), in arrays."""
-    points, center = _check_inputs(points, center)
-    n = _window_cells(linear_window, pyramid.resolution)
-    headings = search_headings(center[2], angular_window, angular_step)
-    cells = pyramid.cells(points, center, headings)  # (H, M, 2)
-    grid = pyramid.levels[0]
-    shifts = np.arange(-n, n + 1)
-    i = cells[:, None, None, :, 0] + shifts[None, :, None, None]  # (H, S, 1, M)
-    j = cells[:, None, None, :, 1] + shifts[None, None, :, None]  # (H, 1, S, M)
-    i, j = np.broadcast_arrays(i, j)
-    inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
-    values = np.where(inside, grid[np.where(inside, i, 0), np.where(inside, j, 0)], 0.0)
-    scores = values.mean(axis=-1)  # (H, S, S)
-    h, a, b = np.unravel_index(int(np.argmax(scores)), scores.shape)
-    pose = np.array([center[0] + shifts[a] * pyramid.resolution,
-                     center[1] + shifts[b] * pyramid.resolution, float(wrap_angle(headings[h]))])
-    return Match(pose, float(scores[h, a, b]), True, int(scores.size))
 
 
 def levels_for_window(linear_window: float, resolution: float) -> int:

@@ -10,7 +10,7 @@ import pytest
 
 from estimators.matching.branch_and_bound import (
     GridPyramid,
-    brute_force_match,
+    Match,
     levels_for_window,
     likelihood_grid,
     match,
@@ -23,6 +23,30 @@ from estimators.matching.scan_matching import LikelihoodField
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import relative, wrap_angle
 from tests.estimators.room_scans import scan_points
+
+
+def brute_force_match(
+    pyramid: GridPyramid, points: np.ndarray, center: np.ndarray, linear_window: float,
+    angular_window: float, angular_step: float,
+) -> Match:
+    """The exhaustive search :func:`match` must agree with: every heading and translation of
+    the same window scored on the grid (level 0), in arrays."""
+    points, center = np.asarray(points, dtype=np.float64), np.asarray(center, dtype=np.float64)
+    n = int(np.ceil(linear_window / pyramid.resolution - 1e-9))
+    headings = search_headings(center[2], angular_window, angular_step)
+    cells = pyramid.cells(points, center, headings)  # (H, M, 2)
+    grid = pyramid.levels[0]
+    shifts = np.arange(-n, n + 1)
+    i = cells[:, None, None, :, 0] + shifts[None, :, None, None]  # (H, S, 1, M)
+    j = cells[:, None, None, :, 1] + shifts[None, None, :, None]  # (H, 1, S, M)
+    i, j = np.broadcast_arrays(i, j)
+    inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+    values = np.where(inside, grid[np.where(inside, i, 0), np.where(inside, j, 0)], 0.0)
+    scores = values.mean(axis=-1)  # (H, S, S)
+    h, a, b = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    pose = np.array([center[0] + shifts[a] * pyramid.resolution,
+                     center[1] + shifts[b] * pyramid.resolution, float(wrap_angle(headings[h]))])
+    return Match(pose, float(scores[h, a, b]), True, int(scores.size))
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -137,3 +161,23 @@ def test_bad_input_is_refused_with_a_readable_error() -> None:
         GridPyramid(-np.ones((5, 5)), (0.0, 0.0), 0.1, 2)
     with pytest.raises(ConfigError, match="angular_step"):
         match(pyramid, np.zeros((3, 2)), np.zeros(3), 0.5, 0.1, 0.0)
+
+
+def test_four_node_scores_are_the_means_under_the_shifted_points() -> None:
+    from estimators.matching.branch_and_bound import _square_scores
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        grid = rng.random(tuple(int(k) for k in rng.integers(1, 30, size=2)))
+        cells = rng.integers(-10, 40, size=(3, int(rng.integers(1, 40)), 2))
+        h, di, dj, width = int(rng.integers(3)), *(int(k) for k in rng.integers(-8, 8, 2)), \
+            int(rng.choice([1, 2, 4, 8]))
+        out = np.empty(4)
+        _square_scores(grid, cells, h, di, dj, width, out)
+        for a in range(2):
+            for b in range(2):
+                i, j = cells[h, :, 0] + di + a * width, cells[h, :, 1] + dj + b * width
+                inside = (i >= 0) & (i < grid.shape[0]) & (j >= 0) & (j < grid.shape[1])
+                expected = np.where(inside, grid[np.where(inside, i, 0),
+                                                 np.where(inside, j, 0)], 0.0).mean()
+                assert out[2 * a + b] == pytest.approx(expected, abs=1e-12)
