@@ -46,11 +46,10 @@ from estimators.mapping.obstacles import detect_in_observation
 from estimators.mapping.occupancy import (  # noqa: E402
     OccupancyGrid,
     bounds_around,
-    from_estimator_run,
     logit,
     sensor_poses,
 )
-from estimators.mapping.run_maps import evaluate_run_map, map_truth
+from estimators.mapping.run_maps import evaluate_run_map, from_estimator_run, map_truth
 from estimators.mapping.tracking import ObstacleTracker
 
 WORLDS = ("open_cylinders", "hallway", "closed_to_open")

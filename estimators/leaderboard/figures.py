@@ -124,7 +124,7 @@ def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
     as scored (:data:`estimators.leaderboard.recording.MAP_RESOLUTION`). Returns the PNG paths."""
     from estimators.leaderboard.recording import MAP_RESOLUTION, world_from_geometry
     from estimators.mapping.map_figure import _panel_image
-    from estimators.mapping.occupancy import from_estimator_run
+    from estimators.mapping.run_maps import from_estimator_run
 
     candidates = [(g, scenarios[g.name][0]) for g in groups if scenarios[g.name]]
     candidates = [(g, s) for g, s in candidates if db.has_sensor_dataset(s)]

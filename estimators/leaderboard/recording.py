@@ -215,22 +215,23 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
     ``cylinder_precision`` and ``cylinder_error_m`` (mean centre error [m] of the matched ones)
     of the cylinders tracked over every ``obstacle_stride``-th scan."""
     from estimators.mapping.map_scoring import score_cylinders, score_occupancy
-    from estimators.mapping.occupancy import from_estimator_run
-    from estimators.mapping.run_maps import track_obstacles
+    from estimators.mapping.moving_returns import label_run
+    from estimators.mapping.run_maps import from_estimator_run, track_obstacles
 
     if isinstance(obstacle_stride, bool) or not isinstance(obstacle_stride, int) \
             or obstacle_stride < 1:
         raise ConfigError(f"obstacle_stride: expected an integer >= 1, got {obstacle_stride!r}")
     observations = list(dataset.observations())
+    moving = label_run(poses, observations, dataset.setup, dataset.times)
     grid = from_estimator_run(poses, observations, dataset.setup, reference.resolution,
-                              bounds=reference.bounds)
+                              bounds=reference.bounds, moving=moving)
     cells = score_occupancy(grid.occupied(), reference.image, MAP_TOLERANCE_CELLS,
                             reference.visible)
     metrics = {"map_precision": cells.precision, "map_recall": cells.recall,
                "map_iou": cells.iou}
     if len(reference.circles):
         tracker = track_obstacles(poses[::obstacle_stride], observations[::obstacle_stride],
-                                  dataset.setup)
+                                  dataset.setup, moving=moving[::obstacle_stride])
         cylinders = score_cylinders(tracker.cylinders(), reference.circles,
                                     observable=reference.observable)
         metrics.update({"cylinder_recall": cylinders.recall,

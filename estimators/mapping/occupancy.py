@@ -33,7 +33,7 @@ about two hits to be occupied and can still be cleared when the scene changes.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numba
@@ -88,6 +88,7 @@ def _trace_scans(
     headings: NDArray[np.float64],
     beam_angles: NDArray[np.float64],
     ranges: NDArray[np.float64],
+    moving: NDArray[np.bool_],
     max_range: float,
     free_margin: float,
     clear_radius: float,
@@ -99,9 +100,10 @@ def _trace_scans(
     """Update ``log_odds`` in place with the scans ``ranges`` (K, n) [cells] taken from
     ``origins`` (K, 2) (column, row) [cells] at world ``headings`` (K,) [rad]: a miss in each
     cell a beam crosses up to ``free_margin`` [cells] before its return (or up to ``max_range``
-    [cells]), a hit in the cell of each return. ``marks`` remembers per cell what this ``call``
-    (>= 1) did: ``2 call`` = updated, ``2 call + 1`` = holds a return, not yet updated. A miss
-    goes only to the cells whose centre lies within ``clear_radius`` [cells] of the beam."""
+    [cells]), a hit in the cell of each return not on something ``moving`` (K, n). ``marks``
+    remembers per cell what this ``call`` (>= 1) did: ``2 call`` = updated, ``2 call + 1`` =
+    holds a return, not yet updated. A miss goes only to the cells whose centre lies within
+    ``clear_radius`` [cells] of the beam."""
     n_rows, n_cols = log_odds.shape
     n_scans, n_beams = ranges.shape
     done, pending = 2 * call, 2 * call + 1
@@ -112,7 +114,7 @@ def _trace_scans(
     dir_row = -np.sin(headings.reshape(-1, 1) + beam_angles.reshape(1, -1))
     for k in range(n_scans):  # mark this call's hit cells first: hits outrank misses
         for j in range(n_beams):
-            if ranges[k, j] < max_range:
+            if ranges[k, j] < max_range and not moving[k, j]:
                 gx = origins[k, 0] + ranges[k, j] * dir_col[k, j]
                 gy = origins[k, 1] + ranges[k, j] * dir_row[k, j]
                 if 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
@@ -168,7 +170,7 @@ def _trace_scans(
                     n_row_steps -= 1
     for k in range(n_scans):
         for j in range(n_beams):
-            if ranges[k, j] < max_range:
+            if ranges[k, j] < max_range and not moving[k, j]:
                 gx = origins[k, 0] + ranges[k, j] * dir_col[k, j]
                 gy = origins[k, 1] + ranges[k, j] * dir_row[k, j]
                 if 0.0 <= gx < n_cols and 0.0 <= gy < n_rows:
@@ -280,12 +282,21 @@ class OccupancyGrid:
         beam_angles: ArrayLike,
         sensor_pose: ArrayLike,
         max_range: float,
+        moving: ArrayLike | None = None,
     ) -> None:
         """Add one observation: scan ``ranges`` (n,) [m] taken at ``sensor_pose`` (3,) (world
         x [m], y [m], heading [rad]); beam ``i`` points ``beam_angles[i]`` [rad] CCW from the
         sensor's forward axis. Several sensors observing at once: ``ranges`` (K, n) and
-        ``sensor_pose`` (K, 3). Readings ``>= max_range`` are free space up to ``max_range``."""
+        ``sensor_pose`` (K, 3). Readings ``>= max_range`` are free space up to ``max_range``.
+        ``moving`` (shaped like ``ranges``) marks returns on moving things
+        (:mod:`estimators.mapping.moving_returns`): their beams clear the space before them, and
+        their cells are not marked occupied."""
         ranges = np.atleast_2d(np.asarray(ranges, dtype=np.float64))
+        on_movers = np.zeros(ranges.shape, np.bool_) if moving is None else np.atleast_2d(
+            np.asarray(moving, dtype=np.bool_))
+        if on_movers.shape != ranges.shape:
+            raise EstimatorInputError(
+                f"moving: expected the shape of ranges {ranges.shape}, got {np.shape(moving)}")
         angles = np.asarray(beam_angles, dtype=np.float64)
         poses = np.atleast_2d(np.asarray(sensor_pose, dtype=np.float64))
         if angles.ndim != 1 or ranges.ndim != 2 or ranges.shape[1] != len(angles):
@@ -307,27 +318,31 @@ class OccupancyGrid:
         self._n_updates += 1
         _trace_scans(
             self.log_odds, self._marks, self._n_updates, self.to_grid_coordinates(poses[:, :2]),
-            np.ascontiguousarray(poses[:, 2]), angles, ranges / self.resolution,
+            np.ascontiguousarray(poses[:, 2]), angles, ranges / self.resolution, on_movers,
             max_range / self.resolution, self.free_margin / self.resolution, self.clear_radius,
             logit(self.p_miss), logit(self.p_hit), logit(self.p_min), logit(self.p_max),
         )
 
     def integrate_observation(
-        self, observation: Mapping[str, ArrayLike], car_pose: ArrayLike, setup: SensorSetup
+        self, observation: Mapping[str, ArrayLike], car_pose: ArrayLike, setup: SensorSetup,
+        moving: Mapping[str, ArrayLike] | None = None,
     ) -> None:
         """Add one env observation (scans keyed by ``setup.keys``) taken at the (estimated) car
-        pose ``car_pose`` (3,) [m, m, rad]: each Lidar at car pose ⊕ its mount. This is the
-        online use: call it every step with the estimator's latest pose."""
+        pose ``car_pose`` (3,) [m, m, rad]: each Lidar at car pose ⊕ its mount; ``moving``, per
+        key, the returns on moving things (:meth:`integrate`). This is the online use: call it
+        every step with the estimator's latest pose."""
         scans = setup.check_observation(observation)
         poses = sensor_poses(car_pose, setup)[0]
+        masks = [None if moving is None else moving[key] for key in setup.keys]
         if setup.uniform:
             self.integrate(np.stack([scans[key] for key in setup.keys]), setup.beam_angles,
-                           poses, setup.max_range)
+                           poses, setup.max_range,
+                           None if moving is None else np.stack(masks))
             return
-        for key, sensor, pose in zip(setup.keys, setup.sensors, poses, strict=True):
+        for key, sensor, pose, mask in zip(setup.keys, setup.sensors, poses, masks, strict=True):
             # Lidars of their own beams: one update each (a cell may change once per Lidar)
             self.integrate(scans[key][None, :], sensor.beam_angles, pose[None, :],
-                           sensor.max_range)
+                           sensor.max_range, mask)
 
     def probabilities(self) -> NDArray[np.float64]:
         """``(rows, cols)`` occupancy probability of each cell; 0.5 = never observed."""
@@ -368,33 +383,3 @@ def bounds_around(
     low = positions.min(axis=0) - margin
     high = positions.max(axis=0) + margin
     return float(low[0]), float(low[1]), float(high[0]), float(high[1])
-
-
-def from_estimator_run(
-    trajectory: ArrayLike,
-    observations: Sequence[Mapping[str, ArrayLike]],
-    setup: SensorSetup,
-    resolution: float = 0.05,
-    bounds: Bounds | None = None,
-    **grid_params: float,
-) -> OccupancyGrid:
-    """The map built from ``observations[k]`` (scans keyed by ``setup.keys``) taken at car pose
-    ``trajectory[k]`` (N, 3), e.g. an estimator's ``trajectory`` and the scans it was fed.
-
-    ``bounds`` default to the trajectory's extent plus the largest max range on every side, which
-    holds every return. ``grid_params`` go to :class:`OccupancyGrid` (``p_hit``, ...)."""
-    trajectory = np.asarray(trajectory, dtype=np.float64)
-    if trajectory.ndim != 2 or trajectory.shape[1] != 3:
-        raise EstimatorInputError(f"trajectory: expected shape (N, 3), got {trajectory.shape}")
-    if len(observations) != len(trajectory):
-        raise EstimatorInputError(
-            f"observations: expected one per trajectory row ({len(trajectory)}), "
-            f"got {len(observations)}")
-    poses = sensor_poses(trajectory, setup)
-    if bounds is None:
-        reach = max(sensor.max_range for sensor in setup.sensors)
-        bounds = bounds_around(poses[..., :2].reshape(-1, 2), reach)
-    grid = OccupancyGrid(bounds, resolution, **grid_params)
-    for observation, car_pose in zip(observations, trajectory, strict=True):
-        grid.integrate_observation(observation, car_pose, setup)
-    return grid

@@ -1,7 +1,9 @@
-"""The map of one run, built and scored in one place: :func:`map_truth` computes once per scenario
-what its maps are scored against (the true occupied cells, the visible ones, the observable
-cylinders), :func:`evaluate_run_map` builds the occupancy grid at an estimator's poses, tracks
-its obstacles and scores both (:mod:`estimators.mapping.map_scoring`).
+"""The map of one run, built and scored in one place: :func:`from_estimator_run` builds the
+occupancy grid at an estimator's poses (leaving out the returns on moving things when it is
+given the scans' times, :mod:`estimators.mapping.moving_returns`), :func:`track_obstacles`
+its cylinder map, :func:`map_truth` computes once per scenario what maps are scored against
+(the true occupied cells, the visible ones, the observable cylinders), and
+:func:`evaluate_run_map` builds and scores both (:mod:`estimators.mapping.map_scoring`).
 """
 
 from __future__ import annotations
@@ -23,10 +25,51 @@ from estimators.mapping.map_scoring import (
     score_occupancy,
     true_occupancy,
 )
+from estimators.mapping.moving_returns import MovingStep, label_run
 from estimators.mapping.obstacles import DetectorParams, detect_in_observation
-from estimators.mapping.occupancy import Bounds, OccupancyGrid, from_estimator_run, sensor_poses
+from estimators.mapping.occupancy import Bounds, OccupancyGrid, bounds_around, sensor_poses
 from estimators.mapping.tracking import ObstacleTracker
 from lidar_env.errors import EstimatorInputError
+
+
+def from_estimator_run(
+    trajectory: ArrayLike,
+    observations: Sequence[Mapping[str, ArrayLike]],
+    setup: SensorSetup,
+    resolution: float = 0.05,
+    bounds: Bounds | None = None,
+    times: ArrayLike | None = None,
+    moving: Sequence[MovingStep] | None = None,
+    **grid_params: float,
+) -> OccupancyGrid:
+    """The map built from ``observations[k]`` (scans keyed by ``setup.keys``) taken at car pose
+    ``trajectory[k]`` (N, 3), e.g. an estimator's ``trajectory`` and the scans it was fed.
+
+    With the scans' ``times`` [s] (or their ``moving`` labels, :func:`label_run`, already
+    computed), the returns on tracks labelled moving clear the space before them but mark
+    nothing occupied. ``bounds`` default to the trajectory's extent plus the largest max range
+    on every side, which holds every return. ``grid_params`` go to :class:`OccupancyGrid`
+    (``p_hit``, ...)."""
+    trajectory = np.asarray(trajectory, dtype=np.float64)
+    if trajectory.ndim != 2 or trajectory.shape[1] != 3:
+        raise EstimatorInputError(f"trajectory: expected shape (N, 3), got {trajectory.shape}")
+    if len(observations) != len(trajectory):
+        raise EstimatorInputError(
+            f"observations: expected one per trajectory row ({len(trajectory)}), "
+            f"got {len(observations)}")
+    if moving is None and times is not None:
+        moving = label_run(trajectory, observations, setup, times)
+    if moving is not None and len(moving) != len(trajectory):
+        raise EstimatorInputError(
+            f"moving: expected one step per trajectory row ({len(trajectory)}), got {len(moving)}")
+    if bounds is None:
+        reach = max(sensor.max_range for sensor in setup.sensors)
+        bounds = bounds_around(sensor_poses(trajectory, setup)[..., :2].reshape(-1, 2), reach)
+    grid = OccupancyGrid(bounds, resolution, **grid_params)
+    for k, (observation, car_pose) in enumerate(zip(observations, trajectory, strict=True)):
+        grid.integrate_observation(observation, car_pose, setup,
+                                   None if moving is None else moving[k].beams)
+    return grid
 
 
 @dataclass(frozen=True)
@@ -97,10 +140,16 @@ def track_obstacles(
     setup: SensorSetup,
     params: DetectorParams | None = None,
     gate: float = 0.5,
+    moving: Sequence[MovingStep] | None = None,
 ) -> ObstacleTracker:
     """Detect the obstacles of every scan at the (estimated) sensor poses of ``trajectory``
-    (N, 3) and track them across steps (one tracker step per observation)."""
+    (N, 3) and track them across steps (one tracker step per observation). With the steps'
+    ``moving`` labels (:func:`label_run`), only the detections not on a moving track."""
     tracker = ObstacleTracker(gate=gate)
+    if moving is not None:
+        for step in moving:
+            tracker.update(step.static_obstacles)
+        return tracker
     for observation, car_pose in zip(observations, np.asarray(trajectory), strict=True):
         tracker.update(detect_in_observation(observation, car_pose, setup, params))
     return tracker
@@ -113,16 +162,20 @@ def evaluate_run_map(
     setup: SensorSetup,
     tolerance_cells: int = 1,
     params: DetectorParams | None = None,
+    times: ArrayLike | None = None,
 ) -> RunMapEvaluation:
     """Map and track obstacles from ``observations`` at the car poses ``estimated_trajectory``
     (N, 3), and score both against ``truth`` (:func:`map_truth` of the same run): occupied cells
     at ``tolerance_cells`` over the visible cells, and cylinders
     (:meth:`~estimators.mapping.obstacles.ObstacleTracker.cylinders`) against the observable
-    true ones."""
+    true ones. With the scans' ``times`` [s], both leave out the returns on moving things
+    (:func:`from_estimator_run`)."""
+    moving = None if times is None else label_run(estimated_trajectory, observations, setup,
+                                                    times, params)
     grid = from_estimator_run(estimated_trajectory, observations, setup, truth.resolution,
-                              bounds=truth.bounds)
+                              bounds=truth.bounds, moving=moving)
     map_scores = score_occupancy(grid.occupied(), truth.image, tolerance_cells, truth.visible)
-    tracker = track_obstacles(estimated_trajectory, observations, setup, params)
+    tracker = track_obstacles(estimated_trajectory, observations, setup, params, moving=moving)
     cylinder_scores = None
     if len(truth.circles):
         cylinder_scores = score_cylinders(tracker.cylinders(), truth.circles,

@@ -15,8 +15,8 @@ from estimators.mapping.map_scoring import (
     true_occupancy,
     visible_cells,
 )
-from estimators.mapping.occupancy import OccupancyGrid, bounds_around, from_estimator_run
-from estimators.mapping.run_maps import evaluate_run_map, map_truth
+from estimators.mapping.occupancy import OccupancyGrid, bounds_around
+from estimators.mapping.run_maps import evaluate_run_map, from_estimator_run, map_truth
 from estimators.paths import SHARED_DATA
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World

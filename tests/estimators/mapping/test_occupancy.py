@@ -7,7 +7,8 @@ import pytest
 
 from estimators.base import SensorSetup, default_beam_angles
 from estimators.mapping.map_figure import occupancy_to_rgb
-from estimators.mapping.occupancy import OccupancyGrid, from_estimator_run, logit, sensor_poses
+from estimators.mapping.occupancy import OccupancyGrid, logit, sensor_poses
+from estimators.mapping.run_maps import from_estimator_run
 
 MISS, HIT = logit(0.4), logit(0.7)
 

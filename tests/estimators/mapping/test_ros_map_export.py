@@ -8,8 +8,8 @@ import numpy as np
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
-from estimators.mapping.occupancy import from_estimator_run
 from estimators.mapping.ros_map_export import save_grid_as_ros_map
+from estimators.mapping.run_maps import from_estimator_run
 from lidar_env import lidars_with_noise
 from lidar_env.ros_map import read_ros_map
 from lidar_env.world import World
