@@ -115,18 +115,20 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             outcome.timed("record", started)
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
     reference, ceiling = None, {}
+    with_movers = bool(task.scenario.config.get("moving_obstacles"))
     if task.estimators and task.score_maps:
         started = time.perf_counter()
         try:
             reference = map_reference(dataset)
             if reference is not None:  # the mapper's own score, at the true poses
                 ceiling = {f"{name}_true_poses": value for name, value in
-                           score_map(reference, dataset.poses, dataset).items()}
+                           score_map(reference, dataset.poses, dataset,
+                                     label_movers=with_movers).items()}
         except Exception:  # the trajectories are still scored, without map metrics
             outcome.failures["map reference"] = traceback.format_exc(limit=-6)
         outcome.timed("map reference", started)
     movers = None
-    if task.estimators and task.score_maps and task.scenario.config.get("moving_obstacles"):
+    if task.estimators and task.score_maps and with_movers:
         started = time.perf_counter()
         try:  # a stored dataset lacks them: drive it again
             movers = (recorded_movers if recorded_movers is not None
@@ -147,7 +149,8 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         if reference is not None:
             started = time.perf_counter()
             try:
-                metrics.update(score_map(reference, trace.poses, dataset), **ceiling)
+                metrics.update(score_map(reference, trace.poses, dataset,
+                                         label_movers=with_movers), **ceiling)
                 if movers is not None:
                     metrics.update(score_movers(dataset, trace.poses, movers))
             except Exception:  # e.g. poses far outside the world: the trace is kept unmapped

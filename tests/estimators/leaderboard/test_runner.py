@@ -142,10 +142,10 @@ def test_a_failing_map_score_keeps_the_trace(monkeypatch: pytest.MonkeyPatch,
 
     real = tasks.score_map
 
-    def fails_for_zero(reference, poses, dataset):  # noqa: ANN001, ANN202 - a faulty mapper
-        if not np.any(np.diff(poses, axis=0)):
+    def fails_for_zero(reference, poses, dataset, **kwargs):  # noqa: ANN001, ANN003, ANN202
+        if not np.any(np.diff(poses, axis=0)):  # a faulty mapper
             raise FloatingPointError("no motion")
-        return real(reference, poses, dataset)
+        return real(reference, poses, dataset, **kwargs)
 
     monkeypatch.setattr(tasks, "score_map", fails_for_zero)
     with ExperimentDatabase(tmp_path / "db.sqlite") as db:
