@@ -323,6 +323,8 @@ def _full_turn(*angle_sets: FloatArray) -> bool:
     """Beams evenly spread over a full turn in every set (range profiles then correlate)."""
     for angles in angle_sets:
         steps = np.diff(angles)
-        if not np.allclose(steps, 2.0 * np.pi / len(angles), atol=1e-6):
+        step = 2.0 * np.pi / len(angles)
+        # np.allclose(steps, step, atol=1e-6) written out: a fifth of its cost, once per scan
+        if not np.all(np.abs(steps - step) <= 1e-6 + 1e-5 * step):
             return False
     return True

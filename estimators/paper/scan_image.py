@@ -100,7 +100,9 @@ def scan_filter(
     if not np.all(np.isfinite(ranges)) or np.any(ranges < 0):
         raise ValueError("ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
     clipped = np.minimum(ranges, max_range)
-    before, after = np.roll(clipped, 1), np.roll(clipped, -1)
+    # np.roll's values, without its generality (a third of this function's time)
+    before = np.concatenate((clipped[-1:], clipped[:-1]))
+    after = np.concatenate((clipped[1:], clipped[:1]))
     hit = (ranges < max_range) & (ranges > 0)
     l_i = clipped[hit]
     # eq. 4
