@@ -335,7 +335,8 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     out: Path = args.out
     written, rows = _write_tables(args, groups, scenarios, specs, records, logs, table_i_runs)
     try:
-        written += draw_all(db, groups, scenarios, records, specs, rows, logs, out)
+        written += draw_all(db, groups, scenarios, records, specs, rows, logs, out,
+                            workers=1 if args.scheduler else args.workers)
     except ImportError as error:
         print(f"note: figures skipped ({error}); install the plots extra: "
               "pip install 'duallidar[plots]'")

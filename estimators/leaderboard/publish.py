@@ -6,7 +6,7 @@ against accuracy) and the self-contained ``report.html`` of the run (:func:`publ
 from __future__ import annotations
 
 import shlex
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.records import Scenario, TraceRecord
 from estimators.leaderboard.report import write_report
 from estimators.leaderboard.tasks import EstimatorSpec
+from estimators.leaderboard.workers import process_pool
 
 #: Each figure's caption in the report, by file name.
 CAPTIONS: dict[str, str] = {
@@ -40,22 +41,43 @@ CAPTIONS: dict[str, str] = {
 def draw_all(db: ExperimentDatabase, groups: Sequence[Group],
              scenarios: dict[str, list[Scenario]],
              records: dict[tuple[Scenario, str], TraceRecord], specs: Sequence[EstimatorSpec],
-             rows: Sequence[Mapping[str, Any]], logs: Sequence[RealLog], out: Path) -> list[Path]:
-    """Every figure of the run into ``out`` (PNG + SVG each); returns the files written.
-    Raises ImportError without matplotlib."""
+             rows: Sequence[Mapping[str, Any]], logs: Sequence[RealLog], out: Path,
+             workers: int = 1) -> list[Path]:
+    """Every figure of the run into ``out`` (PNG + SVG each); returns the files written, in
+    the same order whatever ``workers``: with more than one, the figures are drawn by that many
+    processes at once (each opens the database again, read only; a figure takes 1-4 s, most of
+    it matplotlib's PNG and SVG rendering). Raises ImportError without matplotlib."""
     import matplotlib  # noqa: F401  (fail early, with the caller's hint, when it is missing)
 
     names = [spec.name for spec in specs]
-    written = draw_figure_8(db, groups, scenarios, records, specs, out)
-    written += draw_map_figure(db, groups, scenarios, records,
-                               [row["estimator"] for row in rows], out)
     every = [s for group in groups for s in scenarios[group.name]]
-    written += draw_segment_errors(db, every, names, records, out)
-    written += draw_speed_accuracy(rows, out)
+    jobs: list[tuple[Callable[..., list[Path]], bool, tuple[Any, ...]]] = [  # (draw, db?, args)
+        (draw_figure_8, True, (groups, scenarios, records, specs, out)),
+        (draw_map_figure, True, (groups, scenarios, records,
+                                 [row["estimator"] for row in rows], out)),
+        (draw_segment_errors, True, (every, names, records, out)),
+        (draw_speed_accuracy, False, (list(rows), out)),
+    ]
     for log in logs[:1]:
         samples = relation_error_samples(db, log.scenario, log.relations(), names, records)
-        written += draw_relation_histograms(samples, log.name.upper(), out)
-    return written
+        jobs.append((draw_relation_histograms, False, (samples, log.name.upper(), out)))
+    if workers <= 1:
+        return [path for draw, with_db, args in jobs
+                for path in (draw(db, *args) if with_db else draw(*args))]
+    with process_pool(min(workers, len(jobs))) as pool:
+        futures = [pool.submit(_draw, draw, db.path if with_db else None, args)
+                   for draw, with_db, args in jobs]
+        return [path for future in futures for path in future.result()]
+
+
+def _draw(draw: Callable[..., list[Path]], db_path: Path | None,
+          args: tuple[Any, ...]) -> list[Path]:
+    """One figure job in a worker process: ``draw(db, *args)`` on the database at ``db_path``
+    opened again (``draw(*args)`` without one)."""
+    if db_path is None:
+        return draw(*args)
+    with ExperimentDatabase(db_path, verify=False) as db:
+        return draw(db, *args)
 
 
 def publish_report(out: Path, written: Sequence[Path], config: Mapping[str, object],
