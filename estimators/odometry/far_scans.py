@@ -52,6 +52,7 @@ from estimators.matching.branch_and_bound import (
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField, correlative_search, voxel_downsample
+from estimators.odometry.motion_prior import ScanClock
 from lidar_env.se2 import relative
 
 FloatArray = NDArray[np.float64]
@@ -181,8 +182,7 @@ class FarScanMatching:
     ICP from the guess, from the far-apart search, or through the fallback. It reads the
     front end's settings (``params``, ``min_quality``, ``keyframe_*``, ``max_speed``,
     ``max_turn_rate``, ``search_*``, ``noise_sigma``, ``prior_sigma_translation``,
-    ``prediction_acceleration``) and state (``_reference``, ``_search``, ``_time_steps``,
-    ``_intervals``)."""
+    ``prediction_acceleration``) and state (``_reference``, ``_search``, ``_clock``)."""
 
     params: ICPParams
     min_quality: float
@@ -197,8 +197,7 @@ class FarScanMatching:
     prediction_acceleration: float
     _reference: PointToLineReference | None
     _search: GlobalSearch | None
-    _time_steps: deque[float]
-    _intervals: deque[float]
+    _clock: ScanClock
     _far_steps: deque[tuple[float, float]]  # the last few steps' lengths [m] and turns [rad]
     _prior_information: FloatArray
     _poses: list[FloatArray]
@@ -227,7 +226,7 @@ class FarScanMatching:
         """Whether over the clock's typical interval (the median of the last ones, else
         ``typical`` [s]) the constant-velocity guess can miss by more than the weakest prior
         the ordinary path allows (scans 4 Hz and slower)."""
-        clock = float(np.median(self._intervals)) if len(self._intervals) >= 5 else typical
+        clock = self._clock.median if len(self._clock.intervals) >= 5 else typical
         return self.prediction_acceleration * clock**2 > self.prior_sigma_translation
 
     def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,
@@ -235,7 +234,7 @@ class FarScanMatching:
         """The registration of ``points`` (M, 2, car frame) near ``guess`` (3,), the car
         having moved ``predicted`` (3,) over the scan ``interval`` [s] if its velocity held."""
         assert self._reference is not None
-        typical = float(np.median(self._time_steps)) if self._time_steps else interval
+        typical = self._clock.typical_step if self._clock.steps else interval
         window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
         if self._far_steps:  # a stalled clock does not mean the car drove or turned further
             longest, sharpest = np.max(self._far_steps, axis=0)

@@ -67,7 +67,7 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.free_space import MovingPointFilter
-from estimators.odometry.motion_prior import clock_jitter, prediction_sigma
+from estimators.odometry.motion_prior import ScanClock, prediction_sigma
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
@@ -253,8 +253,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
         self._degenerate = False  # the scan at the guess leaves a direction free
         self._last_time = 0.0
-        self._time_steps: deque[float] = deque(maxlen=21)
-        self._intervals: deque[float] = deque(maxlen=201)  # every finite interval [s]: the clock
+        self._clock = ScanClock()
         dynamic = self.reject_dynamic and not self.setup.world_aligned
         self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
                         if dynamic else None)
@@ -313,13 +312,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         guarded against glitching stamps."""
         dt = t - self._last_time
         self._last_time = t
-        if np.isfinite(dt):
-            self._intervals.append(dt)
-        if np.isfinite(dt) and dt > 0:
-            self._time_steps.append(dt)
-        if not self.use_timestamps or not self._time_steps:
+        self._clock.add(dt)
+        if not self.use_timestamps or not self._clock.steps:
             return 1.0  # count in scans
-        typical = float(np.median(self._time_steps))
+        typical = self._clock.typical_step
         return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
 
     def _prediction_information(self) -> NDArray[np.float64]:
@@ -338,11 +334,11 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         cost ACES 0.033 -> 0.034 m per local relation and 0.19 -> 0.29 m over all; only there,
         0.0346 m and 0.22 m)."""
         information = self._prior_information.copy()
-        typical = float(np.median(self._intervals)) if len(self._intervals) >= 5 else 0.0
+        typical = self._clock.median if len(self._clock.intervals) >= 5 else 0.0
         step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
         if typical > 0:
             sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
-                                     clock_jitter(self._intervals), self.prediction_acceleration,
+                                     self._clock.jitter, self.prediction_acceleration,
                                      self.prior_sigma_translation)
             information[:2] = (self.noise_sigma / sigma) ** 2
         sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0

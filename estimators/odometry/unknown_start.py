@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 from estimators.matching.icp import ICPParams, leaves_a_direction_free
 from estimators.matching.point_to_line import PointToLineReference
+from estimators.odometry.motion_prior import ScanClock
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]
@@ -75,7 +76,7 @@ class UnknownStartSpeed:
     _poses: list[FloatArray]
     _velocity: FloatArray
     _translations: deque[FloatArray]
-    _intervals: deque[float]
+    _clock: ScanClock
     _keyframes: deque[tuple[FloatArray, FloatArray]]
     _build_reference: Callable[[], None]
     _points: Callable[[Scans], FloatArray]
@@ -104,7 +105,7 @@ class UnknownStartSpeed:
         reference = self._reference
         pose = self._odometry_step(scans, t)
         assert self._kept is not None
-        if len(self._intervals) >= 5 and self._slow_clock(0.0):  # the far-apart search, not
+        if len(self._clock.intervals) >= 5 and self._slow_clock(0.0):  # the far-apart search, not
             self._kept, self.speed_unknown = None, False  # the prior, decides: nothing stalls
             return pose
         self._kept.append((scans, t))
@@ -148,7 +149,7 @@ class UnknownStartSpeed:
         self._velocity = velocity
         self._translations.extend([velocity[:2].copy()] * self.velocity_window)
         stamps = np.array([t for _, t in kept])
-        self._intervals.extend(np.diff(stamps)[np.isfinite(np.diff(stamps))])  # the clock seen
+        self._clock.extend(np.diff(stamps)[np.isfinite(np.diff(stamps))])  # the clock seen
         for k, (scans, t) in enumerate(kept[1:-1], start=1):
             self._poses.append(np.asarray(self._odometry_step(scans, t), dtype=np.float64))
             if k < unseen:  # where the scans did not show the speed, the measured one holds

@@ -1,8 +1,17 @@
 """The constant-velocity prediction's uncertainty shared by lidar_odometry and pc_fusion."""
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from estimators.odometry.motion_prior import MIN_PREDICTION_SIGMA, clock_jitter, prediction_sigma
+from estimators.odometry.motion_prior import (
+    MIN_PREDICTION_SIGMA,
+    ScanClock,
+    clock_jitter,
+    median,
+    prediction_sigma,
+)
 
 
 def test_a_steady_clock_has_no_jitter_and_glitches_do_not_count() -> None:
@@ -18,3 +27,31 @@ def test_prediction_sigma_is_acceleration_dt2_plus_speed_jitter_within_bounds() 
     assert prediction_sigma(0.1, 1.0, 0.002, 0.5, 0.05) == pytest.approx(0.007)
     assert prediction_sigma(0.01, 0.0, 0.0, 0.5, 0.05) == MIN_PREDICTION_SIGMA
     assert prediction_sigma(1.0, 1.0, 0.1, 0.5, 0.05) == 0.05
+
+
+def test_scan_clock_statistics_are_those_of_its_last_intervals() -> None:
+    """``ScanClock`` keeps the last finite intervals and positive steps, and its cached
+    median, jitter and typical step are recomputed as soon as one is added."""
+    rng = np.random.default_rng(0)
+    clock = ScanClock(max_intervals=7, max_steps=3)
+    seen: list[float] = []
+    for dt in [*rng.uniform(-0.05, 0.3, 20), np.nan, np.inf, 0.0]:
+        clock.add(float(dt))
+        if np.isfinite(dt):
+            seen.append(float(dt))
+        assert list(clock.intervals) == seen[-7:]
+        steps = [value for value in seen if value > 0][-3:]
+        assert clock.median == np.median(seen[-7:])
+        assert clock.jitter == clock_jitter(seen[-7:])
+        assert clock.typical_step == np.median(steps)
+    clock.extend([0.5, 0.5])
+    assert clock.median == np.median([*seen[-5:], 0.5, 0.5])
+    assert clock.typical_step == np.median([value for value in seen if value > 0][-3:])
+
+
+@settings(max_examples=80, deadline=None)
+@given(values=st.lists(st.floats(-1e3, 1e3) | st.sampled_from([0.1, np.inf, -np.inf]),
+                       min_size=1, max_size=60))
+def test_median_is_numpys_bit_for_bit(values: list[float]) -> None:
+    array = np.array(values)
+    assert median(array) == np.median(array) or np.isnan(np.median(array))
