@@ -234,6 +234,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         odometry = self._frontend.update(scans, t)
+        if self._start_points is None and not self._is_keyframe(odometry):
+            return self.add_scan(np.zeros((0, 2)), odometry)  # its points are not needed
         points = scans_to_car_points(scans, self.setup, self.min_range)
         if self._start_points is not None:  # the front end may still match its start again
             self._start_points.append(points)
@@ -252,20 +254,28 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     def add_scan(self, points: NDArray[np.float64], odometry: NDArray[np.float64]
                  ) -> NDArray[np.float64]:
         """Take one scan's car-frame points (M, 2) and the front end's pose for it; return the
-        online pose estimate (3,). Public so a recorded front-end run can be replayed."""
+        online pose estimate (3,). Public so a recorded front-end run can be replayed. The
+        points are read only when the scan becomes a keyframe (:meth:`_is_keyframe`)."""
         odometry = np.asarray(odometry, dtype=np.float64)
         if not self.keyframes:
             self._add_keyframe(points, odometry, 0.0)
-        else:
+        elif self._is_keyframe(odometry):
             last = self.keyframes[-1]
             step = relative(last.odometry, odometry)
-            if (np.hypot(step[0], step[1]) >= self.keyframe_distance
-                    or abs(step[2]) >= self.keyframe_angle):
-                self._add_keyframe(points, odometry, last.path_length + np.hypot(*step[:2]))
+            self._add_keyframe(points, odometry, last.path_length + np.hypot(*step[:2]))
         self._scan_keyframe.append(len(self.keyframes) - 1)
         self._scan_odometry.append(odometry.copy())
         last = self.keyframes[-1]
         return compose(self.graph.poses[-1], relative(last.odometry, odometry))
+
+    def _is_keyframe(self, odometry: NDArray[np.float64]) -> bool:
+        """Whether a scan at front-end pose ``odometry`` (3,) becomes a keyframe (the first,
+        or one ``keyframe_distance`` / ``keyframe_angle`` from the last)."""
+        if not self.keyframes:
+            return True
+        step = relative(self.keyframes[-1].odometry, odometry)
+        return bool(np.hypot(step[0], step[1]) >= self.keyframe_distance
+                    or abs(step[2]) >= self.keyframe_angle)
 
     def _add_keyframe(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
                       path_length: float) -> None:
