@@ -151,7 +151,7 @@ class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         trace = self.env.unwrapped.trace
         projection = trace.project(pose[:2], near=self._arc)
         self._arc = projection.arc_position
-        ahead = np.array([trace.point_at(self._arc + d) for d in self.offsets])
+        ahead = trace.points_at(self._arc + self.offsets)
         local = se2.transform_points(se2.inverse(pose), ahead) / self.lookahead_scale
         if trace is not self._trace:  # a new episode's trace: unwrap its headings once
             self._trace, self._tangents = trace, np.unwrap(trace.headings)

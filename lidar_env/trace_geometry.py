@@ -223,6 +223,14 @@ class Trace:
         x = np.interp(s, self.arc, self.waypoints[:, 0])
         return np.array([x, np.interp(s, self.arc, self.waypoints[:, 1])])
 
+    def points_at(self, arc_positions: ArrayLike) -> NDArray[np.float64]:
+        """``(n, 2)`` [m]: :meth:`point_at` of each of ``arc_positions`` (n,) [m], the same
+        numbers in one pass."""
+        arcs = np.asarray(arc_positions, dtype=np.float64).reshape(-1)
+        s = arcs % self.length if self.closed else np.minimum(np.maximum(arcs, 0.0), self.length)
+        return np.column_stack([np.interp(s, self.arc, self.waypoints[:, 0]),
+                                np.interp(s, self.arc, self.waypoints[:, 1])])
+
     def lookahead(
         self, point: ArrayLike, distance: float, near: float | None = None
     ) -> NDArray[np.float64]:

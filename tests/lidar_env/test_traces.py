@@ -110,3 +110,12 @@ def test_unknown_seed_and_bad_arguments_are_readable():
         build_trace("straight", (0, 0), 10.0)
     with pytest.raises(ValueError, match="length: expected a positive trace length"):
         build_trace("straight", (0, 0, 0), -1.0)
+
+
+@pytest.mark.parametrize("seed", ["zigzag", "loop"])
+def test_points_at_is_point_at_bit_for_bit(seed: str) -> None:
+    trace = build_trace(seed, (0.5, -1.0, 0.3), 20.0)
+    arcs = np.random.default_rng(3).uniform(-5.0, trace.length + 5.0, 200)  # past both ends
+    arcs[:3] = (0.0, trace.length, -0.0)
+    expected = np.stack([trace.point_at(float(s)) for s in arcs])
+    np.testing.assert_array_equal(trace.points_at(arcs), expected)
