@@ -87,6 +87,19 @@ def _box_gap(box: NDArray[np.float64], node: int, qx: float, qy: float) -> float
 
 
 @njit(cache=True, inline="always")
+def _push_children(box: NDArray[np.float64], first: int, qx: float, qy: float,
+                   pending: NDArray[np.int64], top: int) -> int:
+    """Push the children ``first`` and ``first + 1`` of a node onto ``pending`` above ``top``,
+    the nearer one to (qx, qy) on top (searched first, it tightens the bound soonest); the
+    new top."""
+    if _box_gap(box, first, qx, qy) <= _box_gap(box, first + 1, qx, qy):
+        pending[top], pending[top + 1] = first + 1, first
+    else:
+        pending[top], pending[top + 1] = first, first + 1
+    return top + 2
+
+
+@njit(cache=True, inline="always")
 def _ranked(d2: float, original: int, best0: float, at0: int, best1: float, at1: int,
             best2: float, at2: int) -> tuple[float, int, float, int, float, int]:
     """The three best (squared distance, index) pairs with one more candidate ranked in:
@@ -143,12 +156,7 @@ def search_from(
                         d2, original, best0, at0, best1, at1, best2, at2)
                     worst = best0 if k == 1 else best1 if k == 2 else best2
             continue
-        # nearer child on top of the stack: searched first, it tightens the bound soonest
-        if _box_gap(box, first, qx, qy) <= _box_gap(box, first + 1, qx, qy):
-            pending[top], pending[top + 1] = first + 1, first
-        else:
-            pending[top], pending[top + 1] = first, first + 1
-        top += 2
+        top = _push_children(box, first, qx, qy, pending, top)
     if not best0 < bound:
         best0, at0 = np.inf, n
     if not best1 < bound:
@@ -229,20 +237,47 @@ def _nearest(
     end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
     queries: NDArray[np.float64], k: int, max_distance: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """``(M, k)`` distances and indices of each query's ``k`` (1 or 2) nearest points closer
-    than ``max_distance``; ``inf`` and ``n`` where fewer exist (``cKDTree.query``'s answer)."""
-    m = queries.shape[0]
-    distances = np.empty((m, k))
-    index = np.empty((m, k), np.int64)
+    """``(M, k)`` distances and indices of each query's ``k`` nearest points closer than
+    ``max_distance``; ``inf`` and ``n`` where fewer exist (``cKDTree.query``'s answer), equally
+    distant points ranked by index. Each query's ``k`` best so far are kept sorted in its
+    rows, a candidate inserted in place."""
+    n = tree_points.shape[0]
+    squared = np.full((queries.shape[0], k), np.inf)
+    index = np.full((queries.shape[0], k), n, np.int64)
     bound = max_distance * max_distance
     pending = np.empty(STACK, np.int64)
-    for q in range(m):
-        d0, i0, d1, i1, _, _ = search(order, tree_points, start, end, child, box,
-                                      queries[q, 0], queries[q, 1], k, bound, pending)
-        distances[q, 0], index[q, 0] = np.sqrt(d0), i0
-        if k == 2:
-            distances[q, 1], index[q, 1] = np.sqrt(d1), i1
-    return distances, index
+    for q in range(queries.shape[0]):
+        qx, qy = queries[q, 0], queries[q, 1]
+        best, at = squared[q], index[q]
+        pending[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            node = pending[top]
+            gap = _box_gap(box, node, qx, qy)
+            if gap > best[k - 1] or gap >= bound:  # ties with the k-th best still count
+                continue
+            first = child[node]
+            if first >= 0:
+                top = _push_children(box, first, qx, qy, pending, top)
+                continue
+            for p in range(start[node], end[node]):
+                dx = tree_points[p, 0] - qx
+                dy = tree_points[p, 1] - qy
+                d2 = dx * dx + dy * dy
+                original = order[p]
+                if d2 > best[k - 1] or (d2 == best[k - 1] and original > at[k - 1]):
+                    continue
+                rank = k - 1  # shift the farther ones down, the last one out
+                while rank > 0 and (d2 < best[rank - 1] or (
+                        d2 == best[rank - 1] and original < at[rank - 1])):
+                    best[rank], at[rank] = best[rank - 1], at[rank - 1]
+                    rank -= 1
+                best[rank], at[rank] = d2, original
+        for j in range(k):
+            if not best[j] < bound:
+                best[j], at[j] = np.inf, n
+    return np.sqrt(squared), index
 
 
 class PointIndex:
@@ -258,12 +293,12 @@ class PointIndex:
     def query(
         self, queries: ArrayLike, k: int = 1, distance_upper_bound: float = np.inf
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """Distances and indices of the ``k`` (1 or 2) nearest points closer than
+        """Distances and indices of the ``k`` nearest points closer than
         ``distance_upper_bound`` [m] to each query ``(M, 2)``: shapes ``(M,)`` for ``k=1``,
-        ``(M, 2)`` for ``k=2``; ``inf`` and ``N`` where there is none, as ``cKDTree.query``.
+        ``(M, k)`` otherwise; ``inf`` and ``N`` where there is none, as ``cKDTree.query``.
         Equally distant points are ranked by index."""
-        if k not in (1, 2):
-            raise ValueError(f"k: expected 1 or 2 neighbours, got {k}")
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
+            raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
         if not distance_upper_bound > 0:
             raise ValueError("distance_upper_bound: expected a positive pairing distance "
                              f"[m], got {distance_upper_bound}")

@@ -12,11 +12,9 @@ closure.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import fresh_neighbours, point_to_line_system
@@ -154,32 +152,27 @@ class PointToLineReference:
                 f"{self.anchors.shape}"
             )
 
-    @cached_property
-    def tree(self) -> cKDTree:
-        """A k-d tree of the points, for the neighbourhood fits (k up to 72)."""
-        return cKDTree(self.points)
-
     @classmethod
     def with_estimated_normals(
         cls, points: ArrayLike, k: int = 5, denoise: bool = False, max_k: int | None = None
     ) -> PointToLineReference:
         """Reference whose normals come from each point's ``k`` nearest neighbours
-        (:func:`estimators.matching.scan_matching.estimate_normals`), sharing one k-d tree. With
-        ``denoise``, lines pass through each point moved onto the curve fitted through its
-        neighbours, with that curve's normal
-        (:func:`estimators.matching.scan_matching.fit_local_curves`): pairs then carry the
-        reference's range noise averaged over ``k`` readings rather than one reading's. With
-        ``max_k``, neighbourhoods that do not form a line are refitted through up to that
-        many points (noisy walls; see
+        (:func:`estimators.matching.scan_matching.estimate_normals`), found in its own k-d tree
+        (:class:`estimators.matching.nearest.PointIndex`). With ``denoise``, lines pass
+        through each point moved onto the curve fitted through its neighbours, with that
+        curve's normal (:func:`estimators.matching.scan_matching.fit_local_curves`): pairs
+        then carry the reference's range noise averaged over ``k`` readings rather than one
+        reading's. With ``max_k``, neighbourhoods that do not form a line are refitted through
+        up to that many points (noisy walls; see
         :func:`estimators.matching.scan_matching.estimate_normals`)."""
         reference = cls(points)
         if denoise:
             reference.normals, reference.valid_normals, reference.anchors = fit_local_curves(
-                reference.points, reference.tree, k, max_k=max_k
+                reference.points, reference.search_tree, k, max_k=max_k
             )
         else:
             reference.normals, reference.valid_normals = estimate_normals(
-                reference.points, reference.tree, k, max_k=max_k
+                reference.points, reference.search_tree, k, max_k=max_k
             )
         return reference
 

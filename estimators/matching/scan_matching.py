@@ -19,6 +19,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from estimators.base import SensorSetup
+from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import curve_points, line_fits
 from lidar_env.se2 import transform_points, wrap_angle
 
@@ -83,8 +84,6 @@ class _Neighbourhoods(NamedTuple):
 
     rows: NDArray[np.intp]  # (n,) which points these are
     index: NDArray[np.intp]  # (n, k) their neighbours, len(points) for a missing one
-    neighbours: NDArray[np.float64]  # (n, k, 2); missing ones repeat the point itself
-    weights: NDArray[np.float64]  # (n, k): 1 for a neighbour found, 0 for a missing one
     count: NDArray[np.float64]  # (n,) neighbours found
     mean: NDArray[np.float64]  # (n, 2) their centroid
     normals: NDArray[np.float64]  # (n, 2) unit normal of their principal axis
@@ -92,25 +91,28 @@ class _Neighbourhoods(NamedTuple):
     valid: NDArray[np.bool_]  # (n,) a line: >= 3 neighbours, clearly elongated spread
 
 
+def _gathered(points: NDArray[np.float64], rows: NDArray[np.intp], index: NDArray[np.intp],
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The neighbours ``index`` (n, k) of ``points[rows]`` as points (n, k, 2), a missing one
+    repeating the point itself, and their weights (n, k): 1 found, 0 missing."""
+    found = index < len(points)
+    return points[np.where(found, index, rows[:, None])], found.astype(np.float64)
+
+
 def _fit_rows(
-    points: NDArray[np.float64], tree: cKDTree, rows: NDArray[np.intp], k: int,
+    points: NDArray[np.float64], tree: PointIndex | cKDTree, rows: NDArray[np.intp], k: int,
     max_radius: float, compiled: bool = True,
 ) -> _Neighbourhoods:
     """Lines through the ``k`` nearest neighbours (within ``max_radius``) of ``points[rows]``
     (``tree``: anything with ``cKDTree.query``'s signature over ``points``). ``compiled``
     fits them in :func:`estimators.matching.neighbourhood_fits.line_fits`, else in arrays
     (the same math)."""
-    distances, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
-    distances = distances.reshape(len(rows), k)
+    _, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
     index = index.reshape(len(rows), k).astype(np.int64)
-    found = np.isfinite(distances)
-    safe = np.where(found, index, rows[:, None])
-    neighbours = points[safe]
-    weights = found.astype(np.float64)
     if compiled:
         count, mean, normals, across, valid = line_fits(points, rows.astype(np.int64), index)
-        return _Neighbourhoods(rows, index, neighbours, weights, count, mean, normals, across,
-                               valid)
+        return _Neighbourhoods(rows, index, count, mean, normals, across, valid)
+    neighbours, weights = _gathered(points, rows, index)
     count = weights.sum(axis=1)
     mean = (neighbours * weights[..., None]).sum(axis=1) / count[:, None]
     centred = (neighbours - mean[:, None, :]) * weights[..., None]
@@ -128,7 +130,7 @@ def _fit_rows(
     # return off a chair leg next to a wall is not a wall point.
     own = np.abs(np.einsum("ij,ij->i", points[rows] - mean, normals))
     valid = (count >= 3) & (small < 0.1 * large) & (own <= 3.0 * across + 1e-9)
-    return _Neighbourhoods(rows, index, neighbours, weights, count, mean, normals, across, valid)
+    return _Neighbourhoods(rows, index, count, mean, normals, across, valid)
 
 
 def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
@@ -137,7 +139,7 @@ def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
 
 
 def _fit_lines(
-    points: NDArray[np.float64], tree: cKDTree, k: int, max_radius: float,
+    points: NDArray[np.float64], tree: PointIndex | cKDTree, k: int, max_radius: float,
     max_k: int | None = None, compiled: bool = True,
 ) -> list[_Neighbourhoods]:
     """Lines through each point's ``k`` nearest neighbours; where they do not form one, the
@@ -162,7 +164,7 @@ def _fit_lines(
                     compiled)
     noise = 2.0 * float(np.median(fit.across))
     groups = [fit]
-    width = fit.weights.shape[1]
+    width = fit.index.shape[1]
     limit = min(max_k or k, len(points))
     while width < limit:
         # Only the widest group can grow: a point with fewer neighbours than its width has
@@ -179,7 +181,7 @@ def _fit_lines(
 
 
 def estimate_normals(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 5, max_radius: float = 0.5,
+    points: NDArray[np.float64], tree: PointIndex | cKDTree, k: int = 5, max_radius: float = 0.5,
     max_k: int | None = None, compiled: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Unit normals ``(M, 2)`` of the local line through each point's ``k`` nearest neighbours
@@ -203,12 +205,13 @@ def _curve_points(
     by :func:`estimators.matching.neighbourhood_fits.curve_points`, else in arrays."""
     if compiled:
         return curve_points(points, fit.rows.astype(np.int64), fit.index, fit.mean, fit.normals)
+    neighbours, weights = _gathered(points, fit.rows, fit.index)
     points = points[fit.rows]
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
-    offsets = fit.neighbours - fit.mean[:, None, :]
+    offsets = neighbours - fit.mean[:, None, :]
     along = np.einsum("ijk,ik->ij", offsets, tangents)
     across = np.einsum("ijk,ik->ij", offsets, fit.normals)
-    basis = np.stack([np.ones_like(along), along, along**2], axis=-1) * fit.weights[..., None]
+    basis = np.stack([np.ones_like(along), along, along**2], axis=-1) * weights[..., None]
     gram = np.einsum("ijk,ijl->ikl", basis, basis)
     moment = np.einsum("ijk,ij->ik", basis, across)
     a, b, c = np.linalg.solve(gram, moment[..., None])[..., 0].T
@@ -220,7 +223,7 @@ def _curve_points(
 
 
 def fit_local_curves(
-    points: NDArray[np.float64], tree: cKDTree, k: int = 9, max_radius: float = 0.5,
+    points: NDArray[np.float64], tree: PointIndex | cKDTree, k: int = 9, max_radius: float = 0.5,
     max_k: int | None = None, compiled: bool = True,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Denoised surface points: normals ``(M, 2)``, which are reliable (as
