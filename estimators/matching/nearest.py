@@ -183,36 +183,35 @@ def search_near(
     order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
     end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
     points: NDArray[np.float64], qx: float, qy: float, k: int, bound: float,
-    pending: NDArray[np.int64], row: int, seen: NDArray[np.float64], near: NDArray[np.int64],
-    reach: NDArray[np.float64],
+    pending: NDArray[np.int64], row: int, kept: NDArray[np.float64], near: NDArray[np.int64],
 ) -> tuple[float, int, float, int, float, int]:
     """:func:`search` (``k`` 1 or 2) for query ``row`` of a set of queries asked again as they
     move (ICP's iterations), with the same answer, from the points last found nearest where
     they suffice.
 
-    Each search of a query keeps its ``KEPT`` nearest points (``near`` (M, 3), ``n`` for none),
-    where it stood (``seen`` (M, 2) [m], NaN for never searched) and ``reach`` (M,) [m], the
-    distance within which those were all the points (the third's distance, or the bound's).
-    A query that has moved ``m`` since lies at least ``reach - m`` from every other point
-    (triangle inequality), so when its ``k``-th nearest kept point, or the bound where there
-    is none, lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept points hold
-    the answer: their distances are computed as :func:`search` computes them, so it is
-    bit-identical. Else the query is searched again. ``points`` (N, 2) are the tree's points
-    in their original order."""
+    Each search of a query keeps its ``KEPT`` nearest points: their indices in ``near``
+    (M, 3), ``n`` for none, and in ``kept`` (M, 9) where the query stood [m] (NaN: never
+    searched), ``reach`` [m], the distance within which those were all the points (the
+    third's distance, or the bound's), and their coordinates (NaN for none). A query that
+    has moved ``m`` since lies at least ``reach - m`` from every other point (triangle
+    inequality), so when its ``k``-th nearest kept point, or the bound where there is none,
+    lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept points hold the
+    answer: their distances are computed as :func:`search` computes them, so it is
+    bit-identical. Else the query is searched again, seeded with them. ``points`` (N, 2) are
+    the tree's points in their original order."""
     n = tree_points.shape[0]
-    moved = np.hypot(qx - seen[row, 0], qy - seen[row, 1])
+    ox, oy = qx - kept[row, 0], qy - kept[row, 1]
+    moved = np.sqrt(ox * ox + oy * oy)
     if moved < np.inf:  # NaN: never searched
         best0 = best1 = best2 = np.inf
         at0 = at1 = at2 = n
-        for j in range(KEPT):
-            original = near[row, j]
-            if original < n:
-                dx = points[original, 0] - qx
-                dy = points[original, 1] - qy
-                best0, at0, best1, at1, best2, at2 = _ranked(
-                    dx * dx + dy * dy, original, best0, at0, best1, at1, best2, at2)
+        for j in range(KEPT):  # a missing one's NaN distance ranks nowhere
+            dx = kept[row, 3 + 2 * j] - qx
+            dy = kept[row, 4 + 2 * j] - qy
+            best0, at0, best1, at1, best2, at2 = _ranked(
+                dx * dx + dy * dy, near[row, j], best0, at0, best1, at1, best2, at2)
         last = best0 if k == 1 else best1
-        if np.sqrt(min(last, bound)) + moved + REUSE_MARGIN <= reach[row]:
+        if np.sqrt(min(last, bound)) + moved + REUSE_MARGIN <= kept[row, 2]:
             if not best0 < bound:
                 best0, at0 = np.inf, n
             if not best1 < bound:
@@ -225,9 +224,12 @@ def search_near(
     else:
         best0, at0, best1, at1, best2, at2 = search(order, tree_points, start, end, child,
                                                     box, qx, qy, KEPT, bound, pending)
-    seen[row, 0], seen[row, 1] = qx, qy
+    kept[row, 0], kept[row, 1], kept[row, 2] = qx, qy, np.sqrt(min(best2, bound))
     near[row, 0], near[row, 1], near[row, 2] = at0, at1, at2
-    reach[row] = np.sqrt(min(best2, bound))
+    for j in range(KEPT):
+        at = near[row, j]
+        kept[row, 3 + 2 * j] = points[at, 0] if at < n else np.nan
+        kept[row, 4 + 2 * j] = points[at, 1] if at < n else np.nan
     return best0, at0, best1, at1, best2, at2
 
 

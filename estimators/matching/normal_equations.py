@@ -49,11 +49,10 @@ def _accumulate(hessian: NDArray[np.float64], gradient: NDArray[np.float64], nx:
 
 
 @njit(cache=True)
-def fresh_neighbours(m: int) -> tuple[NDArray[np.float64], NDArray[np.int64],
-                                      NDArray[np.float64]]:
-    """``seen``, ``near``, ``reach`` for ``m`` query points not searched yet
+def fresh_neighbours(m: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """``kept`` and ``near`` for ``m`` query points not searched yet
     (:func:`estimators.matching.nearest.search_near`)."""
-    return np.full((m, 2), np.nan), np.empty((m, KEPT), np.int64), np.empty(m)
+    return np.full((m, 3 + 2 * KEPT), np.nan), np.empty((m, KEPT), np.int64)
 
 
 @njit(cache=True)
@@ -63,16 +62,16 @@ def point_to_line_system(
     points: NDArray[np.float64], normals: NDArray[np.float64], valid: NDArray[np.bool_],
     anchors: NDArray[np.float64], has_normals: bool,
     query: NDArray[np.float64], pose: NDArray[np.float64], max_distance: float, loss: int,
-    scale: float, residuals: NDArray[np.float64], seen: NDArray[np.float64],
-    near: NDArray[np.int64], reach: NDArray[np.float64],
+    scale: float, residuals: NDArray[np.float64], kept: NDArray[np.float64],
+    near: NDArray[np.int64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float]:
     """One point-to-line iteration of ``query`` (M, 2) at ``pose`` onto a reference (its tree,
     ``points``, and with ``has_normals`` its stored ``normals``/``valid``/``anchors``).
 
     Returns the normal equations ``H = sum w J^T J`` (3, 3), ``g = -sum w J^T r`` (3,), the
     number of pairs and the sum of the squared rotation column of J; ``residuals`` (M,) is
-    filled with each query point's residual [m], NaN where it has no pair. ``seen``, ``near``
-    and ``reach`` are the query points' neighbours from the previous iterations
+    filled with each query point's residual [m], NaN where it has no pair. ``kept`` and
+    ``near`` are the query points' neighbours from the previous iterations
     (:func:`estimators.matching.nearest.search_near`; :func:`fresh_neighbours` before the
     first), updated where they are searched again.
     """
@@ -90,7 +89,7 @@ def point_to_line_system(
         wy = query[i, 0] * s + query[i, 1] * c + pose[1]
         k = 1 if has_normals else 2
         d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box, points,
-                                           wx, wy, k, bound, pending, i, seen, near, reach)
+                                           wx, wy, k, bound, pending, i, kept, near)
         if i0 == n:
             continue
         if has_normals and valid[i0]:
@@ -99,8 +98,8 @@ def point_to_line_system(
         else:
             if has_normals:  # a stored normal that is not valid: the two-nearest-point line
                 d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box,
-                                                   points, wx, wy, 2, bound, pending, i, seen,
-                                                   near, reach)
+                                                   points, wx, wy, 2, bound, pending, i, kept,
+                                                   near)
             ax, ay = points[i0, 0], points[i0, 1]
             has_line = i1 != n
             second = i1 if has_line else i0
@@ -218,14 +217,14 @@ def register_loop(
     assessed on. ``prior_information`` is (3, 3)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
-    seen, near, reach = fresh_neighbours(query.shape[0])
+    kept, near = fresh_neighbours(query.shape[0])
     iterations = 0
     converged = False
     while iterations < max_iterations:
         iterations += 1
         hessian, gradient, count, rotation_squares = point_to_line_system(
             order, tree_points, start, end, child, box, points, normals, valid, anchors,
-            has_normals, query, pose, max_distance, loss, scale, residuals, seen, near, reach)
+            has_normals, query, pose, max_distance, loss, scale, residuals, kept, near)
         if count < 3:
             break
         offset = prior - pose
@@ -240,5 +239,5 @@ def register_loop(
             break
     point_to_line_system(order, tree_points, start, end, child, box, points, normals, valid,
                          anchors, has_normals, query, pose, inlier_distance, loss, scale,
-                         residuals, seen, near, reach)
+                         residuals, kept, near)
     return pose, iterations, converged, residuals

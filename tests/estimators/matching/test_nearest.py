@@ -95,7 +95,7 @@ def test_kept_neighbours_give_the_searchs_answer_as_queries_move(
     index = PointIndex(points)
     m = 12
     queries = rng.uniform(-spread, spread, (m, 2))
-    seen, near, reach = np.full((m, 2), np.nan), np.empty((m, KEPT), np.int64), np.empty(m)
+    kept, near = np.full((m, 3 + 2 * KEPT), np.nan), np.empty((m, KEPT), np.int64)
     pending = np.empty(STACK, np.int64)
     for _ in range(15):
         queries = queries + rng.normal(0.0, step * rng.choice([0.01, 0.1, 1.0]), (m, 2))
@@ -104,8 +104,8 @@ def test_kept_neighbours_give_the_searchs_answer_as_queries_move(
             qx, qy = queries[row]
             for k, b in ((1, bound**2), (2, bound**2), (2, (0.3 * bound) ** 2)):
                 expected = search(*index.arrays, qx, qy, k, b, pending)
-                found = search_near(*index.arrays, points, qx, qy, k, b, pending, row, seen,
-                                    near, reach)
+                found = search_near(*index.arrays, points, qx, qy, k, b, pending, row, kept,
+                                    near)
                 assert found[: 2 * k] == expected[: 2 * k]
             fresh = search(*index.arrays, qx, qy, 3, bound**2, pending)
             seeds = search(*index.arrays, qx + step, qy, 3, np.inf, pending)
