@@ -31,8 +31,9 @@ USER_WORLD_TRACE = "straight"
 MAX_CACHED_SCENES = 32
 
 
-class StartPoseError(ValueError):
-    """The requested start pose puts the car inside or onto an obstacle."""
+class StartPoseError(ConfigError):
+    """The requested start pose (a reset option) lies outside the map or puts the car inside or
+    onto an obstacle."""
 
 
 def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
