@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -67,10 +68,41 @@ def scans_to_car_points(
     )
 
 
-def voxel_downsample(points: NDArray[np.float64], voxel_size: float) -> NDArray[np.float64]:
-    """Keep the first point of every ``voxel_size`` [m] square cell (order preserved)."""
+@njit(cache=True)
+def first_in_each_cell(points: NDArray[np.float64], voxel_size: float) -> NDArray[np.bool_]:
+    """Whether each of ``points`` (N, 2) [m] is the first in its ``voxel_size`` cell: the
+    cells' keys as :func:`voxel_downsample` forms them, in an open-addressing hash set (linear
+    probing, Fibonacci hashing): O(N), where ``np.unique``'s stable sort is O(N log N) and a
+    dozen numpy calls (a 7,000-point local map: ~0.7 ms)."""
+    size = 2
+    while size < 2 * len(points):
+        size *= 2
+    shift = np.uint64(64 - int(np.log2(size)))
+    mask = size - 1
+    table = np.empty(size, np.int64)
+    used = np.zeros(size, np.bool_)
+    first = np.zeros(len(points), np.bool_)
+    for i in range(len(points)):
+        cx = np.int64(np.floor(points[i, 0] / voxel_size))
+        cy = np.int64(np.floor(points[i, 1] / voxel_size))
+        key = (cx << 32) + (cy & 0xFFFFFFFF)
+        slot = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+        while used[slot] and table[slot] != key:
+            slot = (slot + 1) & mask
+        if not used[slot]:
+            used[slot], table[slot], first[i] = True, key, True
+    return first
+
+
+def voxel_downsample(points: NDArray[np.float64], voxel_size: float,
+                     compiled: bool = True) -> NDArray[np.float64]:
+    """Keep the first point of every ``voxel_size`` [m] square cell (order preserved).
+    ``compiled`` finds the first points with :func:`first_in_each_cell`, else with
+    ``np.unique`` (the same points; the tests' reference)."""
     if voxel_size <= 0:
         raise ValueError(f"voxel_size: expected a positive size [m], got {voxel_size}")
+    if compiled:
+        return points[first_in_each_cell(np.ascontiguousarray(points, np.float64), voxel_size)]
     cells = np.floor(points / voxel_size).astype(np.int64)
     # One integer key per cell (a 1-D unique is far faster than np.unique(axis=0)); cells
     # within +-2^31 voxels of the origin never collide.

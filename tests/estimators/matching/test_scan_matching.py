@@ -1,6 +1,6 @@
 """Local surface fits of the scan matchers' reference maps: denoised anchors and normals on
 noisy walls and curved surfaces, checked against the true geometry, and the compiled fits
-against the array form of the same math."""
+against the array form of the same math, the compiled voxel thinning against np.unique."""
 
 from __future__ import annotations
 
@@ -163,3 +163,19 @@ def test_compiled_fits_match_the_array_fits(seed: int, noise: float, k: int,
     pure_normals, pure_valid = estimate_normals(points, tree, k, max_k=max_k, compiled=False)
     np.testing.assert_array_equal(valid, pure_valid)
     np.testing.assert_allclose(normals, pure_normals, rtol=0, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(0, 3000), spread=st.floats(0.01, 1e4),
+       voxel=st.floats(1e-3, 2.0), repeats=st.booleans())
+def test_compiled_voxel_downsample_keeps_the_points_unique_keeps(
+    seed: int, n: int, spread: float, voxel: float, repeats: bool,
+) -> None:
+    """The hash-set kernel keeps the same first point of every cell, in the same order, as
+    ``np.unique`` does, on sparse, dense and repeated points, negative cells included."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-spread, spread, (n, 2))
+    if repeats and n:
+        points = points[rng.integers(0, n, n)]
+    expected = voxel_downsample(points, voxel, compiled=False)
+    np.testing.assert_array_equal(voxel_downsample(points, voxel), expected)
