@@ -1,11 +1,13 @@
 """Exact nearest-neighbour search in the plane, compiled: a k-d tree built and searched in numba.
 
 :class:`PointIndex` answers the queries scan matching makes many times per scan -- the one or
-two nearest reference points of every query point within a pairing distance -- with the same
-answer as ``scipy.spatial.cKDTree.query(points, k, distance_upper_bound=...)`` (distances
-``inf`` and index ``n`` where there is none; equally distant points ranked by index), but
-callable from compiled code (:func:`search`): ICP asks for the nearest points of a few hundred
-queries 10-30 times per scan, and from inside one numba loop each query costs no Python call.
+two nearest reference points of every query point within a pairing distance, and the 9 to 72
+nearest neighbours of every map point the local map's line fits need -- with the same answer
+as ``scipy.spatial.cKDTree.query(points, k, distance_upper_bound=...)`` (distances ``inf`` and
+index ``n`` where there is none) up to the order of equally distant points, which it ranks by
+index (cKDTree's order among them is its heap's), and callable from compiled code
+(:func:`search`): ICP asks for the nearest points of a few hundred queries 10-30 times per
+scan, and from inside one numba loop each query costs no Python call.
 
 The tree splits the longer side of each node's bounding box at the median until at most
 ``LEAF_SIZE`` points remain; a query descends nearest child first and skips every node whose
