@@ -202,30 +202,26 @@ def search_near(
     bit-identical. Else the query is searched again, seeded with them. ``points`` (N, 2) are
     the tree's points in their original order."""
     n = tree_points.shape[0]
+    best0 = best1 = best2 = np.inf
+    at0 = at1 = at2 = n
+    for j in range(KEPT):  # a missing one's (or a never searched row's) NaN ranks nowhere
+        dx = kept[row, 3 + 2 * j] - qx
+        dy = kept[row, 4 + 2 * j] - qy
+        best0, at0, best1, at1, best2, at2 = _ranked(
+            dx * dx + dy * dy, near[row, j], best0, at0, best1, at1, best2, at2)
     ox, oy = qx - kept[row, 0], qy - kept[row, 1]
-    moved = np.sqrt(ox * ox + oy * oy)
-    if moved < np.inf:  # NaN: never searched
-        best0 = best1 = best2 = np.inf
-        at0 = at1 = at2 = n
-        for j in range(KEPT):  # a missing one's NaN distance ranks nowhere
-            dx = kept[row, 3 + 2 * j] - qx
-            dy = kept[row, 4 + 2 * j] - qy
-            best0, at0, best1, at1, best2, at2 = _ranked(
-                dx * dx + dy * dy, near[row, j], best0, at0, best1, at1, best2, at2)
-        last = best0 if k == 1 else best1
-        if np.sqrt(min(last, bound)) + moved + REUSE_MARGIN <= kept[row, 2]:
-            if not best0 < bound:
-                best0, at0 = np.inf, n
-            if not best1 < bound:
-                best1, at1 = np.inf, n
-            return best0, at0, best1, at1, np.inf, n
-        # seeded by the kept points: the search then skips most of the tree
-        best0, at0, best1, at1, best2, at2 = search_from(
-            order, tree_points, start, end, child, box, qx, qy, KEPT, bound, pending,
-            best0, at0, best1, at1, best2, at2)
-    else:
-        best0, at0, best1, at1, best2, at2 = search(order, tree_points, start, end, child,
-                                                    box, qx, qy, KEPT, bound, pending)
+    last = best0 if k == 1 else best1
+    # false for a never searched row (NaN)
+    if np.sqrt(min(last, bound)) + np.sqrt(ox * ox + oy * oy) + REUSE_MARGIN <= kept[row, 2]:
+        if not best0 < bound:
+            best0, at0 = np.inf, n
+        if not best1 < bound:
+            best1, at1 = np.inf, n
+        return best0, at0, best1, at1, np.inf, n
+    # seeded by the kept points (none before the first search): most of the tree is skipped
+    best0, at0, best1, at1, best2, at2 = search_from(
+        order, tree_points, start, end, child, box, qx, qy, KEPT, bound, pending,
+        best0, at0, best1, at1, best2, at2)
     kept[row, 0], kept[row, 1], kept[row, 2] = qx, qy, np.sqrt(min(best2, bound))
     near[row, 0], near[row, 1], near[row, 2] = at0, at1, at2
     for j in range(KEPT):

@@ -87,19 +87,21 @@ def point_to_line_system(
         residuals[i] = np.nan
         wx = query[i, 0] * c - query[i, 1] * s + pose[0]
         wy = query[i, 0] * s + query[i, 1] * c + pose[1]
+        # the nearest point with stored normals, else (or where its normal is not valid)
+        # the two nearest: one call site, as each inlines the whole search
         k = 1 if has_normals else 2
-        d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box, points,
-                                           wx, wy, k, bound, pending, i, kept, near)
+        while True:
+            d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box,
+                                               points, wx, wy, k, bound, pending, i, kept, near)
+            if k == 2 or i0 == n or valid[i0]:
+                break
+            k = 2
         if i0 == n:
             continue
         if has_normals and valid[i0]:
             ax, ay = anchors[i0, 0], anchors[i0, 1]
             nx, ny = normals[i0, 0], normals[i0, 1]
         else:
-            if has_normals:  # a stored normal that is not valid: the two-nearest-point line
-                d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box,
-                                                   points, wx, wy, 2, bound, pending, i, kept,
-                                                   near)
             ax, ay = points[i0, 0], points[i0, 1]
             has_line = i1 != n
             second = i1 if has_line else i0
