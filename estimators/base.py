@@ -194,10 +194,10 @@ class SensorSetup:
                 raise EstimatorInputError(
                     f"{key}: expected a scan of shape {sensor.beam_angles.shape}, got {scan.shape}"
                 )
-            if not np.all(np.isfinite(scan)):
-                raise EstimatorInputError(
-                    f"{key}: scan holds NaN or inf; expected finite ranges [m]")
-            if np.any(scan < 0):
+            if scan.size and not 0.0 <= scan.min() <= scan.max() < np.inf:  # NaN fails both
+                if not np.all(np.isfinite(scan)):
+                    raise EstimatorInputError(
+                        f"{key}: scan holds NaN or inf; expected finite ranges [m]")
                 raise EstimatorInputError(
                     f"{key}: scan holds negative ranges; expected ranges >= 0 [m]")
             scans[key] = scan

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 Pose = NDArray[np.float64]
+_TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle: ArrayLike) -> NDArray[np.float64]:
@@ -21,6 +22,10 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     """``a ⊕ b``: pose ``b`` (given in the frame of ``a``) expressed in the frame ``a`` lives in."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.shape == b.shape == (3,):  # one pose: the same operations on scalars, no stacking
+        c, s = np.cos(a[2]), np.sin(a[2])
+        return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1],
+                         (a[2] + b[2] + np.pi) % _TWO_PI - np.pi])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -30,6 +35,10 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
 def inverse(a: ArrayLike) -> Pose:
     """``a⁻¹``: the pose of the parent frame seen from frame ``a``."""
     a = np.asarray(a, dtype=np.float64)
+    if a.shape == (3,):  # one pose: the same operations on scalars, no stacking
+        c, s = np.cos(a[2]), np.sin(a[2])
+        return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1],
+                         (-a[2] + np.pi) % _TWO_PI - np.pi])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

@@ -40,3 +40,16 @@ def test_transform_points_rotates_then_translates() -> None:
     points = np.array([[1.0, 0.0], [0.0, 2.0]])
     moved = se2.transform_points((1.0, -1.0, np.pi / 2), points)
     np.testing.assert_allclose(moved, [[1.0, 0.0], [-1.0, -1.0]], atol=1e-12)
+
+
+def test_one_pose_at_a_time_is_the_batch_bit_for_bit() -> None:
+    rng = np.random.default_rng(5)
+    a = np.column_stack([rng.normal(0, 50, 3000), rng.normal(0, 50, 3000),
+                         rng.uniform(-10, 10, 3000)])
+    b = np.column_stack([rng.normal(0, 5, 3000), rng.normal(0, 5, 3000),
+                         rng.uniform(-10, 10, 3000)])
+    a[:4, 2], b[:4, 2] = (np.pi, -np.pi, 0.0, 3 * np.pi), (np.pi, -np.pi, -0.0, np.pi)
+    for one, batch in ((np.array([se2.compose(p, q) for p, q in zip(a, b, strict=True)]),
+                        se2.compose(a, b)),
+                       (np.array([se2.inverse(p) for p in a]), se2.inverse(a))):
+        np.testing.assert_array_equal(one.view(np.uint64), batch.view(np.uint64))
