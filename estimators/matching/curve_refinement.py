@@ -17,6 +17,7 @@ from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import nearest_on_surfaces, point_to_curve_system
 from estimators.matching.point_to_line import solve_normal_equations
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
+from lidar_env.errors import EstimatorInputError
 from lidar_env.se2 import rotate, transform_points, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -95,7 +96,7 @@ class CurveReference:
         self.points = np.column_stack([ranges[hit] * np.cos(angles), ranges[hit] * np.sin(angles)])
         count = len(self.points)
         if count < 3:
-            raise ValueError(f"reference scan: expected at least 3 returns, got {count}")
+            raise EstimatorInputError(f"reference scan: expected at least 3 returns, got {count}")
         self.search_tree = PointIndex(self.points)
         self.tangents, self.normals, self.pointlike, self.a, self.b, self.c = chain_curves(
             self.points, hit.astype(np.int64), len(ranges), _full_turn(beam_angles),

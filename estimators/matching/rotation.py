@@ -29,6 +29,7 @@ import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -80,13 +81,14 @@ def log_polar_spectrum(
     """
     image = np.asarray(image, dtype=np.float32)
     if image.ndim != 2 or min(image.shape) < 16:
-        raise ValueError(f"image: expected a 2-D array of at least 16x16 pixels, got {image.shape}")
+        raise EstimatorInputError(
+            f"image: expected a 2-D array of at least 16x16 pixels, got {image.shape}")
     if n_angles < 8 or n_radii < 2:
-        raise ValueError(f"expected n_angles >= 8 and n_radii >= 2, got {n_angles}, {n_radii}")
+        raise ConfigError(f"expected n_angles >= 8 and n_radii >= 2, got {n_angles}, {n_radii}")
     height, width = image.shape
     max_radius = 0.45 * min(height, width)
     if not 0 < min_radius < max_radius:
-        raise ValueError(f"min_radius: expected a value in (0, {max_radius}), got {min_radius}")
+        raise ConfigError(f"min_radius: expected a value in (0, {max_radius}), got {min_radius}")
     window, corners, weights, radii = _log_polar_grid(
         height, width, n_angles, n_radii, min_radius
     )
@@ -136,7 +138,7 @@ def spectrum_rotation(polar_a: FloatArray, polar_b: FloatArray) -> RotationEstim
     ``[-pi/2, pi/2)``; the true rotation may also be ``angle + pi``.
     """
     if polar_a.shape != polar_b.shape or polar_a.ndim != 2:
-        raise ValueError(
+        raise EstimatorInputError(
             f"expected two log-polar grids of equal 2-D shape, got {polar_a.shape}, {polar_b.shape}"
         )
     n_angles = polar_a.shape[0]
@@ -150,7 +152,7 @@ def _check_full_turn(beam_angles: FloatArray) -> None:
     steps = np.diff(np.unwrap(beam_angles))
     n = len(beam_angles)
     if not np.allclose(steps, 2.0 * np.pi / n, atol=1e-6):
-        raise ValueError(
+        raise EstimatorInputError(
             f"range profile correlation needs {n} beams evenly spread over a full turn "
             f"(step {2 * np.pi / n:.6f} rad); got steps from {steps.min():.6f} to {steps.max():.6f}"
         )
@@ -170,7 +172,7 @@ def range_profile_rotation(
     a = np.minimum(np.asarray(ranges_a, dtype=np.float64), max_range)
     b = np.minimum(np.asarray(ranges_b, dtype=np.float64), max_range)
     if a.shape != angles.shape or b.shape != angles.shape:
-        raise ValueError(
+        raise EstimatorInputError(
             f"expected two range profiles of shape {angles.shape}, got {a.shape}, {b.shape}"
         )
     _check_full_turn(angles)

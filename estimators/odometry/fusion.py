@@ -43,7 +43,7 @@ from estimators.odometry.sensor_graph import (
     fuse_car_motion,
     optimize_poses,
 )
-from lidar_env.errors import EstimatorInputError
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, inverse, relative, rotate, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -126,18 +126,18 @@ class FusionEstimator(Estimator):
         if isinstance(self.icp_iterations, bool) or not (
             isinstance(self.icp_iterations, int) and self.icp_iterations >= 1
         ):
-            raise ValueError(
+            raise ConfigError(
                 f"icp_iterations: expected an integer >= 1 (the cross-sensor edges are "
                 f"refined matches), got {self.icp_iterations!r}"
             )
         if isinstance(self.window, bool) or not (isinstance(self.window, int) and self.window >= 1):
-            raise ValueError(f"window: expected an integer >= 1 keyframes, got {self.window!r}")
+            raise ConfigError(f"window: expected an integer >= 1 keyframes, got {self.window!r}")
         if not self.velocity_window > 0:
-            raise ValueError(
+            raise ConfigError(
                 f"velocity_window: expected a positive duration [s], got {self.velocity_window!r}"
             )
         if not (self.keyframe_distance > 0 and self.keyframe_turn > 0):
-            raise ValueError(
+            raise ConfigError(
                 "keyframe_distance [m] and keyframe_turn [rad]: expected positive numbers, got "
                 f"{self.keyframe_distance}, {self.keyframe_turn}"
             )

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, relative, rotate, wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -70,18 +71,18 @@ def _checked_edges(
     and confidences ``(E,)``, after checking that they fit a graph of ``n_nodes`` car poses
     (the first ``n_fixed`` held) and ``n_sensors`` mounts."""
     if not 1 <= n_fixed < n_nodes:
-        raise ValueError(f"n_fixed: expected 1 <= n_fixed < {n_nodes} nodes, got {n_fixed}")
+        raise ConfigError(f"n_fixed: expected 1 <= n_fixed < {n_nodes} nodes, got {n_fixed}")
     if not edges:
-        raise ValueError("edges: expected at least one edge, got none")
+        raise EstimatorInputError("edges: expected at least one edge, got none")
     index = _edge_index(edges)
     if index[:, [0, 2]].min() < 0 or index[:, [0, 2]].max() >= n_nodes:
-        raise ValueError(f"edges refer to nodes outside 0..{n_nodes - 1}")
+        raise EstimatorInputError(f"edges refer to nodes outside 0..{n_nodes - 1}")
     if index[:, [1, 3]].min() < 0 or index[:, [1, 3]].max() >= n_sensors:
-        raise ValueError(f"edges refer to sensors outside 0..{n_sensors - 1}")
+        raise EstimatorInputError(f"edges refer to sensors outside 0..{n_sensors - 1}")
     measured = np.array([e.pose for e in edges], dtype=np.float64)
     confidence = np.array([e.confidence for e in edges], dtype=np.float64)
     if np.any(~(confidence > 0)):
-        raise ValueError(f"edge confidences: expected values > 0, got {confidence}")
+        raise EstimatorInputError(f"edge confidences: expected values > 0, got {confidence}")
     return index, measured, confidence
 
 
@@ -114,7 +115,7 @@ def optimize_poses(
     n_nodes = len(poses)
     index, measured, confidence = _checked_edges(edges, n_nodes, len(mounts), n_fixed)
     if sigma_translation <= 0 or sigma_heading <= 0 or robust_scale <= 0:
-        raise ValueError(
+        raise ConfigError(
             "expected positive sigma_translation, sigma_heading and robust_scale, got "
             f"{sigma_translation}, {sigma_heading}, {robust_scale}"
         )

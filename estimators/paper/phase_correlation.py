@@ -27,6 +27,8 @@ import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import EstimatorInputError
+
 #: Newton stops when its step is below this [px]: convergence is quadratic, so the position
 #: is then good to ~1e-4 px, far under any accuracy we can claim.
 NEWTON_TOLERANCE = 1e-2
@@ -71,12 +73,13 @@ def image_spectrum(image: ArrayLike) -> ImageSpectrum:
     """Whiten the real FFT of a 2-D image once, for any number of :func:`phase_correlate` calls."""
     image = np.asarray(image)
     if image.ndim != 2 or min(image.shape) < 2:
-        raise ValueError(f"image: expected a 2-D array of at least 2 x 2, got shape {image.shape}")
+        raise EstimatorInputError(
+            f"image: expected a 2-D array of at least 2 x 2, got shape {image.shape}")
     if not np.issubdtype(image.dtype, np.number) or np.iscomplexobj(image):
-        raise ValueError(f"image: expected a real numeric array, got dtype {image.dtype}")
+        raise EstimatorInputError(f"image: expected a real numeric array, got dtype {image.dtype}")
     pixels = image.astype(np.float32, copy=False)
     if not np.all(np.isfinite(pixels)):
-        raise ValueError("image: expected finite pixel values, got NaN or inf")
+        raise EstimatorInputError("image: expected finite pixel values, got NaN or inf")
     spectrum = scipy.fft.rfft2(pixels, workers=1)
     _whiten(spectrum)
     return ImageSpectrum(spectrum, (int(image.shape[0]), int(image.shape[1])))
@@ -228,7 +231,7 @@ def phase_correlate(
     """
     first, second = _as_spectrum(reference), _as_spectrum(moving)
     if first.shape != second.shape:
-        raise ValueError(
+        raise EstimatorInputError(
             f"reference and moving: expected equal shapes, got {first.shape} and {second.shape}"
         )
     shape = first.shape

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError
+
 
 @dataclass(frozen=True)
 class PoseGraphCorrelation:
@@ -55,7 +57,7 @@ def _vector(value: ArrayLike, name: str) -> NDArray[np.float64]:
     except (TypeError, ValueError):
         vector = np.empty(0)
     if vector.shape != (2,) or not np.all(np.isfinite(vector)):
-        raise ValueError(f"{name}: expected 2 finite numbers (x [m], y [m]), got {value!r}")
+        raise ConfigError(f"{name}: expected 2 finite numbers (x [m], y [m]), got {value!r}")
     return vector
 
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError
+
 #: Default image side [px]: the paper's default 400 x 400.
 DEFAULT_SIZE = 400
 #: Default resolution [m/px] of :func:`points_to_image`: a 10 m range across 200 px.
@@ -35,13 +37,13 @@ MIN_PIXEL_VALUE = 64
 def check_image_size(size: int) -> None:
     """Raise unless ``size`` [px] is a positive even integer."""
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= 0 or size % 2:
-        raise ValueError(f"size: expected a positive even integer [px], got {size!r}")
+        raise ConfigError(f"size: expected a positive even integer [px], got {size!r}")
 
 
 def _check_resolution(resolution: float) -> float:
     resolution = float(resolution)
     if not np.isfinite(resolution) or resolution <= 0:
-        raise ValueError(f"resolution: expected a positive finite number [m/px], got {resolution}")
+        raise ConfigError(f"resolution: expected a positive finite number [m/px], got {resolution}")
     return resolution
 
 
@@ -53,19 +55,19 @@ def check_image_geometry(size: int, resolution: float | None, max_range: float) 
     """
     check_image_size(size)
     if not np.isfinite(max_range) or max_range <= 0:
-        raise ValueError(f"max_range: expected a positive finite number [m], got {max_range!r}")
+        raise ConfigError(f"max_range: expected a positive finite number [m], got {max_range!r}")
     if resolution is None:
         return 2.0 * float(max_range) / int(size)
     resolution = _check_resolution(resolution)
     half_extent = resolution * int(size) / 2.0
     if half_extent < max_range:
-        raise ValueError(
+        raise ConfigError(
             f"resolution {resolution} m/px cannot hold max_range {max_range} m in a {size} px "
             f"image (it reaches only {half_extent:g} m from the centre): expected a resolution "
             f">= {2.0 * max_range / size:g} m/px"
         )
     if max_range / resolution < 2.0:
-        raise ValueError(
+        raise ConfigError(
             f"resolution {resolution} m/px is too coarse for max_range {max_range} m: expected "
             f"at most {max_range / 2.0:g} m/px so a scan spans more than 2 px"
         )
@@ -93,12 +95,13 @@ def scan_filter(
     ranges = np.asarray(ranges, dtype=np.float64)
     angles = np.asarray(beam_angles, dtype=np.float64)
     if ranges.ndim != 1 or ranges.shape != angles.shape or len(ranges) < 3:
-        raise ValueError(
+        raise EstimatorInputError(
             f"expected ranges and beam_angles of equal shape (n,), n >= 3; got {ranges.shape} "
             f"and {angles.shape}"
         )
     if not np.all(np.isfinite(ranges)) or np.any(ranges < 0):
-        raise ValueError("ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
+        raise EstimatorInputError(
+            "ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
     clipped = np.minimum(ranges, max_range)
     # np.roll's values, without its generality (a third of this function's time)
     before = np.concatenate((clipped[-1:], clipped[:-1]))
@@ -130,9 +133,9 @@ def points_to_image(
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     values = np.asarray(values)
     if values.shape != (len(points),):
-        raise ValueError(f"values: expected shape ({len(points)},), got {values.shape}")
+        raise EstimatorInputError(f"values: expected shape ({len(points)},), got {values.shape}")
     if values.size and (np.min(values) < 0 or np.max(values) > 255):
-        raise ValueError("values: expected pixel values in [0, 255] (uint8)")
+        raise EstimatorInputError("values: expected pixel values in [0, 255] (uint8)")
     check_image_size(size)
     resolution = _check_resolution(resolution)
     half = size // 2

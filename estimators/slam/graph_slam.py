@@ -48,7 +48,7 @@ from estimators.slam.outputs import SlamOutputs
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import optimize
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, relative
 
 
@@ -368,8 +368,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         correction of the keyframes can remove."""
         keyframe_poses = np.asarray(keyframe_poses, dtype=np.float64)
         if keyframe_poses.shape != (len(self.keyframes), 3):
-            raise ValueError(f"keyframe_poses: expected shape ({len(self.keyframes)}, 3), got "
-                             f"{keyframe_poses.shape}")
+            raise EstimatorInputError(f"keyframe_poses: expected shape ({len(self.keyframes)}, "
+                                      f"3), got {keyframe_poses.shape}")
         return blend_on_keyframes(
             keyframe_poses,
             np.array([k.odometry for k in self.keyframes]).reshape(-1, 3),

@@ -34,6 +34,7 @@ from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
 from estimators.matching.scan_matching import voxel_downsample
 from estimators.slam.place_grid import PlaceField, search_pyramid
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points, wrap_angle
 
 
@@ -46,7 +47,7 @@ def range_histogram(
     Default 40 bins over 20 m (0.5 m bins): coarser than a step between keyframes changes
     most ranges, finer than the layout of a room."""
     if n_bins < 1 or not max_range > 0:
-        raise ValueError(f"n_bins, max_range: expected >= 1 and > 0, got {n_bins}, {max_range}")
+        raise ConfigError(f"n_bins, max_range: expected >= 1 and > 0, got {n_bins}, {max_range}")
     ranges = np.hypot(points[:, 0], points[:, 1]) if len(points) else np.zeros(0)
     counts, _ = np.histogram(np.minimum(ranges, max_range), bins=n_bins, range=(0.0, max_range))
     total = counts.sum()
@@ -138,20 +139,20 @@ class LoopClosureParams:
                      "point_sigma", "ambiguity_distance", "effective_points", "search_range",
                      "loss_scale"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
         if self.max_normal_neighbours is not None and (
                 self.max_normal_neighbours < self.normal_neighbours):
-            raise ValueError("max_normal_neighbours: expected None or at least normal_neighbours "
+            raise ConfigError("max_normal_neighbours: expected None or at least normal_neighbours "
                              f"({self.normal_neighbours}), got {self.max_normal_neighbours}")
         if self.normal_neighbours < 3:
-            raise ValueError("normal_neighbours: expected an integer >= 3 (a line needs "
+            raise ConfigError("normal_neighbours: expected an integer >= 3 (a line needs "
                              f"neighbours), got {self.normal_neighbours}")
         if self.angular_window < 0 or self.coarse_factor < 0:
-            raise ValueError("angular_window and coarse_factor: expected values >= 0, got "
+            raise ConfigError("angular_window and coarse_factor: expected values >= 0, got "
                              f"{self.angular_window}, {self.coarse_factor}")
         for name in ("min_quality", "min_score", "ambiguity_ratio"):
             if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name}: expected a share in [0, 1], got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a share in [0, 1], got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -183,7 +184,8 @@ class PlaceMap:
     def __init__(self, points: ArrayLike, params: LoopClosureParams) -> None:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
-            raise ValueError(f"reference points: expected shape (N >= 3, 2), got {points.shape}")
+            raise EstimatorInputError(
+                f"reference points: expected shape (N >= 3, 2), got {points.shape}")
         thinned = voxel_downsample(points, params.resolution)
         if len(thinned) < 3:
             thinned = points
@@ -282,12 +284,12 @@ def verify_loop(
     """
     query = np.asarray(query_points, dtype=np.float64)
     if query.ndim != 2 or query.shape[1] != 2:
-        raise ValueError(f"query points: expected shape (M, 2), got {query.shape}")
+        raise EstimatorInputError(f"query points: expected shape (M, 2), got {query.shape}")
     guess = np.asarray(guess, dtype=np.float64)
     if guess.shape != (3,) or not np.all(np.isfinite(guess)):
-        raise ValueError(f"guess: expected a finite pose (x, y, heading), got {guess}")
+        raise EstimatorInputError(f"guess: expected a finite pose (x, y, heading), got {guess}")
     if not linear_window >= 0:
-        raise ValueError(f"linear_window: expected a distance >= 0 [m], got {linear_window}")
+        raise ConfigError(f"linear_window: expected a distance >= 0 [m], got {linear_window}")
     nothing = np.zeros((3, 3))
     if len(query) < 10:
         return LoopVerification(False, f"too few query points ({len(query)} < 10)", guess,

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.branch_and_bound import GridPyramid, search_headings
 from estimators.matching.scan_matching import LikelihoodField
+from lidar_env.errors import ConfigError, EstimatorInputError
 
 FloatArray = NDArray[np.float64]
 
@@ -104,9 +105,9 @@ class PlaceField(LikelihoodField):
     def __init__(self, points: FloatArray, resolution: float = 0.05, sigma: float = 0.1,
                  margin: float = 1.0) -> None:
         if len(points) == 0:
-            raise ValueError("points: expected at least one reference point, got none")
+            raise EstimatorInputError("points: expected at least one reference point, got none")
         if resolution <= 0 or sigma <= 0:
-            raise ValueError(
+            raise ConfigError(
                 f"resolution and sigma: expected positive [m], got {resolution}, {sigma}")
         self.resolution = resolution
         self.origin = points.min(axis=0) - margin

@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.errors import ConfigError, EstimatorInputError, UnknownNameError
 from lidar_env.se2 import compose, inverse
 
 Loss = Literal["linear", "huber", "cauchy"]
@@ -103,7 +103,8 @@ class PoseGraph:
         n = len(self._ids)
         for name, index in (("i", i), ("j", j)):
             if not 0 <= int(index) < n:
-                raise IndexError(f"edge node {name}={index}: expected a node index in [0, {n})")
+                raise EstimatorInputError(
+                    f"edge node {name}={index}: expected a node index in [0, {n})")
         if int(i) == int(j):
             raise EstimatorInputError(f"edge {i}->{j}: expected two different nodes")
         z = np.asarray(measurement, dtype=np.float64)
@@ -167,7 +168,7 @@ class PoseGraph:
         try:
             return self._index_of[int(node_id)]
         except KeyError:
-            raise KeyError(f"no node with id {node_id} in the graph") from None
+            raise UnknownNameError(f"no node with id {node_id} in the graph") from None
 
     @property
     def edges(self) -> NDArray[np.int64]:

@@ -160,7 +160,7 @@ def optimize(
     if graph.n_nodes == 0:
         raise EstimatorInputError("pose graph is empty: expected at least one node")
     if not 0 <= fixed < graph.n_nodes:
-        raise IndexError(f"fixed={fixed}: expected a node index in [0, {graph.n_nodes})")
+        raise EstimatorInputError(f"fixed={fixed}: expected a node index in [0, {graph.n_nodes})")
     graph.check_connected()
     if robust_edges is not None:
         robust_edges = np.asarray(robust_edges, dtype=bool)

@@ -9,6 +9,7 @@ from estimators.paths import SHARED_DATA
 from estimators.slam.g2o import read_g2o
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _WhitenedProblem, optimize
+from lidar_env.errors import EstimatorInputError
 from lidar_env.se2 import compose, relative, wrap_angle
 
 DATA = SHARED_DATA / "g2o"
@@ -117,7 +118,7 @@ def test_bad_arguments_are_named() -> None:
         optimize(graph, solver="gn")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="positive-definite"):
         graph.add_edge(0, 2, [0, 0, 0], np.diag([1.0, -1.0, 1.0]))
-    with pytest.raises(IndexError, match=r"expected a node index in \[0, 8\)"):
+    with pytest.raises(EstimatorInputError, match=r"expected a node index in \[0, 8\)"):
         graph.add_edge(0, 8, [0, 0, 0], INFO)
     with pytest.raises(ValueError, match="two different nodes"):
         graph.add_edge(1, 1, [0, 0, 0], INFO)
