@@ -26,6 +26,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from lidar_env.errors import ConfigError, EstimatorInputError
+
 #: Points per leaf of the tree: about what a few cache lines hold.
 LEAF_SIZE = 8
 STACK = 128  # depth bound of a search: a median-split tree of n points is log2(n) deep
@@ -286,7 +288,8 @@ class PointIndex:
     def __init__(self, points: ArrayLike) -> None:
         self.points = np.ascontiguousarray(points, dtype=np.float64)
         if self.points.ndim != 2 or self.points.shape[1] != 2 or len(self.points) == 0:
-            raise ValueError(f"points: expected shape (N >= 1, 2), got {self.points.shape}")
+            raise EstimatorInputError(
+                f"points: expected shape (N >= 1, 2), got {self.points.shape}")
         self.n = len(self.points)
         self.arrays = _build(self.points)
 
@@ -298,9 +301,9 @@ class PointIndex:
         ``(M, k)`` otherwise; ``inf`` and ``N`` where there is none, as ``cKDTree.query``.
         Equally distant points are ranked by index."""
         if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
-            raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
+            raise ConfigError(f"k: expected a positive number of neighbours, got {k!r}")
         if not distance_upper_bound > 0:
-            raise ValueError("distance_upper_bound: expected a positive pairing distance "
+            raise ConfigError("distance_upper_bound: expected a positive pairing distance "
                              f"[m], got {distance_upper_bound}")
         queries = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 2)
         distances, index = _nearest(*self.arrays, queries, k, float(distance_upper_bound))

@@ -22,6 +22,7 @@ from estimators.matching.scan_matching import (
     estimate_normals,
     fit_local_curves,
 )
+from lidar_env.errors import EstimatorInputError, UnknownNameError
 
 #: Robust losses by name: weight of a residual r at scale c (IRLS weights).
 LOSSES: tuple[str, ...] = ("cauchy", "huber", "squared")
@@ -36,7 +37,7 @@ def robust_weights(residuals: NDArray[np.float64], loss: str, scale: float) -> N
         return np.where(magnitude <= scale, 1.0, scale / np.maximum(magnitude, 1e-12))
     if loss == "squared":
         return np.ones_like(residuals)
-    raise ValueError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
+    raise UnknownNameError(f"unknown loss {loss!r}: expected one of {', '.join(LOSSES)}")
 
 
 def point_to_line_jacobian(
@@ -135,7 +136,7 @@ class PointToLineReference:
     ) -> None:
         self.points = np.asarray(points, dtype=np.float64)
         if self.points.ndim != 2 or self.points.shape[1] != 2 or len(self.points) < 2:
-            raise ValueError(
+            raise EstimatorInputError(
                 f"reference points: expected shape (N >= 2, 2), got {self.points.shape}"
             )
         self.search_tree = PointIndex(self.points)
@@ -147,7 +148,7 @@ class PointToLineReference:
         )
         self.anchors = self.points if anchors is None else np.asarray(anchors, dtype=np.float64)
         if self.anchors.shape != self.points.shape:
-            raise ValueError(
+            raise EstimatorInputError(
                 f"anchors: expected the points' shape {self.points.shape}, got "
                 f"{self.anchors.shape}"
             )

@@ -22,6 +22,7 @@ from scipy.spatial import cKDTree
 from estimators.base import SensorSetup
 from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import curve_points, line_fits
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points, wrap_angle
 
 #: Readings at or below this [m] are treated as "no return" (CARMEN logs write 0 for none).
@@ -43,7 +44,7 @@ def scan_to_points(
     ranges = np.asarray(ranges, dtype=np.float64)
     angles = np.asarray(angles, dtype=np.float64)
     if ranges.shape != angles.shape or ranges.ndim != 1:
-        raise ValueError(
+        raise EstimatorInputError(
             f"ranges and angles: expected equal 1-D shapes, got {ranges.shape}, {angles.shape}"
         )
     hit = (ranges < max_range) & (ranges > min_range)
@@ -100,7 +101,7 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float,
     ``compiled`` finds the first points with :func:`first_in_each_cell`, else with
     ``np.unique`` (the same points; the tests' reference)."""
     if voxel_size <= 0:
-        raise ValueError(f"voxel_size: expected a positive size [m], got {voxel_size}")
+        raise ConfigError(f"voxel_size: expected a positive size [m], got {voxel_size}")
     if compiled:
         return points[first_in_each_cell(np.ascontiguousarray(points, np.float64), voxel_size)]
     cells = np.floor(points / voxel_size).astype(np.int64)
@@ -294,9 +295,9 @@ class LikelihoodField:
         margin: float = 1.0,
     ) -> None:
         if len(points) == 0:
-            raise ValueError("points: expected at least one reference point, got none")
+            raise EstimatorInputError("points: expected at least one reference point, got none")
         if resolution <= 0 or sigma <= 0:
-            raise ValueError(
+            raise ConfigError(
                 f"resolution and sigma: expected positive [m], got {resolution}, {sigma}"
             )
         self.resolution = resolution

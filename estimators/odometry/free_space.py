@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, transform_points
 
 _TWO_PI = 2.0 * math.pi
@@ -156,8 +157,9 @@ class BeamGeometry:
 
     def __init__(self, beam_angles: Sequence[ArrayLike], max_ranges: Sequence[float]) -> None:
         if len(beam_angles) != len(max_ranges) or not beam_angles:
-            raise ValueError(f"beam_angles, max_ranges: expected one per sensor (>= 1), got "
-                             f"{len(beam_angles)} and {len(max_ranges)}")
+            raise EstimatorInputError(
+                f"beam_angles, max_ranges: expected one per sensor (>= 1), got "
+                f"{len(beam_angles)} and {len(max_ranges)}")
         relative, order, params = [], [], []
         for angles, max_range in zip(beam_angles, max_ranges, strict=True):
             angles = np.asarray(angles, dtype=np.float64).ravel()
@@ -189,13 +191,13 @@ class BeamGeometry:
         range arrays [m] in beam order."""
         poses = np.ascontiguousarray(sensor_poses, dtype=np.float64).reshape(-1, 3)
         if len(poses) != len(self.sizes) or len(scans) != len(self.sizes):
-            raise ValueError(f"sensor_poses, scans: expected {len(self.sizes)} (one per "
+            raise EstimatorInputError(f"sensor_poses, scans: expected {len(self.sizes)} (one per "
                              f"sensor), got {len(poses)} and {len(scans)}")
         if not (math.isfinite(margin) and margin >= 0):
-            raise ValueError(f"margin: expected a distance >= 0 [m], got {margin!r}")
+            raise ConfigError(f"margin: expected a distance >= 0 [m], got {margin!r}")
         ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel() for r in scans])
         if len(ranges) != self.starts[-1]:
-            raise ValueError(f"scans: expected {self.sizes} readings, got "
+            raise EstimatorInputError(f"scans: expected {self.sizes} readings, got "
                              f"{[np.size(r) for r in scans]}")
         return _seen_through_kernel(
             np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses, ranges,
