@@ -303,11 +303,17 @@ class LikelihoodField:
         self.resolution = resolution
         self.origin = points.min(axis=0) - margin
         shape = np.ceil((points.max(axis=0) + margin - self.origin) / resolution).astype(int) + 1
-        occupied = np.ones(tuple(shape), dtype=bool)
+        occupied = np.zeros(tuple(shape), dtype=bool)
         cells = np.floor((points - self.origin) / resolution).astype(int)
-        occupied[cells[:, 0], cells[:, 1]] = False
-        distance = ndimage.distance_transform_edt(occupied) * resolution
-        self.grid = np.exp(-0.5 * (distance / sigma) ** 2)
+        occupied[cells[:, 0], cells[:, 1]] = True
+        self.grid = self._scores(occupied, resolution, sigma)
+
+    @staticmethod
+    def _scores(occupied: NDArray[np.bool_], resolution: float,
+                sigma: float) -> NDArray[np.float64]:
+        """The grid's scores from its ``occupied`` cells (those holding a reference point)."""
+        distance = ndimage.distance_transform_edt(~occupied) * resolution
+        return np.exp(-0.5 * (distance / sigma) ** 2)
 
     def score(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Score of each point ``(..., 2)`` [m]; 0 outside the grid."""

@@ -26,7 +26,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.branch_and_bound import GridPyramid, search_headings
 from estimators.matching.scan_matching import LikelihoodField
-from lidar_env.errors import ConfigError, EstimatorInputError
 
 FloatArray = NDArray[np.float64]
 
@@ -86,7 +85,7 @@ def distance_scores(occupied: NDArray[np.bool_],
 
 
 @cache
-def _scores(resolution: float, sigma: float) -> FloatArray:
+def _score_table(resolution: float, sigma: float) -> FloatArray:
     """``exp(-d^2 / 2 sigma^2)`` for every squared distance ``0, 1, 2, ...`` [cells^2] up to
     the first that underflows to 0, by LikelihoodField's own expression (so bit for bit)."""
     count = int(np.ceil(1500.0 * (sigma / resolution) ** 2)) + 2  # exp(-750) is 0
@@ -102,20 +101,10 @@ class PlaceField(LikelihoodField):
     """:class:`~estimators.matching.scan_matching.LikelihoodField` of ``points`` (M >= 1, 2)
     [m] (same origin, shape and grid), its distances by :func:`distance_scores`."""
 
-    def __init__(self, points: FloatArray, resolution: float = 0.05, sigma: float = 0.1,
-                 margin: float = 1.0) -> None:
-        if len(points) == 0:
-            raise EstimatorInputError("points: expected at least one reference point, got none")
-        if resolution <= 0 or sigma <= 0:
-            raise ConfigError(
-                f"resolution and sigma: expected positive [m], got {resolution}, {sigma}")
-        self.resolution = resolution
-        self.origin = points.min(axis=0) - margin
-        shape = np.ceil((points.max(axis=0) + margin - self.origin) / resolution).astype(int) + 1
-        occupied = np.zeros(tuple(shape), dtype=bool)
-        cells = np.floor((points - self.origin) / resolution).astype(int)
-        occupied[cells[:, 0], cells[:, 1]] = True
-        self.grid = distance_scores(occupied, _scores(float(resolution), float(sigma)))
+    @staticmethod
+    def _scores(occupied: NDArray[np.bool_], resolution: float,
+                sigma: float) -> NDArray[np.float64]:
+        return distance_scores(occupied, _score_table(float(resolution), float(sigma)))
 
 
 def search_pyramid(field: LikelihoodField, levels: int, points: ArrayLike, center: ArrayLike,
