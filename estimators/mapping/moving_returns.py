@@ -28,8 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import SensorSetup
 from estimators.mapping.motion_tracking import MotionTracker, MovingTrack
-from estimators.mapping.obstacles import DetectorParams, Obstacle, detect_obstacles
-from estimators.mapping.occupancy import sensor_poses
+from estimators.mapping.obstacles import DetectorParams, Obstacle, detect_per_lidar
 from lidar_env.errors import EstimatorInputError
 
 #: [m] how far outside a moving track's circle the points of an untracked detection may lie
@@ -70,21 +69,16 @@ class MovingReturns:
                t: float) -> MovingStep:
         """Detect the obstacles of one observation (scans keyed by ``setup.keys``) taken at the
         (estimated) car pose ``car_pose`` (3,) at time ``t`` [s], track them, and label them."""
-        scans = self.setup.check_observation(observation)
-        obstacles: list[Obstacle] = []
-        owners: list[str] = []
-        poses = sensor_poses(car_pose, self.setup)[0]
-        for key, sensor, pose in zip(self.setup.keys, self.setup.sensors, poses, strict=True):
-            found = detect_obstacles(scans[key], sensor.beam_angles, pose, sensor.max_range,
-                                     self.params)
-            obstacles += found
-            owners += [key] * len(found)
+        per_lidar = detect_per_lidar(observation, car_pose, self.setup, self.params)
+        obstacles = [obstacle for found in per_lidar.values() for obstacle in found]
+        owners = [key for key, found in per_lidar.items() for _ in found]
         ids = self.tracker.update(obstacles, t)
         movers = self.tracker.moving_tracks()
         moving_ids = {track.id for track in movers}
         moving = np.array([i in moving_ids or (i is None and _on_a_mover(o, movers))
                            for i, o in zip(ids, obstacles, strict=True)], dtype=np.bool_)
-        beams = {key: np.zeros(len(scans[key]), dtype=np.bool_) for key in self.setup.keys}
+        beams = {key: np.zeros(len(sensor.beam_angles), dtype=np.bool_)
+                 for key, sensor in zip(self.setup.keys, self.setup.sensors, strict=True)}
         for obstacle, key, on_mover in zip(obstacles, owners, moving, strict=True):
             if on_mover:
                 beams[key][obstacle.beams] = True

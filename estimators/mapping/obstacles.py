@@ -312,9 +312,18 @@ def detect_in_observation(
 ) -> list[Obstacle]:
     """The obstacles in every scan of one env observation (keyed by ``setup.keys``) taken at
     the (estimated) car pose ``car_pose`` (3,), each Lidar at car pose ⊕ its mount."""
+    return [obstacle for found in detect_per_lidar(observation, car_pose, setup, params).values()
+            for obstacle in found]
+
+
+def detect_per_lidar(
+    observation: Mapping[str, ArrayLike],
+    car_pose: ArrayLike,
+    setup: SensorSetup,
+    params: DetectorParams | None = None,
+) -> dict[str, list[Obstacle]]:
+    """:func:`detect_in_observation`, the obstacles of each Lidar's scan by its key."""
     scans = setup.check_observation(observation)
-    obstacles = []
-    for key, pose in zip(setup.keys, sensor_poses(car_pose, setup)[0], strict=True):
-        obstacles += detect_obstacles(scans[key], setup.beam_angles, pose, setup.max_range,
-                                      params)
-    return obstacles
+    return {key: detect_obstacles(scans[key], sensor.beam_angles, pose, sensor.max_range, params)
+            for key, sensor, pose in zip(setup.keys, setup.sensors,
+                                         sensor_poses(car_pose, setup)[0], strict=True)}
