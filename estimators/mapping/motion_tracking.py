@@ -121,7 +121,7 @@ class MotionTracker:
         for name in ("gate", "merge_distance", "measurement_sigma", "acceleration_sigma",
                      "initial_speed_sigma", "moving_speed", "max_age", "maneuver_gate"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and not math.isnan(value) and value > 0
+            if not (isinstance(value, int | float) and value > 0  # NaN fails it too
                     and (math.isfinite(value) or name == "maneuver_gate")):
                 raise ConfigError(f"{name}: expected a positive number, got {value!r}")
         if not isinstance(self.min_hits, int) or self.min_hits < 1:
