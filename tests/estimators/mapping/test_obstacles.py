@@ -217,3 +217,25 @@ def test_bad_parameters_are_readable_errors():
         ObstacleTracker(surface_gate=-1.0)
     with pytest.raises(ValueError, match="sensor_pose: expected 3 finite numbers"):
         detect_obstacles(np.ones(360), ANGLES, [0.0, 0.0], MAX_RANGE)
+
+
+def test_each_lidar_detects_with_its_own_beams_and_range() -> None:
+    from estimators.base import Sensor, SensorSetup
+    from estimators.mapping.obstacles import detect_in_observation, detect_per_lidar
+
+    world = World(circles=[(3.0, 0.5, 0.3), (-2.5, -1.0, 0.25)])
+    front = Sensor(np.array([0.3, 0.0, 0.0]), default_beam_angles(360), 10.0, 0)
+    rear = Sensor(np.array([-0.3, 0.0, np.pi]), np.linspace(-1.5, 1.5, 241), 6.0, 1)
+    setup = SensorSetup(sensors=(front, rear))  # two beam geometries: not a uniform setup
+    observation = {key: cast_rays(world, sensor.mount, sensor.beam_angles, sensor.max_range)[0]
+                   for key, sensor in zip(setup.keys, setup.sensors, strict=True)}
+    per_lidar = detect_per_lidar(observation, np.zeros(3), setup)
+    assert list(per_lidar) == ["lidar_1", "lidar_2"]
+    for found, sensor in zip(per_lidar.values(), setup.sensors, strict=True):
+        assert all(o.beams.max() < len(sensor.beam_angles) for o in found)
+    centres = sorted(tuple(np.round(o.circle.centre, 2)) for found in per_lidar.values()
+                     for o in found if o.circle is not None)
+    assert (-2.5, -1.0) in centres and (3.0, 0.5) in centres
+    both = detect_in_observation(observation, np.zeros(3), setup)
+    assert [o.centroid.tolist() for o in both] == [
+        o.centroid.tolist() for found in per_lidar.values() for o in found]
