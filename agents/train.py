@@ -18,8 +18,8 @@ The training envs are stepped batched (``--vectorization batched``: the batched
 ``DualLidar-v0`` through :class:`agents.vec_adapter.TraceFollowingVecEnv`) or one by one
 (``single``: SB3's ``DummyVecEnv`` over wrapped single envs); both give the same observations
 and rewards, so the same seed trains the same model. The default, ``auto``, steps them batched
-unless the env config holds something the batched env does not simulate yet (moving
-obstacles); see the README for the wall times of both.
+(moving obstacles included) unless the env config holds something the batched env does not
+simulate yet (a self-occluded Lidar); see the README for the wall times of both.
 """
 
 from __future__ import annotations

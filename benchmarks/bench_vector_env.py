@@ -13,10 +13,16 @@ Prints, in one run on this machine:
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
+``--moving-obstacles M`` (and ``--mover-model``) runs every figure with M pedestrians per env
+(``config["moving_obstacles"]``) and adds the batched env without them at the largest N, so the
+difference is the crowd's cost (the movers' step, the car's collision checks among them, their
+circles in the scans).
+
 Targets (issue 21): >= 200,000 env steps/s at N = 256 on this 2-core machine, and >= 5x
 ``SyncVectorEnv``.
 
-Run: ``python benchmarks/bench_vector_env.py [--seconds 2] [--sizes 1 16 64 256]``
+Run: ``python benchmarks/bench_vector_env.py [--seconds 2] [--sizes 1 16 64 256]
+[--moving-obstacles 10] [--mover-model yielding|waypoints]``
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 
 import lidar_env  # registers DualLidar-v0
+from lidar_env.config import MOVER_MODELS
 from lidar_env.world import World
 
 TARGET_STEPS_PER_SECOND = 200_000
@@ -46,10 +53,14 @@ EMPTY_WORLD = {"world": World(np.empty((0, 3)), np.empty((0, 4)), bounds=(0.0, 0
                "trace": np.array([[5.0, 30.0], [55.0, 30.0]])}
 
 
+#: Config keys every env of the run gets (the movers of ``--moving-obstacles``).
+BASE: dict[str, Any] = {}
+
+
 def make(mode: str, num_envs: int, config: dict[str, Any] | None = None,
          **kwargs: Any) -> gym.vector.VectorEnv:
     return gym.make_vec("DualLidar-v0", num_envs=num_envs, vectorization_mode=mode,
-                        config=config or {}, **kwargs)
+                        config={**BASE, **(config or {})}, **kwargs)
 
 
 def cpu_steps_per_second(env: gym.vector.VectorEnv, seconds: float, seed: int = 0) -> float:
@@ -97,14 +108,22 @@ def traced_bytes_per_env(mode: str, num_envs: int) -> float:
 def own_bytes_per_env(env: Any) -> float:
     """Bytes of the batched env's per-env state arrays and scenes (each shared scene once), / N."""
     arrays = [value for value in vars(env).values() if isinstance(value, np.ndarray)]
-    return (sum(a.nbytes for a in arrays) + env._slots.nbytes()) / env.num_envs
+    return (sum(a.nbytes for a in arrays) + env._slots.nbytes() + env._crowds.nbytes()
+            ) / env.num_envs
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="CPU seconds per figure")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 16, 64, 256])
+    parser.add_argument("--moving-obstacles", type=int, default=0, help="movers per env")
+    parser.add_argument("--mover-model", choices=MOVER_MODELS,
+                        default="yielding")
     args = parser.parse_args(argv)
+    BASE.clear()
+    if args.moving_obstacles:
+        BASE.update(moving_obstacles=args.moving_obstacles, mover_model=args.mover_model)
+        print(f"every env: {args.moving_obstacles} {args.mover_model} moving obstacles")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"{platform.python_implementation()} {platform.python_version()}, "
           f"gymnasium {gym.__version__}")
@@ -132,6 +151,11 @@ def main(argv: list[str] | None = None) -> None:
           "directions, grid bounds, readings)\n"
           f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
+    if BASE:
+        still = cpu_steps_per_second(make("vector_entry_point", n, {"moving_obstacles": 0}),
+                                     args.seconds)
+        print(f"  of which the crowd: {full_us - 1e6 / still:5.2f} (without movers: {still:,.0f}"
+              " steps/s)")
     env = make("vector_entry_point", n)
     env.reset(seed=0)
     print(f"\nmemory per env at N = {n}: batched env arrays {own_bytes_per_env(env.unwrapped):,.0f}"

@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.config import MOVER_MODELS
@@ -45,7 +46,7 @@ from lidar_env.mover_kernels import WAYPOINT_REACH, advance_crowd, place_movers
 from lidar_env.world import World
 
 __all__ = ["CAR_CIRCLES", "SPAWN_TRIES", "WAYPOINT_REACH", "WAYPOINT_TRIES", "Crowd",
-           "car_circles"]
+           "car_circle_radius", "car_circles", "fill_car_circles"]
 
 #: Circles along the car's axis that together cover its box (for "yielding" movers).
 CAR_CIRCLES = 3
@@ -70,18 +71,37 @@ def car_circles(
 
     The centres sit on the axis ``2 s`` apart with ``s = half_length / CAR_CIRCLES`` (the end
     ones ``s`` from the box's ends), so each covers a ``2 s`` slice of the box with radius
-    ``hypot(s, half_width)``: the union holds the whole box.
+    ``hypot(s, half_width)`` (:func:`car_circle_radius`): the union holds the whole box.
     """
     x, y, heading = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
-    c, s = math.cos(heading), math.sin(heading)  # scalar maths: this runs every env step
+    out = np.empty((CAR_CIRCLES, 5))
+    fill_car_circles(x, y, heading, half_length, half_width,
+                     car_circle_radius(half_length, half_width), speed, yaw_rate, out)
+    return out
+
+
+def car_circle_radius(half_length: float, half_width: float) -> float:
+    """[m] radius of each of :func:`car_circles`' circles (Python's ``math.hypot``, which
+    rounds differently from numba's: computed here, outside the kernels, for both envs)."""
+    return math.hypot(half_length / CAR_CIRCLES, half_width)
+
+
+@njit(cache=True, fastmath=False)
+def fill_car_circles(x: float, y: float, heading: float, half_length: float, half_width: float,
+                     radius: float, speed: float, yaw_rate: float,
+                     out: NDArray[np.float64]) -> None:
+    """:func:`car_circles` into ``out`` (CAR_CIRCLES, 5), compiled: the single env calls it
+    through :func:`car_circles`, the batched env (:mod:`lidar_env.vector.kernel`) inside its
+    step."""
+    c, s = math.cos(heading), math.sin(heading)
     half_slice = half_length / CAR_CIRCLES
-    radius = math.hypot(half_slice, half_width)
-    rows = []
     for k in range(CAR_CIRCLES):
         offset = half_slice * (2 * k - (CAR_CIRCLES - 1))
-        rows.append((x + offset * c, y + offset * s, speed * c - yaw_rate * offset * s,
-                     speed * s + yaw_rate * offset * c, radius))
-    return np.array(rows, dtype=np.float64)
+        out[k, 0] = x + offset * c
+        out[k, 1] = y + offset * s
+        out[k, 2] = speed * c - yaw_rate * offset * s
+        out[k, 3] = speed * s + yaw_rate * offset * c
+        out[k, 4] = radius
 
 
 class Crowd:
@@ -158,9 +178,17 @@ class Crowd:
         waiting = int(np.count_nonzero(self._needs))
         draws = rng.random((waiting, WAYPOINT_TRIES, 2)) if waiting else _NO_DRAWS
         seen = _NO_CAR if car is None or self.model == "waypoints" else car
-        advance_crowd(self.positions, self.velocities, self.waypoints, self.speeds, self._stuck,
-                      self._needs, draws, self.radius, float(dt), self._bounds, world.circles,
-                      world.segments, world.grid, seen)
+        advance_crowd(*self.arrays[:6], draws, self.radius, float(dt), self._bounds,
+                      world.circles, world.segments, world.grid, seen)
+
+    @property
+    def arrays(self) -> tuple[NDArray, ...]:
+        """``(positions, velocities, waypoints, speeds, stuck, needs, bounds)``: the state
+        :func:`~lidar_env.mover_kernels.advance_crowd` advances (the crowd's own arrays, not
+        copies; ``stuck`` counts stuck steps, ``needs`` marks the movers that need a new
+        waypoint, ``bounds`` (4,) is the world's xmin, ymin, xmax, ymax [m])."""
+        return (self.positions, self.velocities, self.waypoints, self.speeds, self._stuck,
+                self._needs, self._bounds)
 
     @property
     def circles(self) -> NDArray[np.float64]:

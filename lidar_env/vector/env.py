@@ -20,6 +20,7 @@ from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.errors import ConfigError
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.trace_geometry import Trace, project_onto_polyline
+from lidar_env.vector.crowds import CrowdSlots
 from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_envs
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.world import World
@@ -33,10 +34,6 @@ Observation = dict[str, NDArray[np.float32]]
 
 def not_batched(config: EnvConfig) -> str | None:
     """Why the batched env cannot run ``config`` yet (the ConfigError it raises), or None."""
-    movers = getattr(config, "moving_obstacles", 0)
-    if movers:
-        return (f"moving_obstacles: not batched yet; the batched env expected 0, got {movers!r}; "
-                "use vectorization_mode='sync' for moving obstacles")
     occluded = [k for k, lidar in enumerate(config.lidars) if lidar.self_occlusion]
     if occluded:
         return (f"lidars[{occluded[0]}].self_occlusion: not batched yet; the batched env "
@@ -66,8 +63,11 @@ class DualLidarVectorEnv(VectorEnv):
     Differences from ``SyncVectorEnv``: a bad action (wrong shape, NaN or inf in the action of
     a sub-env that steps) raises a ``ConfigError`` before any sub-env moves, where
     ``SyncVectorEnv`` has stepped the sub-envs before the bad one; what is not batched yet is
-    refused by name with a ``ConfigError`` (rendering: ``render_mode`` must be None; moving
-    obstacles: ``config["moving_obstacles"]`` must be 0).
+    refused by name with a ``ConfigError`` (rendering: ``render_mode`` must be None;
+    self-occluded Lidars). Moving obstacles (``config["moving_obstacles"]``) are batched: each
+    sub-env's crowd steps inside the same call, drawing its waypoints from the sub-env's
+    generator before its scans, as the single env does; ``info["moving_obstacles"]`` is
+    ``(num_envs, M, 5)``.
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -91,7 +91,7 @@ class DualLidarVectorEnv(VectorEnv):
         reason = not_batched(single.config)
         if reason is not None:
             raise ConfigError(reason)
-        # the single env reports its movers (none here) in every info once it has them
+        # the single env reports its movers (maybe none) in every info once it has them
         self._mover_info = hasattr(single.config, "moving_obstacles")
         self.num_envs = int(num_envs)
         self.render_mode = None
@@ -141,6 +141,7 @@ class DualLidarVectorEnv(VectorEnv):
             MAX_STEP_FRACTION * 2.0 * min(car.half_length, car.half_width)], dtype=np.float64)
         self._speed, self._yaw_rate = np.zeros(n), np.zeros(n)
         self._checks = np.ones(n, dtype=np.int64)
+        self._crowds = CrowdSlots(n, cfg, self._car.half_length, self._car.half_width)
 
     @property
     def worlds(self) -> list[World | None]:
@@ -211,6 +212,7 @@ class DualLidarVectorEnv(VectorEnv):
         scene = self._scenes.for_episode(checked, self._world_arg, self._trace_arg, self.config,
                                          rng)
         slots.set(i, scene.world, scene.trace)
+        self._crowds.spawn(i, scene.world, scene.trace, rng)
         trace = scene.trace
         self._pose[i] = trace.start_pose
         self._time[i] = 0.0
@@ -223,7 +225,8 @@ class DualLidarVectorEnv(VectorEnv):
     def _observe(self, envs: NDArray[np.int64]) -> None:
         if len(envs):
             self._observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
-                               self._slots.scene, self._slots.rngs, self._sensors, self._work())
+                               self._slots.scene, self._slots.rngs, self._sensors, self._work(),
+                               self._crowds.kernel)
 
     def _work(self) -> tuple:
         """The kernels' scratch: ``(sensor poses (K, 3), draws (2 total beams,), circle and
@@ -258,7 +261,8 @@ class DualLidarVectorEnv(VectorEnv):
                      self._collision, self._scans)
             outcome = (self._rewards, self._terminations, self._truncations)
             self._step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
-                            self._slots.rngs, self._sensors, self._work(), self._constants)
+                            self._slots.rngs, self._sensors, self._work(), self._constants,
+                            self._crowds.kernel)
         self._autoreset_envs = self._terminations | self._truncations
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), self._infos(None))
@@ -276,8 +280,9 @@ class DualLidarVectorEnv(VectorEnv):
         if a.shape != (self.num_envs, 2):
             raise ConfigError(f"{expected}, got shape {a.shape}")
         cfg = self.config
+        other = self._crowds.max_speed
         code = self._plan_motion(a, stepping, self._limits, cfg.physics_substeps, MAX_SUBSTEPS,
-                                 self._speed, self._yaw_rate, self._checks)
+                                 other, self._speed, self._yaw_rate, self._checks)
         if code <= -2:
             row = -2 - code
             raise ConfigError(f"actions[{row}]: expected finite values in [-1, 1], got "
@@ -285,7 +290,8 @@ class DualLidarVectorEnv(VectorEnv):
         if code >= 0:  # the single car's own check words the error
             speed = min(max(float(a[code, 0]), -1.0), 1.0) * cfg.max_speed
             yaw_rate = min(max(float(a[code, 1]), -1.0), 1.0) * cfg.max_yaw_rate
-            self._car.substeps_for(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps)
+            self._car.substeps_for(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
+                                   float(other[code]))
         return self._speed, self._yaw_rate, self._checks
 
     # ------------------------------------------------------------------ outputs
@@ -306,8 +312,8 @@ class DualLidarVectorEnv(VectorEnv):
             else:
                 array[~mask] = 0
                 infos[key], infos[f"_{key}"] = array, mask.copy()
-        if self._mover_info:  # x, y, radius, vx, vy of each of no movers
+        if self._mover_info:  # x, y, vx, vy, radius of each mover
             present = np.ones(self.num_envs, np.bool_) if mask is None else mask.copy()
-            infos["moving_obstacles"] = np.zeros((self.num_envs, 0, 5))
+            infos["moving_obstacles"] = self._crowds.state(mask)
             infos["_moving_obstacles"] = present
         return infos

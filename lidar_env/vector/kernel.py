@@ -7,9 +7,12 @@ is the single env's own compiled functions, called in its order: :func:`lidar_en
 for the motion and collision, :func:`lidar_env.trace_geometry.project_onto_polyline` for the
 progress, :func:`lidar_env.car.mount_poses` and
 :func:`lidar_env.layout_kernels.cast_packed` and :func:`~lidar_env.layout_kernels.readings`
-for the scans. Each env draws its noise from
-its own ``numpy.random.Generator`` inside the kernel (numba draws bit-identically to numpy and
-advances the same state), so an env's stream is the one a single env seeded alike would use.
+for the scans; with moving obstacles, :func:`lidar_env.mover_kernels.advance_crowd` for the
+crowd (its waypoint draws first), :func:`lidar_env.movers.fill_car_circles` for the car as
+yielding movers see it and :func:`lidar_env.car.drive_arc_among_movers` for the car among
+them. Each env draws its noise (and its movers' waypoints) from its own
+``numpy.random.Generator`` inside the kernel (numba draws bit-identically to numpy and advances
+the same state), so an env's stream is the one a single env seeded alike would use.
 
 Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world frame.
 """
@@ -24,8 +27,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from lidar_env.car import drive_arc, mount_poses
+from lidar_env.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.layout_kernels import cast_packed, readings
+from lidar_env.mover_kernels import advance_crowd
+from lidar_env.movers import WAYPOINT_TRIES, fill_car_circles
 from lidar_env.primitive_grid import segment_distance2
 from lidar_env.trace_geometry import project_onto_polyline
 
@@ -45,6 +50,7 @@ def observe_envs(
     rngs: object,
     sensors: tuple,
     work: tuple,
+    crowd: tuple,
 ) -> None:
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
@@ -54,8 +60,9 @@ def observe_envs(
     N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.layout_kernels.cast_packed` takes them;
     ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
-    allocated per env). Draws per env: a standard normal per beam if any Lidar is noisy, then
-    a uniform per beam if any drops out (the order of
+    allocated per env); ``crowd`` :attr:`lidar_env.vector.crowds.CrowdSlots.kernel`, whose
+    movers the Lidars see (none when M = 0). Draws per env: a standard normal per beam if any
+    Lidar is noisy, then a uniform per beam if any drops out (the order of
     :meth:`lidar_env.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws are
     the steps of its (and numpy's) array draws.
     """
@@ -66,7 +73,8 @@ def observe_envs(
     total, k = scans.shape[1], mounts.shape[0]
     gaussians = draws[:total] if noisy else draws[:0]
     uniforms = draws[total:2 * total] if dropping else draws[:0]
-    no_movers, no_car, no_facing = np.empty((0, 3)), np.empty(0), np.empty(0, dtype=np.int64)
+    no_car, no_facing = np.empty(0), np.empty(0, dtype=np.int64)
+    positions, radius, movers = crowd[0], crowd[7][0], crowd[8][0]
     if envs.shape[0] == 0:
         return
     last = envs[0]  # the env whose world items are held
@@ -79,13 +87,16 @@ def observe_envs(
         cast_from[:] = sensor_poses[i]
         if world_aligned:
             cast_from[:, 2] = 0.0  # beam i along world angle beam_angles[i]
+        for j in range(movers.shape[0]):  # Crowd.circles
+            movers[j, 0], movers[j, 1], movers[j, 2] = positions[i, j, 0], positions[i, j, 1], \
+                radius
         rng = rngs[i]
         for j in range(gaussians.shape[0]):
             gaussians[j] = rng.standard_normal()
         for j in range(uniforms.shape[0]):
             uniforms[j] = rng.random()
         exact = cast_packed(env_circles, env_segments, first_edge[i], env_grid, cast_from,
-                            beams, params, no_movers, no_car, (circle_seen, segment_seen),
+                            beams, params, movers, no_car, (circle_seen, segment_seen),
                             stamp[0], no_facing)
         stamp[0] += k
         readings(exact, params, gaussians, uniforms, scans[i])
@@ -135,6 +146,7 @@ def step_envs(
     sensors: tuple,
     work: tuple,
     constants: NDArray[np.float64],
+    crowd: tuple,
 ) -> None:
     """One control step of the cars of ``envs`` (the single env's ``step`` after its action
     check), in place.
@@ -142,14 +154,16 @@ def step_envs(
     ``speed`` [m/s], ``yaw_rate`` [rad/s] and ``checks`` (collision checks) are (N,) per env.
     ``state`` is ``(pose (N, 3), sensor_poses (N, K, 3), time (N,), arc (N,), cross_track
     (N,), collision (N,), scans (N, total))``; ``outcome`` ``(reward, terminated, truncated)``
-    (N,) each; ``scene``, ``rngs``, ``sensors`` and ``work`` as :func:`observe_envs` takes
-    them. ``constants``: control_dt [s], car half length and half width [m],
-    cross_track_penalty [1/s], collision_penalty, goal_tolerance [m], the truncation time
-    [s] (``max_episode_time - 1e-9``), the progress window [m].
+    (N,) each; ``scene``, ``rngs``, ``sensors``, ``work`` and ``crowd`` as
+    :func:`observe_envs` takes them (each env's crowd steps first, as in the single env).
+    ``constants``: control_dt [s], car half length and half width [m], cross_track_penalty
+    [1/s], collision_penalty, goal_tolerance [m], the truncation time [s]
+    (``max_episode_time - 1e-9``), the progress window [m].
     """
     pose, sensor_poses, time, arc, cross_track, collision, scans = state
     reward, terminated, truncated = outcome
-    circles, segments, waypoints, trace_arc = scene[0], scene[1], scene[4], scene[5]
+    circles, segments, grids, waypoints, trace_arc = scene[0], scene[1], scene[3], scene[4], \
+        scene[5]
     closed, length, world_key, trace_key = scene[6], scene[7], scene[8], scene[9]
     dt, half_length, half_width = constants[0], constants[1], constants[2]
     cross_penalty, collision_penalty, goal_tolerance = constants[3], constants[4], constants[5]
@@ -158,20 +172,27 @@ def step_envs(
     if envs.shape[0] == 0:
         return
     world, trace = envs[0], envs[0]  # the envs whose world and trace items are held
-    env_circles, env_segments = circles[world], segments[world]
+    env_circles, env_segments, env_grid = circles[world], segments[world], grids[world]
     env_waypoints, env_arc = waypoints[trace], trace_arc[trace]
     for i in envs:
         if world_key[i] != world_key[world]:
             world = i
-            env_circles, env_segments = circles[i], segments[i]
+            env_circles, env_segments, env_grid = circles[i], segments[i], grids[i]
         if trace_key[i] != trace_key[trace]:
             trace = i
             env_waypoints, env_arc = waypoints[i], trace_arc[i]
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(pose[i, 0], pose[i, 1], reach,
                                                        env_circles, env_segments, work[5], work[6])
-        hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length, half_width,
-                        near_circles, near_segments)
+        if crowd[0].shape[1] == 0:
+            hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
+                            half_width, near_circles, near_segments)
+        else:  # movers first (their waypoint draws), then the car among them
+            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd, rngs[i],
+                               env_circles, env_segments, env_grid)
+            hit = drive_arc_among_movers(pose[i], speed[i], yaw_rate[i], dt, checks[i],
+                                         half_length, half_width, near_circles, near_segments,
+                                         start, crowd[1][i])
         time[i] += dt
         previous = arc[i]
         position, error = project_onto_polyline(env_waypoints, env_arc, pose[i, 0],
@@ -186,7 +207,37 @@ def step_envs(
         done = hit or position >= length[i] - goal_tolerance
         terminated[i] = done
         truncated[i] = not done and time[i] >= time_limit
-    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors, work)
+    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors, work, crowd)
+
+
+@njit(cache=True)
+def step_crowd(
+    i: int, car_pose: NDArray[np.float64], half_length: float, half_width: float, dt: float,
+    crowd: tuple, rng: Any, circles: NDArray[np.float64], segments: NDArray[np.float64],
+    grid: Any,
+) -> NDArray[np.float64]:
+    """Env ``i``'s crowd (``crowd`` as :func:`step_envs` takes it) advanced by ``dt`` [s], as
+    :meth:`lidar_env.movers.Crowd.step` does, among the world's ``circles``, ``segments`` and
+    ``grid`` and (yielding movers) the car standing at ``car_pose``. Returns the movers'
+    circles (M, 3) [m] before the step (a view of the crowd's scratch)."""
+    positions, velocities, waypoints, speeds, stuck, needs, bounds, params, work = crowd
+    start, car, draws = work
+    radius = params[0]
+    for j in range(start.shape[0]):  # Crowd.circles, taken before the step
+        start[j, 0], start[j, 1], start[j, 2] = positions[i, j, 0], positions[i, j, 1], radius
+    if car.shape[0] > 0:  # car_circles of the standing car
+        fill_car_circles(car_pose[0], car_pose[1], car_pose[2], half_length, half_width,
+                         params[1], 0.0, 0.0, car)
+    waiting = 0
+    for j in range(needs.shape[1]):
+        waiting += needs[i, j]
+    chosen = draws[:waiting * WAYPOINT_TRIES * 2]
+    for j in range(chosen.shape[0]):  # rng.random((waiting, WAYPOINT_TRIES, 2)), in order
+        chosen[j] = rng.random()
+    advance_crowd(positions[i], velocities[i], waypoints[i], speeds[i], stuck[i], needs[i],
+                  chosen.reshape((waiting, WAYPOINT_TRIES, 2)), radius, dt, bounds[i], circles,
+                  segments, grid, car)
+    return start
 
 
 @njit(cache=True)
@@ -196,6 +247,7 @@ def plan_motion(
     limits: NDArray[np.float64],
     substeps: int,
     max_checks: int,
+    other_speed: NDArray[np.float64],
     speed: NDArray[np.float64],
     yaw_rate: NDArray[np.float64],
     checks: NDArray[np.int64],
@@ -206,9 +258,10 @@ def plan_motion(
     ``checks``.
 
     ``limits`` holds max_speed [m/s], max_yaw_rate [rad/s], control_dt [s], the car's
-    half-diagonal [m] and its largest move between two checks [m]. Returns -1, or ``-2 - i``
-    for the first sub-env ``i`` whose action is not finite, or the first ``i`` whose move needs
-    more than ``max_checks`` checks (nothing is meant to move then).
+    half-diagonal [m] and its largest move between two checks [m]; ``other_speed`` (N,) each
+    env's fastest mover [m/s] (0 without movers), as ``Car.substeps_for`` adds it. Returns -1,
+    or ``-2 - i`` for the first sub-env ``i`` whose action is not finite, or the first ``i``
+    whose move needs more than ``max_checks`` checks (nothing is meant to move then).
     """
     max_speed, max_yaw_rate, duration, half_diagonal, max_step = limits
     for i in envs:
@@ -218,6 +271,8 @@ def plan_motion(
         v = min(max(throttle, -1.0), 1.0) * max_speed
         w = min(max(steer, -1.0), 1.0) * max_yaw_rate
         corner_travel = (abs(v) + abs(w) * half_diagonal) * duration  # [m]
+        if other_speed[i] > 0.0:  # relative to the fastest mover
+            corner_travel += other_speed[i] * duration
         needed = math.ceil(corner_travel / max_step)
         if needed > max_checks:
             return i

@@ -33,9 +33,6 @@ def test_config_errors_are_the_single_envs() -> None:
 def test_what_is_not_batched_yet_is_refused_by_name() -> None:
     with pytest.raises(ConfigError, match="render_mode"):
         DualLidarVectorEnv(2, render_mode="rgb_array")
-    if "moving_obstacles" in lidar_env.EnvConfig.keys():
-        with pytest.raises(ConfigError, match="moving_obstacles.*not batched yet"):
-            batched(config={"moving_obstacles": 2})
     corner = {"mount": (0.4, 0.25, 0.785), "fov": 4.71, "n_beams": 90, "self_occlusion": True}
     with pytest.raises(ConfigError, match=r"lidars\[1\].self_occlusion: not batched yet"):
         batched(config={"lidars": [{"mount": (0.0, 0.0, 0.0)}, corner]})
