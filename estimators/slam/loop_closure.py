@@ -164,7 +164,10 @@ class LoopVerification:
         pose: ``(3,)`` pose of the query keyframe in the reference keyframe's frame.
         information: ``(3, 3)`` information matrix of ``pose`` from the ICP Hessian.
         quality: ICP inlier share; score: mean likelihood-field score; runner_up: best score
-            of a match at least ``ambiguity_distance`` away, relative to the best.
+            of a match at least ``ambiguity_distance`` away, relative to the best, when
+            above ``ambiguity_ratio`` (else 0: not searched further, see
+            :meth:`CorrelativeMatch.runner_up`); searched only when every other test passed
+            (else 0, and ``reason`` lists the others that failed).
     """
 
     accepted: bool
@@ -207,6 +210,53 @@ class PlaceMap:
                               angular_window, angular_step)
 
 
+class CorrelativeMatch:
+    """Best pose of ``points`` (M, 2, query frame) in ``place`` within ``guess[:2] ±
+    linear_window`` [m] (rounded up to whole blocks of ``2 * coarse_factor + 1`` cells, plus
+    ``coarse_factor`` cells) and ``guess[2] ± params.angular_window``: the exact grid optimum
+    (:func:`estimators.matching.branch_and_bound.match`), as :attr:`pose` (3,) and its mean
+    likelihood :attr:`score`; the ambiguity measure on demand (:meth:`runner_up`), on the
+    same pyramid window."""
+
+    def __init__(self, place: PlaceMap, points: NDArray[np.float64], guess: ArrayLike,
+                 linear_window: float, params: LoopClosureParams) -> None:
+        guess = np.asarray(guess, dtype=np.float64)
+        res, c = params.resolution, params.coarse_factor
+        block = 2 * c + 1
+        n = block * int(np.ceil(linear_window / (block * res))) + c  # cells either way
+        n_ang = int(np.ceil(params.angular_window / params.angular_step))
+        search = (points, guess, n * res, n_ang * params.angular_step, params.angular_step)
+        self._window = (place.pyramid(levels_for_window(n * res, res), *search), *search)
+        best = match(*self._window, -0.5)  # every score (>= 0) counts
+        self.pose, self.score = best.pose, best.score
+        self._guess, self._n, self._params = guess, n, params
+
+    def runner_up(self) -> float:
+        """The best score of a pose in a block whose centre lies at least
+        ``ambiguity_distance`` plus one block from the best one's, relative to
+        :attr:`score` (found by the same search over those blocks' translations only), when it
+        exceeds ``ambiguity_ratio``, else 0: the ambiguity test needs no more, and a search
+        that prunes every node below that share of the best costs less than one that ranks
+        them all."""
+        params, n = self._params, self._n
+        res, c = params.resolution, params.coarse_factor
+        block = 2 * c + 1
+        shift = np.round((self.pose[:2] - self._guess[:2]) / res).astype(int)
+        blocks = (np.arange(-n, n + 1) + c) // block  # the block each shift lies in
+        best_block = (shift + c) // block
+        reach = params.ambiguity_distance / res + block
+        far = np.hypot(block * (blocks[:, None] - best_block[0]),
+                       block * (blocks[None, :] - best_block[1])) >= reach
+        if not far.any():
+            return 0.0
+        # The bound sits a hair below the ratio so that the division below, not the
+        # search's rounding, makes the call.
+        best = max(self.score, 1e-12)
+        found = match(*self._window, params.ambiguity_ratio * best * (1.0 - 1e-9), allowed=far)
+        share = max(found.score, 0.0) / best
+        return share if share > params.ambiguity_ratio else 0.0
+
+
 def correlative_match(
     place: PlaceMap,
     points: NDArray[np.float64],
@@ -214,33 +264,9 @@ def correlative_match(
     linear_window: float,
     params: LoopClosureParams,
 ) -> tuple[NDArray[np.float64], float, float]:
-    """Best pose of ``points`` (M, 2, query frame) in ``place`` within ``guess[:2] ±
-    linear_window`` [m] (rounded up to whole blocks of ``2 * coarse_factor + 1`` cells, plus
-    ``coarse_factor`` cells) and ``guess[2] ± params.angular_window``: the exact grid optimum
-    (:func:`estimators.matching.branch_and_bound.match`).
-
-    Returns the pose (3,), its mean likelihood score, and the best score of a pose in a block
-    whose centre lies at least ``params.ambiguity_distance`` plus one block from the best
-    one's, relative to that score (the ambiguity measure, found by the same search over
-    those blocks' translations only).
-    """
-    guess = np.asarray(guess, dtype=np.float64)
-    res, c = params.resolution, params.coarse_factor
-    block = 2 * c + 1
-    n = block * int(np.ceil(linear_window / (block * res))) + c  # cells either way
-    n_ang = int(np.ceil(params.angular_window / params.angular_step))
-    search = (points, guess, n * res, n_ang * params.angular_step, params.angular_step)
-    window = (place.pyramid(levels_for_window(n * res, res), *search), *search,
-              -0.5)  # every score (>= 0) counts
-    best = match(*window)
-    shift = np.round((best.pose[:2] - guess[:2]) / res).astype(int)
-    blocks = (np.arange(-n, n + 1) + c) // block  # the block each shift lies in
-    best_block = (shift + c) // block
-    reach = params.ambiguity_distance / res + block
-    far = np.hypot(block * (blocks[:, None] - best_block[0]),
-                   block * (blocks[None, :] - best_block[1])) >= reach
-    runner_up = match(*window, allowed=far).score if far.any() else 0.0
-    return best.pose, best.score, max(runner_up, 0.0) / max(best.score, 1e-12)
+    """:class:`CorrelativeMatch`'s pose (3,), score and :meth:`~CorrelativeMatch.runner_up`."""
+    found = CorrelativeMatch(place, points, guess, linear_window, params)
+    return found.pose, found.score, found.runner_up()
 
 
 def match_information(
@@ -296,10 +322,10 @@ def verify_loop(
                                 nothing, 0.0, 0.0, 0.0)
     near = query[np.hypot(query[:, 0], query[:, 1]) <= params.search_range]
     thinned = voxel_downsample(near if len(near) >= 10 else query, params.voxel_size)
-    start, _, runner_up = correlative_match(place, thinned, guess, linear_window, params)
+    search = CorrelativeMatch(place, thinned, guess, linear_window, params)
     icp = ICPParams(max_correspondence_distance=3 * params.inlier_distance,
                     inlier_distance=params.inlier_distance, loss_scale=params.loss_scale)
-    result = register(place.reference, query, start, icp)
+    result = register(place.reference, query, search.pose, icp)
     pose = result.pose
     score = float(place.field.score(transform_points(pose, query)).mean())
     information = match_information(place.reference, query, pose, params)
@@ -308,13 +334,16 @@ def verify_loop(
         failures.append(f"ICP inlier share {result.quality:.2f} < {params.min_quality}")
     if score < params.min_score:
         failures.append(f"likelihood score {score:.2f} < {params.min_score}")
-    if runner_up > params.ambiguity_ratio:
-        failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
-                        f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
     offset = np.hypot(*(pose[:2] - guess[:2]))
     turn = abs(float(wrap_angle(pose[2] - guess[2])))
     if offset > linear_window + params.inlier_distance or turn > params.angular_window + 1e-9:
         failures.append(f"ICP left the search window ({offset:.2f} m, {np.degrees(turn):.1f} deg)")
+    # The ambiguity search costs as much as the match: only a match that passed the rest
+    # needs it (most rejected candidates fail on the inlier share).
+    runner_up = 0.0 if failures else search.runner_up()
+    if runner_up > params.ambiguity_ratio:
+        failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
+                        f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
     reason = "; ".join(failures) if failures else "accepted"
     return LoopVerification(not failures, reason, pose, information, result.quality, score,
                             runner_up)
