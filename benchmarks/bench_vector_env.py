@@ -149,7 +149,8 @@ def main(argv: list[str] | None = None) -> None:
           " edges in range, their bearings, the inside-a-polygon test)\n"
           f"  {call_scan:5.2f} the scan call per env (2 Lidars x 8 beams, no obstacles: beam "
           "directions, grid bounds, readings)\n"
-          f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python")
+          f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python"
+          + (" (the crowd's step and the scans' movers included)" if BASE else ""))
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     if BASE:
         still = cpu_steps_per_second(make("vector_entry_point", n, {"moving_obstacles": 0}),
