@@ -67,7 +67,8 @@ class DualLidarVectorEnv(VectorEnv):
     self-occluded Lidars). Moving obstacles (``config["moving_obstacles"]``) are batched: each
     sub-env's crowd steps inside the same call, drawing its waypoints from the sub-env's
     generator before its scans, as the single env does; ``info["moving_obstacles"]`` is
-    ``(num_envs, M, 5)``.
+    ``(num_envs, M, 5)``. The env pickles mid-episode, as the single env does (numba's typed
+    lists and entry points are rebuilt on unpickling; the generators keep their states).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}

@@ -19,6 +19,7 @@ Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world fram
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Callable
 from typing import Any
@@ -293,6 +294,15 @@ class EntryPoint:
     def __init__(self, dispatcher: Any) -> None:
         self.dispatcher = dispatcher
         self._entry: Callable[..., Any] | None = None
+
+    def __getstate__(self) -> dict[str, str]:
+        # by name: the machine code is resolved again (from numba's cache) at the first call
+        return {"module": self.dispatcher.py_func.__module__,
+                "name": self.dispatcher.py_func.__name__}
+
+    def __setstate__(self, state: dict[str, str]) -> None:
+        module = importlib.import_module(state["module"])
+        self.__init__(getattr(module, state["name"]))
 
     def __call__(self, *args: Any) -> Any:
         if self._entry is None:

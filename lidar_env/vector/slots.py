@@ -106,6 +106,21 @@ class SceneSlots:
         self.world_key[i], self.trace_key[i] = id(world), id(trace)
         self.length[i] = trace.length
 
+    def __getstate__(self) -> dict[str, Any]:
+        # numba's typed lists do not pickle: they are rebuilt from the worlds, traces and
+        # generators (which pickle with their states, shared items staying shared)
+        return {**self.__dict__, "_lists": None, "_rngs": None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        worlds, traces, generators = self.worlds, self.traces, self.generators
+        self.worlds, self.traces = [None] * self.n, [None] * self.n
+        for i, (world, trace, rng) in enumerate(zip(worlds, traces, generators, strict=True)):
+            if world is not None and trace is not None:
+                self.set(i, world, trace)
+            if rng is not None:
+                self.set_generator(i, rng)
+
     def set_generator(self, i: int, rng: np.random.Generator) -> None:
         """Env ``i`` draws from ``rng`` (the kernel advances its state, as numpy would)."""
         if self._rngs is None:

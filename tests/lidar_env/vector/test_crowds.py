@@ -5,6 +5,7 @@ and the autoresets after them, for both mover models."""
 
 from __future__ import annotations
 
+import pickle
 from typing import Any
 
 import gymnasium as gym
@@ -144,3 +145,19 @@ def test_a_move_too_long_to_check_among_movers_is_the_single_cars_error() -> Non
     with pytest.raises(ConfigError, match="car motion") as single_error:
         single.step(np.array([1.0, 0.0]))
     assert str(batched_error.value) == str(single_error.value)
+
+
+def test_a_pickled_batched_env_steps_on_like_the_original() -> None:
+    env = gym.make_vec("DualLidar-v0", 3, vectorization_mode="vector_entry_point",
+                       world="random", config={"moving_obstacles": 4, "max_episode_time": 3.0})
+    env.reset(seed=0)
+    actions = np.tile(np.array([1.0, 0.2], np.float32), (3, 1))
+    for _ in range(7):
+        env.step(actions)
+    copy = pickle.loads(pickle.dumps(env))
+    for t in range(60):  # through time limits and autoresets (new random worlds, new crowds)
+        got, expected = copy.step(actions), env.step(actions)
+        assert_same(got[0], expected[0], f"step {t} observation")
+        assert_same(got[4], expected[4], f"step {t} info")
+        np.testing.assert_array_equal(got[1], expected[1])
+    assert copy.unwrapped.worlds[0] is not env.unwrapped.worlds[0]
