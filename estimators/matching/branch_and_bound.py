@@ -29,41 +29,76 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.matching.likelihood_grids import likelihood_grid
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
+
+__all__ = ["GridPyramid", "Match", "PyramidBuffer", "levels_for_window", "likelihood_grid",
+           "match", "max_pool_levels", "search_headings"]
 
 #: Most levels a pyramid may have: level 9 pools 512 x 512 cells (25.6 m at 5 cm).
 MAX_LEVELS = 10
 
 
 @njit(cache=True)
-def _pool_levels(padded: NDArray[np.float64],
-                 levels: int) -> NDArray[np.float64]:  # pragma: no cover (numba)
-    """``(levels, NX, NY)``: level ``l`` holds in cell ``(i, j)`` the maximum of ``padded[i :
-    i + 2^l, j : j + 2^l]`` (0 beyond the grid), each level from the one below in two passes
-    of ``max(cell, cell + 2^(l-1))``."""
-    n_rows, n_cols = padded.shape
-    out = np.zeros((levels, n_rows, n_cols))
-    out[0] = padded
-    row = np.zeros((n_rows, n_cols))
+def _pool_window(grid: NDArray[np.float64], pad: int, r0: int, r1: int, c0: int, c1: int,
+                 levels: int, out: NDArray[np.float64]) -> bool:  # pragma: no cover (numba)
+    """Fill ``out`` ``(levels, r1 - r0, c1 - c0)`` (every cell written): level 0 the cells
+    ``r0 .. r1 - 1``, ``c0 .. c1 - 1`` of ``grid`` padded with ``pad`` empty (0) cells on the
+    low side (0 beyond it too); level
+    ``l`` holds in cell ``(i, j)`` the maximum of level 0's ``[i : i + 2^l, j : j + 2^l]``
+    (clipped to the window), from level ``l - 1`` as the largest of its four cells ``(i, j)``,
+    ``(i + w, j)``, ``(i, j + w)``, ``(i + w, j + w)``, ``w = 2^(l-1)``: one pass a level,
+    the rows split where the clipping starts so that the inner loops have no branches (and
+    vectorise). Returns whether a kept cell is negative or not finite."""
+    n_rows, n_cols = r1 - r0, c1 - c0
+    bad = False
+    i_lo, i_hi = max(0, pad - r0), min(n_rows, grid.shape[0] + pad - r0)
+    j_lo, j_hi = max(0, pad - c0), min(n_cols, grid.shape[1] + pad - c0)
+    out[0] = 0.0
+    for i in range(i_lo, i_hi):
+        source = grid[r0 + i - pad]
+        for j in range(j_lo, j_hi):
+            value = source[c0 + j - pad]
+            bad |= not (value >= 0.0 and value < np.inf)
+            out[0, i, j] = value
     for level in range(1, levels):
         width = 2 ** (level - 1)
-        below = out[level - 1]
-        for i in range(n_rows):
-            for j in range(n_cols):
-                value = below[i, j]
-                if i + width < n_rows and below[i + width, j] > value:
-                    value = below[i + width, j]
-                row[i, j] = value
-        for i in range(n_rows):
-            for j in range(n_cols):
-                value = row[i, j]
-                if j + width < n_cols and row[i, j + width] > value:
-                    value = row[i, j + width]
-                out[level, i, j] = value
-    return out
+        below, here = out[level - 1], out[level]
+        split_i, split_j = max(n_rows - width, 0), max(n_cols - width, 0)
+        for i in range(split_i):
+            top, low, row = below[i], below[i + width], here[i]
+            for j in range(split_j):
+                row[j] = max(max(top[j], top[j + width]), max(low[j], low[j + width]))
+            for j in range(split_j, n_cols):
+                row[j] = max(top[j], low[j])
+        for i in range(split_i, n_rows):
+            top, row = below[i], here[i]
+            for j in range(split_j):
+                row[j] = max(top[j], top[j + width])
+            for j in range(split_j, n_cols):
+                row[j] = top[j]
+    return bad
+
+
+class PyramidBuffer:
+    """Memory that :class:`GridPyramid` s take their levels from, one after another: a
+    pyramid built into it is valid until the next one is. Searches of places of every size
+    otherwise get fresh memory each time (megabytes), whose page faults cost more than
+    pooling into it."""
+
+    def __init__(self) -> None:
+        self._memory = np.empty(0)
+
+    def take(self, shape: tuple[int, ...]) -> NDArray[np.float64]:
+        """An uninitialised float array of ``shape``, over this buffer's memory (grown when
+        too small)."""
+        size = int(np.prod(shape))
+        if size > len(self._memory):
+            self._memory = np.empty(max(size, 3 * len(self._memory) // 2))
+        return self._memory[:size].reshape(shape)
 
 
 def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
@@ -72,7 +107,10 @@ def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
     (clipped to the grid)."""
     if not 1 <= levels <= MAX_LEVELS:
         raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
-    return _pool_levels(np.ascontiguousarray(grid, dtype=np.float64), levels)
+    grid = np.ascontiguousarray(grid, dtype=np.float64)
+    out = np.empty((levels, *grid.shape))
+    _pool_window(grid, 0, 0, grid.shape[0], 0, grid.shape[1], levels, out)
+    return out
 
 
 @njit(cache=True)
@@ -94,43 +132,6 @@ def _rotated_cells(points: NDArray[np.float64], cos: NDArray[np.float64],
     return out
 
 
-@njit(cache=True)
-def _stamp(cells: NDArray[np.int64], n_rows: int, n_cols: int,
-           kernel: NDArray[np.float64]) -> NDArray[np.float64]:  # pragma: no cover (numba)
-    """``(n_rows, n_cols)`` grid holding in each cell the largest ``kernel`` value any of
-    ``cells`` (N, 2) puts there (``kernel`` centred on the cell)."""
-    grid = np.zeros((n_rows, n_cols))
-    reach = kernel.shape[0] // 2
-    for k in range(len(cells)):
-        ci, cj = cells[k, 0], cells[k, 1]
-        for a in range(kernel.shape[0]):
-            i = ci + a - reach
-            if 0 <= i < n_rows:
-                for b in range(kernel.shape[1]):
-                    j = cj + b - reach
-                    if 0 <= j < n_cols and kernel[a, b] > grid[i, j]:
-                        grid[i, j] = kernel[a, b]
-    return grid
-
-
-def likelihood_grid(points: ArrayLike, origin: ArrayLike, shape: tuple[int, int],
-                    resolution: float, sigma: float = 0.1) -> FloatArray:
-    """``shape`` grid of ``exp(-d^2 / 2 sigma^2)``, ``d`` [m] from each cell to the nearest
-    cell holding one of ``points`` (M, 2) [m] (cell ``(0, 0)`` at ``origin``), cut to 0 beyond
-    ``3 sigma``: the values of :class:`~estimators.matching.scan_matching.LikelihoodField`
-    (which spends a distance transform on the whole grid to give cells further out 0.01 or
-    less), stamped point by point, so a grid costs its points, not its area."""
-    if not (resolution > 0 and sigma > 0):
-        raise ConfigError(f"resolution and sigma: expected > 0 [m], got {resolution}, {sigma}")
-    reach = int(np.ceil(3.0 * sigma / resolution))
-    offsets = np.arange(-reach, reach + 1) * resolution
-    distance2 = offsets[:, None] ** 2 + offsets[None, :] ** 2
-    kernel = np.where(distance2 <= (3.0 * sigma) ** 2, np.exp(-0.5 * distance2 / sigma**2), 0.0)
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    cells = np.floor((points - np.asarray(origin, dtype=np.float64)) / resolution)
-    return _stamp(cells.astype(np.int64), int(shape[0]), int(shape[1]), kernel)
-
-
 class GridPyramid:
     """A likelihood grid and its max-pooled levels, ready for :func:`match`.
 
@@ -144,18 +145,20 @@ class GridPyramid:
 
         window: ``((row_start, row_stop), (col_start, col_stop))``: the padded grid's cells
             to keep (default all); a search reading only those finds what it finds on all.
+            Only those are checked for scores >= 0.
+        buffer: where the levels go (default fresh memory); the pyramid is then valid until
+            the buffer's next pyramid.
 
     The levels are padded with ``2^(levels - 1) - 1`` empty cells on the low side, so that a
     coarse cell reaching into the grid from outside still bounds the cells it covers.
     """
 
     def __init__(self, grid: ArrayLike, origin: ArrayLike, resolution: float, levels: int,
-                 window: tuple[tuple[int, int], tuple[int, int]] | None = None) -> None:
-        grid = np.asarray(grid, dtype=np.float64)
+                 window: tuple[tuple[int, int], tuple[int, int]] | None = None,
+                 buffer: PyramidBuffer | None = None) -> None:
+        grid = np.ascontiguousarray(grid, dtype=np.float64)
         if grid.ndim != 2 or grid.size == 0:
             raise EstimatorInputError(f"grid: expected a non-empty 2-D array, got {grid.shape}")
-        if not np.all(np.isfinite(grid)) or grid.min() < 0:
-            raise EstimatorInputError("grid: expected finite scores >= 0")
         if not resolution > 0:
             raise ConfigError(f"resolution: expected a cell size > 0 [m], got {resolution}")
         if not (isinstance(levels, int | np.integer) and 1 <= levels <= MAX_LEVELS):
@@ -167,11 +170,11 @@ class GridPyramid:
         if not (0 <= r0 < r1 <= grid.shape[0] + pad and 0 <= c0 < c1 <= grid.shape[1] + pad):
             raise ConfigError(f"window: expected a non-empty part of the padded grid, got {window}")
         self.start = (r0, c0)
-        kept = np.zeros((r1 - r0, c1 - c0))
-        i0, j0 = max(r0, pad), max(c0, pad)  # the grid's first kept cell, padded
-        if i0 < r1 and j0 < c1:
-            kept[i0 - r0:, j0 - c0:] = grid[i0 - pad:r1 - pad, j0 - pad:c1 - pad]
-        self.levels = max_pool_levels(kept, levels)
+        shape = (int(levels), r1 - r0, c1 - c0)
+        self.levels = np.empty(shape) if buffer is None else buffer.take(shape)
+        # only the kept cells are read, so only they are checked
+        if _pool_window(grid, pad, r0, r1, c0, c1, int(levels), self.levels):
+            raise EstimatorInputError("grid: expected finite scores >= 0")
 
     @classmethod
     def from_field(cls, field: object, levels: int) -> GridPyramid:

@@ -16,10 +16,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from estimators.base import SensorSetup
+from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import curve_points, line_fits
 from lidar_env.errors import ConfigError, EstimatorInputError
@@ -311,9 +311,10 @@ class LikelihoodField:
     @staticmethod
     def _scores(occupied: NDArray[np.bool_], resolution: float,
                 sigma: float) -> NDArray[np.float64]:
-        """The grid's scores from its ``occupied`` cells (those holding a reference point)."""
-        distance = ndimage.distance_transform_edt(~occupied) * resolution
-        return np.exp(-0.5 * (distance / sigma) ** 2)
+        """The grid's scores from its ``occupied`` cells (those holding a reference point),
+        by the compiled exact distance transform
+        (:func:`~estimators.matching.likelihood_grids.likelihood_scores`)."""
+        return likelihood_scores(occupied, resolution, sigma)
 
     def score(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Score of each point ``(..., 2)`` [m]; 0 outside the grid."""

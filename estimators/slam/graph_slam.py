@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
+from estimators.matching.branch_and_bound import PyramidBuffer
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
@@ -210,8 +211,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
         self._scan_odometry: list[NDArray[np.float64]] = []
         self._places: dict[tuple[int, int], PlaceMap] = {}
-        self._dirty = False
-        self._since_optimized = 0
+        self._pyramid_buffer = PyramidBuffer()
+        self._dirty, self._since_optimized = False, 0
         self.loop_attempts: list[tuple[int, int, LoopVerification]] = []
         self.dropped_loops: list[tuple[int, int]] = []
         self._pending: list[tuple[int, int, LoopVerification]] = []
@@ -338,8 +339,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             self.dropped_loops.extend((int(edges[k, 0]), int(edges[k, 1])) for k in bad)
             self.graph.remove_edges(bad)
         self._places.clear()
-        self._dirty = False
-        self._since_optimized = 0
+        self._dirty, self._since_optimized = False, 0
 
     # ------------------------------------------------------------------ results
     @property

@@ -31,7 +31,8 @@ class KeyframeMatching:
     """Keyframe-to-keyframe matching for :class:`~estimators.slam.graph_slam.GraphSlam`, a
     mixin: odometry steps checked against the two keyframes' scans, and loop closure. It
     reads the graph slam's settings (``loop_params``, ``min_loop_separation``, ...) and state
-    (``graph``, ``keyframes``, ``_places``, ``_pending``, ``loop_attempts``) and adds loop edges
+    (``graph``, ``keyframes``, ``_places``, ``_pending``, ``loop_attempts``,
+    ``_pyramid_buffer``: one for all its searches, which run one after another) and adds loop edges
     to its graph."""
 
     def _submap(self, index: int, before: int, after: int) -> NDArray[np.float64]:
@@ -52,7 +53,7 @@ class KeyframeMatching:
         key = (index, neighbours)
         if key not in self._places:
             self._places[key] = PlaceMap(self._submap(index, neighbours, neighbours),
-                                         self.loop_params)
+                                         self.loop_params, self._pyramid_buffer)
         return self._places[key]
 
     def loop_candidates(self, index: int) -> list[tuple[int, float]]:
@@ -201,8 +202,8 @@ class KeyframeMatching:
         share /= len(points)
         if share >= self.loop_params.min_quality:
             return step
-        result = verify_loop(PlaceMap(previous, self.loop_params), points, step,
-                             self.keyframe_distance, self._step_params)
+        place = PlaceMap(previous, self.loop_params, self._pyramid_buffer)
+        result = verify_loop(place, points, step, self.keyframe_distance, self._step_params)
         self.step_checks.append((len(self.keyframes), share, result))
         return result.pose if result.accepted and result.quality > share else step
 

@@ -29,11 +29,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.matching.branch_and_bound import GridPyramid, levels_for_window, match
+from estimators.matching.branch_and_bound import (
+    GridPyramid,
+    PyramidBuffer,
+    levels_for_window,
+    match,
+)
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
-from estimators.matching.scan_matching import voxel_downsample
-from estimators.slam.place_grid import PlaceField, search_pyramid
+from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
+from estimators.slam.place_grid import search_pyramid
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points, wrap_angle
 
@@ -181,10 +186,14 @@ class LoopVerification:
 
 class PlaceMap:
     """The old place's points (reference frame) ready for matching: likelihood field
-    (:class:`~estimators.slam.place_grid.PlaceField`), the part of its max-pooled pyramid
-    each search reads (:meth:`pyramid`), and a point-to-line ICP reference."""
+    (:class:`~estimators.matching.scan_matching.LikelihoodField`), the part of its max-pooled
+    pyramid each search reads (:meth:`pyramid`), and a point-to-line ICP reference. Its pyramids go
+    into ``buffer`` when given (shared by places searched one after another: each pyramid is
+    valid until the buffer's next, see
+    :class:`~estimators.matching.branch_and_bound.PyramidBuffer`)."""
 
-    def __init__(self, points: ArrayLike, params: LoopClosureParams) -> None:
+    def __init__(self, points: ArrayLike, params: LoopClosureParams,
+                 buffer: PyramidBuffer | None = None) -> None:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
             raise EstimatorInputError(
@@ -192,8 +201,8 @@ class PlaceMap:
         thinned = voxel_downsample(points, params.resolution)
         if len(thinned) < 3:
             thinned = points
-        self.field = PlaceField(thinned, params.resolution, params.sigma)
-        self._levels = 0
+        self.field = LikelihoodField(thinned, params.resolution, params.sigma)
+        self._levels, self._buffer = 0, buffer
         self.reference = PointToLineReference.with_estimated_normals(
             thinned, params.normal_neighbours, params.denoise_reference,
             params.max_normal_neighbours)
@@ -207,7 +216,7 @@ class PlaceMap:
         depth orders the search, which decides between equal scores)."""
         self._levels = max(self._levels, levels)
         return search_pyramid(self.field, self._levels, points, center, linear_window,
-                              angular_window, angular_step)
+                              angular_window, angular_step, self._buffer)
 
 
 class CorrelativeMatch:

@@ -181,3 +181,26 @@ def test_four_node_scores_are_the_means_under_the_shifted_points() -> None:
                 expected = np.where(inside, grid[np.where(inside, i, 0),
                                                  np.where(inside, j, 0)], 0.0).mean()
                 assert out[2 * a + b] == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_kept_window_pools_exactly_the_padded_grid(seed: int) -> None:
+    """A pyramid kept on a window holds what pooling the whole padded grid holds there."""
+    rng = np.random.default_rng(seed)
+    for _ in range(10):
+        grid = rng.random((int(rng.integers(1, 40)), int(rng.integers(1, 40))))
+        levels = int(rng.integers(1, 6))
+        pad = 2 ** (levels - 1) - 1
+        padded = np.zeros((grid.shape[0] + pad, grid.shape[1] + pad))
+        padded[pad:, pad:] = grid
+        r0 = int(rng.integers(0, padded.shape[0]))
+        c0 = int(rng.integers(0, padded.shape[1]))
+        r1 = int(rng.integers(r0 + 1, padded.shape[0] + 1))
+        c1 = int(rng.integers(c0 + 1, padded.shape[1] + 1))
+        pyramid = GridPyramid(grid, (0.0, 0.0), 0.1, levels, ((r0, r1), (c0, c1)))
+        kept = padded[r0:r1, c0:c1]
+        for level in range(levels):
+            width = 2**level
+            expected = np.array([[kept[i:i + width, j:j + width].max()
+                                  for j in range(kept.shape[1])] for i in range(kept.shape[0])])
+            np.testing.assert_array_equal(pyramid.levels[level], expected)
