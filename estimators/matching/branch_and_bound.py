@@ -383,10 +383,15 @@ def match(
     return Match(pose, float(best), True, int(nodes))
 
 
-def levels_for_window(linear_window: float, resolution: float) -> int:
+def levels_for_window(linear_window: float, resolution: float,
+                      max_levels: int = MAX_LEVELS) -> int:
     """Levels for a window of ``± linear_window`` [m]: the coarsest node spans at least half
-    of it, so a heading starts from 4 nodes (fewer when the window is one cell). Scoring
-    the headings' first nodes is most of a search's cost: the bounds of a fine grid of
-    headings prune almost all of them, and the children of the rest."""
+    of it, so a heading starts from 4 nodes (fewer when the window is one cell), but at most
+    ``max_levels``. Where a scan has a few hundred points, fewer levels can be cheaper: each
+    level costs a pass over the pyramid's window, while more first nodes cost passes over
+    the points only (loop closure takes 5, see
+    :class:`~estimators.slam.loop_closure.LoopClosureParams`)."""
+    if not 1 <= max_levels <= MAX_LEVELS:
+        raise ConfigError(f"max_levels: expected an integer in [1, {MAX_LEVELS}], got {max_levels}")
     cells = 2 * _window_cells(linear_window, resolution) + 1
-    return int(np.clip(np.ceil(np.log2(cells)), 1, MAX_LEVELS))
+    return int(np.clip(np.ceil(np.log2(cells)), 1, max_levels))

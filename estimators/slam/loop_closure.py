@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.branch_and_bound import (
+    MAX_LEVELS,
     GridPyramid,
     PyramidBuffer,
     levels_for_window,
@@ -114,6 +115,11 @@ class LoopClosureParams:
             pair with the wrong line, and at 0.1 m they pull the match by millimetres:
             matches of simulated keyframes 6 m apart at true poses erred 7.6 -> 3.9 mm in
             open_cylinders, 4.1 -> 2.2 mm in a random world; ACES unchanged).
+        search_levels: the branch and bound's pyramid has at most 5 levels (its coarsest
+            nodes 16 x 16 cells; exact at any depth): a search's query has a few hundred
+            points, so the 36 first nodes per heading of a +-2 m window cost less than two
+            more pooled levels of the place (measured on ACES: 7 -> 5 levels cut pooling and
+            search by a quarter, the same poses).
         point_sigma, effective_points: the ICP Hessian becomes the edge's information
             matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
             made it (0.05 m, 20: neighbouring residuals are strongly correlated, so hundreds
@@ -138,6 +144,7 @@ class LoopClosureParams:
     effective_points: float = 20.0
     loss_scale: float = 0.03
     max_normal_neighbours: int | None = 72
+    search_levels: int = 5
 
     def __post_init__(self) -> None:
         for name in ("resolution", "sigma", "angular_step", "voxel_size", "inlier_distance",
@@ -149,6 +156,9 @@ class LoopClosureParams:
                 self.max_normal_neighbours < self.normal_neighbours):
             raise ConfigError("max_normal_neighbours: expected None or at least normal_neighbours "
                              f"({self.normal_neighbours}), got {self.max_normal_neighbours}")
+        if not 1 <= self.search_levels <= MAX_LEVELS:
+            raise ConfigError(f"search_levels: expected an integer in [1, {MAX_LEVELS}], got "
+                              f"{self.search_levels}")
         if self.normal_neighbours < 3:
             raise ConfigError("normal_neighbours: expected an integer >= 3 (a line needs "
                              f"neighbours), got {self.normal_neighbours}")
@@ -235,7 +245,8 @@ class CorrelativeMatch:
         n = block * int(np.ceil(linear_window / (block * res))) + c  # cells either way
         n_ang = int(np.ceil(params.angular_window / params.angular_step))
         search = (points, guess, n * res, n_ang * params.angular_step, params.angular_step)
-        self._window = (place.pyramid(levels_for_window(n * res, res), *search), *search)
+        levels = levels_for_window(n * res, res, params.search_levels)
+        self._window = (place.pyramid(levels, *search), *search)
         best = match(*self._window, -0.5)  # every score (>= 0) counts
         self.pose, self.score = best.pose, best.score
         self._guess, self._n, self._params = guess, n, params

@@ -62,6 +62,7 @@ class PoseGraph:
 
     def __init__(self) -> None:
         self._poses: list[NDArray[np.float64]] = []
+        self._pose_array: NDArray[np.float64] | None = None  # _poses as one array, once read
         self._ids: list[int] = []
         self._index_of: dict[int, int] = {}
         self._edge_nodes: list[tuple[int, int]] = []
@@ -85,6 +86,7 @@ class PoseGraph:
         self._index_of[node_id] = len(self._ids)
         self._ids.append(node_id)
         self._poses.append(pose_arr.copy())
+        self._pose_array = None
         return len(self._ids) - 1
 
     def add_edge(
@@ -144,8 +146,10 @@ class PoseGraph:
 
     @property
     def poses(self) -> NDArray[np.float64]:
-        """``(N, 3)`` node poses in the world frame."""
-        return np.array(self._poses, dtype=np.float64).reshape(-1, 3)
+        """``(N, 3)`` node poses in the world frame (a fresh copy: the graph keeps its own)."""
+        if self._pose_array is None:
+            self._pose_array = np.array(self._poses, dtype=np.float64).reshape(-1, 3)
+        return self._pose_array.copy()
 
     @poses.setter
     def poses(self, poses: ArrayLike) -> None:
@@ -154,9 +158,11 @@ class PoseGraph:
             raise EstimatorInputError(
                 f"poses: expected finite ({self.n_nodes}, 3), got {arr.shape}")
         self._poses = [p.copy() for p in arr]
+        self._pose_array = None
 
     def set_pose(self, index: int, pose: ArrayLike) -> None:
         self._poses[index] = np.asarray(pose, dtype=np.float64).copy()
+        self._pose_array = None
 
     @property
     def ids(self) -> NDArray[np.int64]:
