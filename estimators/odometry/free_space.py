@@ -41,7 +41,6 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, transform_points
@@ -146,6 +145,22 @@ def _seen_through_kernel(
                     free = False
                     break
             out[i] = free
+    return out
+
+
+@numba.njit(cache=True)
+def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
+              radius: float) -> NDArray[np.bool_]:
+    """``(n,)`` True where ``points[i]`` lies within ``radius`` of one of ``anchors`` (m, 2)
+    (brute force: the anchors are the few points a scan sees through)."""
+    out = np.zeros(points.shape[0], dtype=np.bool_)
+    limit = radius * radius
+    for i in range(points.shape[0]):
+        for j in range(anchors.shape[0]):
+            dx, dy = points[i, 0] - anchors[j, 0], points[i, 1] - anchors[j, 1]
+            if dx * dx + dy * dy < limit:
+                out[i] = True
+                break
     return out
 
 
@@ -306,16 +321,17 @@ class MovingPointFilter:
         sizes = [len(p) for p in earlier]
         if not sum(sizes):
             return moving, [np.zeros(0, dtype=np.bool_) for _ in map_points]
+        stacked = np.concatenate(earlier)
         seen = self._beams.seen_through(
-            np.concatenate(earlier), self._sensor_poses(pose),
+            stacked, self._sensor_poses(pose),
             [scans[key] for key in self.setup.keys], self.margin, self.min_range,
             self.stale_resolution)
-        flags = np.split(seen, np.cumsum(sizes)[:-1])
-        anchors = np.concatenate(earlier)[seen]
-        if len(anchors) and len(world):  # moved on: next to a point the new scan sees through
-            distance, _ = cKDTree(anchors).query(world, distance_upper_bound=self.radius)
-            moving |= np.isfinite(distance)
-        return moving, flags[:len(map_points)]
+        ends = np.cumsum(sizes)
+        flags = [seen[end - size:end] for size, end in zip(sizes[:len(map_points)], ends,
+                                                           strict=False)]
+        if seen.any() and len(world):  # moved on: next to a point the new scan sees through
+            moving |= _near_any(world, stacked[seen], self.radius)
+        return moving, flags
 
     def remember(self, pose: NDArray[np.float64], scans: Mapping[str, NDArray[np.float64]],
                  points: NDArray[np.float64]) -> None:
