@@ -29,88 +29,21 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.matching.likelihood_grids import likelihood_grid
+from estimators.matching.likelihood_grids import (
+    MAX_LEVELS,
+    PyramidBuffer,
+    _pool_window,
+    likelihood_grid,
+    max_pool_levels,
+)
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["GridPyramid", "Match", "PyramidBuffer", "levels_for_window", "likelihood_grid",
-           "match", "max_pool_levels", "search_headings"]
+__all__ = ["MAX_LEVELS", "GridPyramid", "Match", "PyramidBuffer", "levels_for_window",
+           "likelihood_grid", "match", "max_pool_levels", "search_headings"]
 
-#: Most levels a pyramid may have: level 9 pools 512 x 512 cells (25.6 m at 5 cm).
-MAX_LEVELS = 10
-
-
-@njit(cache=True)
-def _pool_window(grid: NDArray[np.float64], pad: int, r0: int, r1: int, c0: int, c1: int,
-                 levels: int, out: NDArray[np.float64]) -> bool:  # pragma: no cover (numba)
-    """Fill ``out`` ``(levels, r1 - r0, c1 - c0)`` (every cell written): level 0 the cells
-    ``r0 .. r1 - 1``, ``c0 .. c1 - 1`` of ``grid`` padded with ``pad`` empty (0) cells on the
-    low side (0 beyond it too); level
-    ``l`` holds in cell ``(i, j)`` the maximum of level 0's ``[i : i + 2^l, j : j + 2^l]``
-    (clipped to the window), from level ``l - 1`` as the largest of its four cells ``(i, j)``,
-    ``(i + w, j)``, ``(i, j + w)``, ``(i + w, j + w)``, ``w = 2^(l-1)``: one pass a level,
-    the rows split where the clipping starts so that the inner loops have no branches (and
-    vectorise). Returns whether a kept cell is negative or not finite."""
-    n_rows, n_cols = r1 - r0, c1 - c0
-    bad = False
-    i_lo, i_hi = max(0, pad - r0), min(n_rows, grid.shape[0] + pad - r0)
-    j_lo, j_hi = max(0, pad - c0), min(n_cols, grid.shape[1] + pad - c0)
-    out[0] = 0.0
-    for i in range(i_lo, i_hi):
-        source = grid[r0 + i - pad]
-        for j in range(j_lo, j_hi):
-            value = source[c0 + j - pad]
-            bad |= not (value >= 0.0 and value < np.inf)
-            out[0, i, j] = value
-    for level in range(1, levels):
-        width = 2 ** (level - 1)
-        below, here = out[level - 1], out[level]
-        split_i, split_j = max(n_rows - width, 0), max(n_cols - width, 0)
-        for i in range(split_i):
-            top, low, row = below[i], below[i + width], here[i]
-            for j in range(split_j):
-                row[j] = max(max(top[j], top[j + width]), max(low[j], low[j + width]))
-            for j in range(split_j, n_cols):
-                row[j] = max(top[j], low[j])
-        for i in range(split_i, n_rows):
-            top, row = below[i], here[i]
-            for j in range(split_j):
-                row[j] = max(top[j], top[j + width])
-            for j in range(split_j, n_cols):
-                row[j] = top[j]
-    return bad
-
-
-class PyramidBuffer:
-    """Memory that :class:`GridPyramid` s take their levels from, one after another: a
-    pyramid built into it is valid until the next one is. Searches of places of every size
-    otherwise get fresh memory each time (megabytes), whose page faults cost more than
-    pooling into it."""
-
-    def __init__(self) -> None:
-        self._memory = np.empty(0)
-
-    def take(self, shape: tuple[int, ...]) -> NDArray[np.float64]:
-        """An uninitialised float array of ``shape``, over this buffer's memory (grown when
-        too small)."""
-        size = int(np.prod(shape))
-        if size > len(self._memory):
-            self._memory = np.empty(max(size, 3 * len(self._memory) // 2))
-        return self._memory[:size].reshape(shape)
-
-
-def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
-    """``(levels, NX, NY)`` copies of ``grid`` (2-D, values >= 0; booleans count as 0 / 1):
-    level ``l`` holds in cell ``(i, j)`` the maximum of ``grid[i : i + 2^l, j : j + 2^l]``
-    (clipped to the grid)."""
-    if not 1 <= levels <= MAX_LEVELS:
-        raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
-    grid = np.ascontiguousarray(grid, dtype=np.float64)
-    out = np.empty((levels, *grid.shape))
-    _pool_window(grid, 0, 0, grid.shape[0], 0, grid.shape[1], levels, out)
-    return out
 
 
 @njit(cache=True)
@@ -238,15 +171,44 @@ def angular_step_for(points: FloatArray, resolution: float, max_step: float = np
 
 
 @njit(cache=True)
-def _square_scores(grid: NDArray[np.float64], cells: NDArray[np.int64], h: int, di: int,
-                   dj: int, width: int,
+def _cell_bounds(cells: NDArray[np.int64]) -> NDArray[np.int64]:  # pragma: no cover (numba)
+    """``(H, 4)``: the smallest and largest row, then column, of each heading's ``cells``
+    (H, M, 2)."""
+    out = np.empty((cells.shape[0], 4), np.int64)
+    for h in range(cells.shape[0]):
+        out[h, 0] = out[h, 2] = 2**62
+        out[h, 1] = out[h, 3] = -(2**62)
+        for m in range(cells.shape[1]):
+            out[h, 0] = min(out[h, 0], cells[h, m, 0])
+            out[h, 1] = max(out[h, 1], cells[h, m, 0])
+            out[h, 2] = min(out[h, 2], cells[h, m, 1])
+            out[h, 3] = max(out[h, 3], cells[h, m, 1])
+    return out
+
+
+@njit(cache=True)
+def _square_scores(grid: NDArray[np.float64], cells: NDArray[np.int64],
+                   bounds: NDArray[np.int64], h: int, di: int, dj: int, width: int,
                    out: NDArray[np.float64]) -> None:  # pragma: no cover (numba)
     """``out[2 a + b]``: mean of ``grid`` under the points of heading ``h`` moved by ``(di + a
     width, dj + b width)`` cells, ``a, b`` in 0, 1: four sums in one pass, each in point order
-    (each sum's additions wait for one another; four of them interleave)."""
+    (each sum's additions wait for one another; four of them interleave). ``bounds`` are
+    :func:`_cell_bounds` of ``cells``: when all four shifted scans lie on the grid, no point
+    is checked (the same sums, in the same order)."""
     n_rows, n_cols = grid.shape
     n_points = cells.shape[1]
     t00 = t01 = t10 = t11 = 0.0
+    if (bounds[h, 0] + di >= 0 and bounds[h, 1] + di + width < n_rows
+            and bounds[h, 2] + dj >= 0 and bounds[h, 3] + dj + width < n_cols):
+        for m in range(n_points):
+            i, j = cells[h, m, 0] + di, cells[h, m, 1] + dj
+            t00 += grid[i, j]
+            t01 += grid[i, j + width]
+            t10 += grid[i + width, j]
+            t11 += grid[i + width, j + width]
+        count = max(n_points, 1)
+        out[0], out[1], out[2], out[3] = t00 / count, t01 / count, t10 / count, t11 / count
+        return
     for m in range(n_points):
         i, j = cells[h, m, 0] + di, cells[h, m, 1] + dj
         low_i, high_i = 0 <= i < n_rows, 0 <= i + width < n_rows
@@ -278,10 +240,12 @@ def _branch_and_bound(
     n_starts = len(starts)
     roots = np.empty(n_headings * n_starts * n_starts)
     square = np.empty(4)
+    bounds = _cell_bounds(cells)
     for h in range(n_headings):
         for a0 in range(0, n_starts, 2):
             for b0 in range(0, n_starts, 2):
-                _square_scores(levels[top], cells, h, starts[a0], starts[b0], width, square)
+                _square_scores(levels[top], cells, bounds, h, starts[a0], starts[b0], width,
+                               square)
                 for a in range(a0, min(a0 + 2, n_starts)):
                     for b in range(b0, min(b0 + 2, n_starts)):
                         k = (h * n_starts + a) * n_starts + b
@@ -317,7 +281,7 @@ def _branch_and_bound(
                 best, best_h, best_i, best_j = score, stack_h[size], di, dj
                 continue
             half = 2 ** (level - 1)
-            _square_scores(levels[level - 1], cells, h, di, dj, half, square)
+            _square_scores(levels[level - 1], cells, bounds, h, di, dj, half, square)
             count = 0
             for a in range(2):
                 for b in range(2):

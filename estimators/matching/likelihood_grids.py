@@ -1,7 +1,9 @@
 """Likelihood grids for correlative scan matching, compiled: the exact Euclidean distance
 transform turned into scores (:func:`distance_scores`, what
 :class:`~estimators.matching.scan_matching.LikelihoodField` is built from) and a grid stamped
-point by point, cut at 3 sigma (:func:`likelihood_grid`).
+point by point, cut at 3 sigma (:func:`likelihood_grid`), and a grid's max-pooled levels
+(:func:`max_pool_levels`, the bounds of the branch and bound in
+:mod:`estimators.matching.branch_and_bound`).
 
 :func:`distance_scores` with :func:`score_table` gives ``LikelihoodField``'s grid bit for bit
 (the squared distances are integers in cells, and each distinct one is turned into a score by
@@ -25,6 +27,9 @@ from scipy import ndimage
 from lidar_env.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
+
+#: Most levels a pyramid may have: level 9 pools 512 x 512 cells (25.6 m at 5 cm).
+MAX_LEVELS = 10
 
 
 @njit(cache=True)
@@ -142,3 +147,74 @@ def likelihood_grid(points: ArrayLike, origin: ArrayLike, shape: tuple[int, int]
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     cells = np.floor((points - np.asarray(origin, dtype=np.float64)) / resolution)
     return _stamp(cells.astype(np.int64), int(shape[0]), int(shape[1]), kernel)
+
+
+@njit(cache=True)
+def _pool_window(grid: NDArray[np.float64], pad: int, r0: int, r1: int, c0: int, c1: int,
+                 levels: int, out: NDArray[np.float64]) -> bool:  # pragma: no cover (numba)
+    """Fill ``out`` ``(levels, r1 - r0, c1 - c0)`` (every cell written): level 0 the cells
+    ``r0 .. r1 - 1``, ``c0 .. c1 - 1`` of ``grid`` padded with ``pad`` empty (0) cells on the
+    low side (0 beyond it too); level
+    ``l`` holds in cell ``(i, j)`` the maximum of level 0's ``[i : i + 2^l, j : j + 2^l]``
+    (clipped to the window), from level ``l - 1`` as the largest of its four cells ``(i, j)``,
+    ``(i + w, j)``, ``(i, j + w)``, ``(i + w, j + w)``, ``w = 2^(l-1)``: one pass a level,
+    the rows split where the clipping starts so that the inner loops have no branches (and
+    vectorise). Returns whether a kept cell is negative or not finite."""
+    n_rows, n_cols = r1 - r0, c1 - c0
+    bad = False
+    i_lo, i_hi = max(0, pad - r0), min(n_rows, grid.shape[0] + pad - r0)
+    j_lo, j_hi = max(0, pad - c0), min(n_cols, grid.shape[1] + pad - c0)
+    out[0] = 0.0
+    for i in range(i_lo, i_hi):
+        source = grid[r0 + i - pad]
+        for j in range(j_lo, j_hi):
+            value = source[c0 + j - pad]
+            bad |= not (value >= 0.0 and value < np.inf)
+            out[0, i, j] = value
+    for level in range(1, levels):
+        width = 2 ** (level - 1)
+        below, here = out[level - 1], out[level]
+        split_i, split_j = max(n_rows - width, 0), max(n_cols - width, 0)
+        for i in range(split_i):
+            top, low, row = below[i], below[i + width], here[i]
+            for j in range(split_j):
+                row[j] = max(max(top[j], top[j + width]), max(low[j], low[j + width]))
+            for j in range(split_j, n_cols):
+                row[j] = max(top[j], low[j])
+        for i in range(split_i, n_rows):
+            top, row = below[i], here[i]
+            for j in range(split_j):
+                row[j] = max(top[j], top[j + width])
+            for j in range(split_j, n_cols):
+                row[j] = top[j]
+    return bad
+
+
+class PyramidBuffer:
+    """Memory that :class:`GridPyramid` s take their levels from, one after another: a
+    pyramid built into it is valid until the next one is. Searches of places of every size
+    otherwise get fresh memory each time (megabytes), whose page faults cost more than
+    pooling into it."""
+
+    def __init__(self) -> None:
+        self._memory = np.empty(0)
+
+    def take(self, shape: tuple[int, ...]) -> NDArray[np.float64]:
+        """An uninitialised float array of ``shape``, over this buffer's memory (grown when
+        too small)."""
+        size = int(np.prod(shape))
+        if size > len(self._memory):
+            self._memory = np.empty(max(size, 3 * len(self._memory) // 2))
+        return self._memory[:size].reshape(shape)
+
+
+def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
+    """``(levels, NX, NY)`` copies of ``grid`` (2-D, values >= 0; booleans count as 0 / 1):
+    level ``l`` holds in cell ``(i, j)`` the maximum of ``grid[i : i + 2^l, j : j + 2^l]``
+    (clipped to the grid)."""
+    if not 1 <= levels <= MAX_LEVELS:
+        raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
+    grid = np.ascontiguousarray(grid, dtype=np.float64)
+    out = np.empty((levels, *grid.shape))
+    _pool_window(grid, 0, 0, grid.shape[0], 0, grid.shape[1], levels, out)
+    return out

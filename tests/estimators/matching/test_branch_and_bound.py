@@ -164,16 +164,18 @@ def test_bad_input_is_refused_with_a_readable_error() -> None:
 
 
 def test_four_node_scores_are_the_means_under_the_shifted_points() -> None:
-    from estimators.matching.branch_and_bound import _square_scores
+    from estimators.matching.branch_and_bound import _cell_bounds, _square_scores
 
     rng = np.random.default_rng(3)
-    for _ in range(50):
-        grid = rng.random(tuple(int(k) for k in rng.integers(1, 30, size=2)))
+    for trial in range(100):
+        # half the trials on grids large enough for the unchecked sums
+        size = 30 if trial % 2 else 80
+        grid = rng.random(tuple(int(k) for k in rng.integers(1, size, size=2)))
         cells = rng.integers(-10, 40, size=(3, int(rng.integers(1, 40)), 2))
         h, di, dj, width = int(rng.integers(3)), *(int(k) for k in rng.integers(-8, 8, 2)), \
             int(rng.choice([1, 2, 4, 8]))
         out = np.empty(4)
-        _square_scores(grid, cells, h, di, dj, width, out)
+        _square_scores(grid, cells, _cell_bounds(cells), h, di, dj, width, out)
         for a in range(2):
             for b in range(2):
                 i, j = cells[h, :, 0] + di + a * width, cells[h, :, 1] + dj + b * width
@@ -181,6 +183,10 @@ def test_four_node_scores_are_the_means_under_the_shifted_points() -> None:
                 expected = np.where(inside, grid[np.where(inside, i, 0),
                                                  np.where(inside, j, 0)], 0.0).mean()
                 assert out[2 * a + b] == pytest.approx(expected, abs=1e-12)
+        bounds = _cell_bounds(cells)
+        assert np.array_equal(bounds, np.column_stack([
+            cells[..., 0].min(axis=1), cells[..., 0].max(axis=1),
+            cells[..., 1].min(axis=1), cells[..., 1].max(axis=1)]))
 
 
 @pytest.mark.parametrize("seed", range(4))
