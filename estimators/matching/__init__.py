@@ -1,9 +1,9 @@
-"""Matching two scans: scan geometry (points, normals, fitted local curves, likelihood fields and
-the correlative search: ``scan_matching``), point-to-line ICP (``icp``), the multi-resolution
-branch-and-bound correlative matcher for scans far apart (``branch_and_bound``), the heading
-change from log-polar spectra (``rotation``) and rotation-aware phase correlation
-(``rotation_pc``, with the ``pc_rot``/``pc_rot_icp`` estimators). It imports
-``estimators.base``, ``estimators.paper`` and ``lidar_env`` only.
+"""Matching two scans: scan geometry (points, normals, fitted local curves, likelihood fields:
+``scan_matching``), the exhaustive correlative search (``correlative``), point-to-line ICP
+(``icp``), the multi-resolution branch-and-bound correlative matcher for scans far apart
+(``branch_and_bound``), the heading change from log-polar spectra (``rotation``) and
+rotation-aware phase correlation (``rotation_pc``, with the ``pc_rot``/``pc_rot_icp``
+estimators). It imports ``estimators.base``, ``estimators.paper`` and ``lidar_env`` only.
 """
 
 from estimators.matching.icp import ICPParams, register

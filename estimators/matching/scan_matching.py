@@ -1,4 +1,4 @@
-"""Scan geometry shared by the scan matchers: scans to points, normals, correlative search.
+"""Scan geometry shared by the scan matchers: scans to points, normals, likelihood fields.
 
 Frames: a scan's points are first in the sensor frame (x forward, y left), then mapped into
 the car frame through the sensor's mount; the estimators map them into the world frame with
@@ -23,7 +23,7 @@ from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import curve_points, line_fits
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import transform_points, wrap_angle
+from lidar_env.se2 import transform_points
 
 #: Readings at or below this [m] are treated as "no return" (CARMEN logs write 0 for none).
 DEFAULT_MIN_RANGE: float = 0.05
@@ -326,43 +326,3 @@ class LikelihoodField:
         scores = np.zeros(points.shape[:-1])
         scores[inside] = self.grid[cells[inside][:, 0], cells[inside][:, 1]]
         return scores
-
-
-def correlative_search(
-    field: LikelihoodField,
-    points: NDArray[np.float64],
-    center: ArrayLike,
-    linear_window: float = 0.5,
-    angular_window: float = np.radians(20.0),
-    angular_step: float = np.radians(1.0),
-    max_points: int = 90,
-) -> tuple[NDArray[np.float64], float]:
-    """Exhaustive search for the pose of ``points`` (M, 2, car frame) in ``field`` (world).
-
-    Tries every heading within ``center[2] ± angular_window`` [rad] at ``angular_step`` and
-    every translation within ``center[:2] ± linear_window`` [m] at the field's resolution.
-    Returns the best pose (3,) and its mean score in [0, 1]. At most ``max_points`` evenly
-    spread points are scored: the search only has to find the basin ICP then refines.
-    """
-    center = np.asarray(center, dtype=np.float64)
-    points = points[:: max(1, int(np.ceil(len(points) / max_points)))]
-    step = field.resolution
-    n_lin = int(np.ceil(linear_window / step))
-    offsets = step * np.arange(-n_lin, n_lin + 1)
-    n_ang = int(np.ceil(angular_window / angular_step))
-    headings = center[2] + angular_step * np.arange(-n_ang, n_ang + 1)
-    best_pose, best_score = center.copy(), -1.0
-    grid_x, grid_y = np.meshgrid(offsets, offsets, indexing="ij")
-    shifts = np.column_stack([grid_x.ravel(), grid_y.ravel()])
-    for heading in headings:
-        c, s = np.cos(heading), np.sin(heading)
-        rotated = points @ np.array([[c, s], [-s, c]]) + center[:2]
-        # (n_shifts, M, 2): every translation of the rotated scan at once.
-        scores = field.score(rotated[None, :, :] + shifts[:, None, :]).mean(axis=1)
-        k = int(np.argmax(scores))
-        if scores[k] > best_score:
-            best_score = float(scores[k])
-            best_pose = np.array(
-                [center[0] + shifts[k, 0], center[1] + shifts[k, 1], float(wrap_angle(heading))]
-            )
-    return best_pose, best_score

@@ -49,9 +49,10 @@ from estimators.matching.branch_and_bound import (
     likelihood_grid,
     match,
 )
+from estimators.matching.correlative import correlative_search
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
-from estimators.matching.scan_matching import LikelihoodField, correlative_search, voxel_downsample
+from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from estimators.odometry.motion_prior import ScanClock
 from lidar_env.se2 import relative
 
@@ -156,7 +157,7 @@ def fallback_match(
 ) -> MatchResult:
     """The best-explaining ICP match of ``points`` from correlative searches around ``guess``
     in ever wider windows, until one explains ``min_quality`` of the points: exhaustive
-    (:func:`~estimators.matching.scan_matching.correlative_search`) in the ``near`` window,
+    (:func:`~estimators.matching.correlative.correlative_search`) in the ``near`` window,
     then over every heading at its translations, then (if given) branch-and-bound in the
     ``far`` window."""
     best: MatchResult | None = None

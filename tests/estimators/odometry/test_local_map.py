@@ -10,9 +10,9 @@ import pytest
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators import SensorSetup, make
+from estimators.matching.correlative import correlative_search
 from estimators.matching.scan_matching import (
     LikelihoodField,
-    correlative_search,
     scans_to_car_points,
     voxel_downsample,
 )
