@@ -103,25 +103,6 @@ def test_the_same_seed_gives_the_same_crowds() -> None:
     assert not np.array_equal(runs[0][0, 0], runs[0][0, 1])  # each sub-env its own crowd
 
 
-def test_a_masked_reset_respawns_only_that_crowd_like_sync() -> None:
-    batched, reference = pair(3, world="hallway", config={"moving_obstacles": 4})
-    batched.reset(seed=1)
-    reference.reset(seed=1)
-    actions = np.full((3, 2), 0.5, np.float32)
-    for _ in range(4):
-        batched.step(actions)
-        reference.step(actions)
-    mask = np.array([False, True, False])
-    got = batched.reset(options={"reset_mask": mask.copy()})
-    expected = reference.reset(options={"reset_mask": mask.copy()})
-    assert_same(got[1], expected[1], "masked reset info")
-    assert got[1]["_moving_obstacles"].tolist() == [False, True, False]
-    for t in range(5):
-        got, expected = batched.step(actions), reference.step(actions)
-        assert_same(got[0], expected[0], f"step {t} observation after the masked reset")
-        assert_same(got[4], expected[4], f"step {t} info after the masked reset")
-
-
 def test_a_world_too_crowded_is_the_single_envs_error() -> None:
     config = {"moving_obstacles": 200, "mover_radius": 1.0}
     with pytest.raises(ConfigError, match="too crowded") as single_error:

@@ -98,8 +98,9 @@ def test_reseeding_and_reset_options_match_single_envs() -> None:
             np.testing.assert_array_equal(got[1], expected[1])
 
 
-def test_a_masked_reset_resets_only_those_envs_like_sync() -> None:
-    batched, reference = pair(3, world="hallway")
+@pytest.mark.parametrize("config", [{}, {"moving_obstacles": 4}], ids=["static", "movers"])
+def test_a_masked_reset_resets_only_those_envs_like_sync(config: dict[str, int]) -> None:
+    batched, reference = pair(3, world="hallway", config=config)
     batched.reset(seed=1)
     reference.reset(seed=1)
     actions = np.full((3, 2), 0.5, np.float32)
@@ -112,7 +113,9 @@ def test_a_masked_reset_resets_only_those_envs_like_sync() -> None:
     assert_same(got[0], expected[0], "masked reset observation")
     assert_same(got[1], expected[1], "masked reset info")
     assert got[1]["time"][1] == 0.0 and got[1]["_time"].tolist() == [False, True, False]
-    for _ in range(3):
+    if config:  # only that sub-env's crowd respawns
+        assert got[1]["_moving_obstacles"].tolist() == [False, True, False]
+    for _ in range(5):
         got, expected = batched.step(actions), reference.step(actions)
         assert_same(got[0], expected[0], "observation after the masked reset")
         assert_same(got[4], expected[4], "info after the masked reset")
