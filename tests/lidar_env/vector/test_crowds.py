@@ -16,7 +16,12 @@ from lidar_env import lidars_with_noise  # importing lidar_env registers DualLid
 from lidar_env.car import box_touches_obstacles
 from lidar_env.errors import ConfigError
 from lidar_env.world import World
-from tests.lidar_env.vector.test_identity import assert_same, pair, wall_seeking_actions
+from tests.lidar_env.vector.test_identity import (
+    assert_same,
+    pair,
+    step_alike,
+    wall_seeking_actions,
+)
 
 #: Short episodes, so 220 steps hold time-limit ends besides the collisions.
 SHORT = {"max_episode_time": 6.0}
@@ -64,12 +69,7 @@ def compare(num_envs: int, steps: int, seed: int, **kwargs: Any) -> dict[str, in
     counts = {"mover collisions": 0, "collisions": 0, "truncations": 0, "autoresets": 0}
     for t in range(steps):
         actions = wall_seeking_actions(rng, steer)
-        got, expected = batched.step(actions), reference.step(actions)
-        assert_same(got[0], expected[0], f"step {t} observation")
-        for name, index in (("reward", 1), ("terminated", 2), ("truncated", 3)):
-            assert got[index].dtype == expected[index].dtype, f"step {t} {name} dtype"
-            np.testing.assert_array_equal(got[index], expected[index], f"step {t} {name}")
-        assert_same(got[4], expected[4], f"step {t} info")
+        got = step_alike(batched, reference, actions, t)
         info = got[4]
         for i in np.flatnonzero(info["collision"]):
             counts["mover collisions"] += touched_a_mover(
