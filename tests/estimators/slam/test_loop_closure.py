@@ -9,6 +9,7 @@ import pytest
 
 from estimators.matching.scan_matching import scan_to_points
 from estimators.slam.loop_closure import (
+    CorrelativeMatch,
     LoopClosureParams,
     PlaceMap,
     correlative_match,
@@ -162,3 +163,34 @@ def test_bad_inputs_are_named() -> None:
         LoopClosureParams(loss_scale=0.0)
     with pytest.raises(ValueError, match=r"reference points: expected shape \(N >= 3, 2\)"):
         PlaceMap(np.zeros((2, 2)), LoopClosureParams())
+
+
+@pytest.mark.parametrize("ratio", [0.0, 0.5, 0.9, 0.99])
+def test_the_pruned_ambiguity_search_makes_the_unpruned_ones_call(ratio: float) -> None:
+    """The runner-up is searched only above ``ambiguity_ratio`` of the best: where the full
+    search's share exceeds the ratio it is the same share, else 0."""
+    from estimators.matching.branch_and_bound import match
+
+    rng = np.random.default_rng(7)
+    params = LoopClosureParams(angular_window=np.radians(4.0), ambiguity_ratio=ratio)
+    for _ in range(4):
+        place = PlaceMap(scan_points(np.array([4.0, 3.0, 0.2]), rng), params)
+        query = scan_points(np.array([4.0, 3.0, 0.2]) + rng.normal(0, [0.3, 0.3, 0.05]),
+                            rng)[::3]
+        guess = rng.normal(0, [0.1, 0.1, 0.02])
+        found = CorrelativeMatch(place, query, guess, 1.0, params)
+        share = found.runner_up()
+        # the unpruned search over the same far blocks
+        n = found._n
+        block = 2 * params.coarse_factor + 1
+        shift = np.round((found.pose[:2] - guess[:2]) / params.resolution).astype(int)
+        blocks = (np.arange(-n, n + 1) + params.coarse_factor) // block
+        best_block = (shift + params.coarse_factor) // block
+        far = np.hypot(block * (blocks[:, None] - best_block[0]),
+                       block * (blocks[None, :] - best_block[1])) >= (
+            params.ambiguity_distance / params.resolution + block)
+        full = match(*found._window, -0.5, allowed=far).score / found.score
+        if full > ratio:
+            assert share == pytest.approx(full, abs=1e-12)
+        else:
+            assert share == 0.0
