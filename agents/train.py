@@ -133,6 +133,7 @@ def train(
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize
 
     torch.set_num_threads(torch_threads)  # small MLP: more threads only add contention
@@ -170,6 +171,8 @@ def train(
         policy, vec_env, seed=seed, device="cpu", verbose=0,
         tensorboard_log=str(tensorboard) if tensorboard else None, **params,
     )
+    if not tensorboard:  # SB3's default logger makes an empty folder in /tmp per run
+        model.set_logger(Logger(folder=None, output_formats=[]))
     start = time.perf_counter()
     callbacks = [callback, _progress_callback(total)] if progress else [callback]
     model.learn(total_timesteps=total, callback=callbacks, progress_bar=False)
