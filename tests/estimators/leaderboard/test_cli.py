@@ -133,8 +133,9 @@ def test_real_log_results_join_the_table(tmp_path: Path,
 def test_scenarios_run_on_a_dask_scheduler(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, processes=False,
-                                  dashboard_address=None) as cluster:
+    dask = pytest.importorskip("dask")  # its scratch folder (lock files) goes to tmp_path
+    with dask.config.set({"temporary-directory": str(tmp_path)}), distributed.LocalCluster(
+            n_workers=1, processes=False, dashboard_address=None) as cluster:
         status = leaderboard.main(["--worlds", "hallway", "--traces", "straight", "--seeds", "0",
                                    "1", "--estimators", "zero", "--no-real", "--no-progress",
                                    "--scheduler", cluster.scheduler_address,

@@ -88,8 +88,10 @@ def test_a_killed_worker_loses_only_unfinished_scenarios_and_a_rerun_resumes(
 @pytest.mark.slow
 def test_two_scenarios_through_dask_match_a_serial_run(tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
+    dask = pytest.importorskip("dask")  # its scratch folder (lock files) goes to tmp_path
     scenarios = SCENARIOS[:2]
-    with distributed.Client(processes=False, dashboard_address=None) as client:
+    with dask.config.set({"temporary-directory": str(tmp_path)}), distributed.Client(
+            processes=False, dashboard_address=None) as client:
         with ExperimentDatabase(tmp_path / "dask.sqlite") as db:
             summary = run_scenarios(db, scenarios, ESTIMATORS, client)
             on_dask = {(r.scenario, r.trace.estimator): r for r in db.traces()}
