@@ -2,7 +2,8 @@
 look-alike place the odometry cannot have drifted to is refused (a straight drive down a
 symmetric hallway is never worse than the front end); a corridor driven out and back gets loop
 edges all along the way back, and a false loop along it is dropped; the registered pipeline
-runs end to end on ray-cast scans; the odometry chain's covariance matches Monte Carlo."""
+runs end to end on ray-cast scans; a loop beyond every local window is closed by the global
+search; the odometry chain's covariance matches Monte Carlo."""
 
 from __future__ import annotations
 
@@ -312,3 +313,25 @@ def test_chain_covariance_matches_monte_carlo() -> None:
     assert np.trace(empirical) > 5 * np.trace(predicted)
     with pytest.raises(ValueError, match=r"chain covariances: expected shape \(20, 3, 3\)"):
         chain_covariance(poses, np.tile(covariance, (n - 1, 1, 1)))
+
+
+def test_the_global_search_closes_a_loop_beyond_every_local_window() -> None:
+    """1.4 laps on an odometry 10 % long and turning 3 deg/m: at the revisit the estimate is
+    metres from the start, outside the local search's windows (loop_radius + loop_drift x
+    path, at most max_search_window); with overlap edges and step checks off only the global
+    all-heading search can find the loop."""
+    laps, n = 1.4, 504
+    phase = 2 * np.pi * laps * np.arange(n) / n
+    truth = np.column_stack([10 + 6.5 * np.cos(phase), 7 + 4.2 * np.sin(phase),
+                             np.arctan2(4.2 * np.cos(phase), -6.5 * np.sin(phase))])
+    odometry = drifting_odometry(truth, scale=1.1, turn=3.0)
+    drift = np.hypot(*(odometry[-1, :2] - truth[-1, :2]))
+    assert drift > 5.0  # far beyond max_search_window (3 m)
+    ends = {}
+    for every in (6, 0):
+        slam = GraphSlam(min_loop_separation=8.0, min_overlap_separation=8.0, check_steps=False,
+                         global_every=every)
+        replay(slam, truth, odometry, seed=0)
+        ends[every] = (slam.n_loops, np.hypot(*(slam.trajectory[-1, :2] - truth[-1, :2])))
+    assert ends[0][0] == 0 and ends[0][1] == pytest.approx(drift, rel=1e-6)
+    assert ends[6][0] >= 1 and ends[6][1] < 0.25 * drift
