@@ -227,7 +227,7 @@ class FarScanMatching:
         """Whether over the clock's typical interval (the median of the last ones, else
         ``typical`` [s]) the constant-velocity guess can miss by more than the weakest prior
         the ordinary path allows (scans 4 Hz and slower)."""
-        clock = self._clock.median if len(self._clock.intervals) >= 5 else typical
+        clock = self._clock.median if self._clock.settled else typical
         return self.prediction_acceleration * clock**2 > self.prior_sigma_translation
 
     def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,

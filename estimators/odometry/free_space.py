@@ -292,9 +292,10 @@ class MovingPointFilter:
         self.stale_resolution = stale_resolution
         angles = [s.beam_angles for s in setup.sensors]
         ranges = [s.max_range for s in setup.sensors]
-        self._beams = BeamGeometry(angles, ranges)
-        # the last ``history`` scans packed as one setup of history x K sensors: one call
-        self._past_beams = [BeamGeometry(angles * n, ranges * n) for n in range(1, history + 1)]
+        # the last n scans packed as one setup of n x K sensors (one call); n = 1: the new scan
+        self._past_beams = [BeamGeometry(angles * n, ranges * n)
+                            for n in range(1, max(history, 1) + 1)]
+        self._beams = self._past_beams[0]
         self._history: deque[tuple[NDArray[np.float64], list[NDArray[np.float64]],
                                    NDArray[np.float64]]] = deque(maxlen=history)
 

@@ -338,7 +338,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         cost ACES 0.033 -> 0.034 m per local relation and 0.19 -> 0.29 m over all; only there,
         0.0346 m and 0.22 m)."""
         information = self._prior_information.copy()
-        typical = self._clock.median if len(self._clock.intervals) >= 5 else 0.0
+        typical = self._clock.median if self._clock.settled else 0.0
         step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
         if typical > 0:
             sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,

@@ -76,13 +76,18 @@ def clock_jitter(intervals: ArrayLike) -> float:
     return median(np.abs(intervals - median(intervals)))
 
 
+#: Intervals a clock must have shown before its median stands for it.
+SETTLED_INTERVALS = 5
+
+
 class ScanClock:
     """The last scan intervals [s] of a logged clock and their robust statistics, each
     computed once per new interval (a median of a few hundred stamps costs tens of
     microseconds, and a scan of ``lidar_odometry`` asks for them several times).
 
     ``intervals`` holds the last ``max_intervals`` finite ones, ``steps`` the last
-    ``max_steps`` positive ones (a glitching clock's zero or negative stamps are no step).
+    ``max_steps`` positive ones (a glitching clock's zero or negative stamps are no step);
+    the clock is ``settled`` once it has seen :data:`SETTLED_INTERVALS` intervals.
     """
 
     def __init__(self, max_intervals: int = 201, max_steps: int = 21) -> None:
@@ -109,6 +114,11 @@ class ScanClock:
         if name not in self._statistics:
             self._statistics[name] = statistic(np.fromiter(values, np.float64, len(values)))
         return self._statistics[name]
+
+    @property
+    def settled(self) -> bool:
+        """Whether enough intervals were seen for their median to describe the clock."""
+        return len(self.intervals) >= SETTLED_INTERVALS
 
     @property
     def median(self) -> float:

@@ -105,7 +105,7 @@ class UnknownStartSpeed:
         reference = self._reference
         pose = self._odometry_step(scans, t)
         assert self._kept is not None
-        if len(self._clock.intervals) >= 5 and self._slow_clock(0.0):  # the far-apart search, not
+        if self._clock.settled and self._slow_clock(0.0):  # the far-apart search, not
             self._kept, self.speed_unknown = None, False  # the prior, decides: nothing stalls
             return pose
         self._kept.append((scans, t))

@@ -145,3 +145,27 @@ def test_a_scan_judges_only_points_where_its_beams_lie_close_enough() -> None:
     near_only = beams.seen_through(points, np.zeros((1, 3)), [ranges], 0.2, 0.0, 0.1)
     np.testing.assert_array_equal(everywhere, [True] * 5)
     np.testing.assert_array_equal(near_only, [True, True, False, False, False])
+
+
+def test_the_filter_clears_map_points_only_where_the_new_scan_resolves_them() -> None:
+    """A map point in free space 3 m out is stale, one 8 m out (1-degree beams 14 cm apart
+    there) is not, with the default ``stale_resolution`` 0.1 m; a new point in space an earlier
+    scan saw through is moving at 8 m too (that test keeps the full range)."""
+    from estimators.base import SensorSetup
+    from estimators.odometry.free_space import MovingPointFilter
+
+    room = World(segments=[[-12, -12, 12, -12], [12, -12, 12, 12], [12, 12, -12, 12],
+                           [-12, 12, -12, -12]])
+    setup = SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0)
+    car = np.zeros(3)
+    empty = {setup.keys[0]: cast_rays(room, car[None], FULL, 20.0)[0]}
+    moving_filter = MovingPointFilter(setup)
+    far, near = np.array([[8.0, 0.05]]), np.array([[3.0, 0.05]])
+    moving, stale = moving_filter.classify(far, car, empty, [near, far])
+    assert stale[0].tolist() == [True] and stale[1].tolist() == [False]
+    assert moving.tolist() == [False]  # no history yet
+    moving_filter.remember(car, empty, np.zeros((0, 2)))
+    moving, _ = moving_filter.classify(far, car, empty, [])
+    assert moving.tolist() == [True]
+    everywhere = MovingPointFilter(setup, stale_resolution=np.inf)
+    assert everywhere.classify(far, car, empty, [far])[1][0].tolist() == [True]

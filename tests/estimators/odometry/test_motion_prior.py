@@ -46,6 +46,12 @@ def test_scan_clock_statistics_are_those_of_its_last_intervals() -> None:
         assert clock.typical_step == np.median(steps)
     clock.extend([0.5, 0.5])
     assert clock.median == np.median([*seen[-5:], 0.5, 0.5])
+    fresh = ScanClock()
+    for k in range(5):  # settled from the fifth finite interval on
+        assert not fresh.settled
+        fresh.add(0.1 if k != 2 else np.nan)
+    fresh.add(0.1)
+    assert fresh.settled
     assert clock.typical_step == np.median([value for value in seen if value > 0][-3:])
 
 
