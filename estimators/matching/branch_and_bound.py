@@ -32,9 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 from estimators.matching.likelihood_grids import (
     MAX_LEVELS,
     PyramidBuffer,
-    _pool_window,
     likelihood_grid,
     max_pool_levels,
+    pool_window,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
@@ -106,7 +106,7 @@ class GridPyramid:
         shape = (int(levels), r1 - r0, c1 - c0)
         self.levels = np.empty(shape) if buffer is None else buffer.take(shape)
         # only the kept cells are read, so only they are checked
-        if _pool_window(grid, pad, r0, r1, c0, c1, int(levels), self.levels):
+        if pool_window(grid, pad, r0, r1, c0, c1, int(levels), self.levels):
             raise EstimatorInputError("grid: expected finite scores >= 0")
 
     @classmethod

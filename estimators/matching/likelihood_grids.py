@@ -150,7 +150,7 @@ def likelihood_grid(points: ArrayLike, origin: ArrayLike, shape: tuple[int, int]
 
 
 @njit(cache=True)
-def _pool_window(grid: NDArray[np.float64], pad: int, r0: int, r1: int, c0: int, c1: int,
+def pool_window(grid: NDArray[np.float64], pad: int, r0: int, r1: int, c0: int, c1: int,
                  levels: int, out: NDArray[np.float64]) -> bool:  # pragma: no cover (numba)
     """Fill ``out`` ``(levels, r1 - r0, c1 - c0)`` (every cell written): level 0 the cells
     ``r0 .. r1 - 1``, ``c0 .. c1 - 1`` of ``grid`` padded with ``pad`` empty (0) cells on the
@@ -216,5 +216,5 @@ def max_pool_levels(grid: NDArray, levels: int) -> NDArray[np.float64]:
         raise ConfigError(f"levels: expected an integer in [1, {MAX_LEVELS}], got {levels}")
     grid = np.ascontiguousarray(grid, dtype=np.float64)
     out = np.empty((levels, *grid.shape))
-    _pool_window(grid, 0, 0, grid.shape[0], 0, grid.shape[1], levels, out)
+    pool_window(grid, 0, 0, grid.shape[0], 0, grid.shape[1], levels, out)
     return out
