@@ -289,6 +289,9 @@ class MovingPointFilter:
         self.margin = margin
         self.radius = radius
         self.min_range = min_range
+        if not stale_resolution > 0:  # NaN too; inf judges every earlier point
+            raise ConfigError(f"stale_resolution: expected a beam spacing > 0 [m] (inf: no "
+                              f"limit), got {stale_resolution!r}")
         self.stale_resolution = stale_resolution
         angles = [s.beam_angles for s in setup.sensors]
         ranges = [s.max_range for s in setup.sensors]

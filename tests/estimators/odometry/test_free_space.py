@@ -169,3 +169,13 @@ def test_the_filter_clears_map_points_only_where_the_new_scan_resolves_them() ->
     assert moving.tolist() == [True]
     everywhere = MovingPointFilter(setup, stale_resolution=np.inf)
     assert everywhere.classify(far, car, empty, [far])[1][0].tolist() == [True]
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, float("nan")])
+def test_a_stale_resolution_that_is_no_spacing_is_named(bad: float) -> None:
+    from estimators.base import SensorSetup
+    from estimators.odometry.free_space import MovingPointFilter
+    from lidar_env.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="stale_resolution"):
+        MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), stale_resolution=bad)
