@@ -5,11 +5,15 @@ Prints, in one run on this machine:
 * env steps/s (CPU time of this process, ``time.process_time``; random actions, autoresets
   included) of ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` and of
   ``vectorization_mode="sync"`` at N = 1, 16, 64, 256, and their ratio;
-* where a batched env step goes at the largest N, from the same loop with less work: without
-  range noise (no Gaussian draws), and noiseless with 8-beam Lidars (nearly no ray casting),
-  so the differences are the cost of the range noise and of the exact rays [us per env step];
-  the scan call of the 8-beam Lidars is split into its cost per call (the same Lidars in a
-  world with no obstacles) and the cost of the circles and edges in range (the rest);
+* where a batched env step goes at the largest N [us per env step]: the scan call alone
+  (every sub-env, at its reset pose) of the default Lidars, of the same without range noise,
+  of noiseless 8-beam Lidars and of those in a world with no obstacles, so the differences are
+  the noise, the exact rays, the obstacles in range and the cost per call; the noise split
+  into its Gaussian draws alone (a compiled loop drawing them as the scan does) and the rest;
+  the step's remainder split into its Python (the action check, observation copies, infos)
+  and the compiled motion, collision, progress and reward; and what 200,000 steps/s leaves
+  per step against what the draws and the noiseless scan alone take; and the batched env in
+  a large map (2,000 walls);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
@@ -32,10 +36,13 @@ import os
 import platform
 import time
 import tracemalloc
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from numba import njit
+from numpy.typing import NDArray
 
 import lidar_env  # registers DualLidar-v0
 from lidar_env.config import MOVER_MODELS
@@ -51,6 +58,20 @@ NOISELESS = {"lidars": lidar_env.lidars_with_noise(range_noise_std=0.0)}
 #: [m] a 60 m square with nothing in it, driven along its middle: a scan with no primitives.
 EMPTY_WORLD = {"world": World(np.empty((0, 3)), np.empty((0, 4)), bounds=(0.0, 0.0, 60.0, 60.0)),
                "trace": np.array([[5.0, 30.0], [55.0, 30.0]])}
+
+
+
+
+def cluttered_world(walls: int, seed: int = 0) -> dict[str, Any]:
+    """``world`` and ``trace`` kwargs: EMPTY_WORLD's 60 m square strewn with ``walls`` 0.5 m
+    walls (none within 3 m of its middle line, the trace): a large map's many primitives."""
+    rng = np.random.default_rng(seed)
+    starts = rng.uniform(0.0, 60.0, (3 * walls, 2))
+    starts = starts[np.abs(starts[:, 1] - 30.0) > 3.0][:walls]
+    angles = rng.uniform(0.0, np.pi, len(starts))
+    ends = starts + 0.5 * np.column_stack([np.cos(angles), np.sin(angles)])
+    return {"world": World(np.empty((0, 3)), np.hstack([starts, ends]),
+                           bounds=(0.0, 0.0, 60.0, 60.0)), "trace": EMPTY_WORLD["trace"]}
 
 
 #: Config keys every env of the run gets (the movers of ``--moving-obstacles``).
@@ -84,12 +105,54 @@ def scan_microseconds(env: Any, seconds: float) -> float:
     """CPU time [us] per env of the batched env's scan call alone (every sub-env)."""
     env.reset(seed=0)
     every = np.arange(env.num_envs)
+    return timed_microseconds(lambda: env._observe(every), seconds, env.num_envs)
+
+
+@njit(cache=True)
+def draw_standard_normals(rngs: Any, out: NDArray[np.float64]) -> None:
+    """``out`` (n,) overwritten with n standard normals from each generator of ``rngs`` in turn,
+    drawn one at a time as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
+    for i in range(len(rngs)):
+        rng = rngs[i]
+        for j in range(out.shape[0]):
+            out[j] = rng.standard_normal()
+
+
+def timed_microseconds(call: Callable[[], Any], seconds: float, per: int) -> float:
+    """CPU time [us] of ``call()`` divided by ``per``, over ``seconds`` of repeats (one untimed
+    call first)."""
+    call()
     calls = 0
     start = time.process_time()
     while time.process_time() - start < seconds:
-        env._observe(every)
+        call()
         calls += 1
-    return (time.process_time() - start) / calls / env.num_envs * 1e6
+    return (time.process_time() - start) / calls / per * 1e6
+
+
+def draw_microseconds(env: Any, seconds: float) -> float:
+    """CPU time [us] per env of the range noise's draws alone: one standard normal per beam
+    from each sub-env's generator, as the batched scan draws them (numba's draws, bit-identical
+    to numpy's ``Generator.standard_normal``)."""
+    env.reset(seed=0)
+    out = np.empty(env._scans.shape[1])  # one draw per beam of every Lidar
+    return timed_microseconds(lambda: draw_standard_normals(env._slots.rngs, out), seconds,
+                              env.num_envs)
+
+
+def python_microseconds(env: Any, seconds: float) -> float:
+    """CPU time [us] per env of a batched step's Python around its compiled call: the action
+    check (:meth:`_motion`, one compiled call), the observation copies and the infos."""
+    env.reset(seed=0)
+    actions = np.zeros((env.num_envs, 2))
+
+    def outputs() -> None:
+        env._motion(actions, env._every_env)
+        env._observation()
+        env._infos(None)
+        env._rewards.copy(), env._terminations.copy(), env._truncations.copy()
+
+    return timed_microseconds(outputs, seconds, env.num_envs)
 
 
 def traced_bytes_per_env(mode: str, num_envs: int) -> float:
@@ -136,27 +199,40 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{n:>5} {batched:>16,.0f} {sync:>13,.0f} {batched / sync:>5.1f}x")
     n = max(args.sizes)
     noiseless = cpu_steps_per_second(make("vector_entry_point", n, NOISELESS), args.seconds)
-    few_env = make("vector_entry_point", n, FEW_BEAMS)
-    few = cpu_steps_per_second(few_env, args.seconds)
-    few_scan = scan_microseconds(few_env.unwrapped, args.seconds)
-    call_scan = scan_microseconds(make("vector_entry_point", n, FEW_BEAMS, **EMPTY_WORLD).unwrapped,
-                                  args.seconds)
-    full_us, noiseless_us, few_us = (1e6 / r for r in (rates[n], noiseless, few))
+    few = cpu_steps_per_second(make("vector_entry_point", n, FEW_BEAMS), args.seconds)
+    full_scan, noiseless_scan, few_scan, call_scan = (
+        scan_microseconds(make("vector_entry_point", n, config, **kwargs).unwrapped, args.seconds)
+        for config, kwargs in ((None, {}), (NOISELESS, {}), (FEW_BEAMS, {}),
+                               (FEW_BEAMS, EMPTY_WORLD)))
+    draws = draw_microseconds(make("vector_entry_point", n).unwrapped, args.seconds)
+    python = python_microseconds(make("vector_entry_point", n).unwrapped, args.seconds)
+    full_us = 1e6 / rates[n]
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
-          f"  {full_us - noiseless_us:5.2f} the range noise (720 Gaussian draws, adding them)\n"
-          f"  {noiseless_us - few_us:5.2f} the other 704 exact rays and their noise pass\n"
+          f"  {draws:5.2f} the 720 Gaussian draws of the range noise alone (numba's, one at a time"
+          " from each sub-env's generator)\n"
+          f"  {full_scan - noiseless_scan - draws:5.2f} the rest of the noise (adding it; the "
+          "draws in the scan beyond a bare loop of them)\n"
+          f"  {noiseless_scan - few_scan:5.2f} the other 704 exact rays and their readings\n"
           f"  {few_scan - call_scan:5.2f} the scan's obstacles (2 Lidars x 8 beams: the circles and"
           " edges in range, their bearings, the inside-a-polygon test)\n"
           f"  {call_scan:5.2f} the scan call per env (2 Lidars x 8 beams, no obstacles: beam "
           "directions, grid bounds, readings)\n"
-          f"  {few_us - few_scan:5.2f} motion, collision, progress, reward, infos and Python"
-          + (" (the crowd's step and the scans' movers included)" if BASE else ""))
+          f"  {full_us - full_scan - python:5.2f} motion, collision, progress, reward (compiled)"
+          + (" (the crowd's step and the scans' movers included)" if BASE else "") + "\n"
+          f"  {python:5.2f} Python: the action check, observation copies, infos\n"
+          "  (the scan figures are the scan call alone at the reset poses, the rest the step's)")
+    print(f"  {TARGET_STEPS_PER_SECOND:,} steps/s leaves {1e6 / TARGET_STEPS_PER_SECOND:.2f} us "
+          f"per env step; the draws and the noiseless scan alone take {draws:.2f} + "
+          f"{noiseless_scan:.2f} = {draws + noiseless_scan:.2f} us")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     if BASE:
         still = cpu_steps_per_second(make("vector_entry_point", n, {"moving_obstacles": 0}),
                                      args.seconds)
         print(f"  of which the crowd: {full_us - 1e6 / still:5.2f} (without movers: {still:,.0f}"
               " steps/s)")
+    cluttered = cpu_steps_per_second(make("vector_entry_point", n, **cluttered_world(2000)),
+                                     args.seconds)
+    print(f"  in a 60 m square of 2,000 short walls: {cluttered:,.0f} steps/s")
     env = make("vector_entry_point", n)
     env.reset(seed=0)
     print(f"\nmemory per env at N = {n}: batched env arrays {own_bytes_per_env(env.unwrapped):,.0f}"

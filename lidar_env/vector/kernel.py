@@ -32,13 +32,15 @@ from lidar_env.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.layout_kernels import cast_packed, readings
 from lidar_env.mover_kernels import advance_crowd
 from lidar_env.movers import WAYPOINT_TRIES, fill_car_circles
-from lidar_env.primitive_grid import segment_distance2
+from lidar_env.primitive_grid import cell_block, segment_distance2
 from lidar_env.trace_geometry import project_onto_polyline
 
 #: [m] added to the reach of a move when picking the obstacles it may touch: far above the
 #: rounding of the arc's closed form (~1e-7 m on the flattest arcs, yaw rates near 1e-9 rad/s),
 #: far below any obstacle spacing, so the pick stays conservative and culls nearly all.
 REACH_MARGIN = 0.01
+#: The beam wedge of :func:`lidar_env.primitive_grid.cell_block` for a whole disc (width 2 pi).
+WHOLE_DISC = (2.0 * math.pi, 1.0, 0.0, 1.0, 0.0)
 
 
 @njit(cache=True)
@@ -106,7 +108,8 @@ def observe_envs(
 @njit(cache=True)
 def obstacles_within(
     x: float, y: float, reach: float, circles: NDArray[np.float64], segments: NDArray[np.float64],
-    near_circles: NDArray[np.float64], near_segments: NDArray[np.float64],
+    grid: tuple, seen: tuple, stamp: NDArray[np.int64], near_circles: NDArray[np.float64],
+    near_segments: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The circles (n, 3) and segments (m, 4) that come within ``reach`` [m] of (x, y), as
     views of the first rows of ``near_circles`` and ``near_segments`` (at least as long as
@@ -116,21 +119,42 @@ def obstacles_within(
     (a chord is never longer than its arc) and the box within its half-diagonal of the centre,
     so with ``reach`` = the two plus a margin, the obstacles left out cannot touch it: the
     collision check over the rest gives the same answer as over all (the culling is the
-    broad phase the single car does not need).
+    broad phase the single car does not need). Only the cells of the world's ``grid``
+    (:class:`~lidar_env.primitive_grid.PrimitiveGrid`) under the square of half side ``reach``
+    are visited (a circle is listed in every cell its bounding box touches, a segment in every
+    cell it passes through); ``seen`` ``(circle_seen, segment_seen)`` and the stamp
+    ``stamp[0]`` (then advanced) make a primitive listed in several of them count once, as
+    :func:`lidar_env.ray_casting.cast_sensor` uses them. The near ones come in cell order, not
+    index order: the check only asks whether any touches.
     """
-    n_circles = 0
-    for j in range(circles.shape[0]):
-        dx, dy, r = circles[j, 0] - x, circles[j, 1] - y, circles[j, 2] + reach
-        if dx * dx + dy * dy <= r * r:
-            for c in range(3):
-                near_circles[n_circles, c] = circles[j, c]
-            n_circles += 1
-    n_segments = 0
-    for j in range(segments.shape[0]):
-        if segment_distance2(x, y, segments[j]) <= reach * reach:
-            for c in range(4):
-                near_segments[n_segments, c] = segments[j, c]
-            n_segments += 1
+    circle_seen, segment_seen = seen
+    mark = stamp[0]
+    stamp[0] += 1
+    nx, circle_start, circle_ids, segment_start, segment_ids = grid[3], grid[5], grid[6], \
+        grid[7], grid[8]
+    c0, c1, r0, r1, _, _ = cell_block(x, y, reach, WHOLE_DISC, grid[:5])
+    n_circles = n_segments = 0
+    for iy in range(r0, r1 + 1):
+        for c in range(iy * nx + c0, iy * nx + c1 + 1):
+            for p in range(circle_start[c], circle_start[c + 1]):
+                j = circle_ids[p]
+                if circle_seen[j] == mark:
+                    continue
+                circle_seen[j] = mark
+                dx, dy, r = circles[j, 0] - x, circles[j, 1] - y, circles[j, 2] + reach
+                if dx * dx + dy * dy <= r * r:
+                    for k in range(3):
+                        near_circles[n_circles, k] = circles[j, k]
+                    n_circles += 1
+            for p in range(segment_start[c], segment_start[c + 1]):
+                j = segment_ids[p]
+                if segment_seen[j] == mark:
+                    continue
+                segment_seen[j] = mark
+                if segment_distance2(x, y, segments[j]) <= reach * reach:
+                    for k in range(4):
+                        near_segments[n_segments, k] = segments[j, k]
+                    n_segments += 1
     return near_circles[:n_circles], near_segments[:n_segments]
 
 
@@ -183,8 +207,9 @@ def step_envs(
             trace = i
             env_waypoints, env_arc = waypoints[i], trace_arc[i]
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
-        near_circles, near_segments = obstacles_within(pose[i, 0], pose[i, 1], reach,
-                                                       env_circles, env_segments, work[5], work[6])
+        near_circles, near_segments = obstacles_within(
+            pose[i, 0], pose[i, 1], reach, env_circles, env_segments, env_grid,
+            (work[2], work[3]), work[4], work[5], work[6])
         if crowd[0].shape[1] == 0:
             hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
