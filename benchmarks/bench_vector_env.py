@@ -6,14 +6,14 @@ Prints, in one run on this machine:
   included) of ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` and of
   ``vectorization_mode="sync"`` at N = 1, 16, 64, 256, and their ratio;
 * where a batched env step goes at the largest N [us per env step]: the scan call alone
-  (every sub-env, at its reset pose) of the default Lidars, of the same without range noise,
-  of noiseless 8-beam Lidars and of those in a world with no obstacles, so the differences are
-  the noise, the exact rays, the obstacles in range and the cost per call; the noise split
-  into its Gaussian draws alone (a compiled loop drawing them as the scan does) and the rest;
-  the step's remainder split into its Python (the action check, observation copies, infos)
-  and the compiled motion, collision, progress and reward; and what 200,000 steps/s leaves
-  per step against what the draws and the noiseless scan alone take; and the batched env in
-  a large map (2,000 walls);
+  (every sub-env, 50 random steps after a reset) of the default Lidars, of the same without
+  range noise, of noiseless 8-beam Lidars and of those in a world with no obstacles, so the
+  differences are the noise, the exact rays, the obstacles in range and the cost per call;
+  the noise split into its Gaussian draws alone (a compiled loop drawing them as the scan
+  does) and the rest; the step's remainder split into its Python (the action check,
+  observation copies, infos) and the compiled motion, collision, progress and reward; and
+  what 200,000 steps/s leaves per step against what the draws and the noiseless scan alone
+  take; and the batched env in a large map (2,000 walls);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
@@ -101,9 +101,14 @@ def cpu_steps_per_second(env: gym.vector.VectorEnv, seconds: float, seed: int = 
     return steps * env.num_envs / (time.process_time() - start)
 
 
-def scan_microseconds(env: Any, seconds: float) -> float:
-    """CPU time [us] per env of the batched env's scan call alone (every sub-env)."""
+def scan_microseconds(env: Any, seconds: float, warmup_steps: int = 50) -> float:
+    """CPU time [us] per env of the batched env's scan call alone (every sub-env), at the poses
+    ``warmup_steps`` random steps after a reset (where the timed loop's cars are, not at their
+    starts)."""
     env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(warmup_steps):
+        env.step(env.action_space.sample())
     every = np.arange(env.num_envs)
     return timed_microseconds(lambda: env._observe(every), seconds, env.num_envs)
 
@@ -220,7 +225,8 @@ def main(argv: list[str] | None = None) -> None:
           f"  {full_us - full_scan - python:5.2f} motion, collision, progress, reward (compiled)"
           + (" (the crowd's step and the scans' movers included)" if BASE else "") + "\n"
           f"  {python:5.2f} Python: the action check, observation copies, infos\n"
-          "  (the scan figures are the scan call alone at the reset poses, the rest the step's)")
+          "  (the scan figures are the scan call alone, 50 random steps into the episodes; the "
+          "rest the step's)")
     print(f"  {TARGET_STEPS_PER_SECOND:,} steps/s leaves {1e6 / TARGET_STEPS_PER_SECOND:.2f} us "
           f"per env step; the draws and the noiseless scan alone take {draws:.2f} + "
           f"{noiseless_scan:.2f} = {draws + noiseless_scan:.2f} us")
