@@ -29,6 +29,9 @@ from lidar_env.world import World
 INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_position",
                               "cross_track_error", "collision")
 
+#: Their ``_key`` masks (which sub-envs have a value), in the same order.
+INFO_MASK_KEYS: tuple[str, ...] = tuple(f"_{key}" for key in INFO_KEYS)
+
 Observation = dict[str, NDArray[np.float32]]
 
 
@@ -303,18 +306,18 @@ class DualLidarVectorEnv(VectorEnv):
     def _infos(self, mask: NDArray[np.bool_] | None) -> dict[str, Any]:
         """The infos of every sub-env (``mask`` None) or of the ``mask`` ones, batched like
         ``SyncVectorEnv`` does (zeros and a False ``_key`` where a sub-env has none)."""
-        values = (self._pose, self._sensor_poses, self._time, self._arc / self._slots.length,
-                  self._arc, self._cross_track, self._collision)
+        values = (self._pose.copy(), self._sensor_poses.copy(), self._time.copy(),
+                  self._arc / self._slots.length, self._arc.copy(), self._cross_track.copy(),
+                  self._collision.copy())
+        present = np.ones(self.num_envs, np.bool_) if mask is None else mask.copy()
+        if mask is not None:
+            absent = ~mask
+            for array in values:
+                array[absent] = 0
         infos: dict[str, Any] = {}
-        for key, value in zip(INFO_KEYS, values, strict=True):
-            array = np.array(value)
-            if mask is None:
-                infos[key], infos[f"_{key}"] = array, np.ones(self.num_envs, dtype=np.bool_)
-            else:
-                array[~mask] = 0
-                infos[key], infos[f"_{key}"] = array, mask.copy()
+        for key, mask_key, array in zip(INFO_KEYS, INFO_MASK_KEYS, values, strict=True):
+            infos[key], infos[mask_key] = array, present.copy()  # a mask per key, as Sync's
         if self._mover_info:  # x, y, vx, vy, radius of each mover
-            present = np.ones(self.num_envs, np.bool_) if mask is None else mask.copy()
             infos["moving_obstacles"] = self._crowds.state(mask)
             infos["_moving_obstacles"] = present
         return infos
