@@ -27,6 +27,7 @@ from functools import cache
 
 import numpy as np
 import scipy.fft
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError, EstimatorInputError
@@ -69,7 +70,8 @@ def _circular_correlation(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def log_polar_spectrum(
-    image: ArrayLike, n_angles: int = 360, n_radii: int = 64, min_radius: float = 4.0
+    image: ArrayLike, n_angles: int = 360, n_radii: int = 64, min_radius: float = 4.0,
+    compiled: bool = True,
 ) -> FloatArray:
     """Magnitude spectrum of ``image`` (H, W) resampled on a log-polar grid.
 
@@ -78,6 +80,8 @@ def log_polar_spectrum(
     spectrum is point-symmetric), columns are radii spaced evenly in log from ``min_radius``
     [frequency bins] to 0.45 of the smaller image side. Values are ``log1p`` of the magnitude
     times the radius, which evens out the 1/f fall-off so fine detail weighs in.
+    ``compiled``: sample in one numba loop (:func:`_sample_log_polar`) rather than by
+    ``np.einsum`` over the gathered bins, the same values bit for bit.
     """
     image = np.asarray(image, dtype=np.float32)
     if image.ndim != 2 or min(image.shape) < 16:
@@ -92,10 +96,32 @@ def log_polar_spectrum(
     window, corners, weights, radii = _log_polar_grid(
         height, width, n_angles, n_radii, min_radius
     )
-    magnitude = np.abs(np.fft.fftshift(scipy.fft.rfft2(image * window, workers=1), axes=0))
+    magnitude = np.abs(scipy.fft.rfft2(image * window, workers=1))
+    if compiled:
+        # numpy's log1p, not numba's: they differ in the last bit on AVX-512 machines
+        return np.log1p(_sample_log_polar(magnitude.ravel(), corners, weights, radii))
     # Bilinear interpolation: the four neighbouring bins of each sample, weighted.
     samples = np.einsum("kij,kij->ij", magnitude.ravel()[corners], weights)
     return np.log1p(samples * radii)
+
+
+@njit(cache=True, nogil=True)
+def _sample_log_polar(
+    magnitude: NDArray[np.float32], corners: NDArray[np.intp], weights: FloatArray,
+    radii: FloatArray,
+) -> FloatArray:  # pragma: no cover (numba)
+    """:func:`log_polar_spectrum`'s bilinear samples times their radius,
+    ``radius * sum_k w_k |F|_k``, of the flat magnitude spectrum, from its four-corner indices
+    and weights (4, angles, radii)."""
+    _, n_angles, n_radii = corners.shape
+    samples = np.empty((n_angles, n_radii))
+    for i in range(n_angles):
+        for j in range(n_radii):
+            total = 0.0
+            for k in range(4):
+                total += magnitude[corners[k, i, j]] * weights[k, i, j]
+            samples[i, j] = total * radii[j]
+    return samples
 
 
 @cache
@@ -104,8 +130,10 @@ def _log_polar_grid(
 ) -> tuple[NDArray[np.float32], NDArray[np.intp], FloatArray, FloatArray]:
     """For :func:`log_polar_spectrum`, made once per geometry (they cost as much as the FFT):
     the Hann window (height, width); for each sample (n_angles, n_radii) the flat indices
-    (4, ...) of its four neighbouring bins in the shifted half-spectrum (height, width // 2 + 1)
-    and their bilinear weights (4, ...); the radii (n_radii,)."""
+    (4, ...) of its four neighbouring bins in the half-spectrum (height, width // 2 + 1) as
+    ``rfft2`` lays it out (the grid is placed in the spectrum shifted to put frequency 0 at row
+    ``height // 2``, as ``np.fft.fftshift`` would) and their bilinear weights (4, ...); the
+    radii (n_radii,)."""
     # A separable Hann window stops the image border from adding a bright cross to the spectrum.
     window = np.outer(np.hanning(height), np.hanning(width)).astype(np.float32)
     angles = -0.5 * np.pi + np.pi * np.arange(n_angles) / n_angles
@@ -121,7 +149,8 @@ def _log_polar_grid(
         # Clipped like map_coordinates' mode="nearest" (the grid stays inside anyway).
         r = np.clip(row0 + dr, 0, height - 1)
         c = np.clip(col0 + dc, 0, n_cols - 1)
-        corners.append(r * n_cols + c)
+        # row r of the shifted spectrum is row (r - height // 2) mod height of rfft2's
+        corners.append((r - height // 2) % height * n_cols + c)
         weights.append(weight)
     grid = (window, np.stack(corners), np.stack(weights), radii)
     for array in grid:

@@ -87,9 +87,8 @@ class PreparedScan:
 
     def image(self, turn: float = 0.0) -> NDArray[np.uint8]:
         """The scan's eq.-5 image, its beams turned by ``turn`` [rad]."""
-        return scan_to_image(
-            self.ranges, self.beam_angles + turn, self.max_range, self.image_size, self.resolution
-        )
+        return scan_to_image(self.ranges, self.beam_angles, self.max_range, self.image_size,
+                             self.resolution, turn)
 
     @cached_property
     def upright_image(self) -> NDArray[np.uint8]:
@@ -165,12 +164,12 @@ class ScanMatcher:
         angles = np.asarray(beam_angles, dtype=np.float64)
         hit = (ranges < self.max_range) & (ranges > DEFAULT_MIN_RANGE)
         reference = None
-        points = np.column_stack(
-            [ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])]
-        )
-        if self.icp_iterations and len(points) >= 3:
+        if self.icp_iterations and np.count_nonzero(hit) >= 3:
             reference = CurveReference(ranges, angles, self.max_range)
             points = reference.smoothed
+        else:
+            points = np.column_stack([ranges[hit] * np.cos(angles[hit]),
+                                      ranges[hit] * np.sin(angles[hit])])
         grid = POLAR_GRID_BEFORE_REFINEMENT if self.icp_iterations else POLAR_GRID
         return PreparedScan(
             ranges,
@@ -207,7 +206,7 @@ class ScanMatcher:
         pose = np.array([translation[0], translation[1], rotation.angle])
         # Peak-to-runner-up ratio r >= 1 maps to 1 - 1/r: 0 when ambiguous, -> 1 when unique.
         confidence = rotation.confidence * (1.0 - 1.0 / max(correlation.confidence, 1.0))
-        return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+        return ScanMatch(pose, clipped_confidence(confidence))
 
     def match(
         self,
@@ -268,12 +267,17 @@ class ScanMatcher:
         ]
         best_quality = max(quality for _, quality in refined)
         candidates = [r for r in refined if r[1] >= best_quality - QUALITY_TOLERANCE]
-        if prior is not None:
+        if prior is not None and len(candidates) > 1:
             candidates.sort(
                 key=lambda r: float(np.sum((pose_difference(r[0], prior) / PRIOR_SIGMA) ** 2))
             )
         pose, confidence = candidates[0]
-        return ScanMatch(pose, float(np.clip(confidence, MIN_CONFIDENCE, 1.0)))
+        return ScanMatch(pose, clipped_confidence(confidence))
+
+
+def clipped_confidence(confidence: float) -> float:
+    """``np.clip(confidence, MIN_CONFIDENCE, 1.0)`` of one number (NaN kept), without its cost."""
+    return min(max(float(confidence), MIN_CONFIDENCE), 1.0)
 
 
 def refinement_starts(start: FloatArray, prior: FloatArray | None) -> list[FloatArray]:

@@ -113,6 +113,10 @@ class FusionEstimator(Estimator):
     robust_scale: float = 3.0
     velocity_window: float = 1.0
     _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
+    #: the setup's mounts (N, 3) and their inverses, made once per reset
+    _mounts: FloatArray = field(default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
+    _mount_inverses: FloatArray = field(
+        default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
     _keyframes: list[_Keyframe] = field(default_factory=list, init=False, repr=False)
     _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
     _n_keyframes: int = field(default=0, init=False, repr=False)
@@ -152,6 +156,8 @@ class FusionEstimator(Estimator):
                 f"share one geometry), got max ranges {ranges} [m]")
         self._matcher = ScanMatcher(ranges[0], self.image_size, self.resolution,
                                     self.icp_iterations)
+        self._mounts = self.setup.mounts
+        self._mount_inverses = inverse(self._mounts)
         self._keyframes = []
         self._edges = []
         self._n_keyframes = 0
@@ -197,19 +203,21 @@ class FusionEstimator(Estimator):
         first start.
         """
         assert self._matcher is not None and self.setup is not None
-        mounts = self.setup.mounts
+        mounts, mount_inverses = self._mounts, self._mount_inverses
         sensors = range(len(scans))
         start_motion = motion_guess if seed is None else seed
         edges = []
         for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
-            prior = relative(mounts[i], compose(motion_guess, mounts[j]))
-            start = relative(mounts[i], compose(start_motion, mounts[j]))
+            # relative(mount_i, guess ⊕ mount_j), the mount's inverse made once
+            prior = compose(mount_inverses[i], compose(motion_guess, mounts[j]))
+            start = (prior if start_motion is motion_guess
+                     else compose(mount_inverses[i], compose(start_motion, mounts[j])))
             match = self._matcher.refine(
                 keyframe.scans[i],
                 scans[j],
                 refinement_starts(start, prior),
                 prior,
-                inverse(mounts[j])[:2],
+                mount_inverses[j][:2],
                 prior_information,
             )
             edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
@@ -227,7 +235,7 @@ class FusionEstimator(Estimator):
 
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self.setup is not None
-        mounts = self.setup.mounts
+        mounts, mount_inverses = self._mounts, self._mount_inverses
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
@@ -236,7 +244,7 @@ class FusionEstimator(Estimator):
         step = self._velocity * dt if predicted else np.zeros(3)
         guess = relative(latest.pose, compose(self.pose, step))
         correlated = self._matcher.correlate(
-            latest.scans[0], current[0], relative(mounts[0], compose(guess, mounts[0]))
+            latest.scans[0], current[0], compose(mount_inverses[0], compose(guess, mounts[0]))
         )
         seed = motion_from_sensor_match(mounts[0], correlated.pose)
         # A constant twist moves the car along the chord of its turn: with the turn the
@@ -250,7 +258,7 @@ class FusionEstimator(Estimator):
         information = self._prediction_information(dt, predicted)
         edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
-        start = compose(compose(mounts[0], edges[0].pose), inverse(mounts[0]))
+        start = compose(compose(mounts[0], edges[0].pose), mount_inverses[0])
         from_latest = fuse_car_motion(mounts, edges, start, **self._weights())
         pose = compose(latest.pose, from_latest)
         if (

@@ -78,7 +78,8 @@ def image_spectrum(image: ArrayLike) -> ImageSpectrum:
     if not np.issubdtype(image.dtype, np.number) or np.iscomplexobj(image):
         raise EstimatorInputError(f"image: expected a real numeric array, got dtype {image.dtype}")
     pixels = image.astype(np.float32, copy=False)
-    if not np.all(np.isfinite(pixels)):
+    # integer pixels (a drawn scan) are finite: the check is for float images
+    if image.dtype.kind in "fc" and not np.all(np.isfinite(pixels)):
         raise EstimatorInputError("image: expected finite pixel values, got NaN or inf")
     spectrum = scipy.fft.rfft2(pixels, workers=1)
     _whiten(spectrum)
@@ -128,18 +129,25 @@ def _surface_derivatives(
     rows = cross.shape[0]
     row_kernel = _axis_kernel(rows, row, False)
     col_kernel = _axis_kernel(cols, col, True)
-    partial = np.zeros((3, cross.shape[1]), dtype=np.complex128)
+    # partial = row_kernel @ cross in real arithmetic, (a + bi)(c + di) = ac - bd + (ad + bc)i
+    # as numba's complex product computes it, which the compiler can vectorise
+    partial_real = np.zeros((3, cross.shape[1]))
+    partial_imag = np.zeros((3, cross.shape[1]))
     for r in range(rows):
         for i in range(3):
-            weight = row_kernel[i, r]
+            weight_real, weight_imag = row_kernel[i, r].real, row_kernel[i, r].imag
             for k in range(cross.shape[1]):
-                partial[i, k] += weight * cross[r, k]
+                value_real = np.float64(cross[r, k].real)
+                value_imag = np.float64(cross[r, k].imag)
+                partial_real[i, k] += weight_real * value_real - weight_imag * value_imag
+                partial_imag[i, k] += weight_real * value_imag + weight_imag * value_real
     derivatives = np.zeros((3, 3))
     for i in range(3):
         for j in range(3 - i):
             total = 0.0
             for k in range(cross.shape[1]):
-                total += (partial[i, k] * col_kernel[j, k]).real
+                total += (partial_real[i, k] * col_kernel[j, k].real
+                          - partial_imag[i, k] * col_kernel[j, k].imag)
             derivatives[i, j] = total / (rows * cols)
     return derivatives
 
@@ -204,10 +212,61 @@ def _refine_peak(
     return position, value
 
 
+@numba.njit(cache=True, nogil=True)
+def _refine_peak_compiled(
+    cross: NDArray[np.complex64], cols: int, start: NDArray[np.float64], tolerance: float,
+    max_iterations: int,
+) -> tuple[NDArray[np.float64], bool, float]:  # pragma: no cover (numba)
+    """:func:`_refine_peak`'s iterations in one call: (position, whether Newton found a
+    concave peak, the surface value there)."""
+    position = start.copy()
+    found, value = False, 0.0
+    for _ in range(max_iterations):
+        moments = _surface_derivatives(cross, position[0], position[1], cols)
+        value_here, d_col, d_col2 = moments[0, 0], moments[0, 1], moments[0, 2]
+        d_row, d_row_col, d_row2 = moments[1, 0], moments[1, 1], moments[2, 0]
+        determinant = d_row2 * d_col2 - d_row_col * d_row_col
+        if d_row2 >= 0 or determinant <= 0:
+            break
+        step_row = (d_row_col * d_col - d_col2 * d_row) / determinant
+        step_col = (d_row_col * d_row - d_row2 * d_col) / determinant
+        if (abs(position[0] + step_row - start[0]) > 1.0
+                or abs(position[1] + step_col - start[1]) > 1.0):
+            break
+        position[0] += step_row
+        position[1] += step_col
+        found, value = True, value_here
+        if max(abs(step_row), abs(step_col)) < tolerance:
+            break
+    return (position, found, value) if found else (start.copy(), False, 0.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _runner_up_compiled(
+    surface: NDArray[np.float32], peak_row: int, peak_col: int, radius: int
+) -> float:  # pragma: no cover (numba)
+    """:func:`_runner_up` without overwriting ``surface``: the highest value more than
+    ``radius`` px (periodically) from the peak (-inf if none)."""
+    rows, cols = surface.shape
+    best = -np.inf
+    for r in range(rows):
+        row_gap = abs(r - peak_row)
+        near_row = min(row_gap, rows - row_gap) <= radius
+        for c in range(cols):
+            if near_row:
+                col_gap = abs(c - peak_col)
+                if min(col_gap, cols - col_gap) <= radius:
+                    continue
+            if surface[r, c] > best:
+                best = surface[r, c]
+    return best
+
+
 def phase_correlate(
     reference: ArrayLike | ImageSpectrum,
     moving: ArrayLike | ImageSpectrum,
     subpixel: bool = True,
+    compiled: bool = True,
 ) -> PhaseCorrelation:
     """Shift of ``moving`` relative to ``reference`` by phase correlation (eqs. 6-9).
 
@@ -218,6 +277,9 @@ def phase_correlate(
             surface (Newton's method, see the module docstring), started from a parabola
             through the peak's neighbours, whose vertex is kept if Newton finds no concave
             peak within 1 px of it.
+        compiled: Newton's iterations and the runner-up search in numba
+            (:func:`_refine_peak_compiled`, :func:`_runner_up_compiled`) rather than in Python
+            and numpy, the same numbers.
 
     Returns:
         :class:`PhaseCorrelation`; ``shift`` is ``(d_row, d_col)`` [px] such that
@@ -250,9 +312,18 @@ def phase_correlate(
             _parabola_vertex(surface[row - 1, col], peak, surface[(row + 1) % shape[0], col]),
             _parabola_vertex(surface[row, col - 1], peak, surface[row, (col + 1) % shape[1]]),
         ]
-        shift, refined_peak = _refine_peak(cross, shape, shift)
-        peak = refined_peak if refined_peak is not None else peak
-    runner_up = _runner_up(surface, peak_index)
+        if compiled:
+            shift, found, refined = _refine_peak_compiled(
+                cross, shape[1], shift, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS)
+            peak = float(refined) if found else peak
+        else:
+            shift, refined_peak = _refine_peak(cross, shape, shift)
+            peak = refined_peak if refined_peak is not None else peak
+    if compiled:
+        runner_up = float(_runner_up_compiled(surface, int(peak_index[0]), int(peak_index[1]),
+                                              PEAK_EXCLUSION_RADIUS))
+    else:
+        runner_up = _runner_up(surface, peak_index)
     confidence = peak / runner_up if runner_up > 0 else np.inf
     return PhaseCorrelation(shift, peak, float(confidence))
 

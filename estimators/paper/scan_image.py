@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.paper.scan_image_kernel import draw_scan
 from lidar_env.errors import ConfigError, EstimatorInputError
 
 #: Default image side [px]: the paper's default 400 x 400.
@@ -74,6 +75,23 @@ def check_image_geometry(size: int, resolution: float | None, max_range: float) 
     return resolution
 
 
+def _checked_scan(
+    ranges: ArrayLike, beam_angles: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``ranges`` and ``beam_angles`` as float64 ``(n,)``, after checking they make a scan."""
+    ranges = np.asarray(ranges, dtype=np.float64)
+    angles = np.asarray(beam_angles, dtype=np.float64)
+    if ranges.ndim != 1 or ranges.shape != angles.shape or len(ranges) < 3:
+        raise EstimatorInputError(
+            f"expected ranges and beam_angles of equal shape (n,), n >= 3; got {ranges.shape} "
+            f"and {angles.shape}"
+        )
+    if not np.all(np.isfinite(ranges)) or np.any(ranges < 0):
+        raise EstimatorInputError(
+            "ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
+    return ranges, angles
+
+
 def scan_filter(
     ranges: ArrayLike, beam_angles: ArrayLike, max_range: float
 ) -> NDArray[np.float64]:
@@ -92,16 +110,7 @@ def scan_filter(
         Neighbours wrap around (the scan is a full circle); a neighbour without a return
         counts as ``max_range``, so the edge of an object stands out as a large ``|c|``.
     """
-    ranges = np.asarray(ranges, dtype=np.float64)
-    angles = np.asarray(beam_angles, dtype=np.float64)
-    if ranges.ndim != 1 or ranges.shape != angles.shape or len(ranges) < 3:
-        raise EstimatorInputError(
-            f"expected ranges and beam_angles of equal shape (n,), n >= 3; got {ranges.shape} "
-            f"and {angles.shape}"
-        )
-    if not np.all(np.isfinite(ranges)) or np.any(ranges < 0):
-        raise EstimatorInputError(
-            "ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
+    ranges, angles = _checked_scan(ranges, beam_angles)
     clipped = np.minimum(ranges, max_range)
     # np.roll's values, without its generality (a third of this function's time)
     before = np.concatenate((clipped[-1:], clipped[:-1]))
@@ -174,6 +183,8 @@ def scan_to_image(
     max_range: float,
     size: int = DEFAULT_SIZE,
     resolution: float | None = None,
+    turn: float = 0.0,
+    compiled: bool = True,
 ) -> NDArray[np.uint8]:
     """One scan as a ``(size, size)`` uint8 image (eqs. 4 and 5); zero where nothing returned.
 
@@ -184,12 +195,19 @@ def scan_to_image(
         max_range: [m].
         size: image side [px], a positive even integer (default 400, the paper's).
         resolution: [m/px]; default ``2 max_range / size``; must hold ``max_range``.
-    To draw a scan rotated by ``phi`` (e.g. into another sensor's axes), add ``phi`` to
-    ``beam_angles``; to draw arbitrary points, use :func:`points_to_image`.
+        turn: [rad] added to every beam angle (draws the scan rotated by it, e.g. into another
+            sensor's axes).
+        compiled: draw in one numba pass (:func:`estimators.paper.scan_image_kernel.draw_scan`)
+            rather than by :func:`scan_filter`, :func:`pixel_values` and
+            :func:`points_to_image`, the same image pixel for pixel.
+    To draw arbitrary points, use :func:`points_to_image`.
     """
     resolution = check_image_geometry(size, resolution, max_range)
-    angles = np.asarray(beam_angles, dtype=np.float64)
-    filtered = scan_filter(ranges, angles, max_range)
+    ranges, angles = _checked_scan(ranges, beam_angles)
+    if compiled:
+        return draw_scan(ranges, angles, float(turn), float(max_range), int(size), resolution,
+                         MIN_PIXEL_VALUE, CORNER_SATURATION)
+    filtered = scan_filter(ranges, angles + turn, max_range)
     beam_step = 2.0 * np.pi / len(angles)
     values = pixel_values(filtered, max_range, beam_step)
     return points_to_image(filtered[:, :2], values, size, resolution)

@@ -3,6 +3,8 @@ correlation, and their combination. Oracle: scans cast from known sensor poses."
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimators.matching.rotation import (
     heading_change,
@@ -155,3 +157,20 @@ def test_log_polar_spectrum_samples_the_magnitude_like_scipy_map_coordinates() -
         np.testing.assert_allclose(
             log_polar_spectrum(image, n_angles, n_radii), expected, rtol=1e-5, atol=1e-5
         )
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), height=st.integers(16, 120), width=st.integers(16, 120),
+       n_angles=st.integers(8, 200), n_radii=st.integers(2, 50), drawn=st.booleans())
+def test_compiled_log_polar_sampling_equals_the_einsum_form(
+    seed: int, height: int, width: int, n_angles: int, n_radii: int, drawn: bool
+) -> None:
+    """log_polar_spectrum's numba sampling against its np.einsum form, bit for bit, on sparse
+    uint8 images (a drawn scan) and dense float ones, any shape and grid."""
+    rng = np.random.default_rng(seed)
+    sparse = (rng.random((height, width)) < 0.05) * rng.integers(0, 256, (height, width))
+    image = sparse.astype(np.uint8) if drawn else rng.random((height, width))
+    np.testing.assert_array_equal(
+        log_polar_spectrum(image, n_angles, n_radii),
+        log_polar_spectrum(image, n_angles, n_radii, compiled=False),
+    )

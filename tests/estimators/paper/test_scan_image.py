@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimators.paper.phase_correlation import phase_correlate
 from estimators.paper.scan_image import (
@@ -117,3 +119,31 @@ def test_bad_scans_are_readable_errors() -> None:
         points_to_image([[0.0, 0.0]], np.array([1, 2]))
     with pytest.raises(ValueError, match=r"values: expected pixel values in \[0, 255\]"):
         points_to_image([[0.0, 0.0]], np.array([300]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_beams=st.integers(3, 800),
+    half_size=st.integers(8, 120),
+    full_turn=st.booleans(),
+    turn=st.one_of(st.just(0.0), st.floats(-7.0, 7.0)),
+    coarser=st.floats(1.0, 3.0),
+)
+def test_compiled_image_equals_the_array_form_pixel_for_pixel(
+    seed: int, n_beams: int, half_size: int, full_turn: bool, turn: float, coarser: float
+) -> None:
+    """draw_scan against scan_filter + pixel_values + points_to_image: returns, no returns,
+    zero ranges, returns outside the image, turned beams, any beam layout."""
+    rng = np.random.default_rng(seed)
+    max_range = float(rng.uniform(1.0, 30.0))
+    ranges = rng.uniform(0.0, 1.3 * max_range, n_beams)
+    ranges[rng.random(n_beams) < 0.1] = 0.0
+    angles = (2 * np.pi * np.arange(n_beams) / n_beams if full_turn
+              else np.sort(rng.uniform(-4.0, 4.0, n_beams)))
+    size = 2 * half_size
+    # coarser than the finest (None) by a margin over rounding, never too coarse
+    resolution = None if coarser < 1.5 else min(2.0 * max_range / size * coarser, max_range / 2)
+    compiled = scan_to_image(ranges, angles, max_range, size, resolution, turn)
+    array_form = scan_to_image(ranges, angles, max_range, size, resolution, turn, compiled=False)
+    np.testing.assert_array_equal(compiled, array_form)
