@@ -11,8 +11,8 @@ eigen-decomposition), which made the Python around the maths most of ``pc_fusion
 
 from __future__ import annotations
 
-import numpy as np
 import numba
+import numpy as np
 from numba import njit
 from numba.np.linalg import _LAPACK
 from numpy.typing import NDArray
