@@ -55,18 +55,40 @@ def _subbin_peak(correlation: FloatArray) -> tuple[float, float]:
     return k + float(np.clip(offset, -0.5, 0.5)), float(centre)
 
 
-def _circular_correlation(a: FloatArray, b: FloatArray) -> FloatArray:
+@dataclass(frozen=True)
+class CentredSpectrum:
+    """A signal ``(n, ...)`` with its mean over axis 0 removed, as a circular correlation
+    needs it: ``transform`` its real DFT over axis 0, ``energy`` its sum of squares, ``length``
+    its ``n``. Made once per signal (:func:`centred_spectrum`), e.g. for a keyframe's
+    log-polar grid correlated with every later scan's."""
+
+    transform: NDArray[np.complex128]
+    energy: float
+    length: int
+
+
+def centred_spectrum(signal: FloatArray) -> CentredSpectrum:
+    """The :class:`CentredSpectrum` of ``signal`` ``(n, ...)``."""
+    centred = signal - signal.mean(axis=0)
+    return CentredSpectrum(np.fft.rfft(centred, axis=0), float(np.sum(centred * centred)),
+                           len(signal))
+
+
+def _circular_correlation(
+    a: FloatArray | CentredSpectrum, b: FloatArray | CentredSpectrum
+) -> FloatArray:
     """``c[k] = sum_i b[i] a[i - k]`` over axis 0, summed over any further axes, normalised
-    to the Pearson correlation of the mean-removed inputs (so ``c`` lies in [-1, 1])."""
-    a = a - a.mean(axis=0)
-    b = b - b.mean(axis=0)
-    spectrum = np.fft.rfft(b, axis=0) * np.conj(np.fft.rfft(a, axis=0))
+    to the Pearson correlation of the mean-removed inputs (so ``c`` lies in [-1, 1]); either
+    input may be given as its :func:`centred_spectrum`."""
+    a = a if isinstance(a, CentredSpectrum) else centred_spectrum(a)
+    b = b if isinstance(b, CentredSpectrum) else centred_spectrum(b)
+    spectrum = b.transform * np.conj(a.transform)
     if spectrum.ndim > 1:
         spectrum = spectrum.sum(axis=tuple(range(1, spectrum.ndim)))
-    norm = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    norm = np.sqrt(a.energy * b.energy)
     if norm == 0.0:
-        return np.zeros(len(a))
-    return np.fft.irfft(spectrum, n=len(a)) / norm
+        return np.zeros(a.length)
+    return np.fft.irfft(spectrum, n=a.length) / norm
 
 
 def log_polar_spectrum(
@@ -158,19 +180,24 @@ def _log_polar_grid(
     return grid
 
 
-def spectrum_rotation(polar_a: FloatArray, polar_b: FloatArray) -> RotationEstimate:
+def spectrum_rotation(
+    polar_a: FloatArray | CentredSpectrum, polar_b: FloatArray | CentredSpectrum
+) -> RotationEstimate:
     """Rotation of image ``b``'s content relative to image ``a``'s, modulo pi, from their
     :func:`log_polar_spectrum` grids (Fourier-Mellin without the scale axis, since the scale
     is fixed by the metres per pixel of both images).
 
     The angle is counter-clockwise in the (column, row) pixel frame and lies in
-    ``[-pi/2, pi/2)``; the true rotation may also be ``angle + pi``.
+    ``[-pi/2, pi/2)``; the true rotation may also be ``angle + pi``. Either grid may be given
+    as its :func:`centred_spectrum` (made once for a grid correlated with many).
     """
-    if polar_a.shape != polar_b.shape or polar_a.ndim != 2:
+    shapes = [(p.length, *p.transform.shape[1:]) if isinstance(p, CentredSpectrum) else p.shape
+              for p in (polar_a, polar_b)]
+    if shapes[0] != shapes[1] or len(shapes[0]) != 2:
         raise EstimatorInputError(
-            f"expected two log-polar grids of equal 2-D shape, got {polar_a.shape}, {polar_b.shape}"
+            f"expected two log-polar grids of equal 2-D shape, got {shapes[0]}, {shapes[1]}"
         )
-    n_angles = polar_a.shape[0]
+    n_angles = shapes[0][0]
     correlation = _circular_correlation(polar_a, polar_b)
     index, peak = _subbin_peak(correlation)
     angle = float(wrap_angle(2.0 * np.pi * index / n_angles) / 2.0)
@@ -218,8 +245,8 @@ def resolve_half_turn(angle_mod_pi: float, reference: float) -> float:
 
 
 def heading_change(
-    polar_a: FloatArray,
-    polar_b: FloatArray,
+    polar_a: FloatArray | CentredSpectrum,
+    polar_b: FloatArray | CentredSpectrum,
     reference: float | None = None,
     profiles: tuple[ArrayLike, ArrayLike, ArrayLike, float] | None = None,
 ) -> RotationEstimate:
@@ -230,7 +257,8 @@ def heading_change(
     Of the two pi-apart candidates, the one closest to ``reference`` [rad] (e.g. a predicted
     heading change) is taken; else, given ``profiles = (ranges_a, ranges_b, beam_angles,
     max_range)`` of full-turn scans, the one closest to :func:`range_profile_rotation`; else
-    the smaller turn. The confidence is the spectrum correlation's.
+    the smaller turn. The confidence is the spectrum correlation's. The grids may be given as
+    their :func:`centred_spectrum`.
     """
     content = spectrum_rotation(polar_a, polar_b)
     # The scene turns by minus the heading change; with rows pointing down (-y) the pixel-frame

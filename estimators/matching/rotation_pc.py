@@ -37,7 +37,16 @@ from estimators.matching.curve_refinement import (
     pose_difference,
     refine_on_curves,
 )
-from estimators.matching.rotation import heading_change, log_polar_spectrum
+
+# prediction_horizon is re-exported for estimators.odometry.motion_prior
+from estimators.matching.prediction import constant_velocity, within_prediction_horizon
+from estimators.matching.prediction import prediction_horizon as prediction_horizon
+from estimators.matching.rotation import (
+    CentredSpectrum,
+    centred_spectrum,
+    heading_change,
+    log_polar_spectrum,
+)
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
 from estimators.paper.pc import MIN_MATCH_RETURNS
 from estimators.paper.phase_correlation import ImageSpectrum, image_spectrum, phase_correlate
@@ -100,6 +109,11 @@ class PreparedScan:
         """The image's log-polar magnitude spectrum (:func:`log_polar_spectrum`)."""
         n_angles, n_radii = self.polar_grid
         return log_polar_spectrum(self.upright_image, n_angles=n_angles, n_radii=n_radii)
+
+    @cached_property
+    def polar_spectrum(self) -> CentredSpectrum:
+        """:attr:`polar`'s :func:`centred_spectrum` (a keyframe's serves every later match)."""
+        return centred_spectrum(self.polar)
 
     @cached_property
     def spectrum(self) -> ImageSpectrum:
@@ -198,7 +212,7 @@ class ScanMatcher:
         if prior is None and _full_turn(earlier.beam_angles, later.beam_angles):
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
         hint = None if prior is None else float(np.asarray(prior, dtype=np.float64)[2])
-        rotation = heading_change(earlier.polar, later.polar, hint, profiles)
+        rotation = heading_change(earlier.polar_spectrum, later.polar_spectrum, hint, profiles)
         turned = image_spectrum(later.image(rotation.angle))
         correlation = phase_correlate(earlier.spectrum, turned)
         # The turned later image sees the scene shifted by minus the sensor's translation.
@@ -303,34 +317,6 @@ def require_sensor_frame(setup: SensorSetup, estimator: str) -> None:
             f"{estimator}: expected sensor-frame scans (scan_frame='sensor'), got world-aligned "
             "scans; the paper's estimators (pc, pc_pg) take those"
         )
-
-
-#: A constant-velocity prediction is trusted over at most this many typical scan intervals
-#: (the intervals its velocity was measured over); past that it says nothing.
-PREDICTION_GAP_FACTOR = 10.0
-
-
-def prediction_horizon(intervals: ArrayLike) -> float:
-    """The longest gap [s] a constant-velocity prediction may extrapolate over:
-    ``PREDICTION_GAP_FACTOR`` times the median of the recent scan ``intervals`` [s] (positive
-    ones; none seen: 0, no prediction)."""
-    intervals = np.asarray(intervals, dtype=np.float64).ravel()
-    intervals = intervals[np.isfinite(intervals) & (intervals > 0)]
-    typical = float(np.median(intervals)) if len(intervals) else 0.0
-    return PREDICTION_GAP_FACTOR * typical
-
-
-def within_prediction_horizon(dt: float, intervals: ArrayLike) -> bool:
-    """True when a constant-velocity prediction over ``dt`` [s] is within what the velocity
-    measured over ``intervals`` [s] can tell (:func:`prediction_horizon`); False for a clock
-    gap past it (the estimator then predicts no motion and uses its weak default prior)."""
-    return 0.0 < dt <= prediction_horizon(intervals)
-
-
-def constant_velocity(last_motion: FloatArray, last_dt: float, dt: float) -> FloatArray:
-    """The motion (3,) over ``dt`` [s] at the velocity of ``last_motion`` over ``last_dt`` [s]
-    (a prediction from the estimator's own increments, never from odometry)."""
-    return np.asarray(last_motion, dtype=np.float64) * (dt / last_dt if last_dt > 0 else 1.0)
 
 
 @dataclass
