@@ -18,13 +18,24 @@ FloatArray = NDArray[np.float64]
 PREDICTION_GAP_FACTOR = 10.0
 
 
+def median(values: FloatArray) -> float:
+    """``np.median`` of ``values`` (1-D, not empty, no NaN), bit for bit (the middle value, or
+    the mean of the middle two), by one partition: ``np.median``'s own checks cost several
+    times the work on the few hundred intervals an estimator keeps."""
+    half = len(values) // 2
+    if len(values) % 2:
+        return float(np.partition(values, half)[half])
+    middle = np.partition(values, (half - 1, half))
+    return (float(middle[half - 1]) + float(middle[half])) / 2
+
+
 def prediction_horizon(intervals: ArrayLike) -> float:
     """The longest gap [s] a constant-velocity prediction may extrapolate over:
     ``PREDICTION_GAP_FACTOR`` times the median of the recent scan ``intervals`` [s] (positive
     ones; none seen: 0, no prediction)."""
     intervals = np.asarray(intervals, dtype=np.float64).ravel()
     intervals = intervals[np.isfinite(intervals) & (intervals > 0)]
-    typical = float(np.median(intervals)) if len(intervals) else 0.0
+    typical = median(intervals) if len(intervals) else 0.0
     return PREDICTION_GAP_FACTOR * typical
 
 
