@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -35,6 +35,7 @@ from estimators.registry import make
 from lidar_env.errors import ConfigError, DatabaseError
 
 if TYPE_CHECKING:
+    from estimators.mapping.obstacles import Obstacle
     from estimators.mapping.run_maps import MapTruth
 
 ENV_ID = "DualLidar-v0"
@@ -206,7 +207,8 @@ def map_reference(dataset: SensorDataset, resolution: float = MAP_RESOLUTION,
 
 def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDataset,
               obstacle_stride: int = OBSTACLE_STRIDE,
-              label_movers: bool = True) -> dict[str, float]:
+              label_movers: bool = True,
+              car_frame: Sequence[Sequence[Obstacle]] | None = None) -> dict[str, float]:
     """The map metrics of car poses ``poses`` (N, 3) on ``dataset`` against ``reference``
     (:func:`map_reference` with the same ``obstacle_stride``).
 
@@ -218,7 +220,10 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
     both leave out the returns the motion tracker finds on moving things
     (:mod:`estimators.mapping.moving_returns`, 1-2 ms per scan); the leaderboard asks for it
     in scenarios with moving obstacles only (in a static one it labels nothing: the maps of
-    the 6 static drives of ``bench_movers_estimators`` came out the same either way)."""
+    the 6 static drives of ``bench_movers_estimators`` came out the same either way). Without
+    ``label_movers``, the scans' ``car_frame`` obstacles
+    (:func:`~estimators.mapping.run_maps.car_frame_obstacles`, every ``obstacle_stride``-th
+    scan) spare detecting them again for each estimate of the poses."""
     from estimators.mapping.map_scoring import score_cylinders, score_occupancy
     from estimators.mapping.moving_returns import label_run
     from estimators.mapping.run_maps import from_estimator_run, track_obstacles
@@ -238,7 +243,8 @@ def score_map(reference: MapTruth, poses: NDArray[np.float64], dataset: SensorDa
     if len(reference.circles):
         tracker = track_obstacles(poses[::obstacle_stride], observations[::obstacle_stride],
                                   dataset.setup,
-                                  moving=None if moving is None else moving[::obstacle_stride])
+                                  moving=None if moving is None else moving[::obstacle_stride],
+                                  car_frame=None if moving is not None else car_frame)
         cylinders = score_cylinders(tracker.cylinders(), reference.circles,
                                     observable=reference.observable)
         metrics.update({"cylinder_recall": cylinders.recall,

@@ -18,6 +18,7 @@ import numpy as np
 
 from estimators.leaderboard.real_logs import RealLog
 from estimators.leaderboard.recording import (
+    OBSTACLE_STRIDE,
     map_reference,
     mover_truth,
     record_with_movers,
@@ -27,6 +28,7 @@ from estimators.leaderboard.recording import (
     score_movers,
 )
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
+from estimators.mapping.run_maps import car_frame_obstacles
 from estimators.registry import defaults, make, names
 from lidar_env.errors import ConfigError
 
@@ -114,16 +116,20 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
         finally:
             outcome.timed("record", started)
     outcome.dataset, outcome.recorded = (dataset if recorded else None), recorded
-    reference, ceiling = None, {}
+    reference, ceiling, car_frame = None, {}, None
     with_movers = bool(task.scenario.config.get("moving_obstacles"))
     if task.estimators and task.score_maps:
         started = time.perf_counter()
         try:
             reference = map_reference(dataset)
+            if reference is not None and len(reference.circles) and not with_movers:
+                # the scans' obstacles, detected once and placed at each estimate of the poses
+                car_frame = car_frame_obstacles(
+                    list(dataset.observations())[::OBSTACLE_STRIDE], dataset.setup)
             if reference is not None:  # the mapper's own score, at the true poses
                 ceiling = {f"{name}_true_poses": value for name, value in
                            score_map(reference, dataset.poses, dataset,
-                                     label_movers=with_movers).items()}
+                                     label_movers=with_movers, car_frame=car_frame).items()}
         except Exception:  # the trajectories are still scored, without map metrics
             outcome.failures["map reference"] = traceback.format_exc(limit=-6)
         outcome.timed("map reference", started)
@@ -150,7 +156,8 @@ def run_scenario_task(task: ScenarioTask) -> ScenarioOutcome:
             started = time.perf_counter()
             try:
                 metrics.update(score_map(reference, trace.poses, dataset,
-                                         label_movers=with_movers), **ceiling)
+                                         label_movers=with_movers, car_frame=car_frame),
+                               **ceiling)
                 if movers is not None:
                     metrics.update(score_movers(dataset, trace.poses, movers))
             except Exception:  # e.g. poses far outside the world: the trace is kept unmapped

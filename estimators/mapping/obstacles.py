@@ -88,6 +88,24 @@ class Obstacle:
         return self.circle.centre if self.circle is not None else self.centroid
 
 
+def placed(obstacle: Obstacle, car_pose: ArrayLike) -> Obstacle:
+    """``obstacle``, detected in the car frame (car pose ``(0, 0, 0)``), in the world frame of
+    car pose ``car_pose`` (3,): its points, centroid, principal axis and circle centre moved
+    rigidly. The detector is equivariant under rigid moves, so this is what detecting at
+    ``car_pose`` finds, to rounding: one detection serves every estimate of a run's poses."""
+    pose = np.asarray(car_pose, dtype=np.float64)
+    cos, sin = math.cos(pose[2]), math.sin(pose[2])
+    circle = obstacle.circle
+    if circle is not None:
+        circle = CircleFit(pose[0] + cos * circle.cx - sin * circle.cy,
+                           pose[1] + sin * circle.cx + cos * circle.cy, circle.radius,
+                           circle.rms)
+    axis = (obstacle.axis_angle + pose[2] + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    return Obstacle(transform_points(pose, obstacle.points), obstacle.beams,
+                    transform_points(pose, obstacle.centroid[None])[0], obstacle.extent,
+                    float(axis), circle, obstacle.circle_tested, obstacle.spread)
+
+
 @dataclass(frozen=True)
 class DetectorParams:
     """Parameters of :func:`detect_obstacles`, with the reasons for their defaults.

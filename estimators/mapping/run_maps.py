@@ -26,7 +26,12 @@ from estimators.mapping.map_scoring import (
     true_occupancy,
 )
 from estimators.mapping.moving_returns import MovingStep, label_run
-from estimators.mapping.obstacles import DetectorParams, detect_in_observation
+from estimators.mapping.obstacles import (
+    DetectorParams,
+    Obstacle,
+    detect_in_observation,
+    placed,
+)
 from estimators.mapping.occupancy import Bounds, OccupancyGrid, bounds_around, sensor_poses
 from estimators.mapping.tracking import ObstacleTracker
 from lidar_env.errors import EstimatorInputError
@@ -141,18 +146,38 @@ def track_obstacles(
     params: DetectorParams | None = None,
     gate: float = 0.5,
     moving: Sequence[MovingStep] | None = None,
+    car_frame: Sequence[Sequence[Obstacle]] | None = None,
 ) -> ObstacleTracker:
     """Detect the obstacles of every scan at the (estimated) sensor poses of ``trajectory``
     (N, 3) and track them across steps (one tracker step per observation). With the steps'
-    ``moving`` labels (:func:`label_run`), only the detections not on a moving track."""
+    ``moving`` labels (:func:`label_run`), only the detections not on a moving track. With
+    the observations' ``car_frame`` detections (:func:`car_frame_obstacles`, made once for
+    every estimate of a run), they are placed at the poses instead of detected again."""
     tracker = ObstacleTracker(gate=gate)
     if moving is not None:
         for step in moving:
             tracker.update(step.static_obstacles)
         return tracker
-    for observation, car_pose in zip(observations, np.asarray(trajectory), strict=True):
+    trajectory = np.asarray(trajectory, dtype=np.float64)
+    if car_frame is not None:
+        if len(car_frame) != len(trajectory):
+            raise EstimatorInputError(f"car_frame: expected one list of obstacles per "
+                                      f"trajectory row ({len(trajectory)}), got {len(car_frame)}")
+        for found, car_pose in zip(car_frame, trajectory, strict=True):
+            tracker.update([placed(obstacle, car_pose) for obstacle in found])
+        return tracker
+    for observation, car_pose in zip(observations, trajectory, strict=True):
         tracker.update(detect_in_observation(observation, car_pose, setup, params))
     return tracker
+
+
+def car_frame_obstacles(observations: Sequence[Mapping[str, ArrayLike]], setup: SensorSetup,
+                        params: DetectorParams | None = None) -> list[list[Obstacle]]:
+    """The obstacles of each observation in the car frame (car pose ``(0, 0, 0)``): the
+    detections :func:`track_obstacles` places at any estimate of the poses."""
+    origin = np.zeros(3)
+    return [detect_in_observation(observation, origin, setup, params)
+            for observation in observations]
 
 
 def evaluate_run_map(

@@ -22,6 +22,7 @@ from estimators.leaderboard.recording import (
     world_from_geometry,
 )
 from estimators.leaderboard.records import Scenario
+from estimators.mapping.run_maps import car_frame_obstacles
 from lidar_env import lidars_with_noise
 from lidar_env.se2 import compose
 
@@ -114,6 +115,11 @@ def test_map_scores_see_true_poses_and_a_shifted_run(stored: Path) -> None:
     # a static scene: the mover labels leave nothing out, so the leaderboard may skip them
     assert score_map(reference, dataset.poses, dataset, label_movers=False) == true
     shifted = score_map(reference, dataset.poses + [0.5, 0.0, 0.0], dataset)
+    # the obstacles detected once in the car frame and placed at the poses score the same
+    car_frame = car_frame_obstacles(list(dataset.observations()), dataset.setup)
+    for poses, scores in ((dataset.poses, true), (dataset.poses + [0.5, 0.0, 0.0], shifted)):
+        placed = score_map(reference, poses, dataset, label_movers=False, car_frame=car_frame)
+        assert placed == pytest.approx(scores, abs=1e-12, nan_ok=True)
     assert shifted["map_iou"] < 0.3 and shifted["map_precision"] < 0.4 * true["map_precision"]
     assert shifted["cylinder_error_m"] > 0.3 or shifted["cylinder_recall"] < 0.5
     with pytest.raises(ValueError, match="obstacle_stride: expected an integer >= 1, got 0"):

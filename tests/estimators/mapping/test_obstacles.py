@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from estimators.base import default_beam_angles
 from estimators.mapping.circle_fit import fit_circle
-from estimators.mapping.obstacles import DetectorParams, Obstacle, detect_obstacles, split_scan
+from estimators.mapping.obstacles import (
+    DetectorParams,
+    Obstacle,
+    detect_obstacles,
+    placed,
+    split_scan,
+)
 from estimators.mapping.tracking import ObstacleTracker
 from lidar_env.lidar import cast_rays
 from lidar_env.world import World
@@ -239,3 +247,30 @@ def test_each_lidar_detects_with_its_own_beams_and_range() -> None:
     both = detect_in_observation(observation, np.zeros(3), setup)
     assert [o.centroid.tolist() for o in both] == [
         o.centroid.tolist() for found in per_lidar.values() for o in found]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-20.0, 20.0), st.floats(-20.0, 20.0), st.floats(-np.pi, np.pi),
+       st.integers(0, 2**32 - 1))
+def test_an_obstacle_detected_in_the_car_frame_and_placed_is_the_one_detected_at_the_pose(
+        x: float, y: float, heading: float, seed: int) -> None:
+    # the leaderboard detects each scan's obstacles once and places them at every estimator's
+    # poses (run_maps.car_frame_obstacles): that must be what detecting at the pose finds
+    world = World(circles=CIRCLES, segments=[[-5.0, 2.5, 6.0, 2.5], [4.0, -4.0, 4.0, 2.0]])
+    ranges = noisy_scan(world, np.array([0.3, -0.2, 0.4]), np.random.default_rng(seed))
+    pose = np.array([x, y, heading])
+    at_pose = detect_obstacles(ranges, ANGLES, pose, MAX_RANGE)
+    moved = [placed(o, pose) for o in detect_obstacles(ranges, ANGLES, np.zeros(3), MAX_RANGE)]
+    assert len(moved) == len(at_pose) > 0
+    for a, b in zip(at_pose, moved, strict=True):
+        np.testing.assert_array_equal(a.beams, b.beams)
+        np.testing.assert_allclose(b.points, a.points, atol=1e-9)
+        np.testing.assert_allclose(b.centroid, a.centroid, atol=1e-9)
+        np.testing.assert_allclose(b.extent, a.extent, atol=1e-9)
+        assert np.sin(b.axis_angle - a.axis_angle) == pytest.approx(0.0, abs=1e-9)
+        assert -np.pi / 2 <= b.axis_angle < np.pi / 2
+        assert (a.circle is None) == (b.circle is None)
+        assert (a.circle_tested, a.spread) == pytest.approx((b.circle_tested, b.spread))
+        if a.circle is not None:
+            np.testing.assert_allclose([b.circle.cx, b.circle.cy, b.circle.radius],
+                                       [a.circle.cx, a.circle.cy, a.circle.radius], atol=1e-9)
