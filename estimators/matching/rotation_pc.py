@@ -37,10 +37,7 @@ from estimators.matching.curve_refinement import (
     pose_difference,
     refine_on_curves,
 )
-
-# prediction_horizon is re-exported for estimators.odometry.motion_prior
 from estimators.matching.prediction import constant_velocity, within_prediction_horizon
-from estimators.matching.prediction import prediction_horizon as prediction_horizon
 from estimators.matching.rotation import (
     CentredSpectrum,
     centred_spectrum,

@@ -9,7 +9,7 @@ turns that into the weight of the prior relative to one return's.
 A prediction is only as good as the velocity it extrapolates, which was measured over the
 recent scan intervals: over a clock gap far longer than those (a dropped sensor, a paused
 log) the car may have stopped, turned or driven anywhere, so :func:`within_prediction_horizon`
-(defined beside :func:`estimators.matching.rotation_pc.constant_velocity`, the matching
+(defined beside :func:`estimators.matching.prediction.constant_velocity`, the matching
 layer's own prediction) says when an estimator must fall back to "no prior" instead.
 
 The velocity itself is kept in the frame halfway through each increment's turn
@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
-from estimators.matching.rotation_pc import prediction_horizon, within_prediction_horizon
+from estimators.matching.prediction import median, prediction_horizon, within_prediction_horizon
 from lidar_env.errors import EstimatorInputError
 from lidar_env.se2 import rotate
 
@@ -56,17 +56,6 @@ __all__ = [
 #: The prediction's position is never trusted to better than this [m] per scan (about a
 #: registration's own precision at 1 cm range noise), however fast and regular the scans.
 MIN_PREDICTION_SIGMA = 1e-3
-
-
-def median(values: NDArray[np.float64]) -> float:
-    """``np.median`` of ``values`` (1-D, not empty, no NaN), bit for bit (the middle value, or
-    the mean of the middle two), by one partition: ``np.median``'s own checks cost ~15 us a
-    call, several times the work on a few hundred values."""
-    half = len(values) // 2
-    if len(values) % 2:
-        return float(np.partition(values, half)[half])
-    middle = np.partition(values, (half - 1, half))
-    return (float(middle[half - 1]) + float(middle[half])) / 2
 
 
 def clock_jitter(intervals: ArrayLike) -> float:
