@@ -39,13 +39,44 @@ REUSE_MARGIN = 1e-9
 
 
 @njit(cache=True)
+def _select(order: NDArray[np.int64], points: NDArray[np.float64], axis: int, lo: int,
+            hi: int, kth: int) -> None:
+    """Reorder ``order[lo:hi]`` in place so that no point before ``kth`` has a larger
+    coordinate ``axis`` than any point from ``kth`` on (Hoare's selection with a
+    median-of-three pivot: linear time, equal coordinates split evenly, no allocation)."""
+    left, right = lo, hi - 1
+    while left < right:
+        a = points[order[left], axis]
+        b = points[order[(left + right) // 2], axis]
+        c = points[order[right], axis]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i, j = left, right
+        while i <= j:
+            while i < hi and points[order[i], axis] < pivot:
+                i += 1
+            while j >= lo and points[order[j], axis] > pivot:
+                j -= 1
+            if i <= j:
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        if kth <= j:
+            right = j
+        elif kth > i:
+            left = i
+        else:  # [lo, j] <= pivot, (j, i) == pivot, [i, hi) >= pivot: split anywhere in (j, i]
+            return
+
+
+@njit(cache=True)
 def _build(points: NDArray[np.float64]) -> tuple[
     NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],
     NDArray[np.int64], NDArray[np.float64],
 ]:
     """The tree: original index of each stored point, the points in tree order, each node's
     range of them ``[start, end)``, its first child (-1 for a leaf; the second is next to
-    it) and its bounding box (min x, min y, max x, max y)."""
+    it) and its bounding box (min x, min y, max x, max y). Which of equally placed points goes
+    to which side of a split changes no answer: every search ranks by distance, then index."""
     n = points.shape[0]
     order = np.arange(n)
     capacity = 2 * n + 1
@@ -68,9 +99,8 @@ def _build(points: NDArray[np.float64]) -> tuple[
         if hi - lo <= LEAF_SIZE:
             continue
         axis = 0 if box[node, 2] - box[node, 0] >= box[node, 3] - box[node, 1] else 1
-        members = order[lo:hi].copy()
-        order[lo:hi] = members[np.argsort(points[members, axis], kind="mergesort")]
         middle = (lo + hi) // 2
+        _select(order, points, axis, lo, hi, middle)
         child[node] = nodes
         pending[top] = (nodes, lo, middle)
         pending[top + 1] = (nodes + 1, middle, hi)

@@ -65,6 +65,34 @@ def test_matches_brute_force_on_any_points(n: int, m: int, seed: int, spread: fl
     np.testing.assert_allclose(distances.reshape(-1, k), expected_distances, rtol=1e-12, atol=0)
 
 
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 400), seed=st.integers(0, 2**31), levels=st.integers(1, 6),
+       k=st.sampled_from([1, 2, 9, 40]))
+def test_split_points_lie_on_their_side_even_when_coordinates_repeat(
+        n: int, seed: int, levels: int, k: int) -> None:
+    """Points on a coarse lattice (``levels`` values per axis: many equal coordinates, as a
+    CARMEN log's centimetre ranges or an axis-aligned wall give): each split leaves no point
+    of its first child beyond the second's on the split axis, the leaves hold every point once,
+    and the answers are brute force's."""
+    rng = np.random.default_rng(seed)
+    points = rng.integers(0, levels, (n, 2)).astype(np.float64) * 0.05
+    index = PointIndex(points)
+    order, tree_points, start, end, child, box = index.arrays
+    assert np.array_equal(np.sort(order), np.arange(n))
+    np.testing.assert_array_equal(tree_points, points[order])
+    for node in np.flatnonzero(child >= 0):
+        first, second = child[node], child[node] + 1
+        assert start[first] == start[node] and end[second] == end[node]
+        assert end[first] == start[second] == (start[node] + end[node]) // 2
+        left, right = tree_points[start[first]:end[first]], tree_points[start[second]:end[second]]
+        assert np.any(left.max(axis=0) <= right.min(axis=0))
+    queries = np.concatenate([points, rng.uniform(-0.05, 0.05 * levels, (20, 2))])
+    distances, found = index.query(queries, k=k, distance_upper_bound=0.12)
+    expected_distances, expected_index = _brute(points, queries, k, 0.12)
+    np.testing.assert_array_equal(found.reshape(-1, k), expected_index)
+    np.testing.assert_allclose(distances.reshape(-1, k), expected_distances, rtol=1e-12, atol=0)
+
+
 def test_bad_arguments_are_named() -> None:
     grid = PointIndex(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="k: expected a positive number"):
