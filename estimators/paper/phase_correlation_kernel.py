@@ -1,9 +1,9 @@
 """The compiled parts of :mod:`estimators.paper.phase_correlation` (numba, ``cache=True``).
 
-* :func:`whitened_spectrum_of_rows`: ``rfft2`` of an image whose empty rows are skipped
+* :func:`real_spectrum`: ``rfft2`` of an image whose empty rows are skipped
   (a scan image leaves more than half of them empty), the same numbers bit for bit: the 2-D
   transform is a row transform then a column transform, and a row of zeros transforms to zeros;
-  then whitened in place (:func:`whiten`).
+  :func:`whitened_spectrum_of_rows` whitens it in place (:func:`whiten`).
 * :func:`locate_peak`: what follows the inverse transform and numpy's ``argmax``, in one call:
   the parabola start and Newton's refinement (:func:`refine_peak`) on the Fourier series of
   the surface, then the peak's neighbourhood masked for the runner-up. It keeps the Python
@@ -47,16 +47,21 @@ def _scatter_rows(
     return out
 
 
-def whitened_spectrum_of_rows(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
-    """``whiten(scipy.fft.rfft2(pixels, workers=1))`` of a float32 image, bit for bit, with
-    its all-zero rows left out of the row transforms."""
+def real_spectrum(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
+    """``scipy.fft.rfft2(pixels, workers=1)`` of a float32 image, bit for bit, with its
+    all-zero rows left out of the row transforms."""
     rows = _occupied_rows(pixels.view(np.uint32))
     if len(rows) == pixels.shape[0]:
-        spectrum = scipy.fft.rfft2(pixels, workers=1)
-    else:
-        half = scipy.fft.rfft(pixels[rows], axis=1, workers=1)
-        spectrum = scipy.fft.fft(_scatter_rows(half, rows, pixels.shape[0]), axis=0,
-                                 overwrite_x=True, workers=1)
+        return scipy.fft.rfft2(pixels, workers=1)
+    half = scipy.fft.rfft(pixels[rows], axis=1, workers=1)
+    return scipy.fft.fft(_scatter_rows(half, rows, pixels.shape[0]), axis=0, overwrite_x=True,
+                         workers=1)
+
+
+def whitened_spectrum_of_rows(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
+    """``whiten(scipy.fft.rfft2(pixels, workers=1))`` of a float32 image, bit for bit
+    (:func:`real_spectrum`)."""
+    spectrum = real_spectrum(pixels)
     whiten(spectrum)
     return spectrum
 

@@ -161,15 +161,19 @@ def test_log_polar_spectrum_samples_the_magnitude_like_scipy_map_coordinates() -
 
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), height=st.integers(16, 120), width=st.integers(16, 120),
-       n_angles=st.integers(8, 200), n_radii=st.integers(2, 50), drawn=st.booleans())
+       n_angles=st.integers(8, 200), n_radii=st.integers(2, 50), drawn=st.booleans(),
+       empty_rows=st.floats(0.0, 1.0))
 def test_compiled_log_polar_sampling_equals_the_einsum_form(
-    seed: int, height: int, width: int, n_angles: int, n_radii: int, drawn: bool
+    seed: int, height: int, width: int, n_angles: int, n_radii: int, drawn: bool,
+    empty_rows: float,
 ) -> None:
-    """log_polar_spectrum's numba sampling against its np.einsum form, bit for bit, on sparse
-    uint8 images (a drawn scan) and dense float ones, any shape and grid."""
+    """log_polar_spectrum's numba windowing, row-skipping transform and sampling against its
+    numpy, rfft2 and np.einsum form, bit for bit, on sparse uint8 images (a drawn scan) and
+    dense float ones, with a share ``empty_rows`` of their rows empty, any shape and grid."""
     rng = np.random.default_rng(seed)
     sparse = (rng.random((height, width)) < 0.05) * rng.integers(0, 256, (height, width))
     image = sparse.astype(np.uint8) if drawn else rng.random((height, width))
+    image[rng.random(height) < empty_rows] = 0
     np.testing.assert_array_equal(
         log_polar_spectrum(image, n_angles, n_radii),
         log_polar_spectrum(image, n_angles, n_radii, compiled=False),
