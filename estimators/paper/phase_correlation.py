@@ -82,6 +82,10 @@ def image_spectrum(image: ArrayLike, compiled: bool = True) -> ImageSpectrum:
     (:func:`~estimators.paper.phase_correlation_kernel.whitened_spectrum_of_rows`) rather than
     all of them by ``scipy.fft.rfft2``, the same spectrum bit for bit."""
     image = np.asarray(image)
+    if image.dtype == np.uint8 and image.ndim == 2 and min(image.shape) >= 2:  # a drawn scan
+        pixels = image.astype(np.float32)
+        return ImageSpectrum(whitened_spectrum_of_rows(pixels) if compiled else
+                             _whitened_rfft2(pixels), (int(image.shape[0]), int(image.shape[1])))
     if image.ndim != 2 or min(image.shape) < 2:
         raise EstimatorInputError(
             f"image: expected a 2-D array of at least 2 x 2, got shape {image.shape}")
@@ -91,12 +95,14 @@ def image_spectrum(image: ArrayLike, compiled: bool = True) -> ImageSpectrum:
     # integer pixels (a drawn scan) are finite: the check is for float images
     if image.dtype.kind in "fc" and not np.all(np.isfinite(pixels)):
         raise EstimatorInputError("image: expected finite pixel values, got NaN or inf")
-    if compiled:
-        spectrum = whitened_spectrum_of_rows(pixels)
-    else:
-        spectrum = scipy.fft.rfft2(pixels, workers=1)
-        whiten(spectrum)
+    spectrum = whitened_spectrum_of_rows(pixels) if compiled else _whitened_rfft2(pixels)
     return ImageSpectrum(spectrum, (int(image.shape[0]), int(image.shape[1])))
+
+
+def _whitened_rfft2(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
+    spectrum = scipy.fft.rfft2(pixels, workers=1)
+    whiten(spectrum)
+    return spectrum
 
 
 def _as_spectrum(image: ArrayLike | ImageSpectrum, compiled: bool) -> ImageSpectrum:

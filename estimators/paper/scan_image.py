@@ -86,7 +86,7 @@ def _checked_scan(
             f"expected ranges and beam_angles of equal shape (n,), n >= 3; got {ranges.shape} "
             f"and {angles.shape}"
         )
-    if not np.all(np.isfinite(ranges)) or np.any(ranges < 0):
+    if not 0.0 <= ranges.min() <= ranges.max() < np.inf:  # NaN fails both
         raise EstimatorInputError(
             "ranges: expected finite ranges >= 0 [m], got NaN, inf or negative")
     return ranges, angles
