@@ -38,7 +38,7 @@ from estimators.matching.branch_and_bound import PyramidBuffer
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
-from estimators.slam.keyframe_matching import Keyframe, KeyframeMatching
+from estimators.slam.keyframe_matching import Keyframe, KeyframeMatching, KeyframeTable
 from estimators.slam.loop_closure import (
     LoopClosureParams,
     LoopVerification,
@@ -206,8 +206,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     def _reset_graph(self) -> None:
         self.graph = PoseGraph()
         self.keyframes: list[Keyframe] = []
-        # covariance of the odometry edge into each keyframe (keyframe 0: none)
-        self._odometry_covariance: list[NDArray[np.float64]] = []
+        self._table = KeyframeTable()  # their path lengths, descriptors, edge covariances
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
         self._scan_odometry: list[NDArray[np.float64]] = []
         self._places: dict[tuple[int, int], PlaceMap] = {}
@@ -283,7 +282,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
         if not self.keyframes:
             self.graph.add_node(odometry)
-            self._odometry_covariance.append(np.zeros((3, 3)))
+            covariance = np.zeros((3, 3))
         else:
             previous = self.keyframes[-1]
             step = relative(previous.odometry, odometry)
@@ -298,8 +297,9 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             if self.match_odometry and reference is not None:
                 information = self._matched_information(reference, points, step, information)
             self.graph.add_edge(index - 1, index, step, information)
-            self._odometry_covariance.append(np.linalg.inv(information))
+            covariance = np.linalg.inv(information)
         self.keyframes.append(keyframe)
+        self._table.append(keyframe, covariance)
         self._since_optimized += 1
         index = len(self.keyframes) - 1
         if self._close_loops(index):

@@ -19,7 +19,7 @@ from estimators.matching.point_to_line import PointToLineReference
 from estimators.slam.loop_closure import (
     LoopVerification,
     PlaceMap,
-    descriptor_distance,
+    descriptor_distances,
     match_information,
     verify_loop,
 )
@@ -63,17 +63,14 @@ class KeyframeMatching:
         current = self.keyframes[index]
         if index == 0:
             return []
-        path = np.array([k.path_length for k in self.keyframes[:index]])
-        behind = current.path_length - path
+        behind = current.path_length - self._table.path_lengths[:index]
         poses = self.graph.poses
         distance = np.hypot(*(poses[:index, :2] - poses[index, :2]).T)
         eligible = np.flatnonzero((behind >= self.min_overlap_separation)
                                   & (distance <= self.overlap_radius + self.loop_drift * behind))
         if len(eligible) == 0:
             return []
-        similarity = np.array([descriptor_distance(current.descriptor,
-                                                   self.keyframes[k].descriptor)
-                               for k in eligible])
+        similarity = descriptor_distances(current.descriptor, self._table.descriptors[eligible])
         window = np.minimum(self.loop_radius + self.loop_drift * behind, self.max_search_window)
         chosen: list[tuple[int, float]] = []
         for k in eligible[np.lexsort((similarity, behind[eligible] < self.min_loop_separation))]:
@@ -97,7 +94,7 @@ class KeyframeMatching:
         both err on the side of accepting a true loop after a long, drifting drive."""
         poses = self.graph.poses
         chain = chain_covariance(poses[old:new + 1],
-                                 np.array(self._odometry_covariance[old + 1:new + 1]),
+                                 self._table.odometry_covariances[old + 1:new + 1],
                                  correlated=True)
         residual = compose(inverse(pose), relative(poses[old], poses[new]))  # the graph residual
         covariance = chain + np.linalg.inv(information)
@@ -136,12 +133,11 @@ class KeyframeMatching:
         loop edges once two matches agree on the correction (then optimise at once, trusting
         them: the robust kernel would otherwise refuse a correction of many metres)."""
         current = self.keyframes[index]
-        path = np.array([k.path_length for k in self.keyframes[:index]])
+        path = self._table.path_lengths[:index]
         old = np.flatnonzero(current.path_length - path >= self.min_loop_separation)
         if len(old) == 0:
             return
-        distance = np.array([descriptor_distance(current.descriptor, self.keyframes[k].descriptor)
-                             for k in old])
+        distance = descriptor_distances(current.descriptor, self._table.descriptors[old])
         order = np.argsort(distance, kind="stable")[: self.global_candidates]
         self._pending = [p for p in self._pending if index - p[1] <= self.global_confirmation]
         poses = self.graph.poses
@@ -217,3 +213,46 @@ class Keyframe:
     descriptor: NDArray[np.float64]
     odometry: NDArray[np.float64]
     path_length: float
+
+
+class KeyframeTable:
+    """What the loop search reads of every keyframe, as arrays that grow by doubling (read
+    once per keyframe, over all of them, they would otherwise be rebuilt from the keyframes
+    each time): path lengths (K,) [m], place descriptors (K, B), and the covariance (K, 3, 3)
+    of the odometry edge into each keyframe (keyframe 0: zeros)."""
+
+    def __init__(self) -> None:
+        self._size = 0
+        self._path = np.empty(0)
+        self._descriptors = np.empty((0, 0))
+        self._covariances = np.empty((0, 3, 3))
+
+    def append(self, keyframe: Keyframe, covariance: NDArray[np.float64]) -> None:
+        """Add the next keyframe's row and its odometry edge's covariance (3, 3)."""
+        if self._size == len(self._path):
+            capacity = max(16, 2 * self._size)
+            bins = len(keyframe.descriptor)
+            self._path = np.resize(self._path, capacity)
+            self._descriptors = np.resize(self._descriptors, (capacity, bins))
+            self._covariances = np.resize(self._covariances, (capacity, 3, 3))
+        k = self._size
+        self._path[k] = keyframe.path_length
+        self._descriptors[k] = keyframe.descriptor
+        self._covariances[k] = covariance
+        self._size += 1
+
+    @property
+    def path_lengths(self) -> NDArray[np.float64]:
+        """``(K,)`` path length [m] driven up to each keyframe (a view)."""
+        return self._path[: self._size]
+
+    @property
+    def descriptors(self) -> NDArray[np.float64]:
+        """``(K, B)`` place descriptors (a view)."""
+        return self._descriptors[: self._size]
+
+    @property
+    def odometry_covariances(self) -> NDArray[np.float64]:
+        """``(K, 3, 3)`` covariance of the odometry edge into each keyframe (a view)."""
+        return self._covariances[: self._size]
+

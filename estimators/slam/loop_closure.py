@@ -65,6 +65,13 @@ def descriptor_distance(a: NDArray[np.float64], b: NDArray[np.float64]) -> float
     return 0.5 * float(np.abs(a - b).sum())
 
 
+def descriptor_distances(a: NDArray[np.float64], others: NDArray[np.float64]
+                         ) -> NDArray[np.float64]:
+    """``(K,)`` :func:`descriptor_distance` of ``a`` (B,) to each row of ``others`` (K, B), in
+    one pass (each row summed as numpy sums one histogram, so the same numbers)."""
+    return 0.5 * np.abs(others - a).sum(axis=1)
+
+
 @dataclass(frozen=True)
 class LoopClosureParams:
     """Settings of :func:`verify_loop`; distances [m], angles [rad].

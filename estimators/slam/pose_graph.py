@@ -42,6 +42,14 @@ MIN_INFORMATION, MAX_INFORMATION = 1e-9, 1e15
 ID_RANGE = (-(2**63), 2**63 - 1)
 
 
+def _symmetric(matrix: NDArray[np.float64]) -> bool:
+    """``np.allclose(matrix, matrix.T)`` (its default tolerances), without its overhead for
+    the finite matrices edges carry (a tenth of an edge's checks)."""
+    if not np.isfinite(matrix).all():
+        return bool(np.allclose(matrix, matrix.T))
+    return bool((np.abs(matrix - matrix.T) <= 1e-8 + 1e-5 * np.abs(matrix.T)).all())
+
+
 def _check_coordinates(what: str, pose: NDArray[np.float64]) -> None:
     """``pose`` (x [m], y [m], ...) lies within ``MAX_COORDINATE`` of the origin."""
     if np.max(np.abs(pose[:2])) > MAX_COORDINATE:
@@ -69,6 +77,9 @@ class PoseGraph:
         self._measurements: list[NDArray[np.float64]] = []
         self._information: list[NDArray[np.float64]] = []
         self._is_loop: list[bool] = []
+        # the edge lists as arrays (edges, measurements, information, is_loop), once read
+        self._edge_arrays: tuple[NDArray, NDArray, NDArray, NDArray] | None = None
+        self._connected_nodes = 0  # nodes when last found connected (0: not known to be)
 
     # ------------------------------------------------------------------ building
     def add_node(self, pose: ArrayLike, node_id: int | None = None) -> int:
@@ -115,7 +126,7 @@ class PoseGraph:
                 f"edge measurement: expected 3 finite numbers, got {measurement}")
         _check_coordinates(f"edge {i}->{j} measurement", z)
         omega = np.asarray(information, dtype=np.float64)
-        if omega.shape != (3, 3) or not np.allclose(omega, omega.T):
+        if omega.shape != (3, 3) or not _symmetric(omega):
             raise EstimatorInputError(
                 f"edge information: expected a symmetric 3x3 matrix, got {omega}")
         try:
@@ -133,6 +144,7 @@ class PoseGraph:
         self._measurements.append(z.copy())
         self._information.append(omega.copy())
         self._is_loop.append(bool(is_loop))
+        self._edge_arrays = None
         return len(self._edge_nodes) - 1
 
     # ------------------------------------------------------------------ reading
@@ -176,25 +188,36 @@ class PoseGraph:
         except KeyError:
             raise UnknownNameError(f"no node with id {node_id} in the graph") from None
 
+    def _arrays(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """The edge lists as arrays, kept until the edges change (a graph of a thousand
+        edges is read several times per optimisation)."""
+        if self._edge_arrays is None:
+            self._edge_arrays = (
+                np.array(self._edge_nodes, dtype=np.int64).reshape(-1, 2),
+                np.array(self._measurements, dtype=np.float64).reshape(-1, 3),
+                np.array(self._information, dtype=np.float64).reshape(-1, 3, 3),
+                np.array(self._is_loop, dtype=bool))
+        return self._edge_arrays
+
     @property
     def edges(self) -> NDArray[np.int64]:
-        """``(E, 2)`` node indices ``(i, j)`` of each edge."""
-        return np.array(self._edge_nodes, dtype=np.int64).reshape(-1, 2)
+        """``(E, 2)`` node indices ``(i, j)`` of each edge (a fresh copy)."""
+        return self._arrays()[0].copy()
 
     @property
     def measurements(self) -> NDArray[np.float64]:
-        """``(E, 3)`` measured pose of node j in the frame of node i."""
-        return np.array(self._measurements, dtype=np.float64).reshape(-1, 3)
+        """``(E, 3)`` measured pose of node j in the frame of node i (a fresh copy)."""
+        return self._arrays()[1].copy()
 
     @property
     def information(self) -> NDArray[np.float64]:
-        """``(E, 3, 3)`` information matrices."""
-        return np.array(self._information, dtype=np.float64).reshape(-1, 3, 3)
+        """``(E, 3, 3)`` information matrices (a fresh copy)."""
+        return self._arrays()[2].copy()
 
     @property
     def is_loop(self) -> NDArray[np.bool_]:
-        """``(E,)`` True for loop-closure edges (as opposed to odometry)."""
-        return np.array(self._is_loop, dtype=bool)
+        """``(E,)`` True for loop-closure edges (as opposed to odometry; a fresh copy)."""
+        return self._arrays()[3].copy()
 
     def remove_edges(self, indices: ArrayLike) -> None:
         """Delete the edges at ``indices`` (e.g. loop closures the optimiser could not
@@ -205,6 +228,8 @@ class PoseGraph:
         self._measurements = [self._measurements[k] for k in keep]
         self._information = [self._information[k] for k in keep]
         self._is_loop = [self._is_loop[k] for k in keep]
+        self._edge_arrays = None
+        self._connected_nodes = 0
 
     def copy(self) -> PoseGraph:
         other = PoseGraph()
@@ -220,7 +245,9 @@ class PoseGraph:
     def check_connected(self) -> None:
         """Raise :class:`DisconnectedGraphError` unless every node links to node 0."""
         n = self.n_nodes
-        if n <= 1:
+        # Adding edges cannot disconnect a graph: the answer stands until a node is added or
+        # an edge removed.
+        if n <= 1 or self._connected_nodes == n:
             return
         edges = self.edges
         adjacency = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
@@ -234,6 +261,7 @@ class PoseGraph:
                 f"expected one connected graph. Node ids not linked to node id {self._ids[0]}: "
                 f"{shown}"
             )
+        self._connected_nodes = n
 
     def cost(self, poses: ArrayLike | None = None, loss: Loss = "linear",
              loss_scale: float = 1.0, robust_edges: ArrayLike | None = None) -> float:
