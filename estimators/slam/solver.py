@@ -101,6 +101,12 @@ class _WhitenedProblem:
     def jacobian(self, x: NDArray[np.float64], edge_weight: NDArray[np.float64] | None = None
                  ) -> sp.csr_matrix:
         """Analytic ``d f / d x`` as a sparse matrix (rows scaled by ``sqrt(edge_weight)``)."""
+        values = self.jacobian_entries(x, edge_weight)[self._order]
+        return sp.csr_matrix((values, self._indices, self._indptr), shape=self.shape)
+
+    def jacobian_entries(self, x: NDArray[np.float64],
+                         edge_weight: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+        """The Jacobian's entries at ``(self.rows, self.cols)`` (its COO form)."""
         poses = self.poses_of(x)
         pi, pj = poses[self.edges[:, 0]], poses[self.edges[:, 1]]
         ci, si = np.cos(pi[:, 2]), np.sin(pi[:, 2])
@@ -124,8 +130,7 @@ class _WhitenedProblem:
         whitened = self.sqrt_info_t @ block
         if edge_weight is not None:
             whitened *= np.sqrt(edge_weight)[:, None, None]
-        values = whitened.ravel()[self.keep][self._order]
-        return sp.csr_matrix((values, self._indices, self._indptr), shape=self.shape)
+        return whitened.ravel()[self.keep]
 
 
 def optimize(

@@ -1,0 +1,111 @@
+"""The slam back end's faster forms against the plain ones they replace, bit for bit: the
+vectorised descriptor distances, the keyframe table's arrays, the solver's Jacobian layout
+and damping, the pose graph's kept edge arrays and connectivity."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from estimators.slam.keyframe_matching import Keyframe, KeyframeTable
+from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
+from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
+from estimators.slam.solver import _damped, _diagonal_positions, _WhitenedProblem
+from lidar_env.se2 import wrap_angle
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 60),
+       bins=st.sampled_from([1, 7, 8, 9, 16, 40, 41, 130]))
+def test_descriptor_distances_equal_the_one_by_one_distances(seed: int, rows: int,
+                                                             bins: int) -> None:
+    rng = np.random.default_rng(seed)
+    others = rng.random((rows, bins))
+    others /= others.sum(axis=1, keepdims=True)
+    a = rng.random(bins)
+    a /= a.sum()
+    one_by_one = np.array([descriptor_distance(a, row) for row in others])
+    assert np.array_equal(descriptor_distances(a, others), one_by_one)
+
+
+def test_keyframe_table_holds_every_row_as_appended() -> None:
+    rng = np.random.default_rng(1)
+    table = KeyframeTable()
+    keyframes = [Keyframe(np.zeros((0, 2)), rng.random(40), np.zeros(3), float(k))
+                 for k in range(50)]  # past two doublings
+    covariances = rng.random((50, 3, 3))
+    for keyframe, covariance in zip(keyframes, covariances, strict=True):
+        table.append(keyframe, covariance)
+    assert np.array_equal(table.path_lengths, np.arange(50.0))
+    assert np.array_equal(table.descriptors, np.array([k.descriptor for k in keyframes]))
+    assert np.array_equal(table.odometry_covariances, covariances)
+
+
+def random_graph(rng: np.random.Generator, n: int, loops: int) -> PoseGraph:
+    graph = PoseGraph()
+    for _ in range(n):
+        graph.add_node([*rng.normal(size=2) * 5, wrap_angle(rng.normal() * 3)])
+    pairs = [(k, k + 1) for k in range(n - 1)]
+    pairs += [tuple(sorted(rng.choice(n, 2, replace=False))) for _ in range(loops)]
+    for i, j in pairs:
+        root = rng.normal(size=(3, 3))
+        graph.add_edge(int(i), int(j), rng.normal(size=3), root @ root.T + 0.1 * np.eye(3),
+                       is_loop=(i, j) not in pairs[: n - 1])
+    return graph
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 30), loops=st.integers(0, 20),
+       fixed=st.integers(0, 29))
+def test_jacobian_layout_and_damping_equal_scipys_own_forms(seed: int, n: int, loops: int,
+                                                            fixed: int) -> None:
+    rng = np.random.default_rng(seed)
+    graph = random_graph(rng, n, loops)
+    problem = _WhitenedProblem(graph, fixed % n)
+    x = graph.poses[problem.free].ravel() + 0.1 * rng.normal(size=3 * (n - 1))
+    weight = rng.random(graph.n_edges) + 0.1
+    ours = problem.jacobian(x, weight)
+    # the COO form it replaces, converted by scipy
+    reference = sp.csr_matrix((problem.jacobian_entries(x, weight), (problem.rows, problem.cols)),
+                              shape=problem.shape)
+    assert np.array_equal(ours.indptr, reference.indptr)
+    assert np.array_equal(ours.indices, reference.indices)
+    assert np.array_equal(ours.data, reference.data)
+    hessian = (ours.T @ ours).tocsc()
+    hessian.sum_duplicates()
+    damping = 10.0 ** rng.uniform(-12, 12) * np.maximum(hessian.diagonal(), 1e-9)
+    expected = (hessian + sp.diags(damping, format="csc")).tocsc()
+    expected.sum_duplicates()
+    got = _damped(hessian, damping, _diagonal_positions(hessian))
+    got.sum_duplicates()
+    assert np.array_equal(got.indptr, expected.indptr)
+    assert np.array_equal(got.indices, expected.indices)
+    assert np.array_equal(got.data, expected.data)
+
+
+def test_kept_edge_arrays_follow_every_change() -> None:
+    graph = random_graph(np.random.default_rng(2), 6, 3)
+    edges = graph.edges
+    edges[0] = 99  # a copy: the graph's own arrays are not handed out
+    assert graph.edges[0].tolist() == [0, 1]
+    graph.add_edge(0, 5, np.zeros(3), np.eye(3), is_loop=True)
+    assert graph.edges[-1].tolist() == [0, 5] and graph.is_loop[-1]
+    assert len(graph.measurements) == len(graph.information) == graph.n_edges
+    graph.remove_edges([0])
+    assert graph.edges[0].tolist() == [1, 2] and graph.n_edges == len(graph.is_loop)
+
+
+def test_connectivity_is_checked_again_after_a_node_or_a_removal() -> None:
+    graph = random_graph(np.random.default_rng(3), 4, 0)
+    graph.check_connected()
+    graph.add_node([0.0, 0.0, 0.0])  # no edge yet
+    with pytest.raises(DisconnectedGraphError):
+        graph.check_connected()
+    graph.add_edge(3, 4, np.zeros(3), np.eye(3))
+    graph.check_connected()
+    graph.remove_edges([1])  # 0-1 | 2-3-4
+    with pytest.raises(DisconnectedGraphError):
+        graph.check_connected()
