@@ -30,7 +30,11 @@ import scipy.fft
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.paper.phase_correlation_kernel import real_spectrum
+from estimators.paper.phase_correlation_kernel import (
+    real_spectrum,
+    real_spectrum_of_rows,
+    uint8_rows,
+)
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
@@ -110,7 +114,9 @@ def log_polar_spectrum(
     and sample in one numba loop (:func:`_sample_log_polar`) rather than by numpy, ``rfft2``
     and ``np.einsum`` over the gathered bins, the same values bit for bit.
     """
-    image = np.asarray(image, dtype=np.float32)
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or not compiled:
+        image = image.astype(np.float32, copy=False)
     if image.ndim != 2 or min(image.shape) < 16:
         raise EstimatorInputError(
             f"image: expected a 2-D array of at least 16x16 pixels, got {image.shape}")
@@ -124,7 +130,10 @@ def log_polar_spectrum(
         height, width, n_angles, n_radii, min_radius
     )
     if compiled:
-        magnitude = np.abs(real_spectrum(_windowed(image, window)))
+        if image.dtype == np.uint8:  # a drawn scan: its occupied rows only
+            magnitude = np.abs(real_spectrum_of_rows(*uint8_rows(image, window), height))
+        else:
+            magnitude = np.abs(real_spectrum(_windowed(image, window)))
         # numpy's log1p, not numba's: they differ in the last bit on AVX-512 machines
         return np.log1p(_sample_log_polar(magnitude.ravel(), corners, weights, radii))
     magnitude = np.abs(scipy.fft.rfft2(image * window, workers=1))

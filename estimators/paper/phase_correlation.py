@@ -83,9 +83,9 @@ def image_spectrum(image: ArrayLike, compiled: bool = True) -> ImageSpectrum:
     all of them by ``scipy.fft.rfft2``, the same spectrum bit for bit."""
     image = np.asarray(image)
     if image.dtype == np.uint8 and image.ndim == 2 and min(image.shape) >= 2:  # a drawn scan
-        pixels = image.astype(np.float32)
-        return ImageSpectrum(whitened_spectrum_of_rows(pixels) if compiled else
-                             _whitened_rfft2(pixels), (int(image.shape[0]), int(image.shape[1])))
+        return ImageSpectrum(
+            whitened_spectrum_of_rows(image) if compiled else
+            _whitened_rfft2(image.astype(np.float32)), (int(image.shape[0]), int(image.shape[1])))
     if image.ndim != 2 or min(image.shape) < 2:
         raise EstimatorInputError(
             f"image: expected a 2-D array of at least 2 x 2, got shape {image.shape}")

@@ -19,6 +19,9 @@ import numpy as np
 import scipy.fft
 from numpy.typing import NDArray
 
+#: :func:`uint8_rows`' "no window".
+NO_WINDOW = np.empty((0, 0), dtype=np.float32)
+
 
 @numba.njit(cache=True, nogil=True)
 def _occupied_rows(bits: NDArray[np.uint32]) -> NDArray[np.int64]:  # pragma: no cover (numba)
@@ -47,21 +50,58 @@ def _scatter_rows(
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def uint8_rows(
+    image: NDArray[np.uint8], window: NDArray[np.float32]
+) -> tuple[NDArray[np.int64], NDArray[np.float32]]:  # pragma: no cover (numba)
+    """The rows of a uint8 ``image`` that hold a pixel, and those rows as float32 (times
+    ``window``, as numpy multiplies them, unless ``window`` is empty): what
+    :func:`real_spectrum_of_rows` transforms, without converting the whole image first."""
+    n_rows, cols = image.shape
+    rows = np.empty(n_rows, dtype=np.int64)
+    count = 0
+    for r in range(n_rows):
+        union = np.uint8(0)
+        for c in range(cols):
+            union |= image[r, c]
+        if union != 0:
+            rows[count] = r
+            count += 1
+    compact = np.empty((count, cols), dtype=np.float32)
+    for index in range(count):
+        r = rows[index]
+        for c in range(cols):
+            compact[index, c] = (np.float32(image[r, c]) * window[r, c] if window.size
+                                 else np.float32(image[r, c]))
+    return rows[:count], compact
+
+
+def real_spectrum_of_rows(
+    rows: NDArray[np.int64], compact: NDArray[np.float32], n_rows: int
+) -> NDArray[np.complex64]:
+    """``scipy.fft.rfft2`` of the ``(n_rows, cols)`` float32 image that is zero but for the
+    rows ``rows``, which hold ``compact`` (len(rows), cols), bit for bit."""
+    if len(rows) == n_rows:
+        return scipy.fft.rfft2(compact, workers=1)
+    half = scipy.fft.rfft(compact, axis=1, workers=1)
+    return scipy.fft.fft(_scatter_rows(half, rows, n_rows), axis=0, overwrite_x=True, workers=1)
+
+
 def real_spectrum(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
     """``scipy.fft.rfft2(pixels, workers=1)`` of a float32 image, bit for bit, with its
-    all-zero rows left out of the row transforms."""
+    all-zero rows (all bits zero, so -0.0 counts as a pixel) left out of the row transforms."""
     rows = _occupied_rows(pixels.view(np.uint32))
-    if len(rows) == pixels.shape[0]:
-        return scipy.fft.rfft2(pixels, workers=1)
-    half = scipy.fft.rfft(pixels[rows], axis=1, workers=1)
-    return scipy.fft.fft(_scatter_rows(half, rows, pixels.shape[0]), axis=0, overwrite_x=True,
-                         workers=1)
+    return real_spectrum_of_rows(rows, pixels[rows], pixels.shape[0])
 
 
-def whitened_spectrum_of_rows(pixels: NDArray[np.float32]) -> NDArray[np.complex64]:
-    """``whiten(scipy.fft.rfft2(pixels, workers=1))`` of a float32 image, bit for bit
-    (:func:`real_spectrum`)."""
-    spectrum = real_spectrum(pixels)
+def whitened_spectrum_of_rows(pixels: NDArray[np.float32 | np.uint8]) -> NDArray[np.complex64]:
+    """``whiten(scipy.fft.rfft2(pixels.astype(np.float32), workers=1))`` of a float32 or uint8
+    image (a drawn scan), bit for bit (:func:`real_spectrum`)."""
+    if pixels.dtype == np.uint8:
+        rows, compact = uint8_rows(pixels, NO_WINDOW)
+        spectrum = real_spectrum_of_rows(rows, compact, pixels.shape[0])
+    else:
+        spectrum = real_spectrum(pixels)
     whiten(spectrum)
     return spectrum
 

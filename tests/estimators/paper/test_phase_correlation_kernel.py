@@ -29,7 +29,8 @@ def _sparse_image(rng: np.random.Generator, rows: int, cols: int, pixels: int) -
 def test_spectrum_of_occupied_rows_equals_rfft2_bit_for_bit(
     seed: int, rows: int, cols: int, pixels: int, negative_zero: bool
 ) -> None:
-    """Rows left out of the row transforms change nothing, even a row of -0.0 pixels."""
+    """Rows left out of the row transforms change nothing, even a row of -0.0 pixels; float32
+    and uint8 images."""
     rng = np.random.default_rng(seed)
     image = _sparse_image(rng, rows, cols, pixels)
     if negative_zero:
@@ -39,6 +40,12 @@ def test_spectrum_of_occupied_rows_equals_rfft2_bit_for_bit(
     np.testing.assert_array_equal(whitened_spectrum_of_rows(image), expected)
     np.testing.assert_array_equal(image_spectrum(image).whitened,
                                   image_spectrum(image, compiled=False).whitened)
+    drawn = np.abs(image).astype(np.uint8)  # a drawn scan's uint8 image, its own rows
+    expected = scipy.fft.rfft2(drawn.astype(np.float32), workers=1)
+    whiten(expected)
+    np.testing.assert_array_equal(whitened_spectrum_of_rows(drawn), expected)
+    np.testing.assert_array_equal(image_spectrum(drawn).whitened,
+                                  image_spectrum(drawn, compiled=False).whitened)
 
 
 @settings(max_examples=100, deadline=None)
