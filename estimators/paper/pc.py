@@ -101,6 +101,9 @@ class _ImageCorrelationEstimator(Estimator):
             self.image_size, self.resolution, self._geometry.max_range
         )
         self._position = self._initial_pose[:2].copy()
+        # made once per reset: the beams turned by each rotation drawn, each axes' rotation
+        self._turned_beams: dict[float, NDArray[np.float64]] = {}
+        self._axes_rotations: dict[float, NDArray[np.float64]] = {}
 
     def _image_axes_heading(self, lidar: int) -> float:
         """Heading [rad] of the scan-image axes of Lidar ``lidar`` in the trajectory frame."""
@@ -112,9 +115,12 @@ class _ImageCorrelationEstimator(Estimator):
     def _spectrum(self, scan: NDArray[np.float64], rotation: float = 0.0) -> ImageSpectrum:
         """Whitened spectrum of a scan's image, its points rotated by ``rotation`` [rad]."""
         assert self.setup is not None
+        beams = self._turned_beams.get(rotation)
+        if beams is None:
+            beams = self._turned_beams[rotation] = self._geometry.beam_angles + rotation
         image = scan_to_image(
             scan,
-            self._geometry.beam_angles + rotation,
+            beams,
             self._geometry.max_range,
             self.image_size,
             self._pixel_size,
@@ -136,7 +142,10 @@ class _ImageCorrelationEstimator(Estimator):
 
     def _advance(self, motion: NDArray[np.float64], axes_heading: float) -> NDArray[np.float64]:
         """Add a translation given in image axes to the car position; return the car pose."""
-        self._position = self._position + _rotation(axes_heading) @ motion
+        rotation = self._axes_rotations.get(axes_heading)
+        if rotation is None:
+            rotation = self._axes_rotations[axes_heading] = _rotation(axes_heading)
+        self._position = self._position + rotation @ motion
         return np.array([*self._position, self._initial_pose[2]])
 
 
