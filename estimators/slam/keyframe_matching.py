@@ -30,31 +30,66 @@ from lidar_env.se2 import compose, inverse, relative, transform_points
 class KeyframeMatching:
     """Keyframe-to-keyframe matching for :class:`~estimators.slam.graph_slam.GraphSlam`, a
     mixin: odometry steps checked against the two keyframes' scans, and loop closure. It
-    reads the graph slam's settings (``loop_params``, ``min_loop_separation``, ...) and state
-    (``graph``, ``keyframes``, ``_places``, ``_pending``, ``loop_attempts``,
-    ``_pyramid_buffer``: one for all its searches, which run one after another) and adds loop edges
-    to its graph."""
+    reads the graph slam's settings (``loop_params``, ``min_loop_separation``,
+    ``place_tolerance``, ...) and state (``graph``, ``keyframes``, ``_table``, ``_places``,
+    ``_optimizations``, ``_pending``, ``loop_attempts``, ``_pyramid_buffer``: one for all its
+    searches, which run one after another) and adds loop edges to its graph."""
 
     def _submap(self, index: int, before: int, after: int) -> NDArray[np.float64]:
         """Points (M, 2) of keyframes ``index - before .. index + after`` in the frame of
         keyframe ``index``, placed by the graph's current poses."""
+        lo = max(0, index - before)
+        return np.concatenate([transform_points(pose, self.keyframes[lo + k].points)
+                               for k, pose in enumerate(self._submap_poses(index, before, after))])
+
+    def _submap_poses(self, index: int, before: int, after: int) -> NDArray[np.float64]:
+        """``(n, 3)`` poses of keyframes ``index - before .. index + after`` (clipped to the
+        graph) in the frame of keyframe ``index``, by the graph's current poses."""
         poses = self.graph.poses
         lo, hi = max(0, index - before), min(len(self.keyframes), index + after + 1)
-        return np.concatenate([
-            transform_points(relative(poses[index], poses[k]), self.keyframes[k].points)
-            for k in range(lo, hi)
-        ])
+        return np.array([relative(poses[index], poses[k]) for k in range(lo, hi)])
 
     def _place(self, index: int, neighbours: int | None = None) -> PlaceMap:
         """The old place around keyframe ``index``: its points and its ``neighbours`` on each
-        side (default ``submap_neighbours``), in its frame (cached; the neighbours' relative
-        poses hardly change once optimised)."""
+        side (default ``submap_neighbours``), in its frame. Kept across optimisations while
+        no point of it has moved by more than ``place_tolerance`` (:func:`largest_shift`; the
+        ``max_places`` used last are kept)."""
         neighbours = self.submap_neighbours if neighbours is None else neighbours
         key = (index, neighbours)
-        if key not in self._places:
-            self._places[key] = PlaceMap(self._submap(index, neighbours, neighbours),
-                                         self.loop_params, self._pyramid_buffer)
-        return self._places[key]
+        placed = self._submap_poses(index, neighbours, neighbours)
+        kept = self._places.get(key)
+        lo = max(0, index - neighbours)
+        if kept is not None and len(kept[1]) == len(placed) and largest_shift(
+                kept[1], placed, self._table.reach[lo:lo + len(placed)]) <= self.place_tolerance:
+            self._places.move_to_end(key)
+            if kept[2] != self._optimizations:  # as a map built anew would, after one
+                kept[0].forget_levels()
+                self._places[key] = (kept[0], kept[1], self._optimizations)
+            return kept[0]
+        points = np.concatenate([transform_points(pose, self.keyframes[lo + k].points)
+                                 for k, pose in enumerate(placed)])
+        place = PlaceMap(points, self.loop_params, self._pyramid_buffer)
+        self._places[key] = (place, placed, self._optimizations)
+        self._places.move_to_end(key)
+        while len(self._places) > self.max_places:
+            self._places.popitem(last=False)
+        return place
+
+    @property
+    def revisits(self) -> NDArray[np.bool_]:
+        """``(E,)`` which graph edges are revisits: loop edges between keyframes at least
+        ``min_loop_separation`` of path apart (the others are odometry or overlap edges)."""
+        if not self.graph.n_edges:
+            return np.zeros(0, dtype=bool)
+        path = np.array([k.path_length for k in self.keyframes])
+        edges = self.graph.edges
+        return self.graph.is_loop & (path[edges[:, 1]] - path[edges[:, 0]]
+                                     >= self.min_loop_separation)
+
+    @property
+    def n_loops(self) -> int:
+        """Loop edges in the graph now (accepted and kept)."""
+        return int(self.graph.is_loop.sum()) if self.graph.n_edges else 0
 
     def loop_candidates(self, index: int) -> list[tuple[int, float]]:
         """Old keyframes keyframe ``index`` may revisit or overlap, with their search window
@@ -219,13 +254,15 @@ class KeyframeTable:
     """What the loop search reads of every keyframe, as arrays that grow by doubling (read
     once per keyframe, over all of them, they would otherwise be rebuilt from the keyframes
     each time): path lengths (K,) [m], place descriptors (K, B), and the covariance (K, 3, 3)
-    of the odometry edge into each keyframe (keyframe 0: zeros)."""
+    of the odometry edge into each keyframe (keyframe 0: zeros), and the reach (K,) [m] of
+    each keyframe's points (the farthest one's distance from its origin)."""
 
     def __init__(self) -> None:
         self._size = 0
         self._path = np.empty(0)
         self._descriptors = np.empty((0, 0))
         self._covariances = np.empty((0, 3, 3))
+        self._reach = np.empty(0)
 
     def append(self, keyframe: Keyframe, covariance: NDArray[np.float64]) -> None:
         """Add the next keyframe's row and its odometry edge's covariance (3, 3)."""
@@ -235,10 +272,13 @@ class KeyframeTable:
             self._path = np.resize(self._path, capacity)
             self._descriptors = np.resize(self._descriptors, (capacity, bins))
             self._covariances = np.resize(self._covariances, (capacity, 3, 3))
+            self._reach = np.resize(self._reach, capacity)
         k = self._size
         self._path[k] = keyframe.path_length
         self._descriptors[k] = keyframe.descriptor
         self._covariances[k] = covariance
+        points = keyframe.points
+        self._reach[k] = np.hypot(points[:, 0], points[:, 1]).max() if len(points) else 0.0
         self._size += 1
 
     @property
@@ -255,4 +295,20 @@ class KeyframeTable:
     def odometry_covariances(self) -> NDArray[np.float64]:
         """``(K, 3, 3)`` covariance of the odometry edge into each keyframe (a view)."""
         return self._covariances[: self._size]
+
+    @property
+    def reach(self) -> NDArray[np.float64]:
+        """``(K,)`` distance [m] of each keyframe's farthest point from its origin (a view)."""
+        return self._reach[: self._size]
+
+
+def largest_shift(before: NDArray[np.float64], after: NDArray[np.float64],
+                  reach: NDArray[np.float64]) -> float:
+    """The most [m] a point moves between two placements of the same keyframes (poses (n, 3)
+    ``before`` and ``after``, each keyframe's points within ``reach`` (n,) [m] of its origin):
+    ``|dt| + 2 |sin(dtheta / 2)| reach``, the bound for a point at that distance turned by
+    ``dtheta`` and moved by ``dt``."""
+    turn = np.abs(np.sin(0.5 * (after[:, 2] - before[:, 2])))
+    shift = np.hypot(after[:, 0] - before[:, 0], after[:, 1] - before[:, 1])
+    return float(np.max(shift + 2.0 * turn * reach)) if len(reach) else 0.0
 

@@ -224,6 +224,10 @@ class PlaceMap:
             thinned, params.normal_neighbours, params.denoise_reference,
             params.max_normal_neighbours)
 
+    def forget_levels(self) -> None:
+        """Search as a map built anew would: from the next search's own depth on."""
+        self._levels = 0
+
     def pyramid(self, levels: int, points: NDArray[np.float64], center: NDArray[np.float64],
                 linear_window: float, angular_window: float,
                 angular_step: float) -> GridPyramid:

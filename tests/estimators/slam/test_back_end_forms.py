@@ -10,11 +10,13 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimators.slam.keyframe_matching import Keyframe, KeyframeTable
+from estimators.base import SensorSetup
+from estimators.slam.graph_slam import GraphSlam
+from estimators.slam.keyframe_matching import Keyframe, KeyframeTable, largest_shift
 from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _damped, _diagonal_positions, _WhitenedProblem
-from lidar_env.se2 import wrap_angle
+from lidar_env.se2 import inverse, transform_points, wrap_angle
 
 
 @settings(max_examples=200, deadline=None)
@@ -109,3 +111,55 @@ def test_connectivity_is_checked_again_after_a_node_or_a_removal() -> None:
     graph.remove_edges([1])  # 0-1 | 2-3-4
     with pytest.raises(DisconnectedGraphError):
         graph.check_connected()
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6),
+       scale=st.sampled_from([1e-6, 1e-3, 0.1, 3.0]))
+def test_largest_shift_bounds_every_points_move(seed: int, n: int, scale: float) -> None:
+    rng = np.random.default_rng(seed)
+    before = np.column_stack([rng.normal(size=(n, 2)) * 3, rng.uniform(-np.pi, np.pi, n)])
+    after = before + scale * rng.normal(size=(n, 3))
+    clouds = [rng.normal(size=(20, 2)) * rng.uniform(0.1, 20) for _ in range(n)]
+    reach = np.array([np.hypot(*c.T).max() for c in clouds])
+    moved = max(np.hypot(*(transform_points(a, c) - transform_points(b, c)).T).max()
+                for a, b, c in zip(after, before, clouds, strict=True))
+    bound = largest_shift(before, after, reach)
+    assert moved <= bound * (1 + 1e-9) + 1e-12
+    # tight for the farthest point turned about its origin
+    assert bound <= np.hypot(*(after[:, :2] - before[:, :2]).T).max() + 2 * np.abs(
+        np.sin(0.5 * (after[:, 2] - before[:, 2]))).max() * reach.max() + 1e-12
+
+
+def room_slam(**settings: float) -> GraphSlam:
+    """A slam fed its car-frame view of a 6 m x 4 m room along a circle, by exact odometry."""
+    corners = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0], [0.0, 0.0]])
+    t = np.linspace(0, 1, 300)[:, None]
+    walls = np.concatenate([a + t * (b - a) for a, b in zip(corners[:-1], corners[1:],
+                                                              strict=True)])
+    slam = GraphSlam(**settings)
+    angles = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    slam.reset(SensorSetup(np.zeros((1, 3)), angles, 10.0), np.array([4.5, 2.0, np.pi / 2]))
+    rng = np.random.default_rng(4)
+    for angle in np.linspace(0, 2 * np.pi, 60):
+        pose = np.array([3 + 1.5 * np.cos(angle), 2 + 1.2 * np.sin(angle), angle + np.pi / 2])
+        local = transform_points(inverse(pose), walls) + 0.005 * rng.normal(size=walls.shape)
+        slam.add_scan(local, pose)
+    return slam
+
+
+@pytest.mark.parametrize(("tolerance", "kept"), [(1e-3, True), (1e-4, False), (0.0, False)])
+def test_a_place_map_is_kept_while_its_points_moved_less_than_the_tolerance(
+        tolerance: float, kept: bool) -> None:
+    slam = room_slam(place_tolerance=tolerance, keyframe_distance=0.3)
+    first = slam._place(3)
+    assert slam._place(3) is first  # nothing moved
+    slam.graph.set_pose(4, slam.graph.poses[4] + [5e-4, 0.0, 0.0])  # a neighbour, 0.5 mm
+    assert (slam._place(3) is first) == kept
+
+
+def test_at_most_max_places_maps_are_kept() -> None:
+    slam = room_slam(max_places=2, keyframe_distance=0.3)
+    for index in (2, 5, 8):
+        slam._place(index)
+    assert list(slam._places) == [(5, 2), (8, 2)]
