@@ -44,9 +44,13 @@ def _scatter_rows(
     transformed: NDArray[np.complex64], rows: NDArray[np.int64], n_rows: int
 ) -> NDArray[np.complex64]:  # pragma: no cover (numba)
     """A zero ``(n_rows, cols)`` array with ``transformed``'s rows placed at ``rows``."""
-    out = np.zeros((n_rows, transformed.shape[1]), dtype=np.complex64)
+    out = np.empty((n_rows, transformed.shape[1]), dtype=np.complex64)
+    below = 0  # rows before this one that are still to be zeroed
     for index in range(len(rows)):
+        out[below:rows[index]] = 0
         out[rows[index]] = transformed[index]
+        below = rows[index] + 1
+    out[below:] = 0
     return out
 
 
@@ -70,9 +74,12 @@ def uint8_rows(
     compact = np.empty((count, cols), dtype=np.float32)
     for index in range(count):
         r = rows[index]
-        for c in range(cols):
-            compact[index, c] = (np.float32(image[r, c]) * window[r, c] if window.size
-                                 else np.float32(image[r, c]))
+        if window.size:
+            for c in range(cols):
+                compact[index, c] = np.float32(image[r, c]) * window[r, c]
+        else:
+            for c in range(cols):
+                compact[index, c] = np.float32(image[r, c])
     return rows[:count], compact
 
 
