@@ -64,8 +64,12 @@ def distance_scores(occupied: NDArray[np.bool_],
     height = np.empty(n_cols, np.int64)
     top = len(scores) - 1
     for i in range(n_rows):
+        # A parabola at or above the table's end only gives cells its last score, which every
+        # cell whose envelope lacks it gets anyway (min(d2, top)): left out, exactly.
         for j in range(n_cols):
             height[j] = column[i, j] ** 2 if column[i, j] < far else -1
+            if height[j] >= top:
+                height[j] = -1
         k = -1
         for q in range(n_cols):
             if height[q] < 0:
@@ -79,6 +83,9 @@ def distance_scores(occupied: NDArray[np.bool_],
                 k -= 1
             k += 1
             apex[k], bound[k], bound[k + 1] = q, s if k > 0 else -np.inf, np.inf
+        if k < 0:  # every cell of the row is at least the table's end away
+            out[i] = scores[top]
+            continue
         m = 0
         for j in range(n_cols):
             while bound[m + 1] < j:

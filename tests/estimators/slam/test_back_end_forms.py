@@ -9,8 +9,10 @@ import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from estimators.base import SensorSetup
+from estimators.matching.likelihood_grids import distance_scores
 from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.keyframe_matching import Keyframe, KeyframeTable, largest_shift
 from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
@@ -163,3 +165,19 @@ def test_at_most_max_places_maps_are_kept() -> None:
     for index in (2, 5, 8):
         slam._place(index)
     assert list(slam._places) == [(5, 2), (8, 2)]
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 90), cols=st.integers(1, 90),
+       density=st.sampled_from([1e-4, 2e-3, 0.02, 0.3]), table=st.integers(1, 400))
+def test_distance_scores_with_a_short_table_end_at_its_last_score(
+        seed: int, rows: int, cols: int, density: float, table: int) -> None:
+    """Parabolas at or beyond the table's end are left out of each row's envelope, and rows
+    with none left get the last score: the values of the whole transform, clipped."""
+    rng = np.random.default_rng(seed)
+    occupied = rng.random((rows, cols)) < density
+    occupied[tuple(rng.integers(0, (rows, cols)))] = True
+    squared = np.rint(ndimage.distance_transform_edt(~occupied) ** 2)
+    scores = rng.random(table)  # any table: each squared distance picks its entry
+    assert np.array_equal(distance_scores(occupied, scores),
+                          scores[np.minimum(squared, table - 1).astype(np.int64)])
