@@ -7,7 +7,11 @@ transform peaks at the shift.
 
 Speed: each image's real FFT is whitened (divided by its magnitude) once, in
 :func:`image_spectrum`, and can be reused for the next pair; the cross-power spectrum of two
-whitened spectra is then a single product, because ``|F2 F1*| = |F2| |F1|``.
+whitened spectra is then a single product, because ``|F2 F1*| = |F2| |F1|``. A scan image
+leaves most rows empty, whose row transforms are skipped; what follows the inverse transform
+runs in one compiled call (:mod:`estimators.paper.phase_correlation_kernel`). The two FFTs of
+a pair (one forward, one inverse, 400 x 400) are then about 60 % of its time, Newton's
+refinement (about three Fourier-series passes over the cross spectrum) about 13 %.
 
 Subpixel peak: the inverse transform of the cross-power spectrum, evaluated off the integer
 grid by its Fourier series, is the band-limited interpolation of the correlation surface.
