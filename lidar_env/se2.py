@@ -6,6 +6,8 @@ broadcasts; headings are wrapped to ``[-pi, pi)``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -22,23 +24,32 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     """``a ⊕ b``: pose ``b`` (given in the frame of ``a``) expressed in the frame ``a`` lives in."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    if a.shape == b.shape == (3,):  # one pose: the same operations on scalars, no stacking
-        c, s = np.cos(a[2]), np.sin(a[2])
-        return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1],
-                         (a[2] + b[2] + np.pi) % _TWO_PI - np.pi])
+    if a.shape == b.shape == (3,):  # one pose: the same operations on Python floats
+        return np.array(_compose_floats(*a.tolist(), *b.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
     return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
 
 
+def _compose_floats(
+    ax: float, ay: float, at: float, bx: float, by: float, bt: float
+) -> tuple[float, float, float]:
+    """:func:`compose` of one pose on Python floats: the batch's operations in its order, bit
+    for bit (``math.cos``/``sin`` are the C library's, as numpy's float64 loops; Python's
+    float ``%`` takes the divisor's sign, as ``np.remainder``), at a third of numpy scalars'
+    cost."""
+    c, s = math.cos(at), math.sin(at)
+    return ax + c * bx - s * by, ay + s * bx + c * by, (at + bt + math.pi) % _TWO_PI - math.pi
+
+
 def inverse(a: ArrayLike) -> Pose:
     """``a⁻¹``: the pose of the parent frame seen from frame ``a``."""
     a = np.asarray(a, dtype=np.float64)
-    if a.shape == (3,):  # one pose: the same operations on scalars, no stacking
-        c, s = np.cos(a[2]), np.sin(a[2])
-        return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1],
-                         (-a[2] + np.pi) % _TWO_PI - np.pi])
+    if a.shape == (3,):  # one pose: the same operations on Python floats
+        x, y, heading = a.tolist()
+        c, s = math.cos(heading), math.sin(heading)
+        return np.array([-c * x - s * y, s * x - c * y, (-heading + math.pi) % _TWO_PI - math.pi])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

@@ -9,6 +9,8 @@ the Gauss-Newton step and robust weights are :mod:`estimators.matching.icp`'s.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -73,6 +75,11 @@ STEP_TOLERANCE = (1e-5, 1e-6)
 REPAIR_DISTANCE = 0.005
 
 
+#: The kernel's pivot and prior arguments when none is given (read, never written).
+_ZERO_PIVOT = np.zeros(2)
+_NO_PRIOR = np.zeros(3)
+
+
 class CurveReference:
     """A scan as a chain of local quadratics, for point-to-curve refinement.
 
@@ -92,16 +99,28 @@ class CurveReference:
 
     def __init__(self, ranges: FloatArray, beam_angles: FloatArray, max_range: float) -> None:
         hit = np.flatnonzero((ranges < max_range) & (ranges > DEFAULT_MIN_RANGE))
-        angles = beam_angles[hit]
-        self.points = np.column_stack([ranges[hit] * np.cos(angles), ranges[hit] * np.sin(angles)])
+        angles, hit_ranges = beam_angles[hit], ranges[hit]
+        self.points = np.column_stack([hit_ranges * np.cos(angles), hit_ranges * np.sin(angles)])
         count = len(self.points)
         if count < 3:
             raise EstimatorInputError(f"reference scan: expected at least 3 returns, got {count}")
-        self.search_tree = PointIndex(self.points)
         self.tangents, self.normals, self.pointlike, self.a, self.b, self.c = chain_curves(
             self.points, hit.astype(np.int64), len(ranges), _full_turn(beam_angles),
             SURFACE_HALF_WINDOW, MAX_SURFACE_GAP)
         self.smoothed = self.points + self.c[:, None] * self.normals
+
+    @cached_property
+    def search_tree(self) -> PointIndex:
+        """The returns' k-d tree, built on first use: most scans of a pipeline are only
+        matched onto a reference (they need :attr:`smoothed`), and a third of the build of a
+        reference that never becomes one would be its tree."""
+        return PointIndex(self.points)
+
+    @cached_property
+    def refinement_arrays(self) -> tuple[NDArray[np.generic], ...]:
+        """The tree's and the curves' arrays in :func:`refine_compiled`'s order."""
+        return (*self.search_tree.arrays, self.pointlike, self.points, self.tangents,
+                self.normals, self.a, self.b, self.c)
 
     def correspond(self, points: FloatArray) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
         """For the points ``(M, 2)`` (reference frame) whose nearest return lies within
@@ -224,13 +243,11 @@ def refine_on_curves(
     does not shift the predicted position, whereas at a sensor mounted ``l`` away it shifts it
     by ``l`` times the error -- which the open direction of a corridor would then take over.
     """
-    pivot = np.zeros(2) if pivot is None else np.asarray(pivot, dtype=np.float64)
-    tree = reference.search_tree.arrays
+    pivot = _ZERO_PIVOT if pivot is None else np.asarray(pivot, dtype=np.float64)
     pose, quality = refine_compiled(
-        *tree, reference.pointlike, reference.points, reference.tangents, reference.normals,
-        reference.a, reference.b, reference.c, np.ascontiguousarray(points, dtype=np.float64),
+        *reference.refinement_arrays, np.ascontiguousarray(points, dtype=np.float64),
         np.asarray(initial, dtype=np.float64), int(iterations), prior is not None,
-        np.zeros(3) if prior is None else np.asarray(prior, dtype=np.float64), pivot,
+        _NO_PRIOR if prior is None else np.asarray(prior, dtype=np.float64), pivot,
         np.asarray(prior_information, dtype=np.float64), MAX_PAIR_DISTANCE, LOSS_SCALE,
         INLIER_DISTANCE, DEGENERACY_RATIO, STEP_TOLERANCE, REPAIR_DISTANCE)
     return pose, float(quality)
@@ -316,7 +333,8 @@ def _degenerate_translation(information: FloatArray) -> FloatArray | None:
 def pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a - b`` with the heading difference wrapped."""
     difference = np.asarray(a, dtype=np.float64) - b
-    difference[2] = float(wrap_angle(difference[2]))
+    # wrap_angle of one float, on the float (the same operations; a few microseconds less)
+    difference[2] = (float(difference[2]) + np.pi) % (2.0 * np.pi) - np.pi
     return difference
 
 

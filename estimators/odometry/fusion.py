@@ -205,13 +205,14 @@ class FusionEstimator(Estimator):
         assert self._matcher is not None and self.setup is not None
         mounts, mount_inverses = self._mounts, self._mount_inverses
         sensors = range(len(scans))
-        start_motion = motion_guess if seed is None else seed
+        # guess ⊕ mount_j per target sensor j, shared by the pairs onto it
+        guess_at = [compose(motion_guess, mount) for mount in mounts]
+        start_at = guess_at if seed is None else [compose(seed, mounts[0])]
         edges = []
         for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
             # relative(mount_i, guess ⊕ mount_j), the mount's inverse made once
-            prior = compose(mount_inverses[i], compose(motion_guess, mounts[j]))
-            start = (prior if start_motion is motion_guess
-                     else compose(mount_inverses[i], compose(start_motion, mounts[j])))
+            prior = compose(mount_inverses[i], guess_at[j])
+            start = prior if start_at is guess_at else compose(mount_inverses[i], start_at[j])
             match = self._matcher.refine(
                 keyframe.scans[i],
                 scans[j],
@@ -224,6 +225,7 @@ class FusionEstimator(Estimator):
             if seed is not None and i == j == 0:
                 # The main pair, refined, is a closer start for the others than the correlation.
                 start_motion = motion_from_sensor_match(mounts[0], match.pose)
+                start_at = [compose(start_motion, mount) for mount in mounts]
         return edges
 
     def _weights(self) -> dict[str, float]:
