@@ -124,6 +124,11 @@ def optimize_poses(
             "expected positive sigma_translation, sigma_heading and robust_scale, got "
             f"{sigma_translation}, {sigma_heading}, {robust_scale}"
         )
+    if compiled:
+        return _solve_edges_compiled(poses, mounts, index, measured, confidence,
+                                     float(sigma_translation), float(sigma_heading), int(n_fixed),
+                                     float(robust_scale), STEP_TOLERANCE, TRUSTED_STEP,
+                                     MAX_ITERATIONS)
     # Row scale of each edge's three residuals: sqrt(information).
     scale = np.sqrt(confidence)[:, None] / np.array([sigma_translation] * 2 + [sigma_heading])
     src_mount, dst_mount = mounts[index[:, 1]], mounts[index[:, 3]]
@@ -133,13 +138,6 @@ def optimize_poses(
 
     measured_offset = rotate(-measured[:, 2], measured[:, :2])
     heading_offset = src_mount[:, 2] - dst_mount[:, 2] + measured[:, 2]
-    if compiled:
-        solved = _solve_compiled(poses, column, index, src_mount, dst_mount, measured[:, 2],
-                                 measured_offset, heading_offset, scale, float(robust_scale),
-                                 STEP_TOLERANCE, TRUSTED_STEP, MAX_ITERATIONS)
-        solved[:, 2] = wrap_angle(solved[:, 2])
-        return solved
-
     # The unknowns are corrections to the start poses (so the solver starts at zero).
     def unpack(x: FloatArray) -> FloatArray:
         full = poses.copy()
@@ -318,6 +316,45 @@ def _solve_compiled(poses: FloatArray, column: NDArray[np.int64], index: NDArray
     return full
 
 
+@njit(cache=True)
+def _solve_edges_compiled(poses: FloatArray, mounts: FloatArray, index: NDArray[np.int64],
+                          measured: FloatArray, confidence: FloatArray, sigma_translation: float,
+                          sigma_heading: float, n_fixed: int, robust_scale: float,
+                          tolerance: float, trusted: float,
+                          max_iterations: int) -> FloatArray:  # pragma: no cover (numba)
+    """:func:`optimize_poses`'s compiled path whole: the edge terms its array path makes
+    (row scales, mounts, measured offsets, the same operations in the same order), then
+    :func:`_solve_compiled`, headings wrapped. In one call, since a dozen small numpy calls
+    around the solve cost as much as the solve itself on a step's four edges."""
+    n_nodes, n_edges = len(poses), len(index)
+    column = np.full(n_nodes, -1)
+    for node in range(n_fixed, n_nodes):
+        column[node] = node - n_fixed
+    scale = np.empty((n_edges, 3))
+    src_mount = np.empty((n_edges, 3))
+    dst_mount = np.empty((n_edges, 3))
+    measured_offset = np.empty((n_edges, 2))
+    heading_offset = np.empty(n_edges)
+    for e in range(n_edges):
+        root = np.sqrt(confidence[e])
+        scale[e, 0] = root / sigma_translation
+        scale[e, 1] = root / sigma_translation
+        scale[e, 2] = root / sigma_heading
+        src_mount[e] = mounts[index[e, 1]]
+        dst_mount[e] = mounts[index[e, 3]]
+        c, s = np.cos(-measured[e, 2]), np.sin(-measured[e, 2])
+        measured_offset[e, 0] = c * measured[e, 0] - s * measured[e, 1]
+        measured_offset[e, 1] = s * measured[e, 0] + c * measured[e, 1]
+        heading_offset[e] = src_mount[e, 2] - dst_mount[e, 2] + measured[e, 2]
+    solved = _solve_compiled(poses, column, index, src_mount, dst_mount,
+                             np.ascontiguousarray(measured[:, 2]), measured_offset,
+                             heading_offset, scale, robust_scale, tolerance, trusted,
+                             max_iterations)
+    for node in range(n_nodes):
+        solved[node, 2] = (solved[node, 2] + np.pi) % (2.0 * np.pi) - np.pi
+    return solved
+
+
 def fuse_car_motion(
     mounts: ArrayLike,
     edges: Sequence[SensorEdge],
@@ -327,5 +364,6 @@ def fuse_car_motion(
     """The car motion ``Δ`` (3,) between two scan times from the four-node graph (Fig. 4):
     edges between node 0 (car at t-1, held at the origin) and node 1 (car at t). ``weights``
     go to :func:`optimize_poses`."""
-    start = np.stack([np.zeros(3), np.asarray(initial_motion, dtype=np.float64)])
+    start = np.zeros((2, 3))
+    start[1] = initial_motion
     return optimize_poses(start, mounts, edges, n_fixed=1, **weights)[1]
