@@ -198,3 +198,47 @@ def chain_curves(
             raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
         c[r], b[r], a[r] = moment[0], moment[1], moment[2]
     return tangents, normals, pointlike, a, b, c
+
+
+@njit(cache=True)
+def curve_reference_arrays(
+    ranges: NDArray[np.float64], beam_angles: NDArray[np.float64], max_range: float,
+    min_range: float, half: int, max_gap: float,
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+           NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+           NDArray[np.float64]]:
+    """A ``CurveReference``'s arrays in one call: the beams with a return (``min_range`` <
+    range < ``max_range``), their points ``(M, 2)`` in the sensor frame, :func:`chain_curves`'
+    quadratics (the beams counted a full turn as ``curve_refinement._full_turn`` counts them)
+    and the points moved onto their curves -- each by the operations of the array form, in its
+    order. With fewer than 3 returns, the quadratics and smoothed points are empty."""
+    n_beams = len(ranges)
+    hit = np.empty(n_beams, np.int64)
+    count = 0
+    for beam in range(n_beams):
+        if ranges[beam] < max_range and ranges[beam] > min_range:
+            hit[count] = beam
+            count += 1
+    hit = hit[:count]
+    points = np.empty((count, 2))
+    for i in range(count):
+        points[i, 0] = ranges[hit[i]] * np.cos(beam_angles[hit[i]])
+        points[i, 1] = ranges[hit[i]] * np.sin(beam_angles[hit[i]])
+    if count < 3:
+        empty = np.empty((0, 2))
+        nothing = np.empty(0)
+        return (hit, points, empty, empty, np.empty(0, np.bool_), nothing, nothing, nothing,
+                empty)
+    step = 2.0 * np.pi / n_beams
+    full_turn = True
+    for beam in range(n_beams - 1):
+        if not abs((beam_angles[beam + 1] - beam_angles[beam]) - step) <= 1e-6 + 1e-5 * step:
+            full_turn = False
+            break
+    tangents, normals, pointlike, a, b, c = chain_curves(points, hit, n_beams, full_turn, half,
+                                                         max_gap)
+    smoothed = np.empty((count, 2))
+    for i in range(count):
+        smoothed[i, 0] = points[i, 0] + c[i] * normals[i, 0]
+        smoothed[i, 1] = points[i, 1] + c[i] * normals[i, 1]
+    return hit, points, tangents, normals, pointlike, a, b, c, smoothed
