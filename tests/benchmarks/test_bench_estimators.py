@@ -1,11 +1,13 @@
-"""The estimator speed benchmark's bookkeeping: the forward clock it feeds Intel with, and one
-quick run on a short simulated drive that prints every estimator asked for against ``icp``."""
+"""The estimator speed benchmark's bookkeeping: the forward clock it feeds Intel with, the
+replay it reports, and one quick run on a short simulated drive that prints every estimator
+asked for against ``icp``."""
 
 from __future__ import annotations
 
 import importlib.util
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -32,3 +34,18 @@ def test_a_short_run_prints_each_estimator_against_icp(capsys: pytest.CaptureFix
     assert list(table) == ["icp", "zero", "lidar_odometry"]
     assert float(table["icp"][1]) == 1.0
     assert all(float(ms) > 0 and float(realtime) > 0 for ms, _, realtime in table.values())
+
+
+def test_the_fastest_timed_replay_is_reported_never_the_warm_up(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    data = bench.simulated("open_cylinders:straight:0", max_episode_time=0.3)
+    # (start, end) of each replay: the untimed one takes 1 s, the timed ones 3 s and 2 s
+    clock = iter([0.0, 1.0, 10.0, 13.0, 20.0, 22.0])
+    monkeypatch.setattr(bench, "time", SimpleNamespace(process_time=lambda: next(clock)))
+    assert bench.cpu_seconds_per_scan("zero", data, repeats=2) == 2.0 / len(data.times)
+
+
+def test_repeats_below_one_are_refused(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        bench.main(["--repeats", "0", "--no-real"])
+    assert "--repeats: expected a number of replays >= 1, got 0" in capsys.readouterr().err
