@@ -20,6 +20,13 @@ def wrap_angle(angle: ArrayLike) -> NDArray[np.float64]:
     return (np.asarray(angle, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def wrap_float(angle: float) -> float:
+    """:func:`wrap_angle` of one Python float, on the float: the same operations, bit for bit
+    (Python's float ``%`` takes the divisor's sign, as ``np.remainder``), without numpy's
+    per-call cost."""
+    return (angle + math.pi) % _TWO_PI - math.pi
+
+
 def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     """``a ⊕ b``: pose ``b`` (given in the frame of ``a``) expressed in the frame ``a`` lives in."""
     a = np.asarray(a, dtype=np.float64)
@@ -40,7 +47,7 @@ def _compose_floats(
     float ``%`` takes the divisor's sign, as ``np.remainder``), at a third of numpy scalars'
     cost."""
     c, s = math.cos(at), math.sin(at)
-    return ax + c * bx - s * by, ay + s * bx + c * by, (at + bt + math.pi) % _TWO_PI - math.pi
+    return ax + c * bx - s * by, ay + s * bx + c * by, wrap_float(at + bt)
 
 
 def inverse(a: ArrayLike) -> Pose:
@@ -49,7 +56,7 @@ def inverse(a: ArrayLike) -> Pose:
     if a.shape == (3,):  # one pose: the same operations on Python floats
         x, y, heading = a.tolist()
         c, s = math.cos(heading), math.sin(heading)
-        return np.array([-c * x - s * y, s * x - c * y, (-heading + math.pi) % _TWO_PI - math.pi])
+        return np.array([-c * x - s * y, s * x - c * y, wrap_float(-heading)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

@@ -20,7 +20,7 @@ from estimators.matching.normal_equations import nearest_on_surfaces, point_to_c
 from estimators.matching.point_to_line import solve_normal_equations
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
 from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import rotate, transform_points, wrap_angle
+from lidar_env.se2 import rotate, transform_points, wrap_angle, wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -332,8 +332,7 @@ def _degenerate_translation(information: FloatArray) -> FloatArray | None:
 def pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
     """``a - b`` with the heading difference wrapped."""
     difference = np.asarray(a, dtype=np.float64) - b
-    # wrap_angle of one float, on the float (the same operations; a few microseconds less)
-    difference[2] = (float(difference[2]) + np.pi) % (2.0 * np.pi) - np.pi
+    difference[2] = wrap_float(float(difference[2]))
     return difference
 
 

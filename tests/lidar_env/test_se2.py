@@ -36,6 +36,14 @@ def test_wrap_angle_range() -> None:
     assert se2.wrap_angle(np.pi) == pytest.approx(-np.pi)
 
 
+def test_wrap_float_is_wrap_angle_bit_for_bit() -> None:
+    rng = np.random.default_rng(6)
+    angles = np.concatenate([[0.0, -0.0, np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 1e-300],
+                             rng.uniform(-50, 50, 3000), rng.normal(0, 1e6, 200)])
+    wrapped = np.array([se2.wrap_float(float(angle)) for angle in angles])
+    np.testing.assert_array_equal(wrapped.view(np.uint64), se2.wrap_angle(angles).view(np.uint64))
+
+
 def test_transform_points_rotates_then_translates() -> None:
     points = np.array([[1.0, 0.0], [0.0, 2.0]])
     moved = se2.transform_points((1.0, -1.0, np.pi / 2), points)
