@@ -35,7 +35,7 @@ from estimators.matching.rotation_pc import (
     require_sensor_frame,
 )
 from estimators.odometry.motion_prior import (
-    clock_jitter,
+    ScanClock,
     prediction_information,
     within_prediction_horizon,
 )
@@ -45,37 +45,12 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, inverse, relative
+from lidar_env.se2 import compose, inverse, relative, wrap_float
 
 FloatArray = NDArray[np.float64]
 
 #: Scan intervals the clock's typical jitter is taken over (20 s at 10 Hz).
 CLOCK_HISTORY = 200
-
-
-def _wrapped(angle: float) -> float:
-    """:func:`lidar_env.se2.wrap_angle` of one float, on the float (the same operations)."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-class _RecentIntervals:
-    """The last ``size`` scan intervals [s] in a ring of floats: their medians are all the
-    estimator asks of them, which need the values, not their order, and an array spares
-    converting a deque of 200 floats twice a scan (half of each median's cost)."""
-
-    def __init__(self, size: int) -> None:
-        self._ring = np.empty(size)
-        self._count = 0
-
-    def append(self, interval: float) -> None:
-        """Keep ``interval`` [s] in place of the oldest one once the ring is full."""
-        self._ring[self._count % len(self._ring)] = interval
-        self._count += 1
-
-    @property
-    def values(self) -> FloatArray:
-        """The kept intervals ``(min(count, size),)`` [s], in no particular order."""
-        return self._ring[: self._count]
 
 
 @dataclass
@@ -148,8 +123,8 @@ class FusionEstimator(Estimator):
     _n_keyframes: int = field(default=0, init=False, repr=False)
     _velocity: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
     _recent: deque[tuple[list[float], float]] = field(default_factory=deque, init=False, repr=False)
-    _intervals: _RecentIntervals = field(
-        default_factory=lambda: _RecentIntervals(CLOCK_HISTORY), init=False, repr=False
+    _clock: ScanClock = field(
+        default_factory=lambda: ScanClock(CLOCK_HISTORY, CLOCK_HISTORY), init=False, repr=False
     )
 
     def __post_init__(self) -> None:
@@ -189,7 +164,7 @@ class FusionEstimator(Estimator):
         self._n_keyframes = 0
         self._velocity = np.zeros(3)
         self._recent = deque()
-        self._intervals = _RecentIntervals(CLOCK_HISTORY)
+        self._clock = ScanClock(CLOCK_HISTORY, CLOCK_HISTORY)
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
@@ -233,7 +208,7 @@ class FusionEstimator(Estimator):
         sensors = range(len(scans))
         # guess ⊕ mount_j per target sensor j, shared by the pairs onto it
         guess_at = [compose(motion_guess, mount) for mount in mounts]
-        start_at = guess_at if seed is None else [compose(seed, mounts[0])]
+        start_at = guess_at if seed is None else [compose(seed, mount) for mount in mounts]
         edges = []
         for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
             # relative(mount_i, guess ⊕ mount_j), the mount's inverse made once
@@ -268,7 +243,9 @@ class FusionEstimator(Estimator):
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
         # past the prediction horizon (a clock gap) the velocity says nothing: no prior
-        predicted = within_prediction_horizon(dt, self._intervals.values)
+        # the horizon of the positive intervals' median (the clock's steps: all it keeps)
+        typical = [self._clock.typical_step] if self._clock.steps else []
+        predicted = within_prediction_horizon(dt, typical)
         previous = self.pose
         step = self._velocity * dt if predicted else np.zeros(3)
         guess = relative(latest.pose, compose(previous, step))
@@ -282,8 +259,8 @@ class FusionEstimator(Estimator):
         # corridor), this keeps a weaving car's speed instead of bending its path.
         # (on Python floats: wrap_angle's and rotate's operations, a tenth of their cost)
         x, y, heading = step.tolist()
-        turn = _wrapped(float(latest.pose[2]) + float(seed[2]) - float(previous[2]))
-        if abs(_wrapped(turn - heading)) < PRIOR_SIGMA[2]:
+        turn = wrap_float(float(latest.pose[2]) + float(seed[2]) - float(previous[2]))
+        if abs(wrap_float(turn - heading)) < PRIOR_SIGMA[2]:
             c, s = math.cos(0.5 * (turn - heading)), math.sin(0.5 * (turn - heading))
             step = np.array([c * x - s * y, s * x + c * y, turn])
             guess = relative(latest.pose, compose(previous, step))
@@ -307,13 +284,13 @@ class FusionEstimator(Estimator):
         jitter the median deviation of the last ``CLOCK_HISTORY`` intervals from their median;
         the weak default prior when nothing was ``predicted`` (a clock gap)."""
         if dt > 0:
-            self._intervals.append(dt)
-        if not predicted or not dt > 0 or len(self._intervals.values) < 5:
+            self._clock.add(dt)
+        if not predicted or not dt > 0 or not self._clock.settled:
             # Until a few intervals are seen, neither the clock nor the velocity is known (and
             # a clock that does not run forward predicts nothing).
             return PRIOR_INFORMATION
         speed = float(np.hypot(self._velocity[0], self._velocity[1]))
-        return prediction_information(dt, speed, clock_jitter(self._intervals.values))
+        return prediction_information(dt, speed, self._clock.jitter)
 
     def _update_velocity(self, motion: FloatArray, dt: float) -> None:
         """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of
