@@ -38,9 +38,14 @@ class KeyframeMatching:
     def _submap(self, index: int, before: int, after: int) -> NDArray[np.float64]:
         """Points (M, 2) of keyframes ``index - before .. index + after`` in the frame of
         keyframe ``index``, placed by the graph's current poses."""
-        lo = max(0, index - before)
-        return np.concatenate([transform_points(pose, self.keyframes[lo + k].points)
-                               for k, pose in enumerate(self._submap_poses(index, before, after))])
+        return self._placed_points(max(0, index - before),
+                                   self._submap_poses(index, before, after))
+
+    def _placed_points(self, first: int, poses: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Points (M, 2) of keyframes ``first, first + 1, ...``, each placed at its row of
+        ``poses`` (n, 3)."""
+        return np.concatenate([transform_points(pose, self.keyframes[first + k].points)
+                               for k, pose in enumerate(poses)])
 
     def _submap_poses(self, index: int, before: int, after: int) -> NDArray[np.float64]:
         """``(n, 3)`` poses of keyframes ``index - before .. index + after`` (clipped to the
@@ -66,9 +71,7 @@ class KeyframeMatching:
                 kept[0].forget_levels()
                 self._places[key] = (kept[0], kept[1], self._optimizations)
             return kept[0]
-        points = np.concatenate([transform_points(pose, self.keyframes[lo + k].points)
-                                 for k, pose in enumerate(placed)])
-        place = PlaceMap(points, self.loop_params, self._pyramid_buffer)
+        place = PlaceMap(self._placed_points(lo, placed), self.loop_params, self._pyramid_buffer)
         self._places[key] = (place, placed, self._optimizations)
         self._places.move_to_end(key)
         while len(self._places) > self.max_places:
@@ -81,7 +84,7 @@ class KeyframeMatching:
         ``min_loop_separation`` of path apart (the others are odometry or overlap edges)."""
         if not self.graph.n_edges:
             return np.zeros(0, dtype=bool)
-        path = np.array([k.path_length for k in self.keyframes])
+        path = self._table.path_lengths
         edges = self.graph.edges
         return self.graph.is_loop & (path[edges[:, 1]] - path[edges[:, 0]]
                                      >= self.min_loop_separation)
@@ -311,4 +314,3 @@ def largest_shift(before: NDArray[np.float64], after: NDArray[np.float64],
     turn = np.abs(np.sin(0.5 * (after[:, 2] - before[:, 2])))
     shift = np.hypot(after[:, 0] - before[:, 0], after[:, 1] - before[:, 1])
     return float(np.max(shift + 2.0 * turn * reach)) if len(reach) else 0.0
-
