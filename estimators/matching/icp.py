@@ -253,8 +253,17 @@ def match_scans(
 
 @dataclass
 class ICPEstimator(Estimator):
-    """Scan-to-previous-scan PL-ICP from the identity (no odometry, no motion model): the
-    baseline a user would pick. Both Lidars' points are merged in the car frame first.
+    """Scan-to-previous-scan PL-ICP (no odometry): the baseline a user would pick. Both
+    Lidars' points are merged in the car frame first.
+
+    Each match starts from the last increment (a constant-velocity guess, as KISS-ICP and
+    rf2o seed theirs) rather than from the identity: ICP's nearest-point pairs pull towards
+    its starting pose, most where a corridor leaves its axis to a few points, and from the
+    identity it needed 11.4 iterations a scan, not 6.6 (hallway zigzag). Measured identity
+    -> last increment: ACES local relations 0.0510 -> 0.0428 m (failures 3.1 -> 1.2 %), all 2.10 ->
+    1.32 m; Intel 5 s relations 0.0719 -> 0.0710 m; simulated ATE (``bench_synthetic.py``)
+    hallway zigzag 1.33 -> 1.04 m, closed-to-open 1.36 -> 0.74 m, straight 3.97 -> 2.17 m,
+    open cylinders 0.19 -> 0.22 m.
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """
@@ -277,6 +286,7 @@ class ICPEstimator(Estimator):
 
     def _reset_state(self) -> None:
         self._previous: NDArray[np.float64] | None = None
+        self._increment = np.zeros(3)
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         assert self.setup is not None
@@ -293,6 +303,7 @@ class ICPEstimator(Estimator):
         if len(current) < MIN_MATCH_RETURNS:
             return compose(self.pose, increment)
         if self._previous is not None and len(self._previous) >= MIN_MATCH_RETURNS:
-            increment = match_scans(self._previous, current, increment, self.params).pose
+            increment = match_scans(self._previous, current, self._increment, self.params).pose
+            self._increment = increment
         self._previous = current
         return compose(self.pose, increment)

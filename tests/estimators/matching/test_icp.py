@@ -212,6 +212,30 @@ def test_icp_estimator_follows_a_ray_cast_drive():
     assert estimator.trajectory.shape == (40, 3)
 
 
+
+def test_icp_estimator_starts_each_match_from_the_last_increment(monkeypatch):
+    import estimators.matching.icp as icp
+
+    guesses, results = [], []
+
+    def spy(reference, query, initial_guess, params):
+        guesses.append(np.array(initial_guess, dtype=float))
+        results.append(real_match(reference, query, initial_guess, params).pose)
+        return icp.MatchResult(results[-1], 1.0, 0.0, 1, True)
+
+    real_match = icp.match_scans
+    monkeypatch.setattr(icp, "match_scans", spy)
+    estimator = make("icp")
+    pose = np.array([-3.0, -2.0, 0.6])
+    estimator.reset(SensorSetup(np.zeros((1, 3)), ANGLES, 20.0), pose)
+    for k in range(4):
+        estimator.update({"lidar_1": ray_cast(pose)}, 0.1 * k)
+        pose = compose(pose, np.array([0.08, 0.0, 0.03]))
+    np.testing.assert_array_equal(guesses[0], np.zeros(3))
+    for guess, previous in zip(guesses[1:], results[:-1], strict=True):
+        np.testing.assert_array_equal(guess, previous)
+    np.testing.assert_allclose(results[-1], [0.08, 0.0, 0.03], atol=1e-3)
+
 def test_bad_input_is_named():
     with pytest.raises(ValueError, match="unknown loss 'l1': expected one of cauchy, huber"):
         ICPParams(loss="l1")
