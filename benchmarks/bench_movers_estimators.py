@@ -4,6 +4,7 @@ without them.
     python benchmarks/bench_movers_estimators.py               # the three paper groups, seed 0
     python benchmarks/bench_movers_estimators.py --seeds 0 1
     python benchmarks/bench_movers_estimators.py --mover-model waypoints --defaults
+    python benchmarks/bench_movers_estimators.py --seeds 0 1 --oracle   # + movers' returns deleted
 
 Each paper group (G1 ``open_cylinders`` + ``right_turn`` with 10 pedestrians, G2 ``hallway`` +
 ``zigzag`` with 5, G3 ``closed_to_open`` + ``zigzag`` with 5) is driven by the scripted driver
@@ -89,6 +90,29 @@ def prefix(dataset: SensorDataset, n: int) -> SensorDataset:
         scans={key: scan[:n] for key, scan in dataset.scans.items()})
 
 
+def without_mover_returns(dataset: SensorDataset, movers: list[Any],
+                          tolerance: float = 0.04) -> SensorDataset:
+    """``dataset`` with every return that lies within ``tolerance`` [m] of a true mover's
+    circle read as no return (``max_range``): the scans a perfect moving-point filter would
+    leave, which still lack what the movers hid (an oracle; it reads the truth)."""
+    scans = {}
+    for k, key in enumerate(dataset.setup.keys):
+        sensor = dataset.setup.sensors[k]
+        cleaned = dataset.scans[key].copy()
+        for i, (lidar_pose, circles) in enumerate(zip(dataset.lidar_poses[:, k], movers,
+                                                      strict=False)):
+            ranges = cleaned[i].astype(np.float64)
+            bearings = lidar_pose[2] + sensor.beam_angles
+            x = lidar_pose[0] + ranges * np.cos(bearings)
+            y = lidar_pose[1] + ranges * np.sin(bearings)
+            gaps = np.hypot(x[:, None] - circles[None, :, 0],
+                            y[:, None] - circles[None, :, 1]) - circles[None, :, 4]
+            cleaned[i, (gaps.min(axis=1, initial=np.inf) < tolerance)
+                    & (ranges < sensor.max_range)] = sensor.max_range
+        scans[key] = cleaned
+    return dataclasses.replace(dataset, scans=scans)
+
+
 def run(name: str, dataset: SensorDataset, params: dict[str, Any]) -> np.ndarray:
     """The trajectory (N, 3) of estimator ``name`` with ``params``, started at the true first
     pose."""
@@ -106,6 +130,9 @@ def main() -> None:
                         help="how the pedestrians walk (default %(default)s)")
     parser.add_argument("--defaults", action="store_true",
                         help="the estimators as registered (moving-point filter off)")
+    parser.add_argument("--oracle", action="store_true",
+                        help="also each drive with movers with their returns deleted "
+                             "(the truth's), the estimators as registered")
     args = parser.parse_args()
     params = {name: {} if args.defaults else DYNAMIC[name] for name in ESTIMATORS}
     print("| group | seed | movers | steps | " + " | ".join(
@@ -117,8 +144,19 @@ def main() -> None:
             with_movers, movers = drive(world, trace, seed, count, args.mover_model)
             without, _ = drive(world, trace, seed, 0, args.mover_model)
             n = min(len(with_movers), len(without))
-            for dataset, m in ((prefix(without, n), 0), (prefix(with_movers, n), count)):
+            runs: list[tuple[SensorDataset, Any]] = [(prefix(without, n), 0),
+                                                      (prefix(with_movers, n), count)]
+            if args.oracle:
+                runs.append((without_mover_returns(runs[1][0], movers[:n]), f"{count} oracle"))
+            for dataset, m in runs:
                 cells = []
+                if isinstance(m, str):  # the oracle: the estimators only, as registered
+                    for name in ESTIMATORS:
+                        metrics = evaluate(run(name, dataset, {}), dataset.poses)
+                        cells += [f"{metrics.accuracy_percent:.2f}", f"{metrics.ate_rmse_m:.4f}"]
+                    print(f"| {world}/{trace} | {seed} | {m} | {n} | " + " | ".join(cells)
+                          + " | -" * 7 + " |", flush=True)
+                    continue
                 trajectories = {name: run(name, dataset, params[name]) for name in ESTIMATORS}
                 for name in ESTIMATORS:
                     metrics = evaluate(trajectories[name], dataset.poses)
