@@ -259,17 +259,14 @@ class MovingPointFilter:
     through are *stale*. Nothing is propagated further, so a misjudged point cannot spread a
     label along a wall.
 
-    The new scan judges the map's points only where its beams lie at most
+    The new scan judges the earlier points only where its beams lie at most
     ``stale_resolution`` apart: farther out, its beams can all pass an object thinner than
     their spacing (a door frame, a table leg at 8 m between 1-degree beams, 14 cm apart) that
     an earlier scan hit, and wrongly clearing it off the map is cumulative: on Intel, the map
     lost the far end of a corridor that way, the odometry stalled in it (1.9 m short over 70
     scans, 36 correlative fallbacks) and ``lidar_odometry`` lost 20 % of its accuracy (0.0435
-    -> 0.0522 m per keyframe pair). A wrong "moving" flag costs only one scan's points, so
-    both tests of the new scan's points keep the full range (the last scans' points it sees
-    through mark what moved on at any distance): a walker far down a corridor is what pins
-    (or drags) its axis. (With the map's limit on the last scans' points too, a third of the
-    walkers' points beyond 6 m went unflagged in ``open_cylinders`` seed 1, a tenth without.)
+    -> 0.0522 m per keyframe pair). A wrong "moved in" flag costs one scan's point, so that test
+    keeps the full range: a walker far down a corridor is what pins (or drags) its axis.
 
     Args:
         setup: the sensors' mounts, beams and ranges
@@ -323,25 +320,21 @@ class MovingPointFilter:
                 self.min_range)
         else:
             moving = np.zeros(len(points), dtype=np.bool_)
-        sensor_poses = self._sensor_poses(pose)
-        ranges = [scans[key] for key in self.setup.keys]
-        sizes = [len(p) for p in map_points]
-        flags = [np.zeros(0, dtype=np.bool_) for _ in map_points]
-        anchors = []
-        if sum(sizes):  # stale: map points the new scan sees through, where its beams are dense
-            stacked = np.concatenate(map_points)
-            seen = self._beams.seen_through(stacked, sensor_poses, ranges, self.margin,
-                                            self.min_range, self.stale_resolution)
-            ends = np.cumsum(sizes)
-            flags = [seen[end - size:end] for size, end in zip(sizes, ends, strict=True)]
-            anchors.append(stacked[seen])
-        if self._history:  # the last scans' points it sees through, at any range
-            recent = np.concatenate([last_world for _, _, last_world in self._history])
-            anchors.append(recent[self._beams.seen_through(recent, sensor_poses, ranges,
-                                                           self.margin, self.min_range)])
-        anchors_all = np.concatenate(anchors) if anchors else np.zeros((0, 2))
-        if len(anchors_all) and len(world):  # moved on: next to a point now seen through
-            moving |= _near_any(world, anchors_all, self.radius)
+        # everything the new scan may see through, in one call: the map, then the history
+        earlier = [*map_points, *(last_world for _, _, last_world in self._history)]
+        sizes = [len(p) for p in earlier]
+        if not sum(sizes):
+            return moving, [np.zeros(0, dtype=np.bool_) for _ in map_points]
+        stacked = np.concatenate(earlier)
+        seen = self._beams.seen_through(
+            stacked, self._sensor_poses(pose),
+            [scans[key] for key in self.setup.keys], self.margin, self.min_range,
+            self.stale_resolution)
+        ends = np.cumsum(sizes)
+        flags = [seen[end - size:end] for size, end in zip(sizes[:len(map_points)], ends,
+                                                           strict=False)]
+        if seen.any() and len(world):  # moved on: next to a point the new scan sees through
+            moving |= _near_any(world, stacked[seen], self.radius)
         return moving, flags
 
     def remember(self, pose: NDArray[np.float64], scans: Mapping[str, NDArray[np.float64]],
