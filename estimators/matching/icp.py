@@ -34,10 +34,7 @@ from estimators.matching.point_to_line import (
     robust_weights,
     solve_normal_equations,
 )
-from estimators.matching.scan_matching import (
-    DEFAULT_MIN_RANGE,
-    scans_to_car_points,
-)
+from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, transform_points, wrap_angle
@@ -287,10 +284,8 @@ class ICPEstimator(Estimator):
     def _reset_state(self) -> None:
         self._previous: NDArray[np.float64] | None = None
         self._increment = np.zeros(3)
-
-    def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         assert self.setup is not None
-        return scans_to_car_points(scans, self.setup, self.min_range)
+        self._points = CarPoints(self.setup, self.min_range)
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._previous = self._points(scans)

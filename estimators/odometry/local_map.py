@@ -63,7 +63,7 @@ from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
-    scans_to_car_points,
+    CarPoints,
     voxel_downsample,
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
@@ -258,6 +258,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         self._degenerate = False  # the scan at the guess leaves a direction free
         self._last_time = 0.0
         self._clock = ScanClock()
+        self._car_points = CarPoints(self.setup, self.min_range)
         dynamic = self.reject_dynamic and not self.setup.world_aligned
         self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
                         if dynamic else None)
@@ -266,8 +267,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         self.poor_matches: list[int] = []
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
-        assert self.setup is not None
-        points = scans_to_car_points(scans, self.setup, self.min_range)
+        points = self._car_points(scans)
         return voxel_downsample(points, self.scan_voxel_size) if len(points) else points
 
     def _static_points(self, points: NDArray[np.float64], guess: NDArray[np.float64],
