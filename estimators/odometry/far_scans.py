@@ -238,7 +238,8 @@ class FarScanMatching:
         typical = self._clock.typical_step if self._clock.steps else interval
         window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
         if self._far_steps:  # a stalled clock does not mean the car drove or turned further
-            longest, sharpest = np.max(self._far_steps, axis=0)
+            longest = max(length for length, _ in self._far_steps)
+            sharpest = max(turn for _, turn in self._far_steps)
             window = SearchWindow(
                 min(window.linear, 2.0 * longest + self.params.max_correspondence_distance),
                 min(window.angular, 2.0 * sharpest + self.search_angular_window))

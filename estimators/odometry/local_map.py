@@ -356,7 +356,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         registrations, ~1-2 % of a step, which a corridor's axis dead-reckons), the turn rate
         from the last one (turn rates change faster than speeds and are rarely unobservable)."""
         self._translations.append(motion_prior.midpoint_velocity(increment, dt)[:2])
-        return np.array([*np.mean(self._translations, axis=0), increment[2] / dt])
+        return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         return (self._watched_step if self._kept is not None else self._odometry_step)(scans, t)

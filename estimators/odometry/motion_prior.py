@@ -27,8 +27,9 @@ lagged the turn rate and cost 4-6 % of the speed over 8 m of the closed_to_open 
 
 from __future__ import annotations
 
+import math
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,7 +37,6 @@ from numpy.typing import ArrayLike, NDArray
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
 from estimators.matching.prediction import median, prediction_horizon, within_prediction_horizon
 from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import rotate
 
 FloatArray = NDArray[np.float64]
 
@@ -45,6 +45,7 @@ __all__ = [
     "clock_jitter",
     "median",
     "constant_velocity_increment",
+    "mean_translation",
     "midpoint_velocity",
     "no_sideslip_information",
     "prediction_horizon",
@@ -116,8 +117,9 @@ class ScanClock:
 
     @property
     def jitter(self) -> float:
-        """:func:`clock_jitter` of the intervals [s]."""
-        return self._cached("jitter", self.intervals, clock_jitter)
+        """:func:`clock_jitter` of the intervals [s] (from the cached :attr:`median`)."""
+        return self._cached("jitter", self.intervals,
+                            lambda intervals: median(np.abs(intervals - self.median)))
 
     @property
     def typical_step(self) -> float:
@@ -131,9 +133,7 @@ def prediction_sigma(
     """Position uncertainty [m] of a constant-velocity prediction over ``dt`` [s] at ``speed``
     [m/s]: ``acceleration * dt^2 + speed * jitter``, clipped to [``MIN_PREDICTION_SIGMA``,
     ``max_sigma``]."""
-    return float(
-        np.clip(acceleration * dt**2 + speed * jitter, MIN_PREDICTION_SIGMA, max_sigma)
-    )
+    return float(min(max(acceleration * dt**2 + speed * jitter, MIN_PREDICTION_SIGMA), max_sigma))
 
 
 #: A constant-velocity prediction over a scan interval ``dt`` misses the car's position by
@@ -173,16 +173,30 @@ def midpoint_velocity(increment: ArrayLike, dt: float = 1.0) -> FloatArray:
         raise EstimatorInputError(
             f"increment, dt: expected a pose (3,) and a positive interval, got shape "
             f"{increment.shape} and {dt}")
-    return np.array([*rotate(-0.5 * increment[2], increment[:2]), increment[2]]) / dt
+    x, y, turn = increment.tolist()  # lidar_env.se2.rotate's operations, on Python floats
+    c, s = math.cos(-0.5 * turn), math.sin(-0.5 * turn)
+    return np.array([(c * x - s * y) / dt, (s * x + c * y) / dt, turn / dt])
 
 
 def constant_velocity_increment(velocity: ArrayLike, dt: float = 1.0) -> FloatArray:
     """Pose increment (3,) over ``dt`` of a body keeping ``velocity`` (3,) (translation in the
     midpoint frame per ``dt`` unit, turn rate; :func:`midpoint_velocity`): the translation
     ``velocity[:2] * dt`` turned by half the turn ``velocity[2] * dt``."""
-    velocity = np.asarray(velocity, dtype=np.float64)
-    turn = velocity[2] * dt
-    return np.array([*rotate(0.5 * turn, velocity[:2] * dt), turn])
+    vx, vy, rate = np.asarray(velocity, dtype=np.float64).tolist()
+    turn = rate * dt
+    x, y = vx * dt, vy * dt  # lidar_env.se2.rotate's operations, on Python floats
+    c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
+    return np.array([c * x - s * y, s * x + c * y, turn])
+
+
+def mean_translation(translations: Sequence[FloatArray]) -> tuple[float, float]:
+    """``np.mean(translations, axis=0)`` of a few translations (2,) [m], bit for bit (the
+    rows summed in order, then divided by their number), on Python floats."""
+    sx, sy = translations[0].tolist()
+    for row in range(1, len(translations)):
+        x, y = translations[row].tolist()
+        sx, sy = sx + x, sy + y
+    return sx / len(translations), sy / len(translations)
 
 
 
@@ -208,5 +222,7 @@ def no_sideslip_information(
         raise EstimatorInputError(
             f"information, sideslip_information: expected shape (3,) and a value >= 0, got "
             f"{information.shape} and {sideslip_information}")
+    if sideslip_information == 0 and math.isfinite(heading) and math.isfinite(forward):
+        return np.diag(information)  # the same as adding 0 times the outer product
     jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
     return np.diag(information) + sideslip_information * np.outer(jacobian, jacobian)

@@ -9,9 +9,14 @@ from estimators.odometry.motion_prior import (
     MIN_PREDICTION_SIGMA,
     ScanClock,
     clock_jitter,
+    constant_velocity_increment,
+    mean_translation,
     median,
+    midpoint_velocity,
+    no_sideslip_information,
     prediction_sigma,
 )
+from lidar_env.se2 import rotate
 
 
 def test_a_steady_clock_has_no_jitter_and_glitches_do_not_count() -> None:
@@ -61,3 +66,28 @@ def test_scan_clock_statistics_are_those_of_its_last_intervals() -> None:
 def test_median_is_numpys_bit_for_bit(values: list[float]) -> None:
     array = np.array(values)
     assert median(array) == np.median(array) or np.isnan(np.median(array))
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(1, 8), dt=st.sampled_from([1.0, 0.1, 0.37]))
+def test_float_forms_are_the_array_forms_bit_for_bit(seed: int, rows: int, dt: float) -> None:
+    """The Python-float forms of the per-scan prior (what lidar_odometry calls every scan)
+    against the numpy expressions they replace: rotations by ``se2.rotate``, the mean by
+    ``np.mean``, the clip by ``np.clip``, no sideslip by the outer product times 0."""
+    rng = np.random.default_rng(seed)
+    motion = rng.normal(0.0, [0.3, 0.05, 0.4])
+    bits = np.ndarray.tobytes
+    array_midpoint = np.array([*rotate(-0.5 * motion[2], motion[:2]), motion[2]]) / dt
+    assert bits(midpoint_velocity(motion, dt)) == bits(array_midpoint)
+    turn = motion[2] * dt
+    array_increment = np.array([*rotate(0.5 * turn, motion[:2] * dt), turn])
+    assert bits(constant_velocity_increment(motion, dt)) == bits(array_increment)
+    translations = [rng.normal(0.0, 0.2, 2) for _ in range(rows)]
+    assert bits(np.array(mean_translation(translations))) == bits(np.mean(translations, axis=0))
+    value = rng.normal(0.0, 0.05)
+    assert prediction_sigma(1.0, 0.0, 0.0, value, 0.03) == float(
+        np.clip(value, MIN_PREDICTION_SIGMA, 0.03))
+    information, heading, forward = rng.uniform(0.1, 10.0, 3), motion[2], motion[0]
+    jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
+    full = np.diag(information) + 0.0 * np.outer(jacobian, jacobian)
+    assert bits(no_sideslip_information(information, heading, forward, 0.0)) == bits(full)
