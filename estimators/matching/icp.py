@@ -19,6 +19,7 @@ same pairs.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -214,11 +215,11 @@ def _assess(residuals: NDArray[np.float64], pose: NDArray[np.float64], params: I
             iterations: int, converged: bool) -> MatchResult:
     """The match at ``pose`` from each query point's residual [m] against its pair within
     ``params.inlier_distance`` (NaN for none)."""
-    count = len(residuals)
-    residuals = np.abs(residuals[np.isfinite(residuals)])
-    inliers = residuals[residuals < params.inlier_distance]
-    quality = len(inliers) / max(count, 1)
-    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else float("inf")
+    magnitudes = np.abs(residuals)
+    inliers = magnitudes[magnitudes < params.inlier_distance]  # NaN (no pair) is never below
+    quality = len(inliers) / max(len(residuals), 1)
+    # np.mean's sum and division, without its checks
+    rmse = math.sqrt(np.add.reduce(inliers * inliers) / len(inliers)) if len(inliers) else math.inf
     return MatchResult(pose, quality, rmse, iterations, converged)
 
 

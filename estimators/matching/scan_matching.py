@@ -22,6 +22,7 @@ from estimators.base import SensorSetup
 from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import curve_points, line_fits
+from estimators.matching.prediction import median
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points
 
@@ -240,7 +241,7 @@ def _fit_lines(
     """
     fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius,
                     compiled)
-    noise = 2.0 * float(np.median(fit.across))
+    noise = 2.0 * median(fit.across)  # np.median's, bit for bit
     groups = [fit]
     width = fit.index.shape[1]
     limit = min(max_k or k, len(points))
