@@ -241,9 +241,11 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._step(scans, t)
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
-        odometry = self._frontend.update(scans, t)
-        if self._start_points is None and not self._is_keyframe(odometry):
-            return self.add_scan(np.zeros((0, 2)), odometry)  # its points are not needed
+        odometry = np.asarray(self._frontend.update(scans, t), dtype=np.float64)
+        if self._start_points is None:
+            step = self._keyframe_step(odometry)
+            if step is not None and not self._is_keyframe(step):
+                return self._add_scan(np.zeros((0, 2)), odometry, step)  # points not needed
         points = scans_to_car_points(scans, self.setup, self.min_range)
         if self._start_points is not None:  # the front end may still match its start again
             self._start_points.append(points)
@@ -265,42 +267,47 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         online pose estimate (3,). Public so a recorded front-end run can be replayed. The
         points are read only when the scan becomes a keyframe (:meth:`_is_keyframe`)."""
         odometry = np.asarray(odometry, dtype=np.float64)
-        if not self.keyframes:
-            self._add_keyframe(points, odometry, 0.0)
-        elif self._is_keyframe(odometry):
-            last = self.keyframes[-1]
-            step = relative(last.odometry, odometry)
-            self._add_keyframe(points, odometry, last.path_length + np.hypot(*step[:2]))
+        return self._add_scan(points, odometry, self._keyframe_step(odometry))
+
+    def _add_scan(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
+                  step: NDArray[np.float64] | None) -> NDArray[np.float64]:
+        """:meth:`add_scan` given the front end's :meth:`_keyframe_step` to this scan."""
+        if step is None or self._is_keyframe(step):
+            self._add_keyframe(points, odometry, step)
+            step = relative(odometry, odometry)  # the keyframe's own pose in its frame
         self._scan_keyframe.append(len(self.keyframes) - 1)
         self._scan_odometry.append(odometry.copy())
-        last = self.keyframes[-1]
-        return compose(self.graph.poses[-1], relative(last.odometry, odometry))
+        return compose(self.graph.pose(-1), step)
 
-    def _is_keyframe(self, odometry: NDArray[np.float64]) -> bool:
-        """Whether a scan at front-end pose ``odometry`` (3,) becomes a keyframe (the first,
-        or one ``keyframe_distance`` / ``keyframe_angle`` from the last)."""
-        if not self.keyframes:
-            return True
-        step = relative(self.keyframes[-1].odometry, odometry)
+    def _keyframe_step(self, odometry: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """The front end's motion (3,) from the last keyframe (its frame); None before one."""
+        return relative(self.keyframes[-1].odometry, odometry) if self.keyframes else None
+
+    def _is_keyframe(self, step: NDArray[np.float64]) -> bool:
+        """Whether a scan :meth:`_keyframe_step` ``step`` (3,) from the last keyframe becomes
+        one (``keyframe_distance`` or ``keyframe_angle`` from it)."""
         return bool(np.hypot(step[0], step[1]) >= self.keyframe_distance
                     or abs(step[2]) >= self.keyframe_angle)
 
     def _add_keyframe(self, points: NDArray[np.float64], odometry: NDArray[np.float64],
-                      path_length: float) -> None:
+                      step: NDArray[np.float64] | None) -> None:
+        """Make the scan at front-end pose ``odometry`` (3,), ``step`` (3,) from the last
+        keyframe (None: the first), a keyframe: a node, its odometry edge, its loops."""
+        path_length = 0.0 if step is None else self.keyframes[-1].path_length + np.hypot(*step[:2])
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
         if not self.keyframes:
             self.graph.add_node(odometry)
             covariance = np.zeros((3, 3))
         else:
+            assert step is not None
             previous = self.keyframes[-1]
-            step = relative(previous.odometry, odometry)
             reference = (PointToLineReference.with_estimated_normals(
                 previous.points, self.loop_params.normal_neighbours,
                 self.loop_params.denoise_reference)
                 if len(previous.points) >= 3 and len(points) >= 3 else None)
             if reference is not None and self.check_steps:
                 step = self._checked_step(reference, previous.points, points, step)
-            index = self.graph.add_node(compose(self.graph.poses[-1], step))
+            index = self.graph.add_node(compose(self.graph.pose(-1), step))
             information = self._odometry_information(step)
             if self.match_odometry and reference is not None:
                 information = self._matched_information(reference, points, step, information)

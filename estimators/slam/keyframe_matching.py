@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.matching.point_to_line import PointToLineReference
+from estimators.slam.growing_rows import GrowingRows
 from estimators.slam.loop_closure import (
     LoopVerification,
     PlaceMap,
@@ -52,7 +53,7 @@ class KeyframeMatching:
         graph) in the frame of keyframe ``index``, by the graph's current poses."""
         poses = self.graph.poses
         lo, hi = max(0, index - before), min(len(self.keyframes), index + after + 1)
-        return np.array([relative(poses[index], poses[k]) for k in range(lo, hi)])
+        return compose(inverse(poses[index])[None], poses[lo:hi])
 
     def _place(self, index: int, neighbours: int | None = None) -> PlaceMap:
         """The old place around keyframe ``index``: its points and its ``neighbours`` on each
@@ -254,55 +255,46 @@ class Keyframe:
 
 
 class KeyframeTable:
-    """What the loop search reads of every keyframe, as arrays that grow by doubling (read
-    once per keyframe, over all of them, they would otherwise be rebuilt from the keyframes
-    each time): path lengths (K,) [m], place descriptors (K, B), and the covariance (K, 3, 3)
-    of the odometry edge into each keyframe (keyframe 0: zeros), and the reach (K,) [m] of
-    each keyframe's points (the farthest one's distance from its origin)."""
+    """What the loop search reads of every keyframe, as arrays that grow one row at a time
+    (:class:`~estimators.slam.growing_rows.GrowingRows`: read once per keyframe, over all of
+    them, they would otherwise be rebuilt from the keyframes each time): path lengths (K,) [m],
+    place descriptors (K, B), the covariance (K, 3, 3) of the odometry edge into each
+    keyframe (keyframe 0: zeros), and the reach (K,) [m] of each keyframe's points (the
+    farthest one's distance from its origin)."""
 
     def __init__(self) -> None:
-        self._size = 0
-        self._path = np.empty(0)
-        self._descriptors = np.empty((0, 0))
-        self._covariances = np.empty((0, 3, 3))
-        self._reach = np.empty(0)
+        self._path = GrowingRows()
+        self._descriptors = GrowingRows(None)
+        self._covariances = GrowingRows((3, 3))
+        self._reach = GrowingRows()
 
     def append(self, keyframe: Keyframe, covariance: NDArray[np.float64]) -> None:
         """Add the next keyframe's row and its odometry edge's covariance (3, 3)."""
-        if self._size == len(self._path):
-            capacity = max(16, 2 * self._size)
-            bins = len(keyframe.descriptor)
-            self._path = np.resize(self._path, capacity)
-            self._descriptors = np.resize(self._descriptors, (capacity, bins))
-            self._covariances = np.resize(self._covariances, (capacity, 3, 3))
-            self._reach = np.resize(self._reach, capacity)
-        k = self._size
-        self._path[k] = keyframe.path_length
-        self._descriptors[k] = keyframe.descriptor
-        self._covariances[k] = covariance
+        self._path.append(keyframe.path_length)
+        self._descriptors.append(keyframe.descriptor)
+        self._covariances.append(covariance)
         points = keyframe.points
-        self._reach[k] = np.hypot(points[:, 0], points[:, 1]).max() if len(points) else 0.0
-        self._size += 1
+        self._reach.append(np.hypot(points[:, 0], points[:, 1]).max() if len(points) else 0.0)
 
     @property
     def path_lengths(self) -> NDArray[np.float64]:
         """``(K,)`` path length [m] driven up to each keyframe (a view)."""
-        return self._path[: self._size]
+        return self._path.rows
 
     @property
     def descriptors(self) -> NDArray[np.float64]:
         """``(K, B)`` place descriptors (a view)."""
-        return self._descriptors[: self._size]
+        return self._descriptors.rows
 
     @property
     def odometry_covariances(self) -> NDArray[np.float64]:
         """``(K, 3, 3)`` covariance of the odometry edge into each keyframe (a view)."""
-        return self._covariances[: self._size]
+        return self._covariances.rows
 
     @property
     def reach(self) -> NDArray[np.float64]:
         """``(K,)`` distance [m] of each keyframe's farthest point from its origin (a view)."""
-        return self._reach[: self._size]
+        return self._reach.rows
 
 
 def largest_shift(before: NDArray[np.float64], after: NDArray[np.float64],

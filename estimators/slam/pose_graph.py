@@ -24,6 +24,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
+from estimators.slam.growing_rows import GrowingRows
 from lidar_env.errors import ConfigError, EstimatorInputError, UnknownNameError
 from lidar_env.se2 import compose, inverse
 
@@ -69,16 +70,13 @@ class PoseGraph:
     """
 
     def __init__(self) -> None:
-        self._poses: list[NDArray[np.float64]] = []
-        self._pose_array: NDArray[np.float64] | None = None  # _poses as one array, once read
+        self._poses = GrowingRows((3,))
         self._ids: list[int] = []
         self._index_of: dict[int, int] = {}
-        self._edge_nodes: list[tuple[int, int]] = []
-        self._measurements: list[NDArray[np.float64]] = []
-        self._information: list[NDArray[np.float64]] = []
-        self._is_loop: list[bool] = []
-        # the edge lists as arrays (edges, measurements, information, is_loop), once read
-        self._edge_arrays: tuple[NDArray, NDArray, NDArray, NDArray] | None = None
+        self._edge_nodes = GrowingRows((2,), np.int64)
+        self._measurements = GrowingRows((3,))
+        self._information = GrowingRows((3, 3))
+        self._is_loop = GrowingRows((), bool)
         self._connected_nodes = 0  # nodes when last found connected (0: not known to be)
 
     # ------------------------------------------------------------------ building
@@ -96,8 +94,7 @@ class PoseGraph:
             raise EstimatorInputError(f"node id {node_id} is already in the graph")
         self._index_of[node_id] = len(self._ids)
         self._ids.append(node_id)
-        self._poses.append(pose_arr.copy())
-        self._pose_array = None
+        self._poses.append(pose_arr)
         return len(self._ids) - 1
 
     def add_edge(
@@ -141,10 +138,9 @@ class PoseGraph:
                 f"edge {i}->{j} information: expected eigenvalues in [{MIN_INFORMATION:g}, "
                 f"{MAX_INFORMATION:g}], got {eigenvalues[0]:.3g} .. {eigenvalues[-1]:.3g}")
         self._edge_nodes.append((int(i), int(j)))
-        self._measurements.append(z.copy())
-        self._information.append(omega.copy())
+        self._measurements.append(z)
+        self._information.append(omega)
         self._is_loop.append(bool(is_loop))
-        self._edge_arrays = None
         return len(self._edge_nodes) - 1
 
     # ------------------------------------------------------------------ reading
@@ -159,9 +155,7 @@ class PoseGraph:
     @property
     def poses(self) -> NDArray[np.float64]:
         """``(N, 3)`` node poses in the world frame (a fresh copy: the graph keeps its own)."""
-        if self._pose_array is None:
-            self._pose_array = np.array(self._poses, dtype=np.float64).reshape(-1, 3)
-        return self._pose_array.copy()
+        return self._poses.rows.copy()
 
     @poses.setter
     def poses(self, poses: ArrayLike) -> None:
@@ -169,12 +163,14 @@ class PoseGraph:
         if arr.shape != (self.n_nodes, 3) or not np.all(np.isfinite(arr)):
             raise EstimatorInputError(
                 f"poses: expected finite ({self.n_nodes}, 3), got {arr.shape}")
-        self._poses = [p.copy() for p in arr]
-        self._pose_array = None
+        self._poses.assign(arr)
+
+    def pose(self, index: int) -> NDArray[np.float64]:
+        """``(3,)`` node ``index``'s pose (a fresh copy; negative indices count from the end)."""
+        return self._poses.rows[index].copy()
 
     def set_pose(self, index: int, pose: ArrayLike) -> None:
-        self._poses[index] = np.asarray(pose, dtype=np.float64).copy()
-        self._pose_array = None
+        self._poses.rows[index] = np.asarray(pose, dtype=np.float64)
 
     @property
     def ids(self) -> NDArray[np.int64]:
@@ -189,15 +185,10 @@ class PoseGraph:
             raise UnknownNameError(f"no node with id {node_id} in the graph") from None
 
     def _arrays(self) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-        """The edge lists as arrays, kept until the edges change (a graph of a thousand
-        edges is read several times per optimisation)."""
-        if self._edge_arrays is None:
-            self._edge_arrays = (
-                np.array(self._edge_nodes, dtype=np.int64).reshape(-1, 2),
-                np.array(self._measurements, dtype=np.float64).reshape(-1, 3),
-                np.array(self._information, dtype=np.float64).reshape(-1, 3, 3),
-                np.array(self._is_loop, dtype=bool))
-        return self._edge_arrays
+        """The edges as arrays (views; a graph of a thousand edges is read several times per
+        optimisation)."""
+        return (self._edge_nodes.rows, self._measurements.rows, self._information.rows,
+                self._is_loop.rows)
 
     @property
     def edges(self) -> NDArray[np.int64]:
@@ -222,24 +213,19 @@ class PoseGraph:
     def remove_edges(self, indices: ArrayLike) -> None:
         """Delete the edges at ``indices`` (e.g. loop closures the optimiser could not
         reconcile); the others keep their order."""
-        drop = set(np.atleast_1d(np.asarray(indices, dtype=np.int64)).tolist())
-        keep = [k for k in range(self.n_edges) if k not in drop]
-        self._edge_nodes = [self._edge_nodes[k] for k in keep]
-        self._measurements = [self._measurements[k] for k in keep]
-        self._information = [self._information[k] for k in keep]
-        self._is_loop = [self._is_loop[k] for k in keep]
-        self._edge_arrays = None
+        keep = np.ones(self.n_edges, dtype=bool)
+        keep[np.atleast_1d(np.asarray(indices, dtype=np.int64))] = False
+        for rows in (self._edge_nodes, self._measurements, self._information, self._is_loop):
+            rows.assign(rows.rows[keep])
         self._connected_nodes = 0
 
     def copy(self) -> PoseGraph:
         other = PoseGraph()
-        other._poses = [p.copy() for p in self._poses]
+        other._poses = self._poses.copy()
         other._ids = list(self._ids)
         other._index_of = dict(self._index_of)
-        other._edge_nodes = list(self._edge_nodes)
-        other._measurements = [z.copy() for z in self._measurements]
-        other._information = [o.copy() for o in self._information]
-        other._is_loop = list(self._is_loop)
+        other._edge_nodes, other._measurements = self._edge_nodes.copy(), self._measurements.copy()
+        other._information, other._is_loop = self._information.copy(), self._is_loop.copy()
         return other
 
     def check_connected(self) -> None:
