@@ -187,9 +187,10 @@ def _fit_rows(
     fits them in :func:`estimators.matching.neighbourhood_fits.line_fits`, else in arrays
     (the same math)."""
     _, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
-    index = index.reshape(len(rows), k).astype(np.int64)
+    index = index.reshape(len(rows), k).astype(np.int64, copy=False)
     if compiled:
-        count, mean, normals, across, valid = line_fits(points, rows.astype(np.int64), index)
+        count, mean, normals, across, valid = line_fits(
+            points, rows.astype(np.int64, copy=False), index)
         return _Neighbourhoods(rows, index, count, mean, normals, across, valid)
     neighbours, weights = _gathered(points, rows, index)
     count = weights.sum(axis=1)
@@ -283,7 +284,8 @@ def _curve_points(
     their neighbours in the frame of their line (see :func:`fit_local_curves`); ``compiled``
     by :func:`estimators.matching.neighbourhood_fits.curve_points`, else in arrays."""
     if compiled:
-        return curve_points(points, fit.rows.astype(np.int64), fit.index, fit.mean, fit.normals)
+        return curve_points(points, fit.rows.astype(np.int64, copy=False), fit.index, fit.mean,
+                            fit.normals)
     neighbours, weights = _gathered(points, fit.rows, fit.index)
     points = points[fit.rows]
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
