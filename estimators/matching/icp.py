@@ -258,10 +258,13 @@ class ICPEstimator(Estimator):
     rf2o seed theirs) rather than from the identity: ICP's nearest-point pairs pull towards
     its starting pose, most where a corridor leaves its axis to a few points, and from the
     identity it needed 11.4 iterations a scan, not 6.6 (hallway zigzag). Measured identity
-    -> last increment: ACES local relations 0.0510 -> 0.0428 m (failures 3.1 -> 1.2 %), all 2.10 ->
-    1.32 m; Intel 5 s relations 0.0719 -> 0.0710 m; simulated ATE (``bench_synthetic.py``)
+    -> last increment: ACES local relations 0.0510 -> 0.0428 m (failures 3.1 -> 1.2 %), all
+    2.10 -> 1.32 m; Intel 5 s relations 0.0719 -> 0.0710 m; simulated ATE (``bench_synthetic.py``)
     hallway zigzag 1.33 -> 1.04 m, closed-to-open 1.36 -> 0.74 m, straight 3.97 -> 2.17 m,
-    open cylinders 0.19 -> 0.22 m.
+    open cylinders 0.19 -> 0.22 m, but out-and-back 0.86 -> 3.75 m: in the U-turn at the
+    corridor's end, where the scan leaves a direction nearly free, a wrong sideways step of
+    a few cm is carried into the next guesses and kept for several scans rather than reset
+    (4.9 m lost in the turn against 0.85 m from the identity).
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """
