@@ -17,6 +17,7 @@ from scipy.optimize import least_squares
 from scipy.sparse.linalg import splu
 
 from estimators.slam.pose_graph import LOSSES, Loss, PoseGraph, edge_residuals, robust_rho
+from estimators.slam.sparse_cholesky import cholesky_pattern, cholesky_solve, cholesky_values
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import wrap_angle
 
@@ -235,6 +236,7 @@ def _levenberg_marquardt(
     cost, f, weight = evaluate(x)
     damping = 1e-5
     iterations = 0
+    solver = _OrderedSolver()
     while iterations < max_iterations:
         jac = problem.jacobian(x, weight)
         gradient = jac.T @ (f * np.sqrt(weight)[:, None]).ravel()
@@ -245,12 +247,7 @@ def _levenberg_marquardt(
         improved = False
         while iterations < max_iterations:
             iterations += 1
-            damped = _damped(hessian, damping * diagonal, on_diagonal)
-            # Symmetric mode (no off-diagonal pivoting) keeps the minimum-degree ordering's low
-            # fill on these SPD systems: 17 ms instead of 0.5 s per factorisation on M3500.
-            factor = splu(damped, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                          options={"SymmetricMode": True})
-            step = -factor.solve(gradient)
+            step = -solver.solve(_damped(hessian, damping * diagonal, on_diagonal), gradient)
             candidate = x + step
             new_cost, new_f, new_weight = evaluate(candidate)
             if new_cost < cost:
@@ -267,6 +264,43 @@ def _levenberg_marquardt(
         if not improved:
             break
     return x, iterations, False
+
+
+class _OrderedSolver:
+    """Solves of SPD systems that share one sparsity pattern (an LM run's damped normal
+    equations). The first by SuperLU, which finds its minimum-degree ordering (MMD on
+    ``A^T + A``; symmetric mode, no off-diagonal pivoting, keeps its low fill on these
+    systems: 17 ms instead of 0.5 s per factorisation on M3500); the others by a Cholesky
+    factorisation in that order (:mod:`estimators.slam.sparse_cholesky`: no ordering, no LU;
+    Intel's final graph: 9.7 -> 2.5 ms). Solutions agree with SuperLU's to ~1e-13 relative,
+    not bit for bit."""
+
+    def __init__(self) -> None:
+        self._pattern: tuple[NDArray[np.int32], NDArray[np.int32]] | None = None
+
+    def solve(self, matrix: sp.csc_matrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``matrix^-1 rhs`` for a square CSC ``matrix`` with sorted indices."""
+        if self._pattern is not None and np.array_equal(matrix.indptr, self._pattern[0]) \
+                and np.array_equal(matrix.indices, self._pattern[1]):
+            rows, values, ok = cholesky_values(self._indptr, self._indices,
+                                               matrix.data[self._take], *self._tree)
+            if ok:
+                x = np.empty_like(rhs)
+                x[self._order] = cholesky_solve(self._tree[1], rows, values, rhs[self._order])
+                return x
+        factor = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                      options={"SymmetricMode": True})
+        self._order = np.argsort(factor.perm_c)  # row/column k of the permuted matrix
+        # where each entry of the permuted matrix sits in matrix.data
+        probe = sp.csc_matrix((np.arange(1.0, matrix.nnz + 1.0), matrix.indices, matrix.indptr),
+                              shape=matrix.shape)[self._order][:, self._order].tocsc()
+        probe.sort_indices()
+        self._take = probe.data.astype(np.int64) - 1
+        self._indptr = probe.indptr.astype(np.int64)
+        self._indices = probe.indices.astype(np.int64)
+        self._tree = cholesky_pattern(self._indptr, self._indices)
+        self._pattern = (matrix.indptr.copy(), matrix.indices.copy())
+        return factor.solve(rhs)
 
 
 def _diagonal_positions(matrix: sp.csc_matrix) -> NDArray[np.int64] | None:
