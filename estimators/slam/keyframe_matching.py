@@ -158,7 +158,8 @@ class KeyframeMatching:
         for old, window in self.loop_candidates(index):
             guess = relative(poses[old], poses[index])
             result = self._gate(old, index, verify_loop(
-                self._place(old), self.keyframes[index].points, guess, window, self.loop_params))
+                self._place(old), self.keyframes[index].points, guess, window, self.loop_params,
+                measure_rejected=False))
             self.loop_attempts.append((old, index, result))
             if result.accepted:
                 self.graph.add_edge(old, index, result.pose, result.information, is_loop=True)
@@ -185,7 +186,7 @@ class KeyframeMatching:
         for k in old[order][distance[order] <= self.max_descriptor_distance]:
             result = self._gate(int(k), index, verify_loop(
                 self._place(int(k), self.global_submap_keyframes), query, np.zeros(3),
-                self.global_window, self._global_params))
+                self.global_window, self._global_params, measure_rejected=False))
             self.loop_attempts.append((int(k), index, result))
             if not result.accepted:
                 continue
@@ -238,7 +239,8 @@ class KeyframeMatching:
         if share >= self.loop_params.min_quality:
             return step
         place = PlaceMap(previous, self.loop_params, self._pyramid_buffer)
-        result = verify_loop(place, points, step, self.keyframe_distance, self._step_params)
+        result = verify_loop(place, points, step, self.keyframe_distance, self._step_params,
+                             measure_rejected=False)
         self.step_checks.append((len(self.keyframes), share, result))
         return result.pose if result.accepted and result.quality > share else step
 

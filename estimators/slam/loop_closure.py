@@ -184,7 +184,8 @@ class LoopVerification:
     Attributes:
         accepted: the match passed every test; ``reason`` says which failed otherwise.
         pose: ``(3,)`` pose of the query keyframe in the reference keyframe's frame.
-        information: ``(3, 3)`` information matrix of ``pose`` from the ICP Hessian.
+        information: ``(3, 3)`` information matrix of ``pose`` from the ICP Hessian (zeros
+            when not measured: too few points, or rejected with ``measure_rejected=False``).
         quality: ICP inlier share; score: mean likelihood-field score; runner_up: best score
             of a match at least ``ambiguity_distance`` away, relative to the best, when
             above ``ambiguity_ratio`` (else 0: not searched further, see
@@ -332,12 +333,15 @@ def verify_loop(
     guess: ArrayLike,
     linear_window: float,
     params: LoopClosureParams = LoopClosureParams(),
+    measure_rejected: bool = True,
 ) -> LoopVerification:
     """Verify a loop candidate: is the query keyframe (points (M, 2) in its own frame) at the
     old place, near the pose ``guess`` (3,) in the place's frame predicted by the graph?
 
     ``linear_window`` [m] is how far the truth may be from the guess (the pose uncertainty).
     Never raises for a bad candidate: the result says ``accepted=False`` and why.
+    ``measure_rejected=False`` leaves a rejected match's ``information`` zero, unmeasured
+    (:func:`match_information`, a tenth of a verification: slam reads only accepted ones').
     """
     query = np.asarray(query_points, dtype=np.float64)
     if query.ndim != 2 or query.shape[1] != 2:
@@ -359,7 +363,6 @@ def verify_loop(
     result = register(place.reference, query, search.pose, icp)
     pose = result.pose
     score = float(place.field.score(transform_points(pose, query)).mean())
-    information = match_information(place.reference, query, pose, params)
     failures = []
     if result.quality < params.min_quality:
         failures.append(f"ICP inlier share {result.quality:.2f} < {params.min_quality}")
@@ -376,5 +379,7 @@ def verify_loop(
         failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
                         f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
     reason = "; ".join(failures) if failures else "accepted"
+    information = (match_information(place.reference, query, pose, params)
+                   if measure_rejected or not failures else nothing)
     return LoopVerification(not failures, reason, pose, information, result.quality, score,
                             runner_up)

@@ -112,6 +112,22 @@ def test_a_different_place_fails_verification_with_a_reason() -> None:
     assert "ICP inlier share" in result.reason or "likelihood score" in result.reason
     few = verify_loop(place, np.zeros((4, 2)), np.zeros(3), 1.0)
     assert not few.accepted and "too few query points" in few.reason
+    assert np.all(np.linalg.eigvalsh(result.information) > 0)  # measured by default
+    unmeasured = verify_loop(place, scan_points(np.array([12.5, 6.0, 0.0]), rng),
+                             np.array([0.5, 0.0, 0.0]), 1.0, measure_rejected=False)
+    assert not unmeasured.accepted and not unmeasured.information.any()
+
+
+def test_an_accepted_match_is_measured_either_way() -> None:
+    rng = np.random.default_rng(2)
+    old, new = np.array([4.0, 3.0, 0.4]), np.array([4.6, 2.7, 2.2])
+    place = PlaceMap(scan_points(old, rng), LoopClosureParams())
+    query, guess = scan_points(new, rng), relative(old, new) + np.array([0.3, -0.2, 0.1])
+    measured = verify_loop(place, query, guess, 1.0)
+    lean = verify_loop(place, query, guess, 1.0, measure_rejected=False)
+    assert measured.accepted and lean.accepted
+    np.testing.assert_array_equal(lean.information, measured.information)
+    np.testing.assert_array_equal(lean.pose, measured.pose)
 
 
 def test_corridor_match_carries_no_information_along_the_corridor() -> None:
