@@ -8,9 +8,10 @@
 No estimator reads odometry. ``icp`` (scan-to-previous-scan PL-ICP from a constant-velocity
 guess) is the reference every ratio is measured against, in the same run on the same machine.
 ms/scan is CPU time (``time.process_time``) per scan, the real-time factor the log's median
-scan interval over it. Intel's logger clock runs backwards 631 times, which the estimators refuse: they are
-fed the stamps made to run forward (``estimators.datasets.real_log.forward_clock``: a stamp
-that jumps back is moved 1 us past its predecessor) and scored on the logged ones.
+scan interval over it. Intel's logger clock runs backwards 631 times, which the estimators
+refuse: they are fed the stamps made to run forward
+(``estimators.datasets.real_log.forward_clock``: a stamp that jumps back is moved 1 us past its
+predecessor) and scored on the logged ones.
 ``--set NAME=VALUE`` (a number, ``true``/``false``) passes parameters to every estimator but
 the reference.
 """
