@@ -49,7 +49,7 @@ from estimators.slam.loop_closure import (
 from estimators.slam.outputs import SlamOutputs
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.smoothing import blend_on_keyframes
-from estimators.slam.solver import optimize
+from estimators.slam.solver import EliminationOrdering, optimize
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import compose, relative
 
@@ -219,6 +219,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         # (keyframe, neighbours) -> (map, the poses it was built at, optimisations by then)
         self._places: OrderedDict[tuple[int, int], tuple[PlaceMap, NDArray, int]] = OrderedDict()
         self._pyramid_buffer = PyramidBuffer()
+        self._ordering = EliminationOrdering()  # the graph's solves, kept as it grows
         self._dirty, self._since_optimized, self._optimizations = False, 0, 0
         self.loop_attempts: list[tuple[int, int, LoopVerification]] = []
         self.dropped_loops: list[tuple[int, int]] = []
@@ -340,12 +341,12 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         if trusted is not None:
             first = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale,
                              robust_edges=self.graph.is_loop & ~trusted, max_iterations=100,
-                             tolerance=1e-8)
+                             tolerance=1e-8, ordering=self._ordering)
             self.graph.poses = first.poses
         while True:
             loops = self.graph.is_loop
-            result = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale,
-                              robust_edges=loops, max_iterations=50, tolerance=1e-8)
+            result = optimize(self.graph, loss="cauchy", loss_scale=self.loss_scale, tolerance=1e-8,
+                              robust_edges=loops, max_iterations=50, ordering=self._ordering)
             self.graph.poses = result.poses
             bad = np.flatnonzero(loops & (result.chi2 > self.max_loop_sigma**2))
             if len(bad) == 0:

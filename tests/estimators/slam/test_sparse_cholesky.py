@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.sparse.linalg import splu
 
-from estimators.slam.solver import _OrderedSolver
+from estimators.slam.solver import EliminationOrdering
 from estimators.slam.sparse_cholesky import cholesky_pattern, cholesky_solve, cholesky_values
 
 
@@ -59,13 +59,15 @@ def test_a_matrix_that_is_not_positive_definite_is_reported() -> None:
     assert not cholesky_values(indptr, indices, matrix.data, *cholesky_pattern(indptr, indices))[2]
 
 
-def test_the_lm_solver_agrees_with_superlu_on_every_solve_of_one_pattern() -> None:
-    solver = _OrderedSolver()
+def test_the_lm_solver_agrees_with_superlu_on_every_solve_of_a_growing_graph() -> None:
+    solver = EliminationOrdering()
     rng = np.random.default_rng(3)
-    for damping in (1e-5, 1e-4, 1e-3, 1e-2):  # the LM run's systems: one pattern
-        matrix = pose_graph_system(7, 60, 25) + damping * sp.identity(180, format="csc")
+    # one LM run's systems (one pattern), then a graph grown by a few nodes, then one rebuilt
+    for nodes, damping in ((60, 1e-5), (60, 1e-4), (60, 1e-2), (65, 1e-5), (70, 1e-5),
+                           (40, 1e-5)):
+        matrix = pose_graph_system(7, nodes, 25) + damping * sp.identity(3 * nodes, format="csc")
         matrix.sort_indices()
-        rhs = rng.normal(size=180)
+        rhs = rng.normal(size=3 * nodes)
         expected = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                         options={"SymmetricMode": True}).solve(rhs)
         np.testing.assert_allclose(solver.solve(matrix, rhs), expected, rtol=1e-9, atol=1e-12)
