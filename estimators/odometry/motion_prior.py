@@ -59,11 +59,11 @@ __all__ = [
 MIN_PREDICTION_SIGMA = 1e-3
 
 
-def clock_jitter(intervals: ArrayLike) -> float:
+def clock_jitter(intervals: ArrayLike, centre: float | None = None) -> float:
     """The clock's typical jitter [s]: the median deviation of the scan ``intervals`` [s] from
-    their median (robust to glitching stamps)."""
+    their median (robust to glitching stamps); ``centre``: that median [s], when known."""
     intervals = np.asarray(intervals, dtype=np.float64)
-    return median(np.abs(intervals - median(intervals)))
+    return median(np.abs(intervals - (median(intervals) if centre is None else centre)))
 
 
 #: Intervals a clock must have shown before its median stands for it.
@@ -119,7 +119,7 @@ class ScanClock:
     def jitter(self) -> float:
         """:func:`clock_jitter` of the intervals [s] (from the cached :attr:`median`)."""
         return self._cached("jitter", self.intervals,
-                            lambda intervals: median(np.abs(intervals - self.median)))
+                            lambda intervals: clock_jitter(intervals, self.median))
 
     @property
     def typical_step(self) -> float:

@@ -27,6 +27,13 @@ def test_a_steady_clock_has_no_jitter_and_glitches_do_not_count() -> None:
     assert clock_jitter([*intervals, 3.0]) == pytest.approx(0.01)
 
 
+def test_the_jitter_about_a_given_centre_is_the_median_deviation_from_it() -> None:
+    rng = np.random.default_rng(4)
+    intervals = 0.1 + 0.003 * rng.standard_normal(201)
+    assert clock_jitter(intervals, float(np.median(intervals))) == clock_jitter(intervals)
+    assert clock_jitter([0.1, 0.12, 0.14], centre=0.1) == pytest.approx(0.02)
+
+
 def test_prediction_sigma_is_acceleration_dt2_plus_speed_jitter_within_bounds() -> None:
     assert prediction_sigma(0.1, 0.0, 0.0, 0.5, 0.05) == pytest.approx(0.005)
     assert prediction_sigma(0.1, 1.0, 0.002, 0.5, 0.05) == pytest.approx(0.007)
