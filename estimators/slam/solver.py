@@ -6,6 +6,7 @@ sparse Jacobian (``solver="scipy"``); the first node (or ``fixed``) is held.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -282,6 +283,9 @@ class EliminationOrdering:
     SuperLU's to ~1e-13 relative, not bit for bit."""
 
     def __init__(self, max_fill: float = 1.3) -> None:
+        if not (isinstance(max_fill, int | float) and math.isfinite(max_fill) and max_fill > 0):
+            raise ConfigError(f"max_fill: expected a finite ratio > 0 of a kept order's fill to "
+                              f"a new minimum-degree order's, got {max_fill!r}")
         self.max_fill = max_fill
         self._pattern: tuple[NDArray[np.int32], NDArray[np.int32]] | None = None
         self._order = np.zeros(0, dtype=np.int64)

@@ -3,6 +3,7 @@ pose-graph solver's systems: 3 x 3 blocks, a chain plus random loops), and the L
 solutions against SuperLU's."""
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -10,6 +11,7 @@ from scipy.sparse.linalg import splu
 
 from estimators.slam.solver import EliminationOrdering
 from estimators.slam.sparse_cholesky import cholesky_pattern, cholesky_solve, cholesky_values
+from lidar_env.errors import ConfigError
 
 
 def pose_graph_system(seed: int, nodes: int, loops: int) -> sp.csc_matrix:
@@ -71,3 +73,9 @@ def test_the_lm_solver_agrees_with_superlu_on_every_solve_of_a_growing_graph() -
         expected = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                         options={"SymmetricMode": True}).solve(rhs)
         np.testing.assert_allclose(solver.solve(matrix, rhs), expected, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "1.3"])
+def test_a_fill_ratio_that_is_none_is_named(bad: object) -> None:
+    with pytest.raises(ConfigError, match="max_fill"):
+        EliminationOrdering(bad)  # type: ignore[arg-type]
