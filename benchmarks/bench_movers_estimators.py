@@ -50,6 +50,9 @@ from lidar_env.config import MOVER_MODELS, EnvConfig
 GROUPS = (("open_cylinders", "right_turn", 10), ("hallway", "zigzag", 5),
           ("closed_to_open", "zigzag", 5))
 ESTIMATORS = ("lidar_odometry", "slam")
+#: The columns after the estimators': the map's, then the tracker's.
+MAP_COLUMNS = ("map IoU", "cylinder prec.", "mover recall", "pos. err [m]", "vel. err [m/s]",
+               "id sw.", "moving prec.")
 #: The moving-point filter on, for each (``slam`` passes it to its front end).
 DYNAMIC = {"lidar_odometry": {"reject_dynamic": True},
            "slam": {"frontend_params": {"reject_dynamic": True}}}
@@ -136,9 +139,9 @@ def main() -> None:
     args = parser.parse_args()
     params = {name: {} if args.defaults else DYNAMIC[name] for name in ESTIMATORS}
     print("| group | seed | movers | steps | " + " | ".join(
-        f"{n} acc [%] | {n} ATE [m]" for n in ESTIMATORS) + " | map IoU | cylinder prec. | "
-          "mover recall | pos. err [m] | vel. err [m/s] | id sw. | moving prec. |")
-    print("|---" * (11 + 2 * len(ESTIMATORS)) + "|")
+        f"{n} acc [%] | {n} ATE [m]" for n in ESTIMATORS) + " | " + " | ".join(MAP_COLUMNS)
+          + " |")
+    print("|---" * (4 + 2 * len(ESTIMATORS) + len(MAP_COLUMNS)) + "|")
     for world, trace, count in GROUPS:
         for seed in args.seeds:
             with_movers, movers = drive(world, trace, seed, count, args.mover_model)
@@ -155,7 +158,7 @@ def main() -> None:
                         metrics = evaluate(run(name, dataset, {}), dataset.poses)
                         cells += [f"{metrics.accuracy_percent:.2f}", f"{metrics.ate_rmse_m:.4f}"]
                     print(f"| {world}/{trace} | {seed} | {m} | {n} | " + " | ".join(cells)
-                          + " | -" * 7 + " |", flush=True)
+                          + " | -" * len(MAP_COLUMNS) + " |", flush=True)
                     continue
                 trajectories = {name: run(name, dataset, params[name]) for name in ESTIMATORS}
                 for name in ESTIMATORS:
