@@ -68,7 +68,7 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.free_space import MovingPointFilter
-from estimators.odometry.motion_prior import ScanClock, prediction_sigma
+from estimators.odometry.motion_prior import ScanClock, missed_sigma, prediction_sigma
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
@@ -109,7 +109,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             ``prediction_acceleration * dt^2`` over the scan interval ``dt`` (0.5, a brisk
             indoor robot: 5 mm at 10 Hz, 2 cm at 5 Hz), plus speed times the interval's
             jitter; taken from the logged clock's median and median deviation over the last
-            200 scans, so glitching stamps (Intel) only weaken the prior.
+            200 scans, so glitching stamps (Intel) only weaken the prior; after a miss of over
+            twice that in the last ``velocity_window`` scans (a hard stop), the largest miss
+            (``motion_prior.missed_sigma``).
         prior_sigma_translation, prior_sigma_rotation: the weakest per-scan deviation from
             constant velocity the prior allows, and its value before the clock is known
             (0.03 m: braking or accelerating at ~1 m/s^2 shifts a robot by 0.5 a dt^2 =
@@ -153,15 +155,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             0.63-1.36 m at 2 cm, always lagging): the remaining two-nearest-point pairs,
             often two points of the wall's noise band lying across it, carry ~28 points'
             worth of information along the axis (the fitted lines alone ~1) and outvote
-            the prior. Dropping them fixes it (0.02-0.14 m) but costs ACES and Intel their
-            corners (0.043 / 0.049 m). Discounting them is no way out: the corridor needs
-            a weight below ~0.01 (0.3: 0.50-1.06 m; 0.03: 0.01-0.36 m) while ACES loses at
-            any fixed one (0.3: 0.0366 m; 0.03: 0.0395 m); weighing each line by its
-            direction's expected error against the map's measured noise
-            (``exp(-4 sigma^2 / separation^2)``) only halves the 3 cm drift (0.40-0.80 m;
-            0.74-0.95 m at 2 cm), for ACES 0.0338 -> 0.0334 m and Intel 0.0427 -> 0.0437 m; and
-            letting only the fitted lines decide which directions the scan pins down fixes
-            it (0.00-0.14 m) but costs ACES 0.0361-0.0371 m.
+            the prior. Dropping them, discounting them by any fixed weight, weighing each
+            line by its expected error, or letting only the fitted lines decide the pinned
+            directions fixes or halves it, but costs ACES or Intel (up to 0.043 / 0.049 m).
         denoise_map: pair on each map point moved onto the parabola through its neighbours
             rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
             cylinder's points are not pulled ~3 cm inwards).
@@ -255,6 +251,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         self._search: GlobalSearch | None = None
         self._velocity = np.zeros(3)  # car frame, per second or per scan
         self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
+        self._misses: deque[float] = deque(maxlen=self.velocity_window)
         self._degenerate = False  # the scan at the guess leaves a direction free
         self._last_time = 0.0
         self._clock = ScanClock()
@@ -344,6 +341,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
                                      self._clock.jitter, self.prediction_acceleration,
                                      self.prior_sigma_translation)
+            sigma = missed_sigma(sigma, self._misses, self.prior_sigma_translation)
             information[:2] = (self.noise_sigma / sigma) ** 2
         sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0
         return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
@@ -387,6 +385,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             result = register(self._reference, points, result.pose, self.params, guess,
                               self._prediction_information())
         pose = result.pose
+        miss = relative(guess, pose)
+        self._misses.append(float(np.hypot(miss[0], miss[1])))
         self._velocity = self._updated_velocity(relative(self.pose, pose), dt)
         self._remember(pose, scans, seen)
         last_keyframe = self._keyframes[-1][0]

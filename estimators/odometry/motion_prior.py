@@ -136,6 +136,28 @@ def prediction_sigma(
     return float(min(max(acceleration * dt**2 + speed * jitter, MIN_PREDICTION_SIGMA), max_sigma))
 
 
+#: A prediction that missed by more than this many times its assumed sigma in one of the last
+#: few scans is trusted no better than its largest recent miss (:func:`missed_sigma`).
+MISS_RATIO = 2.0
+
+
+def missed_sigma(sigma: float, misses: Iterable[float], max_sigma: float) -> float:
+    """The prediction's position sigma [m] after its recent ``misses`` [m] (how far each of the
+    last scans' matches landed from its constant-velocity guess): ``sigma`` while none exceeds
+    ``MISS_RATIO * sigma``, else the largest miss, at most ``max_sigma``.
+
+    A fixed ``acceleration * dt^2`` holds for smooth driving; a car that brakes or starts from
+    one scan to the next (an emergency stop for a pedestrian) misses it by its whole change of
+    speed times ``dt``, and where the scan leaves a direction nearly free, the over-confident
+    guess then drags the estimate along that direction scan after scan (steering by
+    ``lidar_odometry`` through ``closed_to_open``: up to 0.4 m off at the end; README, "Driving
+    on estimated poses"). Widening the prior after a large miss, as adaptive Kalman filters
+    widen their process noise on large innovations, lets the scan correct it.
+    """
+    worst = max(misses, default=0.0)
+    return min(max(worst, sigma), max_sigma) if worst > MISS_RATIO * sigma else sigma
+
+
 #: A constant-velocity prediction over a scan interval ``dt`` misses the car's position by
 #: about ``PREDICTION_ACCELERATION dt^2`` [m] (an indoor robot's brisk 0.5 m/s^2: 5 mm at 10 Hz,
 #: 2 cm at 5 Hz), never trusted to better than ``motion_prior.MIN_PREDICTION_SIGMA`` [m] (a

@@ -13,6 +13,7 @@ from estimators.odometry.motion_prior import (
     mean_translation,
     median,
     midpoint_velocity,
+    missed_sigma,
     no_sideslip_information,
     prediction_sigma,
 )
@@ -39,6 +40,20 @@ def test_prediction_sigma_is_acceleration_dt2_plus_speed_jitter_within_bounds() 
     assert prediction_sigma(0.1, 1.0, 0.002, 0.5, 0.05) == pytest.approx(0.007)
     assert prediction_sigma(0.01, 0.0, 0.0, 0.5, 0.05) == MIN_PREDICTION_SIGMA
     assert prediction_sigma(1.0, 1.0, 0.1, 0.5, 0.05) == 0.05
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(1e-4, 0.05), st.lists(st.floats(0.0, 1.0), max_size=6), st.floats(1e-4, 0.1))
+def test_a_large_recent_miss_widens_the_prediction_to_it(
+    sigma: float, misses: list[float], max_sigma: float
+) -> None:
+    sigma = min(sigma, max_sigma)  # as prediction_sigma clips it
+    widened = missed_sigma(sigma, misses, max_sigma)
+    if max(misses, default=0.0) <= 2.0 * sigma:
+        assert widened == sigma  # misses within what the prediction assumes change nothing
+    else:
+        assert widened == min(max(misses), max_sigma)
+    assert sigma <= widened <= max_sigma
 
 
 def test_scan_clock_statistics_are_those_of_its_last_intervals() -> None:
