@@ -217,10 +217,17 @@ class BeamGeometry:
         if len(ranges) != self.starts[-1]:
             raise EstimatorInputError(f"scans: expected {self.sizes} readings, got "
                              f"{[np.size(r) for r in scans]}")
-        return _seen_through_kernel(
-            np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses, ranges,
-            self.starts, self.relative_angles, self.order, self.params, float(margin),
-            float(min_range), float(resolution))
+        return self.judge(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses,
+                          ranges, float(margin), float(min_range), float(resolution))
+
+    def judge(self, points: NDArray[np.float64], poses: NDArray[np.float64],
+              ranges: NDArray[np.float64], margin: float, min_range: float,
+              resolution: float) -> NDArray[np.bool_]:
+        """:meth:`seen_through` of inputs already checked and packed: ``points`` (n, 2) and
+        ``poses`` (K, 3) C-contiguous float64, ``ranges`` every sensor's readings in one
+        float64 array."""
+        return _seen_through_kernel(points, poses, ranges, self.starts, self.relative_angles,
+                                    self.order, self.params, margin, min_range, resolution)
 
 
 def seen_through(
@@ -301,6 +308,9 @@ class MovingPointFilter:
         self._beams = self._past_beams[0]
         self._history: deque[tuple[NDArray[np.float64], list[NDArray[np.float64]],
                                    NDArray[np.float64]]] = deque(maxlen=history)
+        self._past_poses = np.zeros((0, 3))
+        self._past_ranges = np.zeros(0)
+        self._past_world = np.zeros((0, 2))
 
     def _sensor_poses(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.array([compose(pose, s.mount) for s in self.setup.sensors])
@@ -311,28 +321,24 @@ class MovingPointFilter:
     ) -> tuple[NDArray[np.bool_], list[NDArray[np.bool_]]]:
         """``(moving (n,), stale masks)`` for the new scan's car-frame ``points`` (n, 2) at
         (estimated) car ``pose`` and each world ``map_points`` array."""
-        world = transform_points(pose, points)
+        world = np.ascontiguousarray(transform_points(pose, points), dtype=np.float64)
         if self._history:  # moved in: seen through by one of the last scans
             past = self._past_beams[len(self._history) - 1]
-            moving = past.seen_through(
-                world, np.concatenate([poses for poses, _, _ in self._history]),
-                [r for _, ranges, _ in self._history for r in ranges], self.margin,
-                self.min_range)
+            moving = past.judge(world, self._past_poses, self._past_ranges, self.margin,
+                                self.min_range, math.inf)
         else:
             moving = np.zeros(len(points), dtype=np.bool_)
         # everything the new scan may see through, in one call: the map, then the history
-        earlier = [*map_points, *(last_world for _, _, last_world in self._history)]
-        sizes = [len(p) for p in earlier]
-        if not sum(sizes):
+        sizes = [len(p) for p in map_points]
+        if not sum(sizes) + len(self._past_world):
             return moving, [np.zeros(0, dtype=np.bool_) for _ in map_points]
-        stacked = np.concatenate(earlier)
+        stacked = np.concatenate([*map_points, self._past_world])
         seen = self._beams.seen_through(
             stacked, self._sensor_poses(pose),
             [scans[key] for key in self.setup.keys], self.margin, self.min_range,
             self.stale_resolution)
         ends = np.cumsum(sizes)
-        flags = [seen[end - size:end] for size, end in zip(sizes[:len(map_points)], ends,
-                                                           strict=False)]
+        flags = [seen[end - size:end] for size, end in zip(sizes, ends, strict=True)]
         if seen.any() and len(world):  # moved on: next to a point the new scan sees through
             moving |= _near_any(world, stacked[seen], self.radius)
         return moving, flags
@@ -343,3 +349,10 @@ class MovingPointFilter:
         :meth:`classify`."""
         self._history.append((self._sensor_poses(pose), [scans[key] for key in self.setup.keys],
                               transform_points(pose, points)))
+        if not self._history:  # history=0: nothing is kept
+            return
+        # packed once here rather than at each classify (it runs up to twice a scan)
+        self._past_poses = np.concatenate([poses for poses, _, _ in self._history])
+        self._past_ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel()
+                                            for _, ranges, _ in self._history for r in ranges])
+        self._past_world = np.concatenate([world for _, _, world in self._history])
