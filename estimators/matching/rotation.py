@@ -36,7 +36,7 @@ from estimators.paper.phase_correlation_kernel import (
     uint8_rows,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import wrap_angle
+from lidar_env.se2 import wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -56,8 +56,9 @@ def _subbin_peak(correlation: FloatArray) -> tuple[float, float]:
     k = int(np.argmax(correlation))
     left, centre, right = correlation[(k - 1) % n], correlation[k], correlation[(k + 1) % n]
     curvature = left - 2.0 * centre + right
-    offset = 0.5 * (left - right) / curvature if curvature < 0 else 0.0
-    return k + float(np.clip(offset, -0.5, 0.5)), float(centre)
+    offset = float(0.5 * (left - right) / curvature) if curvature < 0 else 0.0
+    # np.clip of one number, on the float (its per-call cost is most of this function's)
+    return k + min(max(offset, -0.5), 0.5), float(centre)
 
 
 @dataclass(frozen=True)
@@ -234,8 +235,9 @@ def spectrum_rotation(
     n_angles = shapes[0][0]
     correlation = _circular_correlation(polar_a, polar_b)
     index, peak = _subbin_peak(correlation)
-    angle = float(wrap_angle(2.0 * np.pi * index / n_angles) / 2.0)
-    return RotationEstimate(angle, float(np.clip(peak, 0.0, 1.0)))
+    # wrap_angle's and np.clip's operations on the floats, bit for bit
+    angle = wrap_float(2.0 * np.pi * index / n_angles) / 2.0
+    return RotationEstimate(angle, min(max(peak, 0.0), 1.0))
 
 
 def _check_full_turn(beam_angles: FloatArray) -> None:
@@ -269,13 +271,16 @@ def range_profile_rotation(
     # c[k] = sum_i b[i] a[i - k] peaks where b[i] = a[i + d/step], i.e. at k = -d/step.
     index, peak = _subbin_peak(_circular_correlation(a, b))
     step = 2.0 * np.pi / len(angles)
-    return RotationEstimate(float(wrap_angle(-index * step)), float(np.clip(peak, 0.0, 1.0)))
+    return RotationEstimate(wrap_float(-index * step), min(max(peak, 0.0), 1.0))
 
 
 def resolve_half_turn(angle_mod_pi: float, reference: float) -> float:
     """Of ``angle_mod_pi`` and ``angle_mod_pi + pi``, the one closer to ``reference`` [rad]."""
-    candidates = wrap_angle(np.array([angle_mod_pi, angle_mod_pi + np.pi]))
-    return float(candidates[np.argmin(np.abs(wrap_angle(candidates - reference)))])
+    # on floats: wrap_angle's operations bit for bit, the first candidate on a tie (argmin's)
+    first, second = wrap_float(float(angle_mod_pi)), wrap_float(float(angle_mod_pi) + np.pi)
+    reference = float(reference)
+    return second if abs(wrap_float(second - reference)) < abs(wrap_float(first - reference)) \
+        else first
 
 
 def heading_change(

@@ -54,7 +54,7 @@ from estimators.paper.scan_image import (
     scan_to_image,
 )
 from lidar_env.errors import ConfigError
-from lidar_env.se2 import compose, inverse
+from lidar_env.se2 import compose, inverse, wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -69,6 +69,8 @@ POLAR_GRID_BEFORE_REFINEMENT = (180, 32)
 #: Two refinements whose inlier shares differ by less than this are equally good fits (a
 #: featureless corridor fits anywhere along it); the one nearer the prior then wins.
 QUALITY_TOLERANCE = 0.02
+#: ``PRIOR_SIGMA`` as Python floats, for :func:`refinement_starts`' comparisons
+_PRIOR_SIGMA_FLOATS = tuple(PRIOR_SIGMA.tolist())
 
 
 @dataclass
@@ -294,8 +296,13 @@ def clipped_confidence(confidence: float) -> float:
 def refinement_starts(start: FloatArray, prior: FloatArray | None) -> list[FloatArray]:
     """Where to start refinements: ``start``, and also ``prior`` where the two disagree by more
     than ``PRIOR_SIGMA`` (a correlation fooled by a repetitive scene)."""
-    if prior is not None and np.any(np.abs(pose_difference(start, prior)) > PRIOR_SIGMA):
-        return [start, prior]
+    if prior is not None:
+        # np.any(|pose_difference(start, prior)| > PRIOR_SIGMA) on the three floats
+        (x, y, heading), (x0, y0, heading0) = np.asarray(start).tolist(), np.asarray(prior).tolist()
+        sigma_x, sigma_y, sigma_heading = _PRIOR_SIGMA_FLOATS
+        if (abs(x - x0) > sigma_x or abs(y - y0) > sigma_y
+                or abs(wrap_float(heading - heading0)) > sigma_heading):
+            return [start, prior]
     return [start]
 
 
