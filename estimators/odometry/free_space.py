@@ -136,7 +136,10 @@ def _seen_through_kernel(
             for offset in (-1, 0, 1):
                 m = j + offset
                 if full_turn:
-                    m %= n
+                    if m < 0:
+                        m += n
+                    elif m >= n:
+                        m -= n
                 elif m < 0 or m >= n:
                     free = False
                     break
