@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +31,6 @@ from estimators.matching.curve_refinement import PRIOR_INFORMATION, PRIOR_SIGMA
 from estimators.matching.rotation_pc import (
     PreparedScan,
     ScanMatcher,
-    motion_from_sensor_match,
     refinement_starts,
     require_sensor_frame,
 )
@@ -45,12 +45,30 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, inverse, relative, wrap_float
+from lidar_env.se2 import inverse, wrap_float
 
 FloatArray = NDArray[np.float64]
 
 #: Scan intervals the clock's typical jitter is taken over (20 s at 10 Hz).
 CLOCK_HISTORY = 200
+
+#: A pose (x [m], y [m], heading [rad]) as three Python floats.
+PoseFloats = tuple[float, float, float]
+
+
+def compose_floats(a: Sequence[float], b: Sequence[float]) -> PoseFloats:
+    """``a ⊕ b`` of two poses of three floats: :func:`lidar_env.se2.compose`'s one-pose
+    operations bit for bit, without its array conversions (a step composes some thirty poses,
+    whose conversions cost more than the arithmetic)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_float(a[2] + b[2])
+
+
+def inverse_floats(a: Sequence[float]) -> PoseFloats:
+    """``a⁻¹`` of a pose of three floats: :func:`lidar_env.se2.inverse`'s one-pose operations bit
+    for bit."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return -c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_float(-a[2])
 
 
 @dataclass
@@ -118,6 +136,11 @@ class FusionEstimator(Estimator):
     _mounts: FloatArray = field(default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
     _mount_inverses: FloatArray = field(
         default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
+    #: the same as Python floats, and the main mount's inverse made as of one pose
+    _mount_floats: list[PoseFloats] = field(default_factory=list, init=False, repr=False)
+    _mount_inverse_floats: list[PoseFloats] = field(
+        default_factory=list, init=False, repr=False)
+    _main_mount_inverse: PoseFloats = field(default=(0.0, 0.0, 0.0), init=False, repr=False)
     _keyframes: list[_Keyframe] = field(default_factory=list, init=False, repr=False)
     _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
     _n_keyframes: int = field(default=0, init=False, repr=False)
@@ -159,6 +182,10 @@ class FusionEstimator(Estimator):
                                     self.icp_iterations)
         self._mounts = self.setup.mounts
         self._mount_inverses = inverse(self._mounts)
+        self._mount_floats = [tuple(mount) for mount in self._mounts.tolist()]
+        self._mount_inverse_floats = [tuple(mount) for mount in self._mount_inverses.tolist()]
+        # the main mount's inverse as se2.inverse makes it of one pose (motion_from_sensor_match)
+        self._main_mount_inverse = inverse_floats(self._mount_floats[0])
         self._keyframes = []
         self._edges = []
         self._n_keyframes = 0
@@ -186,8 +213,8 @@ class FusionEstimator(Estimator):
         self,
         keyframe: _Keyframe,
         scans: tuple[PreparedScan, ...],
-        motion_guess: FloatArray,
-        seed: FloatArray | None = None,
+        motion_guess: Sequence[float],
+        seed: Sequence[float] | None = None,
         prior_information: FloatArray = PRIOR_INFORMATION,
     ) -> list[SensorEdge]:
         """The matches of ``scans`` against ``keyframe`` (nodes 0 and 1) by refinement.
@@ -204,30 +231,37 @@ class FusionEstimator(Estimator):
         first start.
         """
         assert self._matcher is not None and self.setup is not None
-        mounts, mount_inverses = self._mounts, self._mount_inverses
+        mounts, mount_inverses = self._mount_floats, self._mount_inverse_floats
         sensors = range(len(scans))
         # guess ⊕ mount_j per target sensor j, shared by the pairs onto it
-        guess_at = [compose(motion_guess, mount) for mount in mounts]
-        start_at = guess_at if seed is None else [compose(seed, mount) for mount in mounts]
+        guess_at = [compose_floats(motion_guess, mount) for mount in mounts]
+        start_at = guess_at if seed is None else [compose_floats(seed, mount) for mount in mounts]
         edges = []
         for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
             # relative(mount_i, guess ⊕ mount_j), the mount's inverse made once
-            prior = compose(mount_inverses[i], guess_at[j])
-            start = prior if start_at is guess_at else compose(mount_inverses[i], start_at[j])
+            prior = np.array(compose_floats(mount_inverses[i], guess_at[j]))
+            start = prior if start_at is guess_at else np.array(
+                compose_floats(mount_inverses[i], start_at[j]))
             match = self._matcher.refine(
                 keyframe.scans[i],
                 scans[j],
                 refinement_starts(start, prior),
                 prior,
-                mount_inverses[j][:2],
+                self._mount_inverses[j][:2],
                 prior_information,
             )
             edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
             if seed is not None and i == j == 0:
                 # The main pair, refined, is a closer start for the others than the correlation.
-                start_motion = motion_from_sensor_match(mounts[0], match.pose)
-                start_at = [compose(start_motion, mount) for mount in mounts]
+                start_motion = self._motion_from_sensor_match(match.pose)
+                start_at = [compose_floats(start_motion, mount) for mount in mounts]
         return edges
+
+    def _motion_from_sensor_match(self, sensor_motion: FloatArray) -> PoseFloats:
+        """:func:`estimators.matching.rotation_pc.motion_from_sensor_match` of the main Lidar,
+        on floats: the car motion ``mount ⊕ z ⊕ mount⁻¹`` from its match ``z``."""
+        return compose_floats(compose_floats(self._mount_floats[0], sensor_motion.tolist()),
+                              self._main_mount_inverse)
 
     def _weights(self) -> dict[str, float]:
         return {
@@ -238,7 +272,8 @@ class FusionEstimator(Estimator):
 
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self.setup is not None
-        mounts, mount_inverses = self._mounts, self._mount_inverses
+        # the poses on Python floats (compose_floats), arrays only where the matcher reads them
+        mounts, mount_inverses = self._mount_floats, self._mount_inverse_floats
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
@@ -246,36 +281,38 @@ class FusionEstimator(Estimator):
         # the horizon of the positive intervals' median (the clock's steps: all it keeps)
         typical = [self._clock.typical_step] if self._clock.steps else []
         predicted = within_prediction_horizon(dt, typical)
-        previous = self.pose
-        step = self._velocity * dt if predicted else np.zeros(3)
-        guess = relative(latest.pose, compose(previous, step))
+        previous = self.pose.tolist()
+        step = (self._velocity * dt if predicted else np.zeros(3)).tolist()
+        to_latest = inverse_floats(latest.pose.tolist())
+        guess = compose_floats(to_latest, compose_floats(previous, step))
         correlated = self._matcher.correlate(
-            latest.scans[0], current[0], compose(mount_inverses[0], compose(guess, mounts[0]))
+            latest.scans[0], current[0],
+            np.array(compose_floats(mount_inverses[0], compose_floats(guess, mounts[0]))),
         )
-        seed = motion_from_sensor_match(mounts[0], correlated.pose)
+        seed = self._motion_from_sensor_match(correlated.pose)
         # A constant twist moves the car along the chord of its turn: with the turn the
         # correlation measured (far better than the mean rate's), the predicted translation
         # turns by half the difference. Where the scans leave the translation open (a
         # corridor), this keeps a weaving car's speed instead of bending its path.
         # (on Python floats: wrap_angle's and rotate's operations, a tenth of their cost)
-        x, y, heading = step.tolist()
-        turn = wrap_float(float(latest.pose[2]) + float(seed[2]) - float(previous[2]))
+        x, y, heading = step
+        turn = wrap_float(float(latest.pose[2]) + seed[2] - previous[2])
         if abs(wrap_float(turn - heading)) < PRIOR_SIGMA[2]:
             c, s = math.cos(0.5 * (turn - heading)), math.sin(0.5 * (turn - heading))
-            step = np.array([c * x - s * y, s * x + c * y, turn])
-            guess = relative(latest.pose, compose(previous, step))
+            step = [c * x - s * y, s * x + c * y, turn]
+            guess = compose_floats(to_latest, compose_floats(previous, step))
         information = self._prediction_information(dt, predicted)
         edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
-        start = compose(compose(mounts[0], edges[0].pose), mount_inverses[0])
-        from_latest = fuse_car_motion(mounts, edges, start, **self._weights())
-        pose = compose(latest.pose, from_latest)
+        start = compose_floats(compose_floats(mounts[0], edges[0].pose.tolist()), mount_inverses[0])
+        from_latest = fuse_car_motion(self._mounts, edges, start, **self._weights())
+        pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
             pose = self._insert_keyframe(current, pose, edges)
-        self._update_velocity(relative(previous, pose), dt)
+        self._update_velocity(list(compose_floats(inverse_floats(previous), pose.tolist())), dt)
         return pose
 
     def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:
@@ -292,7 +329,7 @@ class FusionEstimator(Estimator):
         speed = float(np.hypot(self._velocity[0], self._velocity[1]))
         return prediction_information(dt, speed, self._clock.jitter)
 
-    def _update_velocity(self, motion: FloatArray, dt: float) -> None:
+    def _update_velocity(self, motion: list[float], dt: float) -> None:
         """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of
         the last ``velocity_window`` [s].
 
@@ -302,7 +339,7 @@ class FusionEstimator(Estimator):
         that of its two ends over its length. Steps inside such a corridor take their open
         component from the prediction, so they keep the velocity the scans last measured.
         """
-        self._recent.append((motion.tolist(), dt))
+        self._recent.append((motion, dt))
         span = sum(step_dt for _, step_dt in self._recent)
         while len(self._recent) > 1 and span - self._recent[0][1] >= self.velocity_window:
             span -= self._recent.popleft()[1]
@@ -326,7 +363,7 @@ class FusionEstimator(Estimator):
         self._edges.extend((new_id - 1, new_id, e) for e in latest_edges)
         older = self._keyframes[leaving:-1]
         for offset, keyframe in enumerate(older):
-            guess = relative(keyframe.pose, pose)
+            guess = compose_floats(inverse_floats(keyframe.pose.tolist()), pose.tolist())
             ids = (first_staying + offset, new_id)
             self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
         self._add_keyframe(_Keyframe(pose, scans))
