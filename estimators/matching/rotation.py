@@ -22,6 +22,7 @@ from scan ``a`` to scan ``b``; the scene then appears turned by minus that angle
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cache
 
@@ -75,11 +76,17 @@ class CentredSpectrum:
 
 def centred_spectrum(signal: FloatArray) -> CentredSpectrum:
     """The :class:`CentredSpectrum` of ``signal`` ``(n, ...)``."""
-    centred = signal - signal.mean(axis=0)
+    if signal.dtype == np.float64:
+        # np.mean's and np.sum's reductions without their Python wrappers: the same ufunc
+        # calls, bit for bit (a keyframe's and every scan's log-polar grid go through here)
+        centred = signal - np.add.reduce(signal, axis=0) / len(signal)
+        energy = float(np.add.reduce(centred * centred, axis=None))
+    else:
+        centred = signal - signal.mean(axis=0)
+        energy = float(np.sum(centred * centred))
     # scipy's transform: numpy's values (on every log-polar grid of the 5 default drives) at
     # three quarters of its cost
-    return CentredSpectrum(scipy.fft.rfft(centred, axis=0, workers=1),
-                           float(np.sum(centred * centred)), len(signal))
+    return CentredSpectrum(scipy.fft.rfft(centred, axis=0, workers=1), energy, len(signal))
 
 
 def _circular_correlation(
@@ -91,9 +98,9 @@ def _circular_correlation(
     a = a if isinstance(a, CentredSpectrum) else centred_spectrum(a)
     b = b if isinstance(b, CentredSpectrum) else centred_spectrum(b)
     spectrum = b.transform * np.conj(a.transform)
-    if spectrum.ndim > 1:
-        spectrum = spectrum.sum(axis=tuple(range(1, spectrum.ndim)))
-    norm = np.sqrt(a.energy * b.energy)
+    if spectrum.ndim > 1:  # ndarray.sum's reduction without its wrapper
+        spectrum = np.add.reduce(spectrum, axis=tuple(range(1, spectrum.ndim)))
+    norm = math.sqrt(a.energy * b.energy)  # correctly rounded, as np.sqrt
     if norm == 0.0:
         return np.zeros(a.length)
     return np.fft.irfft(spectrum, n=a.length) / norm
