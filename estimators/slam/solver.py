@@ -290,6 +290,10 @@ class EliminationOrdering:
         self._pattern: tuple[NDArray[np.int32], NDArray[np.int32]] | None = None
         self._order = np.zeros(0, dtype=np.int64)
         self._fill_per_variable = 0.0  # nnz(L) / n of the last MMD ordering
+        # the kept order's permuted pattern (_analyse): where its entries sit in the matrix's
+        # data, its CSC arrays, its elimination tree and column starts (cholesky_pattern)
+        self._take = self._indptr = self._indices = np.zeros(0, dtype=np.int64)
+        self._tree: tuple[NDArray[np.int64], ...] = ()
 
     def solve(self, matrix: sp.csc_matrix, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
         """``matrix^-1 rhs`` for a square SPD CSC ``matrix`` with sorted indices."""
