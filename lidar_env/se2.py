@@ -7,6 +7,7 @@ broadcasts; headings are wrapped to ``[-pi, pi)``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,31 +33,33 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.shape == b.shape == (3,):  # one pose: the same operations on Python floats
-        return np.array(_compose_floats(*a.tolist(), *b.tolist()))
+        return np.array(compose_floats(a.tolist(), b.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
     return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
 
 
-def _compose_floats(
-    ax: float, ay: float, at: float, bx: float, by: float, bt: float
-) -> tuple[float, float, float]:
-    """:func:`compose` of one pose on Python floats: the batch's operations in its order, bit
-    for bit (``math.cos``/``sin`` are the C library's, as numpy's float64 loops; Python's
-    float ``%`` takes the divisor's sign, as ``np.remainder``), at a third of numpy scalars'
-    cost."""
-    c, s = math.cos(at), math.sin(at)
-    return ax + c * bx - s * by, ay + s * bx + c * by, wrap_float(at + bt)
+def compose_floats(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`compose` of two poses of three Python floats: the batch's operations in its
+    order, bit for bit (``math.cos``/``sin`` are the C library's, as numpy's float64 loops;
+    Python's float ``%`` takes the divisor's sign, as ``np.remainder``), without the array
+    conversions, which cost more than the arithmetic (a third of numpy scalars' cost)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_float(a[2] + b[2])
+
+
+def inverse_floats(a: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`inverse` of a pose of three Python floats, bit for bit (as :func:`compose_floats`)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return -c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_float(-a[2])
 
 
 def inverse(a: ArrayLike) -> Pose:
     """``a⁻¹``: the pose of the parent frame seen from frame ``a``."""
     a = np.asarray(a, dtype=np.float64)
     if a.shape == (3,):  # one pose: the same operations on Python floats
-        x, y, heading = a.tolist()
-        c, s = math.cos(heading), math.sin(heading)
-        return np.array([-c * x - s * y, s * x - c * y, wrap_float(-heading)])
+        return np.array(inverse_floats(a.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

@@ -45,7 +45,7 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import inverse, wrap_float
+from lidar_env.se2 import compose_floats, inverse, inverse_floats, wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -54,21 +54,6 @@ CLOCK_HISTORY = 200
 
 #: A pose (x [m], y [m], heading [rad]) as three Python floats.
 PoseFloats = tuple[float, float, float]
-
-
-def compose_floats(a: Sequence[float], b: Sequence[float]) -> PoseFloats:
-    """``a ⊕ b`` of two poses of three floats: :func:`lidar_env.se2.compose`'s one-pose
-    operations bit for bit, without its array conversions (a step composes some thirty poses,
-    whose conversions cost more than the arithmetic)."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_float(a[2] + b[2])
-
-
-def inverse_floats(a: Sequence[float]) -> PoseFloats:
-    """``a⁻¹`` of a pose of three floats: :func:`lidar_env.se2.inverse`'s one-pose operations bit
-    for bit."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return -c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_float(-a[2])
 
 
 @dataclass

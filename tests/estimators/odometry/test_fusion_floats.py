@@ -1,4 +1,5 @@
-"""``pc_fusion``'s pose algebra on Python floats against :mod:`lidar_env.se2`'s, bit for bit
+"""The pose algebra on Python floats (``pc_fusion``'s) against :mod:`lidar_env.se2`'s batches,
+bit for bit
 (issue 21: a step composes some thirty poses, whose array conversions cost more than the
 arithmetic)."""
 
@@ -8,8 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimators.odometry.fusion import compose_floats, inverse_floats
-from lidar_env.se2 import compose, inverse, relative
+from lidar_env.se2 import compose, compose_floats, inverse, inverse_floats, relative
 
 coordinates = st.floats(-100.0, 100.0, allow_nan=False)
 poses = st.tuples(coordinates, coordinates, st.floats(-10.0, 10.0, allow_nan=False))
@@ -20,17 +20,17 @@ poses = st.tuples(coordinates, coordinates, st.floats(-10.0, 10.0, allow_nan=Fal
 def test_compose_floats_is_se2_compose_bit_for_bit(
     a: tuple[float, float, float], b: tuple[float, float, float]
 ) -> None:
-    expected = compose(np.array(a), np.array(b))
+    expected = compose(np.array([a]), np.array([b]))[0]  # the batch path, not the float one
     assert np.array_equal(np.array(compose_floats(a, b)), expected)
     # and a relative pose, as the estimator chains them
     assert np.array_equal(np.array(compose_floats(inverse_floats(a), b)),
-                          relative(np.array(a), np.array(b)))
+                          relative(np.array([a]), np.array([b]))[0])
 
 
 @settings(max_examples=300, deadline=None)
 @given(poses)
 def test_inverse_floats_is_se2_inverse_bit_for_bit(a: tuple[float, float, float]) -> None:
-    assert np.array_equal(np.array(inverse_floats(a)), inverse(np.array(a)))
+    assert np.array_equal(np.array(inverse_floats(a)), inverse(np.array([a]))[0])
 
 
 def test_floats_compose_back_to_the_identity() -> None:
