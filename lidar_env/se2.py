@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 Pose = NDArray[np.float64]
+#: One pose (x [m], y [m], heading [rad]) as three Python floats (:func:`compose_floats`).
+PoseFloats = tuple[float, float, float]
 _TWO_PI = 2.0 * np.pi
 
 
@@ -40,7 +42,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
 
 
-def compose_floats(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]:
+def compose_floats(a: Sequence[float], b: Sequence[float]) -> PoseFloats:
     """:func:`compose` of two poses of three Python floats: the batch's operations in its
     order, bit for bit (``math.cos``/``sin`` are the C library's, as numpy's float64 loops;
     Python's float ``%`` takes the divisor's sign, as ``np.remainder``), without the array
@@ -49,7 +51,7 @@ def compose_floats(a: Sequence[float], b: Sequence[float]) -> tuple[float, float
     return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_float(a[2] + b[2])
 
 
-def inverse_floats(a: Sequence[float]) -> tuple[float, float, float]:
+def inverse_floats(a: Sequence[float]) -> PoseFloats:
     """:func:`inverse` of a pose of three Python floats, bit for bit (as :func:`compose_floats`)."""
     c, s = math.cos(a[2]), math.sin(a[2])
     return -c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_float(-a[2])

@@ -45,15 +45,12 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
 )
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose_floats, inverse, inverse_floats, wrap_float
+from lidar_env.se2 import PoseFloats, compose_floats, inverse, inverse_floats, wrap_float
 
 FloatArray = NDArray[np.float64]
 
 #: Scan intervals the clock's typical jitter is taken over (20 s at 10 Hz).
 CLOCK_HISTORY = 200
-
-#: A pose (x [m], y [m], heading [rad]) as three Python floats.
-PoseFloats = tuple[float, float, float]
 
 
 @dataclass
