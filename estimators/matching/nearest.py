@@ -263,6 +263,51 @@ def search_near(
     return best0, at0, best1, at1, best2, at2
 
 
+@njit(cache=True, inline="always")
+def k_nearest(
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    qx: float, qy: float, k: int, bound: float, pending: NDArray[np.int64],
+    best: NDArray[np.float64], at: NDArray[np.int64],
+) -> None:
+    """The ``k`` points nearest (qx, qy) with squared distance below ``bound``, written to
+    ``best[:k]`` (squared distances, ascending) and ``at[:k]`` (indices), ``inf`` and ``n``
+    where fewer exist; equally distant points ranked by index. The best so far are kept
+    sorted, a candidate inserted in place. For compiled callers, as :func:`search`; ``best``
+    and ``at`` are scratch of at least ``k`` entries, like ``pending``."""
+    n = tree_points.shape[0]
+    best[:k] = np.inf
+    at[:k] = n
+    pending[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node = pending[top]
+        gap = _box_gap(box, node, qx, qy)
+        if gap > best[k - 1] or gap >= bound:  # ties with the k-th best still count
+            continue
+        first = child[node]
+        if first >= 0:
+            top = _push_children(box, first, qx, qy, pending, top)
+            continue
+        for p in range(start[node], end[node]):
+            dx = tree_points[p, 0] - qx
+            dy = tree_points[p, 1] - qy
+            d2 = dx * dx + dy * dy
+            original = order[p]
+            if d2 > best[k - 1] or (d2 == best[k - 1] and original > at[k - 1]):
+                continue
+            rank = k - 1  # shift the farther ones down, the last one out
+            while rank > 0 and (d2 < best[rank - 1] or (
+                    d2 == best[rank - 1] and original < at[rank - 1])):
+                best[rank], at[rank] = best[rank - 1], at[rank - 1]
+                rank -= 1
+            best[rank], at[rank] = d2, original
+    for j in range(k):
+        if not best[j] < bound:
+            best[j], at[j] = np.inf, n
+
+
 @njit(cache=True)
 def _nearest(
     order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
@@ -270,45 +315,13 @@ def _nearest(
     queries: NDArray[np.float64], k: int, max_distance: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """``(M, k)`` distances and indices of each query's ``k`` nearest points closer than
-    ``max_distance``; ``inf`` and ``n`` where fewer exist (``cKDTree.query``'s answer), equally
-    distant points ranked by index. Each query's ``k`` best so far are kept sorted in its
-    rows, a candidate inserted in place."""
-    n = tree_points.shape[0]
-    squared = np.full((queries.shape[0], k), np.inf)
-    index = np.full((queries.shape[0], k), n, np.int64)
-    bound = max_distance * max_distance
+    ``max_distance`` (:func:`k_nearest`): ``cKDTree.query``'s answer."""
+    squared = np.empty((queries.shape[0], k))
+    index = np.empty((queries.shape[0], k), np.int64)
     pending = np.empty(STACK, np.int64)
     for q in range(queries.shape[0]):
-        qx, qy = queries[q, 0], queries[q, 1]
-        best, at = squared[q], index[q]
-        pending[0] = 0
-        top = 1
-        while top > 0:
-            top -= 1
-            node = pending[top]
-            gap = _box_gap(box, node, qx, qy)
-            if gap > best[k - 1] or gap >= bound:  # ties with the k-th best still count
-                continue
-            first = child[node]
-            if first >= 0:
-                top = _push_children(box, first, qx, qy, pending, top)
-                continue
-            for p in range(start[node], end[node]):
-                dx = tree_points[p, 0] - qx
-                dy = tree_points[p, 1] - qy
-                d2 = dx * dx + dy * dy
-                original = order[p]
-                if d2 > best[k - 1] or (d2 == best[k - 1] and original > at[k - 1]):
-                    continue
-                rank = k - 1  # shift the farther ones down, the last one out
-                while rank > 0 and (d2 < best[rank - 1] or (
-                        d2 == best[rank - 1] and original < at[rank - 1])):
-                    best[rank], at[rank] = best[rank - 1], at[rank - 1]
-                    rank -= 1
-                best[rank], at[rank] = d2, original
-        for j in range(k):
-            if not best[j] < bound:
-                best[j], at[j] = np.inf, n
+        k_nearest(order, tree_points, start, end, child, box, queries[q, 0], queries[q, 1], k,
+                  max_distance * max_distance, pending, squared[q], index[q])
     return np.sqrt(squared), index
 
 

@@ -1,12 +1,17 @@
-"""Compiled per-point fits of a map's neighbourhoods: the line through each point's nearest
-neighbours and the parabola in that line's frame, one numba loop over the points.
+"""Compiled per-point fits of a map's neighbourhoods: each point's nearest neighbours, the line
+through them and the parabola in that line's frame, in one numba loop over the points.
 
-The math is :func:`estimators.matching.scan_matching.fit_rows_pure` and
-:func:`estimators.matching.scan_matching.curve_points_pure` (the principal axis of the
-neighbours' covariance, the line test, the least-squares parabola ``t = a + b s + c s^2``),
-which ``tests/estimators/matching/test_scan_matching.py`` checks these kernels against. The
-local map is refitted at every keyframe (thousands of points, up to 72 neighbours each), where
-the array form's (n, k, 2) temporaries and batched 3 x 3 solves cost most of the keyframe.
+The math is :func:`estimators.matching.scan_matching.fit_local_curves`'s array form (the
+principal axis of the neighbours' covariance, the line test, the least-squares parabola
+``t = a + b s + c s^2``), which ``tests/estimators/matching/test_scan_matching.py`` checks
+these kernels against. The local map is refitted at every keyframe (thousands of points, up
+to 72 neighbours each): searching, fitting and growing each point's neighbourhood in one
+compiled pass leaves no (n, k) neighbour arrays, subsets or dispatches between the steps,
+and searching the points in the tree's order keeps consecutive searches in the same nodes.
+
+Arrays: ``tree`` is the tuple a :class:`estimators.matching.nearest.PointIndex` holds over
+``points`` (N, 2) [m]; ``normals`` (N, 2), ``valid`` (N,) and ``anchors`` (N, 2) [m] are
+written in place, row by row.
 """
 
 from __future__ import annotations
@@ -14,56 +19,53 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from estimators.matching.nearest import STACK, PointIndex, k_nearest
+from estimators.matching.prediction import median
+from lidar_env.errors import ConfigError
+
+#: The tuple :attr:`estimators.matching.nearest.PointIndex.arrays`.
+Tree = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],
+             NDArray[np.int64], NDArray[np.float64]]
 
 
-@njit(cache=True)
-def line_fits(
-    points: NDArray[np.float64], rows: NDArray[np.int64], index: NDArray[np.int64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-           NDArray[np.float64], NDArray[np.bool_]]:
-    """Lines through the neighbours ``index`` (n, k) of ``points[rows]`` (``len(points)``
-    where missing): neighbour count, centroid (n, 2), unit normal (n, 2), RMS spread across
-    the line [m] and whether it is a line (>= 3 neighbours, elongated, the point in its band)."""
-    n, k = index.shape
+@njit(cache=True, inline="always")
+def _line(points: NDArray[np.float64], row: int, at: NDArray[np.int64], k: int,
+          ) -> tuple[float, float, float, float, float, float, bool]:
+    """The line through the neighbours ``at[:k]`` of ``points[row]`` (``len(points)`` where
+    missing): neighbour count, centroid, unit normal, RMS spread across the line [m] and
+    whether it is a line (>= 3 neighbours, elongated, the point in its band)."""
     missing = points.shape[0]
-    count = np.zeros(n)
-    mean = np.zeros((n, 2))
-    normals = np.empty((n, 2))
-    across = np.empty(n)
-    valid = np.empty(n, np.bool_)
-    for r in range(n):
-        sx = sy = 0.0
-        for j in range(k):
-            if index[r, j] != missing:
-                count[r] += 1.0
-                sx += points[index[r, j], 0]
-                sy += points[index[r, j], 1]
-        mx, my = sx / count[r], sy / count[r]
-        mean[r, 0], mean[r, 1] = mx, my
-        sxx = syy = sxy = 0.0
-        for j in range(k):
-            if index[r, j] != missing:
-                dx, dy = points[index[r, j], 0] - mx, points[index[r, j], 1] - my
-                sxx += dx * dx
-                syy += dy * dy
-                sxy += dx * dy
-        direction = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
-        nx, ny = -np.sin(direction), np.cos(direction)
-        normals[r, 0], normals[r, 1] = nx, ny
-        spread = np.sqrt((sxx - syy) ** 2 + 4.0 * sxy**2)
-        small = 0.5 * (sxx + syy - spread)
-        large = 0.5 * (sxx + syy + spread)
-        across[r] = np.sqrt(max(small, 0.0) / count[r])
-        own = abs((points[rows[r], 0] - mx) * nx + (points[rows[r], 1] - my) * ny)
-        valid[r] = count[r] >= 3 and small < 0.1 * large and own <= 3.0 * across[r] + 1e-9
-    return count, mean, normals, across, valid
+    count = sx = sy = 0.0
+    for j in range(k):
+        if at[j] != missing:
+            count += 1.0
+            sx += points[at[j], 0]
+            sy += points[at[j], 1]
+    mx, my = sx / count, sy / count
+    sxx = syy = sxy = 0.0
+    for j in range(k):
+        if at[j] != missing:
+            dx, dy = points[at[j], 0] - mx, points[at[j], 1] - my
+            sxx += dx * dx
+            syy += dy * dy
+            sxy += dx * dy
+    direction = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    nx, ny = -np.sin(direction), np.cos(direction)
+    spread = np.sqrt((sxx - syy) ** 2 + 4.0 * sxy**2)
+    small = 0.5 * (sxx + syy - spread)
+    large = 0.5 * (sxx + syy + spread)
+    across = np.sqrt(max(small, 0.0) / count)
+    own = abs((points[row, 0] - mx) * nx + (points[row, 1] - my) * ny)
+    valid = count >= 3 and small < 0.1 * large and own <= 3.0 * across + 1e-9
+    return count, mx, my, nx, ny, across, valid
 
 
-@njit(cache=True)
-def _solve3(m: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``m^-1 v`` for a 3 x 3 system by Gaussian elimination with partial pivoting."""
-    a = m.copy()
-    x = v.copy()
+@njit(cache=True, inline="always")
+def _solve3(a: NDArray[np.float64], x: NDArray[np.float64]) -> None:
+    """``x <- a^-1 x`` for a 3 x 3 system by Gaussian elimination with partial pivoting, in
+    place (``a`` is overwritten)."""
     for col in range(3):
         pivot = col
         for row in range(col + 1, 3):
@@ -82,46 +84,154 @@ def _solve3(m: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float6
         for j in range(row + 1, 3):
             x[row] -= a[row, j] * x[j]
         x[row] /= a[row, row]
-    return x
+
+
+@njit(cache=True, inline="always")
+def _curve(points: NDArray[np.float64], row: int, at: NDArray[np.int64], k: int, mx: float,
+           my: float, nx: float, ny: float, gram: NDArray[np.float64],
+           moment: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    """The normal and anchor of ``points[row]`` moved onto the parabola through its
+    neighbours ``at[:k]`` in the frame of their line (centroid ``mx, my``, normal ``nx,
+    ny``); ``gram`` (3, 3) and ``moment`` (3,) are scratch."""
+    missing = points.shape[0]
+    tx, ty = ny, -nx
+    g01 = g02 = g12 = g22 = m0 = m1 = m2 = 0.0
+    count = 0.0
+    for j in range(k):
+        if at[j] == missing:
+            continue
+        ox, oy = points[at[j], 0] - mx, points[at[j], 1] - my
+        s, t = ox * tx + oy * ty, ox * nx + oy * ny
+        square = s * s  # the basis (1, s, s^2): products with 1 are exact
+        count += 1.0
+        g01 += s
+        g02 += square
+        g12 += s * square
+        g22 += square * square
+        m0 += t
+        m1 += s * t
+        m2 += square * t
+    gram[0, 0], gram[0, 1], gram[0, 2] = count, g01, g02
+    gram[1, 0], gram[1, 1], gram[1, 2] = g01, g02, g12
+    gram[2, 0], gram[2, 1], gram[2, 2] = g02, g12, g22
+    moment[0], moment[1], moment[2] = m0, m1, m2
+    _solve3(gram, moment)
+    c0, c1, c2 = moment[0], moment[1], moment[2]
+    px, py = points[row, 0] - mx, points[row, 1] - my
+    s = px * tx + py * ty
+    height = c0 + c1 * s + c2 * s * s
+    slope = c1 + 2.0 * c2 * s
+    cx, cy = nx - slope * tx, ny - slope * ty
+    length = np.sqrt(cx * cx + cy * cy)
+    return cx / length, cy / length, mx + s * tx + height * nx, my + s * ty + height * ny
+
+
+@njit(cache=True, inline="always")
+def _fit(tree: Tree, points: NDArray[np.float64], row: int, k: int, bound: float,
+         noise: float, curves: bool, normals: NDArray[np.float64], valid: NDArray[np.bool_],
+         anchors: NDArray[np.float64], pending: NDArray[np.int64], best: NDArray[np.float64],
+         at: NDArray[np.int64], gram: NDArray[np.float64], moment: NDArray[np.float64],
+         ) -> tuple[float, float, bool]:
+    """Fit ``points[row]``'s ``k`` nearest neighbours closer than ``sqrt(bound)`` [m]: its
+    line's normal and whether it is one with a spread across of at most ``noise`` [m]; with
+    ``curves``, where it is and has at least 5 neighbours, the parabola's normal and anchor.
+    Returns the neighbour count, the spread across [m] and the validity."""
+    order, tree_points, start, end, child, box = tree
+    k_nearest(order, tree_points, start, end, child, box, points[row, 0], points[row, 1], k,
+              bound, pending, best, at)
+    count, mx, my, nx, ny, across, line = _line(points, row, at, k)
+    line = line and across <= noise
+    normals[row, 0], normals[row, 1], valid[row] = nx, ny, line
+    if curves and line and count >= 5:
+        normals[row, 0], normals[row, 1], anchors[row, 0], anchors[row, 1] = _curve(
+            points, row, at, k, mx, my, nx, ny, gram, moment)
+    return count, across, line
 
 
 @njit(cache=True)
-def curve_points(
-    points: NDArray[np.float64], rows: NDArray[np.int64], index: NDArray[np.int64],
-    mean: NDArray[np.float64], normals: NDArray[np.float64],
+def fit_neighbourhoods(
+    tree: Tree, points: NDArray[np.float64], k: int, max_radius: float, curves: bool,
+    normals: NDArray[np.float64], valid: NDArray[np.bool_], anchors: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Normals and anchors (n, 2): ``points[rows]`` moved onto the parabola through their
-    neighbours ``index`` (n, k) in the frame of their line (centroid ``mean``, ``normals``)."""
-    n, k = index.shape
-    missing = points.shape[0]
-    curve_normals = np.empty((n, 2))
-    on_curve = np.empty((n, 2))
-    gram = np.empty((3, 3))
-    moment = np.empty(3)
-    for r in range(n):
-        nx, ny = normals[r, 0], normals[r, 1]
-        tx, ty = ny, -nx
-        gram[:] = 0.0
-        moment[:] = 0.0
-        for j in range(k):
-            if index[r, j] == missing:
-                continue
-            ox = points[index[r, j], 0] - mean[r, 0]
-            oy = points[index[r, j], 1] - mean[r, 1]
-            s, t = ox * tx + oy * ty, ox * nx + oy * ny
-            basis = (1.0, s, s * s)
-            for a in range(3):
-                moment[a] += basis[a] * t
-                for b in range(3):
-                    gram[a, b] += basis[a] * basis[b]
-        c0, c1, c2 = _solve3(gram, moment)
-        px, py = points[rows[r], 0] - mean[r, 0], points[rows[r], 1] - mean[r, 1]
-        s = px * tx + py * ty
-        height = c0 + c1 * s + c2 * s * s
-        on_curve[r, 0] = mean[r, 0] + s * tx + height * nx
-        on_curve[r, 1] = mean[r, 1] + s * ty + height * ny
-        slope = c1 + 2.0 * c2 * s
-        cx, cy = nx - slope * tx, ny - slope * ty
-        length = np.sqrt(cx * cx + cy * cy)
-        curve_normals[r, 0], curve_normals[r, 1] = cx / length, cy / length
-    return curve_normals, on_curve
+    """Every point's fit through its ``k`` nearest neighbours within ``max_radius`` [m] (see
+    :func:`_fit`, no noise limit), searched in the tree's order; the neighbour counts and
+    spreads across [m] (N,)."""
+    n = points.shape[0]
+    count = np.empty(n)
+    across = np.empty(n)
+    pending = np.empty(STACK, np.int64)
+    best, at = np.empty(k), np.empty(k, np.int64)
+    gram, moment = np.empty((3, 3)), np.empty(3)
+    order = tree[0]
+    for p in range(n):
+        row = order[p]
+        count[row], across[row], _ = _fit(
+            tree, points, row, k, max_radius * max_radius, np.inf, curves, normals, valid,
+            anchors, pending, best, at, gram, moment)
+    return count, across
+
+
+@njit(cache=True)
+def grow_neighbourhoods(
+    tree: Tree, points: NDArray[np.float64], count: NDArray[np.float64],
+    across: NDArray[np.float64], k: int, limit: int, max_radius: float, noise: float,
+    curves: bool, normals: NDArray[np.float64], valid: NDArray[np.bool_],
+    anchors: NDArray[np.float64],
+) -> None:
+    """Refit the points whose ``k`` neighbours (``count`` and ``across`` (N,) of
+    :func:`fit_neighbourhoods`) are no line but spread across at most ``noise`` [m] through
+    twice as many, then again those of them still so, up to ``limit`` neighbours; a point
+    with fewer neighbours than were asked for already has all within ``max_radius`` [m]."""
+    n = points.shape[0]
+    rows = np.empty(n, np.int64)
+    grow = 0
+    for row in range(n):
+        if not valid[row] and count[row] == k and across[row] <= noise:
+            rows[grow] = row
+            grow += 1
+    pending = np.empty(STACK, np.int64)
+    best, at = np.empty(limit), np.empty(limit, np.int64)
+    gram, moment = np.empty((3, 3)), np.empty(3)
+    width = k
+    while width < limit and grow > 0:
+        width = min(2 * width, limit)
+        still = 0
+        for i in range(grow):
+            row = rows[i]
+            found, spread, line = _fit(tree, points, row, width, max_radius * max_radius,
+                                       noise, curves, normals, valid, anchors, pending, best,
+                                       at, gram, moment)
+            if not line and found == width and spread <= noise:
+                rows[still] = row
+                still += 1
+        grow = still
+
+
+def local_fits(
+    points: NDArray[np.float64], tree: PointIndex | cKDTree, k: int, max_radius: float,
+    max_k: int | None, curves: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """Normals (N, 2), validity (N,) and anchors (N, 2) [m] of ``points`` (N, 2) [m] through
+    their ``k`` nearest neighbours within ``max_radius`` [m], grown up to ``max_k`` where they
+    are no line (:func:`fit_neighbourhoods`, then :func:`grow_neighbourhoods` with twice the
+    median spread across as the noise limit); with ``curves`` the parabolas' normals and
+    anchors, else the lines' normals and the raw points: the compiled form of
+    :func:`estimators.matching.scan_matching.fit_local_curves` and
+    :func:`~estimators.matching.scan_matching.estimate_normals`, bit for bit the same
+    per-point arithmetic. ``tree`` is a :class:`PointIndex` over ``points``."""
+    if not isinstance(tree, PointIndex):
+        raise ConfigError(f"tree: the compiled fits search a PointIndex, got "
+                          f"{type(tree).__name__} (compiled=False takes any tree with "
+                          "cKDTree.query)")
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    normals = np.empty((len(points), 2))
+    valid = np.empty(len(points), dtype=bool)
+    anchors = points.copy()
+    width = min(k, len(points))
+    count, across = fit_neighbourhoods(tree.arrays, points, width, float(max_radius), curves,
+                                       normals, valid, anchors)
+    limit = min(max_k or k, len(points))
+    if width < limit:
+        grow_neighbourhoods(tree.arrays, points, count, across, width, limit, float(max_radius),
+                            2.0 * median(across), curves, normals, valid, anchors)
+    return normals, valid, anchors

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from estimators.base import SensorSetup
 from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
-from estimators.matching.neighbourhood_fits import curve_points, line_fits
+from estimators.matching.neighbourhood_fits import local_fits
 from estimators.matching.prediction import median
 from lidar_env.errors import ConfigError, EstimatorInputError
 from lidar_env.se2 import transform_points
@@ -180,18 +180,12 @@ def _gathered(points: NDArray[np.float64], rows: NDArray[np.intp], index: NDArra
 
 def _fit_rows(
     points: NDArray[np.float64], tree: PointIndex | cKDTree, rows: NDArray[np.intp], k: int,
-    max_radius: float, compiled: bool = True,
+    max_radius: float,
 ) -> _Neighbourhoods:
     """Lines through the ``k`` nearest neighbours (within ``max_radius``) of ``points[rows]``
-    (``tree``: anything with ``cKDTree.query``'s signature over ``points``). ``compiled``
-    fits them in :func:`estimators.matching.neighbourhood_fits.line_fits`, else in arrays
-    (the same math)."""
+    (``tree``: anything with ``cKDTree.query``'s signature over ``points``), in arrays."""
     _, index = tree.query(points[rows], k=k, distance_upper_bound=max_radius)
     index = index.reshape(len(rows), k).astype(np.int64, copy=False)
-    if compiled:
-        count, mean, normals, across, valid = line_fits(
-            points, rows.astype(np.int64, copy=False), index)
-        return _Neighbourhoods(rows, index, count, mean, normals, across, valid)
     neighbours, weights = _gathered(points, rows, index)
     count = weights.sum(axis=1)
     mean = (neighbours * weights[..., None]).sum(axis=1) / count[:, None]
@@ -220,7 +214,7 @@ def _subset(fit: _Neighbourhoods, keep: NDArray[np.bool_]) -> _Neighbourhoods:
 
 def _fit_lines(
     points: NDArray[np.float64], tree: PointIndex | cKDTree, k: int, max_radius: float,
-    max_k: int | None = None, compiled: bool = True,
+    max_k: int | None = None,
 ) -> list[_Neighbourhoods]:
     """Lines through each point's ``k`` nearest neighbours; where they do not form one, the
     neighbourhood doubles (up to ``max_k`` points and ``max_radius``) until they do.
@@ -240,8 +234,7 @@ def _fit_lines(
     of that noise and stays a feature; where it is as noisy as the feature is deep, it cannot
     be told from a wall anyway.
     """
-    fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius,
-                    compiled)
+    fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
     noise = 2.0 * median(fit.across)  # np.median's, bit for bit
     groups = [fit]
     width = fit.index.shape[1]
@@ -254,7 +247,7 @@ def _fit_lines(
         if not np.any(grow):
             break
         width = min(2 * width, limit)
-        grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius, compiled)
+        grown = _fit_rows(points, tree, widest.rows[grow], width, max_radius)
         groups[-1] = _subset(widest, ~grow)
         groups.append(grown._replace(valid=grown.valid & (grown.across <= noise)))
     return groups
@@ -269,23 +262,24 @@ def estimate_normals(
     neighbours within ``max_radius`` [m] and a clearly elongated spread (a line, not a blob:
     the smaller eigenvalue below a tenth of the larger). With ``max_k`` > ``k``, a point whose
     neighbours fail that test is fitted again through twice as many, up to ``max_k``: what a
-    noisy wall needs (see :func:`_fit_lines`); None keeps ``k``."""
+    noisy wall needs (see :func:`_fit_lines`); None keeps ``k``. ``compiled`` fits in the
+    numba kernels of :mod:`estimators.matching.neighbourhood_fits` (``tree`` must then be a
+    :class:`PointIndex`), else in arrays (the same math; the tests' reference)."""
+    if compiled:
+        normals, valid, _ = local_fits(points, tree, k, max_radius, max_k, curves=False)
+        return normals, valid
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
-    for fit in _fit_lines(points, tree, k, max_radius, max_k, compiled):
+    for fit in _fit_lines(points, tree, k, max_radius, max_k):
         normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
     return normals, valid
 
 
 def _curve_points(
-    points: NDArray[np.float64], fit: _Neighbourhoods, compiled: bool = True,
+    points: NDArray[np.float64], fit: _Neighbourhoods,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Normals and anchors ``(n, 2)``: ``points[fit.rows]`` moved onto the parabola through
-    their neighbours in the frame of their line (see :func:`fit_local_curves`); ``compiled``
-    by :func:`estimators.matching.neighbourhood_fits.curve_points`, else in arrays."""
-    if compiled:
-        return curve_points(points, fit.rows.astype(np.int64, copy=False), fit.index, fit.mean,
-                            fit.normals)
+    their neighbours in the frame of their line (see :func:`fit_local_curves`), in arrays."""
     neighbours, weights = _gathered(points, fit.rows, fit.index)
     points = points[fit.rows]
     tangents = np.column_stack([fit.normals[:, 1], -fit.normals[:, 0]])
@@ -318,16 +312,17 @@ def fit_local_curves(
     towards the centre of a curved surface (by ``curvature * spread^2 / 6``: ~2 cm on a
     0.3 m cylinder seen over 0.4 m). Elsewhere the raw point and the line's normal are kept.
     ``max_k`` grows the neighbourhoods that fail the line test, as in :func:`estimate_normals`.
-    ``compiled=False`` fits in arrays rather than in the numba kernels (the same math; the
-    tests' reference).
+    ``compiled`` as in :func:`estimate_normals`.
     """
+    if compiled:
+        return local_fits(points, tree, k, max_radius, max_k, curves=True)
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
     anchors = points.astype(np.float64)
-    for fit in _fit_lines(points, tree, k, max_radius, max_k, compiled):
+    for fit in _fit_lines(points, tree, k, max_radius, max_k):
         normals[fit.rows], valid[fit.rows] = fit.normals, fit.valid
         curved = _subset(fit, fit.valid & (fit.count >= 5))
-        normals[curved.rows], anchors[curved.rows] = _curve_points(points, curved, compiled)
+        normals[curved.rows], anchors[curved.rows] = _curve_points(points, curved)
     return normals, valid, anchors
 
 

@@ -5,11 +5,14 @@ against the array form of the same math, the compiled voxel thinning against np.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
+from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import estimate_normals, fit_local_curves, voxel_downsample
+from lidar_env.errors import ConfigError
 
 
 def _noisy(points: np.ndarray, normals: np.ndarray, sigma: float, seed: int) -> np.ndarray:
@@ -23,7 +26,7 @@ def test_anchors_on_a_noisy_wall_average_the_noise_away():
     x = np.arange(0.0, 3.0, 0.05)
     wall = np.column_stack([x, np.zeros_like(x)])
     points = _noisy(wall, np.tile([0.0, 1.0], (len(x), 1)), 0.01, seed=0)
-    normals, valid, anchors = fit_local_curves(points, cKDTree(points))
+    normals, valid, anchors = fit_local_curves(points, PointIndex(points))
     inner = slice(5, -5)  # away from the wall's ends, where the fit is one-sided
     assert np.all(valid)
     raw_error = np.sqrt(np.mean(points[inner, 1] ** 2))
@@ -42,7 +45,7 @@ def test_anchors_on_a_small_cylinder_are_not_pulled_to_its_centre():
     radial = np.column_stack([np.cos(angle), np.sin(angle)])
     for seed in range(3):
         points = _noisy(radius * radial, radial, 0.01, seed)
-        normals, valid, anchors = fit_local_curves(points, cKDTree(points))
+        normals, valid, anchors = fit_local_curves(points, PointIndex(points))
         assert np.all(valid)
         radial_error = np.linalg.norm(anchors, axis=1) - radius
         raw_error = np.linalg.norm(points, axis=1) - radius
@@ -56,7 +59,7 @@ def test_anchors_on_a_small_cylinder_are_not_pulled_to_its_centre():
 def test_corners_are_not_fitted_and_keep_their_raw_points():
     corner = np.array([[0.05 * i, 0.0] for i in range(10)]
                       + [[0.0, 0.05 * i] for i in range(1, 10)])
-    tree = cKDTree(corner)
+    tree = PointIndex(corner)
     normals, valid, anchors = fit_local_curves(corner, tree, k=9)
     line_normals, line_valid = estimate_normals(corner, tree, k=9)
     np.testing.assert_array_equal(valid, line_valid)
@@ -78,7 +81,7 @@ def test_a_noisy_wall_is_a_line_once_its_neighbourhoods_grow():
     # much of it across as along, fail the line test, and would be paired on random lines.
     for seed in range(3):
         points = _wall_band(0.03, seed)
-        tree = cKDTree(points)
+        tree = PointIndex(points)
         inner = (points[:, 0] > 0.5) & (points[:, 0] < 3.5)
         _, few = estimate_normals(points, tree, k=9)
         normals, grown = estimate_normals(points, tree, k=9, max_k=72)
@@ -92,7 +95,7 @@ def test_growing_does_not_smooth_a_recess_out_of_a_precise_wall():
     # A 10 cm recess (a doorway) in a 1 cm noise wall: its edges are what fixes the motion
     # along the wall, so they must stay "not a line" rather than be averaged into one.
     points = _wall_band(0.01, seed=0, recess=0.1)
-    tree = cKDTree(points)
+    tree = PointIndex(points)
     _, valid = estimate_normals(points, tree, k=9)
     _, grown = estimate_normals(points, tree, k=9, max_k=72)
     edges = (np.abs(points[:, 0] - 2.0) < 0.08) | (np.abs(points[:, 0] - 3.0) < 0.08)
@@ -107,7 +110,7 @@ def test_anchors_match_a_parabola_fitted_point_by_point():
     angle = np.arange(0.0, 2.0 * np.pi, 0.05 / radius)
     radial = np.column_stack([np.cos(angle), np.sin(angle)])
     points = _noisy(radius * radial, radial, 0.01, seed=4)
-    normals, valid, anchors = fit_local_curves(points, cKDTree(points), k=9)
+    normals, valid, anchors = fit_local_curves(points, PointIndex(points), k=9)
     assert np.mean(valid) > 0.9
     for i in np.flatnonzero(valid):
         neighbours = points[np.argsort(np.linalg.norm(points - points[i], axis=1))[:9]]
@@ -128,7 +131,7 @@ def test_anchors_of_grown_neighbourhoods_average_a_noisy_wall():
     # their anchors then average many readings: far closer to the wall than the raw points.
     points = _wall_band(0.03, seed=1)
     inner = (points[:, 0] > 0.5) & (points[:, 0] < 3.5)
-    _, valid, anchors = fit_local_curves(points, cKDTree(points), k=9, max_k=72)
+    _, valid, anchors = fit_local_curves(points, PointIndex(points), k=9, max_k=72)
     assert np.mean(valid[inner]) > 0.95
     raw_error = np.sqrt(np.mean(points[inner, 1] ** 2))
     anchor_error = np.sqrt(np.mean(anchors[inner & valid, 1] ** 2))
@@ -153,7 +156,7 @@ def test_compiled_fits_match_the_array_fits(seed: int, noise: float, k: int,
         rng.uniform(-1.0, 5.0, (20, 2)),  # clutter
     ])
     points = voxel_downsample(points + rng.normal(0.0, noise, points.shape), 0.02)
-    tree = cKDTree(points)
+    tree = PointIndex(points)
     compiled = fit_local_curves(points, tree, k, max_k=max_k)
     pure = fit_local_curves(points, tree, k, max_k=max_k, compiled=False)
     np.testing.assert_array_equal(compiled[1], pure[1])
@@ -163,6 +166,16 @@ def test_compiled_fits_match_the_array_fits(seed: int, noise: float, k: int,
     pure_normals, pure_valid = estimate_normals(points, tree, k, max_k=max_k, compiled=False)
     np.testing.assert_array_equal(valid, pure_valid)
     np.testing.assert_allclose(normals, pure_normals, rtol=0, atol=1e-9)
+
+
+def test_the_array_fits_take_any_tree_the_compiled_ones_a_point_index() -> None:
+    x = np.arange(0.0, 1.0, 0.05)
+    wall = np.column_stack([x, 0.01 * np.sin(7.0 * x)])
+    pure = fit_local_curves(wall, cKDTree(wall), compiled=False)
+    for expected, found in zip(pure, fit_local_curves(wall, PointIndex(wall)), strict=True):
+        np.testing.assert_allclose(found, expected, rtol=0, atol=1e-9)
+    with pytest.raises(ConfigError, match="PointIndex, got cKDTree"):
+        fit_local_curves(wall, cKDTree(wall))
 
 
 @settings(max_examples=60, deadline=None)
