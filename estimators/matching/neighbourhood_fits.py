@@ -5,9 +5,11 @@ The math is :func:`estimators.matching.scan_matching.fit_local_curves`'s array f
 principal axis of the neighbours' covariance, the line test, the least-squares parabola
 ``t = a + b s + c s^2``), which ``tests/estimators/matching/test_scan_matching.py`` checks
 these kernels against. The local map is refitted at every keyframe (thousands of points, up
-to 72 neighbours each): searching, fitting and growing each point's neighbourhood in one
-compiled pass leaves no (n, k) neighbour arrays, subsets or dispatches between the steps,
-and searching the points in the tree's order keeps consecutive searches in the same nodes.
+to 72 neighbours each): fitting and growing each point's neighbourhood in one compiled pass
+leaves no subsets or dispatches between the steps, and the points' neighbours are found a
+batch of nearby points at a time (:func:`neighbours_of_all`: one tree search and one sort
+of a few candidates per point, where a search per point ranks every point it meets; 0.55 ->
+0.37 us per point for 9 neighbours on the hallway maps, the same answer bit for bit).
 
 Arrays: ``tree`` is the tuple a :class:`estimators.matching.nearest.PointIndex` holds over
 ``points`` (N, 2) [m]; ``normals`` (N, 2), ``valid`` (N,) and ``anchors`` (N, 2) [m] are
@@ -21,13 +23,133 @@ from numba import njit
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from estimators.matching.nearest import STACK, PointIndex, k_nearest
+from estimators.matching.nearest import LEAF_SIZE, REUSE_MARGIN, STACK, PointIndex, k_nearest
 from estimators.matching.prediction import median
 from lidar_env.errors import ConfigError
 
 #: The tuple :attr:`estimators.matching.nearest.PointIndex.arrays`.
 Tree = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],
              NDArray[np.int64], NDArray[np.float64]]
+
+
+#: Most points of a node whose points are searched together by :func:`neighbours_of_all`.
+BATCH_SIZE = 2 * LEAF_SIZE
+
+
+@njit(cache=True, inline="always")
+def _batch_candidates(tree: Tree, node: int, reach: float, pending: NDArray[np.int64],
+                      xs: NDArray[np.float64], ys: NDArray[np.float64],
+                      index: NDArray[np.int64]) -> int:
+    """Write the points within ``reach`` [m] of ``node``'s bounding box to ``xs``, ``ys``
+    (coordinates) and ``index`` (original indices); their number."""
+    order, tree_points, start, end, child, box = tree
+    x0, y0, x1, y1 = box[node, 0], box[node, 1], box[node, 2], box[node, 3]
+    reach2 = reach * reach
+    count = 0
+    pending[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        other = pending[top]
+        dx = max(box[other, 0] - x1, x0 - box[other, 2], 0.0)
+        dy = max(box[other, 1] - y1, y0 - box[other, 3], 0.0)
+        if dx * dx + dy * dy > reach2:
+            continue
+        if child[other] >= 0:
+            pending[top], pending[top + 1] = child[other], child[other] + 1
+            top += 2
+            continue
+        for p in range(start[other], end[other]):
+            x, y = tree_points[p, 0], tree_points[p, 1]
+            dx, dy = max(x - x1, x0 - x, 0.0), max(y - y1, y0 - y, 0.0)
+            xs[count], ys[count], index[count] = x, y, order[p]
+            count += dx * dx + dy * dy <= reach2  # written anyway, kept or overwritten
+    return count
+
+
+@njit(cache=True)
+def neighbours_of_all(tree: Tree, k: int, max_distance: float,
+                      ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """``(N, k)`` squared distances and indices of every tree point's ``k`` nearest points
+    closer than ``max_distance`` [m]: :func:`estimators.matching.nearest.k_nearest`'s answer
+    for each (``inf`` and ``N`` where fewer exist, equally distant points ranked by index),
+    bit for bit, with the tree searched about once per batch of up to ``BATCH_SIZE`` points
+    (a node of the tree) rather than once per point.
+
+    The batch's first point is searched in the tree; its ``k``-th distance ``r`` bounds
+    every other's by ``r`` plus its distance from it (triangle inequality), so the points
+    within that reach of the batch's box hold all their neighbours. Each further point keeps
+    those no further than its own bound (the first point's, or the previous point's
+    ``k``-th distance plus its distance from it, whichever is less) and sorts those few,
+    where a search would rank every point it meets in the tree. Bounds carry a margin for
+    rounding (:data:`estimators.matching.nearest.REUSE_MARGIN`, scaled by the coordinates)."""
+    order, tree_points, start, end, child, box = tree
+    n = tree_points.shape[0]
+    bound = max_distance * max_distance
+    squared = np.empty((n, k))
+    index = np.empty((n, k), np.int64)
+    pending = np.empty(STACK, np.int64)
+    xs, ys, near = np.empty(n), np.empty(n), np.empty(n, np.int64)
+    kept, kept_index = np.empty(max(n, k)), np.empty(max(n, k), np.int64)
+    batches = np.empty(len(child), np.int64)
+    count = 0
+    pending[0] = 0
+    top = 1
+    while top > 0:  # the largest nodes of at most BATCH_SIZE points
+        top -= 1
+        node = pending[top]
+        if end[node] - start[node] <= BATCH_SIZE:
+            batches[count] = node
+            count += 1
+        else:
+            pending[top], pending[top + 1] = child[node], child[node] + 1
+            top += 2
+    for b in range(count):
+        node = batches[b]
+        lo, hi = start[node], end[node]
+        scale = max(abs(box[node, 0]), abs(box[node, 1]), abs(box[node, 2]), abs(box[node, 3]))
+        margin = REUSE_MARGIN * (1.0 + scale)
+        first = order[lo]
+        fx, fy = tree_points[lo, 0], tree_points[lo, 1]
+        k_nearest(order, tree_points, start, end, child, box, fx, fy, k, bound, pending,
+                  squared[first], index[first])
+        spread = 0.0
+        for p in range(lo + 1, hi):
+            spread = max(spread, np.sqrt((tree_points[p, 0] - fx) ** 2
+                                         + (tree_points[p, 1] - fy) ** 2))
+        first_reach = np.sqrt(squared[first, k - 1])  # inf where fewer than k
+        reach = min(first_reach + spread, max_distance) + margin
+        found = _batch_candidates(tree, node, reach, pending, xs, ys, near)
+        previous_reach = first_reach
+        for p in range(lo + 1, hi):
+            qx, qy = tree_points[p, 0], tree_points[p, 1]
+            limit = min(
+                first_reach + np.sqrt((qx - fx) ** 2 + (qy - fy) ** 2),
+                previous_reach + np.sqrt((qx - tree_points[p - 1, 0]) ** 2
+                                         + (qy - tree_points[p - 1, 1]) ** 2),
+                max_distance) + margin
+            limit2 = limit * limit
+            m = 0
+            for i in range(found):
+                dx, dy = xs[i] - qx, ys[i] - qy
+                d2 = dx * dx + dy * dy  # as k_nearest computes it
+                kept[m], kept_index[m] = d2, near[i]
+                m += d2 <= limit2
+            for i in range(1, m):  # nearer first, equally distant ones by index
+                d2, original = kept[i], kept_index[i]
+                j = i
+                while j > 0 and (d2 < kept[j - 1] or (
+                        d2 == kept[j - 1] and original < kept_index[j - 1])):
+                    kept[j], kept_index[j] = kept[j - 1], kept_index[j - 1]
+                    j -= 1
+                kept[j], kept_index[j] = d2, original
+            row = order[p]
+            for j in range(k):
+                inside = j < m and kept[j] < bound
+                squared[row, j] = kept[j] if inside else np.inf
+                index[row, j] = kept_index[j] if inside else n
+            previous_reach = np.sqrt(squared[row, k - 1])
+    return squared, index
 
 
 @njit(cache=True, inline="always")
@@ -127,18 +249,14 @@ def _curve(points: NDArray[np.float64], row: int, at: NDArray[np.int64], k: int,
 
 
 @njit(cache=True, inline="always")
-def _fit(tree: Tree, points: NDArray[np.float64], row: int, k: int, bound: float,
-         noise: float, curves: bool, normals: NDArray[np.float64], valid: NDArray[np.bool_],
-         anchors: NDArray[np.float64], pending: NDArray[np.int64], best: NDArray[np.float64],
-         at: NDArray[np.int64], gram: NDArray[np.float64], moment: NDArray[np.float64],
+def _fit(points: NDArray[np.float64], row: int, at: NDArray[np.int64], k: int, noise: float,
+         curves: bool, normals: NDArray[np.float64], valid: NDArray[np.bool_],
+         anchors: NDArray[np.float64], gram: NDArray[np.float64], moment: NDArray[np.float64],
          ) -> tuple[float, float, bool]:
-    """Fit ``points[row]``'s ``k`` nearest neighbours closer than ``sqrt(bound)`` [m]: its
+    """Fit ``points[row]``'s neighbours ``at[:k]`` (``len(points)`` where missing): its
     line's normal and whether it is one with a spread across of at most ``noise`` [m]; with
     ``curves``, where it is and has at least 5 neighbours, the parabola's normal and anchor.
     Returns the neighbour count, the spread across [m] and the validity."""
-    order, tree_points, start, end, child, box = tree
-    k_nearest(order, tree_points, start, end, child, box, points[row, 0], points[row, 1], k,
-              bound, pending, best, at)
     count, mx, my, nx, ny, across, line = _line(points, row, at, k)
     line = line and across <= noise
     normals[row, 0], normals[row, 1], valid[row] = nx, ny, line
@@ -154,20 +272,18 @@ def fit_neighbourhoods(
     normals: NDArray[np.float64], valid: NDArray[np.bool_], anchors: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Every point's fit through its ``k`` nearest neighbours within ``max_radius`` [m] (see
-    :func:`_fit`, no noise limit), searched in the tree's order; the neighbour counts and
-    spreads across [m] (N,)."""
+    :func:`_fit`, no noise limit; found by :func:`neighbours_of_all`), in the tree's order;
+    the neighbour counts and spreads across [m] (N,)."""
     n = points.shape[0]
     count = np.empty(n)
     across = np.empty(n)
-    pending = np.empty(STACK, np.int64)
-    best, at = np.empty(k), np.empty(k, np.int64)
+    _, index = neighbours_of_all(tree, k, max_radius)
     gram, moment = np.empty((3, 3)), np.empty(3)
     order = tree[0]
     for p in range(n):
         row = order[p]
-        count[row], across[row], _ = _fit(
-            tree, points, row, k, max_radius * max_radius, np.inf, curves, normals, valid,
-            anchors, pending, best, at, gram, moment)
+        count[row], across[row], _ = _fit(points, row, index[row], k, np.inf, curves, normals,
+                                          valid, anchors, gram, moment)
     return count, across
 
 
@@ -189,6 +305,7 @@ def grow_neighbourhoods(
         if not valid[row] and count[row] == k and across[row] <= noise:
             rows[grow] = row
             grow += 1
+    order, tree_points, start, end, child, box = tree
     pending = np.empty(STACK, np.int64)
     best, at = np.empty(limit), np.empty(limit, np.int64)
     gram, moment = np.empty((3, 3)), np.empty(3)
@@ -198,9 +315,10 @@ def grow_neighbourhoods(
         still = 0
         for i in range(grow):
             row = rows[i]
-            found, spread, line = _fit(tree, points, row, width, max_radius * max_radius,
-                                       noise, curves, normals, valid, anchors, pending, best,
-                                       at, gram, moment)
+            k_nearest(order, tree_points, start, end, child, box, points[row, 0],
+                      points[row, 1], width, max_radius * max_radius, pending, best, at)
+            found, spread, line = _fit(points, row, at, width, noise, curves, normals, valid,
+                                       anchors, gram, moment)
             if not line and found == width and spread <= noise:
                 rows[still] = row
                 still += 1
