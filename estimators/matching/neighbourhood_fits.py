@@ -7,7 +7,7 @@ principal axis of the neighbours' covariance, the line test, the least-squares p
 these kernels against. The local map is refitted at every keyframe (thousands of points, up
 to 72 neighbours each): fitting and growing each point's neighbourhood in one compiled pass
 leaves no subsets or dispatches between the steps, and the points' neighbours are found a
-batch of nearby points at a time (:func:`neighbours_of_all`: one tree search and one sort
+batch of nearby points at a time (:func:`neighbours_of`: one tree search and one sort
 of a few candidates per point, where a search per point ranks every point it meets; 0.55 ->
 0.37 us per point for 9 neighbours on the hallway maps, the same answer bit for bit).
 
@@ -32,34 +32,33 @@ Tree = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[
              NDArray[np.int64], NDArray[np.float64]]
 
 
-#: Most points of a node whose points are searched together by :func:`neighbours_of_all`.
+#: Most points of a node whose points are searched together by :func:`neighbours_of`.
 BATCH_SIZE = 2 * LEAF_SIZE
 
 
 @njit(cache=True, inline="always")
-def _batch_candidates(tree: Tree, node: int, reach: float, pending: NDArray[np.int64],
-                      xs: NDArray[np.float64], ys: NDArray[np.float64],
-                      index: NDArray[np.int64]) -> int:
-    """Write the points within ``reach`` [m] of ``node``'s bounding box to ``xs``, ``ys``
-    (coordinates) and ``index`` (original indices); their number."""
+def _candidates(tree: Tree, x0: float, y0: float, x1: float, y1: float, reach: float,
+                pending: NDArray[np.int64], xs: NDArray[np.float64], ys: NDArray[np.float64],
+                index: NDArray[np.int64]) -> int:
+    """Write the points within ``reach`` [m] of the box ``[x0, x1] x [y0, y1]`` [m] to ``xs``,
+    ``ys`` (coordinates) and ``index`` (original indices); their number."""
     order, tree_points, start, end, child, box = tree
-    x0, y0, x1, y1 = box[node, 0], box[node, 1], box[node, 2], box[node, 3]
     reach2 = reach * reach
     count = 0
     pending[0] = 0
     top = 1
     while top > 0:
         top -= 1
-        other = pending[top]
-        dx = max(box[other, 0] - x1, x0 - box[other, 2], 0.0)
-        dy = max(box[other, 1] - y1, y0 - box[other, 3], 0.0)
+        node = pending[top]
+        dx = max(box[node, 0] - x1, x0 - box[node, 2], 0.0)
+        dy = max(box[node, 1] - y1, y0 - box[node, 3], 0.0)
         if dx * dx + dy * dy > reach2:
             continue
-        if child[other] >= 0:
-            pending[top], pending[top + 1] = child[other], child[other] + 1
+        if child[node] >= 0:
+            pending[top], pending[top + 1] = child[node], child[node] + 1
             top += 2
             continue
-        for p in range(start[other], end[other]):
+        for p in range(start[node], end[node]):
             x, y = tree_points[p, 0], tree_points[p, 1]
             dx, dy = max(x - x1, x0 - x, 0.0), max(y - y1, y0 - y, 0.0)
             xs[count], ys[count], index[count] = x, y, order[p]
@@ -68,87 +67,90 @@ def _batch_candidates(tree: Tree, node: int, reach: float, pending: NDArray[np.i
 
 
 @njit(cache=True)
-def neighbours_of_all(tree: Tree, k: int, max_distance: float,
-                      ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """``(N, k)`` squared distances and indices of every tree point's ``k`` nearest points
-    closer than ``max_distance`` [m]: :func:`estimators.matching.nearest.k_nearest`'s answer
-    for each (``inf`` and ``N`` where fewer exist, equally distant points ranked by index),
-    bit for bit, with the tree searched about once per batch of up to ``BATCH_SIZE`` points
-    (a node of the tree) rather than once per point.
+def neighbours_of(tree: Tree, positions: NDArray[np.int64], k: int, max_distance: float,
+                  ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """``(M, k)`` squared distances and indices of the ``k`` nearest points closer than
+    ``max_distance`` [m] of the tree's own points at ``positions`` (M,) (in tree order,
+    ascending): :func:`estimators.matching.nearest.k_nearest`'s answer for each (``inf`` and
+    ``N`` where fewer exist, equally distant points ranked by index), bit for bit, with the
+    tree searched about once per batch of them in one node of up to ``BATCH_SIZE`` points
+    rather than once per point.
 
     The batch's first point is searched in the tree; its ``k``-th distance ``r`` bounds
     every other's by ``r`` plus its distance from it (triangle inequality), so the points
-    within that reach of the batch's box hold all their neighbours. Each further point keeps
-    those no further than its own bound (the first point's, or the previous point's
-    ``k``-th distance plus its distance from it, whichever is less) and sorts those few,
-    where a search would rank every point it meets in the tree. Bounds carry a margin for
-    rounding (:data:`estimators.matching.nearest.REUSE_MARGIN`, scaled by the coordinates)."""
+    within that reach of the batch's bounding box hold all their neighbours. Each further
+    point keeps those no further than its own bound (the first point's, or the previous
+    point's ``k``-th distance plus its distance from it, whichever is less) and sorts those
+    few, where a search would rank every point it meets in the tree. Bounds carry a margin
+    for rounding (:data:`estimators.matching.nearest.REUSE_MARGIN`, scaled by the
+    coordinates)."""
     order, tree_points, start, end, child, box = tree
-    n = tree_points.shape[0]
+    n, m = tree_points.shape[0], positions.shape[0]
     bound = max_distance * max_distance
-    squared = np.empty((n, k))
-    index = np.empty((n, k), np.int64)
+    squared = np.empty((m, k))
+    index = np.empty((m, k), np.int64)
     pending = np.empty(STACK, np.int64)
     xs, ys, near = np.empty(n), np.empty(n), np.empty(n, np.int64)
     kept, kept_index = np.empty(max(n, k)), np.empty(max(n, k), np.int64)
-    batches = np.empty(len(child), np.int64)
-    count = 0
-    pending[0] = 0
+    lo = 0  # the batch's first position in positions
+    nodes = np.empty(STACK, np.int64)  # the largest nodes of at most BATCH_SIZE points
+    nodes[0] = 0
     top = 1
-    while top > 0:  # the largest nodes of at most BATCH_SIZE points
+    while top > 0 and lo < m:  # in tree order
         top -= 1
-        node = pending[top]
-        if end[node] - start[node] <= BATCH_SIZE:
-            batches[count] = node
-            count += 1
-        else:
-            pending[top], pending[top + 1] = child[node], child[node] + 1
+        node = nodes[top]
+        if end[node] <= positions[lo]:
+            continue
+        if end[node] - start[node] > BATCH_SIZE:
+            nodes[top], nodes[top + 1] = child[node] + 1, child[node]
             top += 2
-    for b in range(count):
-        node = batches[b]
-        lo, hi = start[node], end[node]
-        scale = max(abs(box[node, 0]), abs(box[node, 1]), abs(box[node, 2]), abs(box[node, 3]))
-        margin = REUSE_MARGIN * (1.0 + scale)
-        first = order[lo]
-        fx, fy = tree_points[lo, 0], tree_points[lo, 1]
+            continue
+        hi = lo
+        x0 = y0 = np.inf
+        x1 = y1 = -np.inf
+        while hi < m and positions[hi] < end[node]:
+            x, y = tree_points[positions[hi], 0], tree_points[positions[hi], 1]
+            x0, y0, x1, y1 = min(x0, x), min(y0, y), max(x1, x), max(y1, y)
+            hi += 1
+        fx, fy = tree_points[positions[lo], 0], tree_points[positions[lo], 1]
         k_nearest(order, tree_points, start, end, child, box, fx, fy, k, bound, pending,
-                  squared[first], index[first])
-        spread = 0.0
-        for p in range(lo + 1, hi):
-            spread = max(spread, np.sqrt((tree_points[p, 0] - fx) ** 2
-                                         + (tree_points[p, 1] - fy) ** 2))
-        first_reach = np.sqrt(squared[first, k - 1])  # inf where fewer than k
-        reach = min(first_reach + spread, max_distance) + margin
-        found = _batch_candidates(tree, node, reach, pending, xs, ys, near)
-        previous_reach = first_reach
-        for p in range(lo + 1, hi):
-            qx, qy = tree_points[p, 0], tree_points[p, 1]
-            limit = min(
-                first_reach + np.sqrt((qx - fx) ** 2 + (qy - fy) ** 2),
-                previous_reach + np.sqrt((qx - tree_points[p - 1, 0]) ** 2
-                                         + (qy - tree_points[p - 1, 1]) ** 2),
-                max_distance) + margin
-            limit2 = limit * limit
-            m = 0
-            for i in range(found):
-                dx, dy = xs[i] - qx, ys[i] - qy
-                d2 = dx * dx + dy * dy  # as k_nearest computes it
-                kept[m], kept_index[m] = d2, near[i]
-                m += d2 <= limit2
-            for i in range(1, m):  # nearer first, equally distant ones by index
-                d2, original = kept[i], kept_index[i]
-                j = i
-                while j > 0 and (d2 < kept[j - 1] or (
-                        d2 == kept[j - 1] and original < kept_index[j - 1])):
-                    kept[j], kept_index[j] = kept[j - 1], kept_index[j - 1]
-                    j -= 1
-                kept[j], kept_index[j] = d2, original
-            row = order[p]
-            for j in range(k):
-                inside = j < m and kept[j] < bound
-                squared[row, j] = kept[j] if inside else np.inf
-                index[row, j] = kept_index[j] if inside else n
-            previous_reach = np.sqrt(squared[row, k - 1])
+                  squared[lo], index[lo])
+        if hi - lo > 1:
+            margin = REUSE_MARGIN * (1.0 + max(abs(x0), abs(y0), abs(x1), abs(y1)))
+            spread = 0.0
+            for i in range(lo + 1, hi):
+                x, y = tree_points[positions[i], 0], tree_points[positions[i], 1]
+                spread = max(spread, np.sqrt((x - fx) ** 2 + (y - fy) ** 2))
+            first_reach = np.sqrt(squared[lo, k - 1])  # inf where fewer than k
+            reach = min(first_reach + spread, max_distance) + margin
+            found = _candidates(tree, x0, y0, x1, y1, reach, pending, xs, ys, near)
+            for i in range(lo + 1, hi):
+                qx, qy = tree_points[positions[i], 0], tree_points[positions[i], 1]
+                px, py = tree_points[positions[i - 1], 0], tree_points[positions[i - 1], 1]
+                limit = min(first_reach + np.sqrt((qx - fx) ** 2 + (qy - fy) ** 2),
+                            np.sqrt(squared[i - 1, k - 1])
+                            + np.sqrt((qx - px) ** 2 + (qy - py) ** 2),
+                            max_distance) + margin
+                limit2 = limit * limit
+                count = 0
+                for c in range(found):
+                    dx, dy = xs[c] - qx, ys[c] - qy
+                    d2 = dx * dx + dy * dy  # as k_nearest computes it
+                    kept[count], kept_index[count] = d2, near[c]
+                    count += d2 <= limit2
+                for c in range(1, count):  # nearer first, equally distant ones by index
+                    d2, original = kept[c], kept_index[c]
+                    j = c
+                    while j > 0 and (d2 < kept[j - 1] or (
+                            d2 == kept[j - 1] and original < kept_index[j - 1])):
+                        kept[j], kept_index[j] = kept[j - 1], kept_index[j - 1]
+                        j -= 1
+                    kept[j], kept_index[j] = d2, original
+                for j in range(k):
+                    inside = j < count and kept[j] < bound
+                    squared[i, j] = kept[j] if inside else np.inf
+                    index[i, j] = kept_index[j] if inside else n
+        lo = hi
     return squared, index
 
 
@@ -272,17 +274,17 @@ def fit_neighbourhoods(
     normals: NDArray[np.float64], valid: NDArray[np.bool_], anchors: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Every point's fit through its ``k`` nearest neighbours within ``max_radius`` [m] (see
-    :func:`_fit`, no noise limit; found by :func:`neighbours_of_all`), in the tree's order;
-    the neighbour counts and spreads across [m] (N,)."""
+    :func:`_fit`, no noise limit; found by :func:`neighbours_of`), in the tree's order; the
+    neighbour counts and spreads across [m] (N,)."""
     n = points.shape[0]
     count = np.empty(n)
     across = np.empty(n)
-    _, index = neighbours_of_all(tree, k, max_radius)
+    _, index = neighbours_of(tree, np.arange(n), k, max_radius)
     gram, moment = np.empty((3, 3)), np.empty(3)
     order = tree[0]
     for p in range(n):
         row = order[p]
-        count[row], across[row], _ = _fit(points, row, index[row], k, np.inf, curves, normals,
+        count[row], across[row], _ = _fit(points, row, index[p], k, np.inf, curves, normals,
                                           valid, anchors, gram, moment)
     return count, across
 
@@ -299,28 +301,25 @@ def grow_neighbourhoods(
     twice as many, then again those of them still so, up to ``limit`` neighbours; a point
     with fewer neighbours than were asked for already has all within ``max_radius`` [m]."""
     n = points.shape[0]
-    rows = np.empty(n, np.int64)
+    order = tree[0]
+    positions = np.empty(n, np.int64)  # of the points to grow, in tree order
     grow = 0
-    for row in range(n):
+    for p in range(n):
+        row = order[p]
         if not valid[row] and count[row] == k and across[row] <= noise:
-            rows[grow] = row
+            positions[grow] = p
             grow += 1
-    order, tree_points, start, end, child, box = tree
-    pending = np.empty(STACK, np.int64)
-    best, at = np.empty(limit), np.empty(limit, np.int64)
     gram, moment = np.empty((3, 3)), np.empty(3)
     width = k
     while width < limit and grow > 0:
         width = min(2 * width, limit)
+        _, index = neighbours_of(tree, positions[:grow], width, max_radius)
         still = 0
         for i in range(grow):
-            row = rows[i]
-            k_nearest(order, tree_points, start, end, child, box, points[row, 0],
-                      points[row, 1], width, max_radius * max_radius, pending, best, at)
-            found, spread, line = _fit(points, row, at, width, noise, curves, normals, valid,
-                                       anchors, gram, moment)
+            found, spread, line = _fit(points, order[positions[i]], index[i], width, noise,
+                                       curves, normals, valid, anchors, gram, moment)
             if not line and found == width and spread <= noise:
-                rows[still] = row
+                positions[still] = positions[i]
                 still += 1
         grow = still
 
