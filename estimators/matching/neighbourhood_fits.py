@@ -24,7 +24,6 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from estimators.matching.nearest import LEAF_SIZE, REUSE_MARGIN, STACK, PointIndex, k_nearest
-from estimators.matching.prediction import median
 from lidar_env.errors import ConfigError
 
 #: The tuple :attr:`estimators.matching.nearest.PointIndex.arrays`.
@@ -270,58 +269,39 @@ def _fit(points: NDArray[np.float64], row: int, at: NDArray[np.int64], k: int, n
 
 @njit(cache=True)
 def fit_neighbourhoods(
-    tree: Tree, points: NDArray[np.float64], k: int, max_radius: float, curves: bool,
-    normals: NDArray[np.float64], valid: NDArray[np.bool_], anchors: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Every point's fit through its ``k`` nearest neighbours within ``max_radius`` [m] (see
-    :func:`_fit`, no noise limit; found by :func:`neighbours_of`), in the tree's order; the
-    neighbour counts and spreads across [m] (N,)."""
-    n = points.shape[0]
-    count = np.empty(n)
-    across = np.empty(n)
-    _, index = neighbours_of(tree, np.arange(n), k, max_radius)
-    gram, moment = np.empty((3, 3)), np.empty(3)
-    order = tree[0]
-    for p in range(n):
-        row = order[p]
-        count[row], across[row], _ = _fit(points, row, index[p], k, np.inf, curves, normals,
-                                          valid, anchors, gram, moment)
-    return count, across
-
-
-@njit(cache=True)
-def grow_neighbourhoods(
-    tree: Tree, points: NDArray[np.float64], count: NDArray[np.float64],
-    across: NDArray[np.float64], k: int, limit: int, max_radius: float, noise: float,
+    tree: Tree, points: NDArray[np.float64], k: int, limit: int, max_radius: float,
     curves: bool, normals: NDArray[np.float64], valid: NDArray[np.bool_],
     anchors: NDArray[np.float64],
 ) -> None:
-    """Refit the points whose ``k`` neighbours (``count`` and ``across`` (N,) of
-    :func:`fit_neighbourhoods`) are no line but spread across at most ``noise`` [m] through
-    twice as many, then again those of them still so, up to ``limit`` neighbours; a point
-    with fewer neighbours than were asked for already has all within ``max_radius`` [m]."""
+    """Every point's fit (:func:`_fit`) through its ``k`` nearest neighbours within
+    ``max_radius`` [m] (found by :func:`neighbours_of`, in the tree's order); then, with
+    twice the median spread across of those fits as the noise limit, the points whose
+    neighbours are no line but spread across no more than that are fitted again through
+    twice as many, and again those of them still so, up to ``limit`` neighbours (a point
+    with fewer neighbours than were asked for already has all within ``max_radius``)."""
     n = points.shape[0]
     order = tree[0]
-    positions = np.empty(n, np.int64)  # of the points to grow, in tree order
-    grow = 0
-    for p in range(n):
-        row = order[p]
-        if not valid[row] and count[row] == k and across[row] <= noise:
-            positions[grow] = p
-            grow += 1
+    count, across = np.empty(n), np.empty(n)
+    positions = np.arange(n)  # of the points to fit, in tree order
+    fitting, width, noise = n, k, np.inf
     gram, moment = np.empty((3, 3)), np.empty(3)
-    width = k
-    while width < limit and grow > 0:
-        width = min(2 * width, limit)
-        _, index = neighbours_of(tree, positions[:grow], width, max_radius)
+    while fitting > 0:
+        _, index = neighbours_of(tree, positions[:fitting], width, max_radius)
+        for i in range(fitting):
+            row = order[positions[i]]
+            count[row], across[row], _ = _fit(points, row, index[i], width, noise, curves,
+                                              normals, valid, anchors, gram, moment)
+        if width >= limit:
+            break
+        if width == k:
+            noise = 2.0 * np.median(across)  # the mean of the middle two, as np.median's
         still = 0
-        for i in range(grow):
-            found, spread, line = _fit(points, order[positions[i]], index[i], width, noise,
-                                       curves, normals, valid, anchors, gram, moment)
-            if not line and found == width and spread <= noise:
+        for i in range(fitting):
+            row = order[positions[i]]
+            if not valid[row] and count[row] == width and across[row] <= noise:
                 positions[still] = positions[i]
                 still += 1
-        grow = still
+        fitting, width = still, min(2 * width, limit)
 
 
 def local_fits(
@@ -330,8 +310,7 @@ def local_fits(
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Normals (N, 2), validity (N,) and anchors (N, 2) [m] of ``points`` (N, 2) [m] through
     their ``k`` nearest neighbours within ``max_radius`` [m], grown up to ``max_k`` where they
-    are no line (:func:`fit_neighbourhoods`, then :func:`grow_neighbourhoods` with twice the
-    median spread across as the noise limit); with ``curves`` the parabolas' normals and
+    are no line (:func:`fit_neighbourhoods`); with ``curves`` the parabolas' normals and
     anchors, else the lines' normals and the raw points: the compiled form of
     :func:`estimators.matching.scan_matching.fit_local_curves` and
     :func:`~estimators.matching.scan_matching.estimate_normals`, bit for bit the same
@@ -344,11 +323,7 @@ def local_fits(
     normals = np.empty((len(points), 2))
     valid = np.empty(len(points), dtype=bool)
     anchors = points.copy()
-    width = min(k, len(points))
-    count, across = fit_neighbourhoods(tree.arrays, points, width, float(max_radius), curves,
-                                       normals, valid, anchors)
-    limit = min(max_k or k, len(points))
-    if width < limit:
-        grow_neighbourhoods(tree.arrays, points, count, across, width, limit, float(max_radius),
-                            2.0 * median(across), curves, normals, valid, anchors)
+    fit_neighbourhoods(tree.arrays, points, min(k, len(points)),
+                       min(max_k or k, len(points)), float(max_radius), curves, normals,
+                       valid, anchors)
     return normals, valid, anchors
