@@ -91,6 +91,18 @@ def solve_3x3(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> bool:
 
 
 @njit(cache=True)
+def _solved(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.linalg.solve(matrix, rhs)`` of a 3 x 3 system as numba computes it (LAPACK's dgesv,
+    the same errors), by :func:`solve_3x3`, overwriting both arguments: the same bits without
+    the copies and the LAPACK call's buffer allocation."""
+    if not (np.all(np.isfinite(matrix)) and np.all(np.isfinite(rhs))):
+        raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
+    if not solve_3x3(matrix, rhs):
+        raise np.linalg.LinAlgError("Matrix is singular to machine precision.")
+    return rhs
+
+
+@njit(cache=True)
 def _wrap(angle: float) -> float:
     """``lidar_env.se2.wrap_angle`` of one angle."""
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
@@ -153,7 +165,7 @@ def refine_compiled(
             loss_scale, inlier_distance)
         quality = inliers / points.shape[0]
         if not has_prior:
-            step = np.linalg.solve(information + identity, gradient)
+            step = _solved(information + identity, gradient.copy())
         else:
             lever_x = cos * pivot[0] - sin * pivot[1]
             lever_y = sin * pivot[0] + cos * pivot[1]
@@ -171,7 +183,7 @@ def refine_compiled(
                     total[p] -= prior_information[r] * rows[r, p] * residuals[r]
                     for q in range(3):
                         hessian[p, q] += prior_information[r] * rows[r, p] * rows[r, q]
-            step = np.linalg.solve(hessian + identity, total)
+            step = _solved(hessian + identity, total)
             found, open_x, open_y = _open_direction(information, degeneracy_ratio)
             if found:
                 heading = pose[2] + step[2]
