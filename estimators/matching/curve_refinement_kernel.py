@@ -54,11 +54,7 @@ def solve_3x3(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> bool:
     for bit as that LAPACK call on FMA hardware (tested) without its per-call buffer
     allocation, which cost 0.35 us a solve, three quarters of :func:`chain_curves`. False when a
     pivot is zero (a singular matrix), as ``dgesv``'s ``info > 0``."""
-    pivots = np.empty(3, np.int64)
     for j in range(3):
-        for i in range(j):  # the earlier columns' row swaps, on this column
-            if pivots[i] != i:
-                matrix[i, j], matrix[pivots[i], j] = matrix[pivots[i], j], matrix[i, j]
         for i in range(1, 3):  # U's rows by dot, the rest by gemv: one sum of FMAs each
             total = 0.0
             for k in range(min(i, j)):
@@ -68,18 +64,17 @@ def solve_3x3(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> bool:
         for i in range(j + 1, 3):
             if abs(matrix[i, j]) > abs(matrix[largest, j]):
                 largest = i
-        pivots[j] = largest
         if matrix[largest, j] == 0.0:
             return False
         if largest != j:
-            for k in range(j + 1):
+            # the whole rows and rhs now: the columns to the right, untouched until their
+            # turn, and rhs, until the solves, take the same swaps in the same order
+            for k in range(3):
                 matrix[j, k], matrix[largest, k] = matrix[largest, k], matrix[j, k]
+            rhs[j], rhs[largest] = rhs[largest], rhs[j]
         scale = 1.0 / matrix[j, j]
         for i in range(j + 1, 3):
             matrix[i, j] *= scale
-    for i in range(3):
-        if pivots[i] != i:
-            rhs[i], rhs[pivots[i]] = rhs[pivots[i]], rhs[i]
     for i in range(3):  # L y = P b, L's diagonal ones
         for k in range(i + 1, 3):
             rhs[k] = _fma(-rhs[i], matrix[k, i], rhs[k])
