@@ -2,7 +2,7 @@
 pose to 1e-9 and the same quality, with and without a motion prior, about any pivot, in a
 room and in a featureless corridor (where the prior takes over the open direction); the
 compiled local quadratics of a scan against theirs (``chain_curves_pure``); and their 3 x 3
-solve against LAPACK's ``dgesv`` bit for bit."""
+solve against LAPACK's ``dgesv``."""
 
 from __future__ import annotations
 
@@ -106,10 +106,13 @@ def test_compiled_chain_curves_match_the_array_form(seed: int, corridor: bool, f
 
 @settings(max_examples=300, deadline=None)
 @given(seed=st.integers(0, 2**31), symmetric=st.booleans(), scale=st.floats(-6.0, 6.0))
-def test_solve_3x3_is_lapack_dgesv_bit_for_bit(seed: int, symmetric: bool, scale: float) -> None:
+def test_solve_3x3_agrees_with_lapack_dgesv(seed: int, symmetric: bool, scale: float) -> None:
     """Any pivot order (general matrices) and the local quadratics' Gram matrices, whose entries
-    span many magnitudes (1, u, u^2 summed); scipy's dgesv is the OpenBLAS call the kernel
-    replaced (the same bits on FMA hardware: x86-64 from Haswell on, Apple and ARM64)."""
+    span many magnitudes (1, u, u^2 summed), against scipy's dgesv, the OpenBLAS call the
+    kernel replaced. It performs dgesv's operations, so on this project's machines (x86-64
+    with FMA) the bits were equal on 896,256 systems of real drives; but OpenBLAS picks its
+    kernels per CPU, so the test asks for what holds on any: the same singular verdict and
+    a solution within rounding of the same LU (normwise, a few ulps times the condition)."""
     rng = np.random.default_rng(seed)
     if symmetric:
         u = 10.0**scale * rng.standard_normal(rng.integers(2, 6))
@@ -123,7 +126,8 @@ def test_solve_3x3_is_lapack_dgesv_bit_for_bit(seed: int, symmetric: bool, scale
     solution = rhs.copy()
     assert solve_3x3(matrix.copy(), solution) == (info == 0)
     if info == 0:
-        np.testing.assert_array_equal(solution.view(np.uint64), expected.view(np.uint64))
+        bound = 64 * np.finfo(float).eps * np.linalg.cond(matrix) * np.abs(expected).max()
+        assert np.abs(solution - expected).max() <= bound
 
 
 def test_solve_3x3_reports_a_singular_matrix() -> None:
