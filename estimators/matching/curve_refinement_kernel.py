@@ -51,9 +51,10 @@ def solve_3x3(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> bool:
     partial pivoting of its ``getf2`` (the first largest pivot; the column below it scaled by the
     pivot's reciprocal; dot and gemv sums of FMAs), then the row swaps and the two triangular
     solves of ``getrs`` (FMA axpys, a division by each diagonal element). The same numbers bit
-    for bit as that LAPACK call on FMA hardware (tested) without its per-call buffer
-    allocation, which cost 0.35 us a solve, three quarters of :func:`chain_curves`. False when a
-    pivot is zero (a singular matrix), as ``dgesv``'s ``info > 0``."""
+    for bit as that LAPACK call on this project's machine (OpenBLAS picks kernels per CPU;
+    tested within rounding) without its per-call buffer allocation, which cost 0.35 us a
+    solve, three quarters of :func:`chain_curves`. False when a pivot is zero (a singular
+    matrix), as ``dgesv``'s ``info > 0``."""
     for j in range(3):
         for i in range(1, 3):  # U's rows by dot, the rest by gemv: one sum of FMAs each
             total = 0.0

@@ -8,7 +8,8 @@ previous scan looked through). :func:`seen_through` finds such points; the scan-
 (:mod:`estimators.odometry.local_map`) drops the current scan's points that the previous scan
 saw through, and the map points the current scan sees through. (The same visibility argument
 removes dynamic points from 3D maps, e.g. Kim & Kim, "Remove, then Revert", IROS 2020; here it
-runs per scan, on the scans themselves.)
+runs per scan, on the scans themselves.) :class:`~estimators.odometry.moving_points.
+MovingPointFilter` applies it to a stream of scans.
 
 A point counts as seen through by one sensor when it lies within the sensor's field of view and
 range, and the beam nearest its bearing and both that beam's neighbours all read more than its
@@ -24,7 +25,7 @@ obstacles: odometry, maps and tracking"). The odometry judges the points at the 
 made static points look seen through, and on the whole ACES log ``lidar_odometry`` went from
 0.034 to 0.059 m per local relation. Judged at the matched pose it still cost Intel 20 % of
 its accuracy, until the new scan judged earlier points only where its beams lie close enough
-to hit a thin object (:class:`MovingPointFilter`'s ``stale_resolution``). Taking no-return
+to hit a thin object (``MovingPointFilter``'s ``stale_resolution``). Taking no-return
 beams as saying nothing instead keeps Intel level too but gives back most of the simulated
 gain: in the open, space behind a walker is seen free only by beams that return nothing.
 
@@ -34,16 +35,13 @@ Units: metres, radians; points and sensor poses in one common frame (the world, 
 from __future__ import annotations
 
 import math
-from collections import deque
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, transform_points
 
 _TWO_PI = 2.0 * math.pi
 
@@ -151,22 +149,6 @@ def _seen_through_kernel(
     return out
 
 
-@numba.njit(cache=True)
-def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
-              radius: float) -> NDArray[np.bool_]:
-    """``(n,)`` True where ``points[i]`` lies within ``radius`` of one of ``anchors`` (m, 2)
-    (brute force: the anchors are the few points a scan sees through)."""
-    out = np.zeros(points.shape[0], dtype=np.bool_)
-    limit = radius * radius
-    for i in range(points.shape[0]):
-        for j in range(anchors.shape[0]):
-            dx, dy = points[i, 0] - anchors[j, 0], points[i, 1] - anchors[j, 1]
-            if dx * dx + dy * dy < limit:
-                out[i] = True
-                break
-    return out
-
-
 class BeamGeometry:
     """K sensors' beams packed for :func:`_seen_through_kernel` (built once per setup).
 
@@ -256,106 +238,3 @@ def seen_through(
     """
     return BeamGeometry(beam_angles, max_ranges).seen_through(points, sensor_poses, scans,
                                                               margin, min_range)
-
-
-class MovingPointFilter:
-    """Tells which points of each new scan lie on moving things, and which map points are
-    trails of things that moved away, from the scans alone.
-
-    A point of the new scan is *moving* if one of the last ``history`` scans saw through it (it
-    moved in), or if it lies within ``radius`` of a point the new scan sees through: of those
-    scans or of the map (it moved on from there: a person walking away from the sensor keeps
-    hiding where they will be, but not where they were). Map points the new scan sees
-    through are *stale*. Nothing is propagated further, so a misjudged point cannot spread a
-    label along a wall.
-
-    The new scan judges the earlier points only where its beams lie at most
-    ``stale_resolution`` apart: farther out, its beams can all pass an object thinner than
-    their spacing (a door frame, a table leg at 8 m between 1-degree beams, 14 cm apart) that
-    an earlier scan hit, and wrongly clearing it off the map is cumulative: on Intel, the map
-    lost the far end of a corridor that way, the odometry stalled in it (1.9 m short over 70
-    scans, 36 correlative fallbacks) and ``lidar_odometry`` lost 20 % of its accuracy (0.0435
-    -> 0.0522 m per keyframe pair). A wrong "moved in" flag costs one scan's point, so that test
-    keeps the full range: a walker far down a corridor is what pins (or drags) its axis.
-
-    Args:
-        setup: the sensors' mounts, beams and ranges
-            (:class:`~estimators.base.SensorSetup`).
-        margin: [m] of :func:`seen_through`.
-        radius: [m] how far a moving thing's surface may be from where it was seen one scan
-            before (0.3: a brisk walker's 10 Hz step plus the surface's change of shape).
-        history: earlier scans a point is checked against (5: at 10 Hz, half a second, in
-            which a walker at 0.5 m/s moves farther than ``margin``; one scan before, a
-            walker's surface has moved only 5-15 cm into space seen free).
-        min_range: [m] readings below it are no return.
-        stale_resolution: [m] the widest beam spacing at which the new scan judges earlier
-            points (0.1: the thinnest static things indoors; 5.7 m out at 1-degree beams).
-    """
-
-    def __init__(self, setup: Any, margin: float = 0.2, radius: float = 0.3,
-                 history: int = 5, min_range: float = 0.0,
-                 stale_resolution: float = 0.1) -> None:
-        self.setup = setup
-        self.margin = margin
-        self.radius = radius
-        self.min_range = min_range
-        if not stale_resolution > 0:  # NaN too; inf judges every earlier point
-            raise ConfigError(f"stale_resolution: expected a beam spacing > 0 [m] (inf: no "
-                              f"limit), got {stale_resolution!r}")
-        self.stale_resolution = stale_resolution
-        angles = [s.beam_angles for s in setup.sensors]
-        ranges = [s.max_range for s in setup.sensors]
-        # the last n scans packed as one setup of n x K sensors (one call); n = 1: the new scan
-        self._past_beams = [BeamGeometry(angles * n, ranges * n)
-                            for n in range(1, max(history, 1) + 1)]
-        self._beams = self._past_beams[0]
-        self._history: deque[tuple[NDArray[np.float64], list[NDArray[np.float64]],
-                                   NDArray[np.float64]]] = deque(maxlen=history)
-        self._past_poses = np.zeros((0, 3))
-        self._past_ranges = np.zeros(0)
-        self._past_world = np.zeros((0, 2))
-
-    def _sensor_poses(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.array([compose(pose, s.mount) for s in self.setup.sensors])
-
-    def classify(
-        self, points: NDArray[np.float64], pose: NDArray[np.float64],
-        scans: Mapping[str, NDArray[np.float64]], map_points: list[NDArray[np.float64]],
-    ) -> tuple[NDArray[np.bool_], list[NDArray[np.bool_]]]:
-        """``(moving (n,), stale masks)`` for the new scan's car-frame ``points`` (n, 2) at
-        (estimated) car ``pose`` and each world ``map_points`` array."""
-        world = np.ascontiguousarray(transform_points(pose, points), dtype=np.float64)
-        if self._history:  # moved in: seen through by one of the last scans
-            past = self._past_beams[len(self._history) - 1]
-            moving = past.judge(world, self._past_poses, self._past_ranges, self.margin,
-                                self.min_range, math.inf)
-        else:
-            moving = np.zeros(len(points), dtype=np.bool_)
-        # everything the new scan may see through, in one call: the map, then the history
-        sizes = [len(p) for p in map_points]
-        if not sum(sizes) + len(self._past_world):
-            return moving, [np.zeros(0, dtype=np.bool_) for _ in map_points]
-        stacked = np.concatenate([*map_points, self._past_world])
-        seen = self._beams.seen_through(
-            stacked, self._sensor_poses(pose),
-            [scans[key] for key in self.setup.keys], self.margin, self.min_range,
-            self.stale_resolution)
-        ends = np.cumsum(sizes)
-        flags = [seen[end - size:end] for size, end in zip(sizes, ends, strict=True)]
-        if seen.any() and len(world):  # moved on: next to a point the new scan sees through
-            moving |= _near_any(world, stacked[seen], self.radius)
-        return moving, flags
-
-    def remember(self, pose: NDArray[np.float64], scans: Mapping[str, NDArray[np.float64]],
-                 points: NDArray[np.float64]) -> None:
-        """Keep the scans (and their car-frame ``points``) taken at car ``pose`` for the next
-        :meth:`classify`."""
-        self._history.append((self._sensor_poses(pose), [scans[key] for key in self.setup.keys],
-                              transform_points(pose, points)))
-        if not self._history:  # history=0: nothing is kept
-            return
-        # packed once here rather than at each classify (it runs up to twice a scan)
-        self._past_poses = np.concatenate([poses for poses, _, _ in self._history])
-        self._past_ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel()
-                                            for _, ranges, _ in self._history for r in ranges])
-        self._past_world = np.concatenate([world for _, _, world in self._history])

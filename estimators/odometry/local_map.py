@@ -41,7 +41,7 @@ the car can have reached; a poor match gets correlative searches in ever wider w
 one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). All
 Lidars are merged in the car frame (:func:`estimators.matching.scan_matching.scans_to_car_points`).
 
-Moving things (``reject_dynamic``, on by default, :class:`~estimators.odometry.free_space.
+Moving things (``reject_dynamic``, on by default, :class:`~estimators.odometry.moving_points.
 MovingPointFilter`): points in space recent scans saw as free, or next to points the new scan
 sees through, neither pull the registration nor enter the map, and map points the new scan
 sees through leave it (from :data:`MIN_MOVING_POINTS` on). Judged at the matched pose, then
@@ -67,8 +67,8 @@ from estimators.matching.scan_matching import (
     voxel_downsample,
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
-from estimators.odometry.free_space import MovingPointFilter
 from estimators.odometry.motion_prior import ScanClock, missed_sigma, prediction_sigma
+from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
@@ -109,9 +109,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             ``prediction_acceleration * dt^2`` over the scan interval ``dt`` (0.5, a brisk
             indoor robot: 5 mm at 10 Hz, 2 cm at 5 Hz), plus speed times the interval's
             jitter; taken from the logged clock's median and median deviation over the last
-            200 scans, so glitching stamps (Intel) only weaken the prior; after a miss of over
-            twice that in the last ``velocity_window`` scans (a hard stop), the largest miss
-            (``motion_prior.missed_sigma``).
+            200 scans, so glitching stamps (Intel) only weaken the prior; after a hard stop (a
+            miss over twice that in ``velocity_window`` scans) the largest miss (``missed_sigma``).
         prior_sigma_translation, prior_sigma_rotation: the weakest per-scan deviation from
             constant velocity the prior allows, and its value before the clock is known
             (0.03 m: braking or accelerating at ~1 m/s^2 shifts a robot by 0.5 a dt^2 =
@@ -281,9 +280,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         return points[~moving] if np.count_nonzero(~moving) >= 3 else points
 
     def _remember(self, pose: NDArray[np.float64], scans: dict[str, NDArray[np.float64]],
-                  points: NDArray[np.float64]) -> None:
+                  points: NDArray[np.float64], jump: float = 0.0) -> None:
         if self._moving is not None:  # the scans and all their points, moving or not
-            self._moving.remember(pose, scans, points)
+            self._moving.remember(pose, scans, points,
+                                  self._clock.median if self._clock.settled else None, jump)
 
     def _add_keyframe(self, pose: NDArray[np.float64], points: NDArray[np.float64]) -> None:
         self._keyframes.append((pose.copy(), transform_points(pose, points)))
@@ -370,7 +370,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             if self._moving is not None:
                 points = self._static_points(points, guess, scans)
             self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
-            self._remember(guess, scans, seen)
+            self._remember(guess, scans, seen, float("inf"))  # a guess: no anchor
             if len(points) >= 2:
                 self._add_keyframe(guess, points)
             return guess
@@ -388,7 +388,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         miss = relative(guess, pose)
         self._misses.append(float(np.hypot(miss[0], miss[1])))
         self._velocity = self._updated_velocity(relative(self.pose, pose), dt)
-        self._remember(pose, scans, seen)
+        self._remember(pose, scans, seen, self._misses[-1])
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
         if (

@@ -101,7 +101,7 @@ def _car_points(scans: list[np.ndarray], setup: object) -> np.ndarray:
 @pytest.mark.parametrize("path", ["crossing", "receding"])
 def test_the_filter_flags_a_walker_and_nothing_static(path: str) -> None:
     from estimators.base import SensorSetup
-    from estimators.odometry.free_space import MovingPointFilter
+    from estimators.odometry.moving_points import MovingPointFilter
 
     setup = SensorSetup([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]], FULL, 10.0)
     moving_filter = MovingPointFilter(setup)
@@ -152,7 +152,7 @@ def test_the_filter_clears_map_points_only_where_the_new_scan_resolves_them() ->
     there) is not, with the default ``stale_resolution`` 0.1 m; a new point in space an earlier
     scan saw through is moving at 8 m too (that test keeps the full range)."""
     from estimators.base import SensorSetup
-    from estimators.odometry.free_space import MovingPointFilter
+    from estimators.odometry.moving_points import MovingPointFilter
 
     room = World(segments=[[-12, -12, 12, -12], [12, -12, 12, 12], [12, 12, -12, 12],
                            [-12, 12, -12, -12]])
@@ -174,7 +174,7 @@ def test_the_filter_clears_map_points_only_where_the_new_scan_resolves_them() ->
 @pytest.mark.parametrize("bad", [0.0, -0.1, float("nan")])
 def test_a_stale_resolution_that_is_no_spacing_is_named(bad: float) -> None:
     from estimators.base import SensorSetup
-    from estimators.odometry.free_space import MovingPointFilter
+    from estimators.odometry.moving_points import MovingPointFilter
     from lidar_env.errors import ConfigError
 
     with pytest.raises(ConfigError, match="stale_resolution"):
