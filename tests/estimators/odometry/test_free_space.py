@@ -179,3 +179,67 @@ def test_a_stale_resolution_that_is_no_spacing_is_named(bad: float) -> None:
 
     with pytest.raises(ConfigError, match="stale_resolution"):
         MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), stale_resolution=bad)
+
+
+def _walker_steps(places: np.ndarray, interval: float, room: World = BOX, jump: float = 0.0,
+                  **params: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A two-Lidar car (20 m range) standing in ``room`` beside a post while a walker (0.25 m)
+    passes through ``places``, one scan every ``interval`` [s], each pose ``jump`` [m] from
+    the motion model's guess: per scan, the filter's moving mask and which points lie on the
+    walker."""
+    from estimators.base import SensorSetup
+    from estimators.odometry.moving_points import MovingPointFilter
+
+    setup = SensorSetup([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]], FULL, 20.0)
+    moving_filter = MovingPointFilter(setup, **params)
+    sensors, car = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]]), np.zeros(3)
+    steps = []
+    for walker_x, walker_y in places:
+        world = World(circles=[[3.0, 2.0, 0.3], [walker_x, walker_y, 0.25]],
+                      segments=room.walls)
+        scans = cast_rays(world, sensors, FULL, 20.0)
+        points = _car_points(scans, setup)
+        observation = dict(zip(setup.keys, scans, strict=True))
+        moving, _ = moving_filter.classify(points, car, observation, [])
+        on_walker = np.abs(np.hypot(points[:, 0] - walker_x, points[:, 1] - walker_y)
+                           - 0.25) < 0.05
+        steps.append((moving, on_walker))
+        moving_filter.remember(car, observation, points, interval, jump)
+    return steps
+
+
+def test_a_slow_walker_walking_away_is_flagged_once_it_has_left_margin_behind() -> None:
+    """At 0.3 m/s a walker leaves the 0.2 m margin behind only after 0.7 s: half a second of
+    scans (``history``) never shows it moved on, the last second's (``anchor_time``) does."""
+    walk = 3.0 + 0.03 * np.arange(25)  # 0.3 m/s at 10 Hz, straight away from the car
+    places = np.column_stack([walk, np.full_like(walk, 0.3)])
+    for anchor_time in (1.0, 0.0):
+        steps = _walker_steps(places, 0.1, anchor_time=anchor_time)
+        assert not any(moving[~on_walker].any() for moving, on_walker in steps)
+        late = [moving[on_walker].mean() for moving, on_walker in steps[10:]]
+        assert min(late) > 0.8 if anchor_time else max(late) == 0.0
+
+
+def test_after_a_jump_the_last_scans_are_judged_only_where_beams_are_dense() -> None:
+    """A pose that landed far from the motion model's guess may be off; the far points of the
+    scans before it then stop marking what moved on for ``history`` scans."""
+    far = 7.0 + 0.03 * np.arange(25)  # walking away 7 m out: 1-degree beams 12 cm apart
+    places = np.column_stack([far, np.full_like(far, 0.3)])
+    hall = World(segments=[[-12, -12, 12, -12], [12, -12, 12, 12], [12, 12, -12, 12],
+                           [-12, 12, -12, -12]])
+    steady = _walker_steps(places, 0.1, hall)
+    assert min(moving[on].mean() for moving, on in steady[10:]) > 0.5  # 4 beams on it
+    jumpy = _walker_steps(places, 0.1, hall, jump=0.06)  # each pose 6 cm from the guess
+    assert not any(moving.any() for moving, _ in jumpy)
+
+
+@pytest.mark.parametrize("name", ["anchor_time", "max_anchor_scans", "anchor_spacing",
+                                  "anchor_break"])
+def test_an_anchor_setting_out_of_range_is_named(name: str) -> None:
+    from estimators.base import SensorSetup
+    from estimators.odometry.moving_points import MovingPointFilter
+    from lidar_env.errors import ConfigError
+
+    for bad in (-1, float("nan")):
+        with pytest.raises(ConfigError, match=name):
+            MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), **{name: bad})
