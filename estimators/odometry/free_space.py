@@ -46,10 +46,11 @@ from lidar_env.errors import ConfigError, EstimatorInputError
 _TWO_PI = 2.0 * math.pi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _bearing(y: float, x: float) -> float:
     """``atan2(y, x)`` [rad] to within 2e-6 rad (an octant-reduced polynomial): enough to pick
-    the nearest beam, and several times cheaper than libm's."""
+    the nearest beam, and several times cheaper than libm's. (numpy's error model: its one
+    division, guarded, needs no zero check, so a loop of it compiles to SIMD.)"""
     ax, ay = abs(x), abs(y)
     if ax == 0.0 and ay == 0.0:
         return 0.0
@@ -86,6 +87,9 @@ def _seen_through_kernel(
     ``sensor_params[k]`` = (beam 0's angle [rad], max range [m], uniform step [rad] or 0, full
     turn 1/0). A full turn's neighbours wrap around; a narrower one's do not. Points where
     a sensor's beams lie more than ``resolution`` [m] apart are not judged by it.
+
+    The plain form, beam by beam: :func:`_seen_through_free` gives the same booleans faster
+    (the tests hold it to this one).
     """
     out = np.zeros(points.shape[0], dtype=np.bool_)
     for k in range(poses.shape[0]):
@@ -149,6 +153,116 @@ def _seen_through_kernel(
     return out
 
 
+@numba.njit(cache=True)
+def _free_ranges(ranges: NDArray[np.float64], starts: NDArray[np.int64],
+                 order: NDArray[np.int64], sensor_params: NDArray[np.float64],
+                 min_range: float) -> NDArray[np.float64]:
+    """How far [m] each beam and both its neighbours saw free, packed as ``relative_angles``
+    (sorted): the least of the three readings, each capped at the max range, -inf where one
+    is below ``min_range`` (or NaN) or missing (a narrower field of view's end beams).
+
+    :func:`_seen_through_kernel`'s three-reading test at distance d is then one comparison,
+    ``free > d + margin``: the least of three is exact, so the booleans are the same.
+    """
+    free = np.empty(len(ranges))
+    for k in range(len(starts) - 1):
+        a, b = starts[k], starts[k + 1]
+        n = b - a
+        max_range, full_turn = sensor_params[k, 1], sensor_params[k, 3] > 0.5
+        seen = np.empty(n)
+        for m in range(n):
+            reading = ranges[a + order[a + m]]
+            seen[m] = min(reading, max_range) if reading >= min_range else -np.inf
+        for j in range(n):
+            before, after = j - 1, j + 1
+            if full_turn:
+                before, after = (before + n) % n, after % n
+            elif before < 0 or after >= n:
+                free[a + j] = -np.inf
+                continue
+            free[a + j] = min(seen[before], min(seen[j], seen[after]))
+    return free
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _polar(points: NDArray[np.float64], x: float, y: float, c: float, s: float,
+           distance: NDArray[np.float64], bearing: NDArray[np.float64]) -> None:
+    """Each of ``points`` (n, 2)' distance [m] and raw bearing [rad] (before beam 0's angle
+    is taken off) from a sensor at ``(x, y)`` heading ``atan2(s, c)``, into ``distance`` and
+    ``bearing`` (n,): the operations of :func:`_seen_through_kernel`, with no branch to stop
+    SIMD."""
+    for i in range(points.shape[0]):
+        dx, dy = points[i, 0] - x, points[i, 1] - y
+        distance[i] = math.sqrt(dx * dx + dy * dy)
+        bearing[i] = _bearing(-s * dx + c * dy, c * dx + s * dy)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _seen_through_free(
+    points: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    free: NDArray[np.float64],
+    starts: NDArray[np.int64],
+    relative_angles: NDArray[np.float64],
+    sensor_params: NDArray[np.float64],
+    margin: float,
+    min_range: float,
+    resolution: float,
+) -> NDArray[np.bool_]:
+    """:func:`_seen_through_kernel`'s booleans from the sensors' :func:`_free_ranges`
+    ``free``: every point's distance and bearing from a sensor in one SIMD pass, then the
+    nearest beam and one comparison; points beyond the sensor's farthest free reach are
+    passed over before that (they fail the comparison anyway)."""
+    count = points.shape[0]
+    out = np.zeros(count, dtype=np.bool_)
+    distances, bearings = np.empty(count), np.empty(count)
+    for k in range(poses.shape[0]):
+        a, b = starts[k], starts[k + 1]
+        n = b - a
+        first_angle, max_range, step, full = sensor_params[k]
+        full_turn = full > 0.5
+        last = relative_angles[b - 1] - relative_angles[a]
+        half_spacing = 0.5 * last / max(n - 1, 1)
+        reach = max_range
+        if n:
+            reach = min(reach, free[a:b].max())
+        _polar(points, poses[k, 0], poses[k, 1], math.cos(poses[k, 2]), math.sin(poses[k, 2]),
+               distances, bearings)
+        for i in range(count):
+            distance = distances[i]
+            if (out[i] or distance + margin >= reach or distance < min_range
+                    or 2.0 * half_spacing * distance > resolution):
+                continue
+            bearing = bearings[i] - first_angle
+            while bearing < 0.0:
+                bearing += _TWO_PI
+            while bearing >= _TWO_PI:
+                bearing -= _TWO_PI
+            if step > 0.0:  # uniform beams: the nearest by arithmetic
+                j = int(bearing / step + 0.5)
+                if j >= n:
+                    if full_turn:
+                        j = 0 if j * step >= _TWO_PI - 0.5 * step else n - 1
+                    elif bearing - last <= half_spacing:
+                        j = n - 1
+                    else:
+                        continue  # outside the field of view: this sensor says nothing
+            else:
+                j = np.searchsorted(relative_angles[a:b], bearing)
+                if j == n:  # past the last beam: it, or (on a full turn) beam 0 a turn on
+                    if full_turn and _TWO_PI - bearing < bearing - last:
+                        j = 0
+                    elif full_turn or bearing - last <= half_spacing:
+                        j = n - 1
+                    else:
+                        continue
+                elif j > 0 and (bearing - relative_angles[a + j - 1]
+                                < relative_angles[a + j] - bearing):
+                    j -= 1
+            out[i] = free[a + j] > distance + margin
+    return out
+
+
 class BeamGeometry:
     """K sensors' beams packed for :func:`_seen_through_kernel` (built once per setup).
 
@@ -198,12 +312,16 @@ class BeamGeometry:
                              f"sensor), got {len(poses)} and {len(scans)}")
         if not (math.isfinite(margin) and margin >= 0):
             raise ConfigError(f"margin: expected a distance >= 0 [m], got {margin!r}")
+        return self.judge(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses,
+                          self.pack(scans), float(margin), float(min_range), float(resolution))
+
+    def pack(self, scans: Sequence[ArrayLike]) -> NDArray[np.float64]:
+        """The K sensors' readings ``scans`` [m] as one float64 array, checked for length."""
         ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel() for r in scans])
         if len(ranges) != self.starts[-1]:
             raise EstimatorInputError(f"scans: expected {self.sizes} readings, got "
-                             f"{[np.size(r) for r in scans]}")
-        return self.judge(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses,
-                          ranges, float(margin), float(min_range), float(resolution))
+                                      f"{[np.size(r) for r in scans]}")
+        return ranges
 
     def judge(self, points: NDArray[np.float64], poses: NDArray[np.float64],
               ranges: NDArray[np.float64], margin: float, min_range: float,
@@ -211,8 +329,21 @@ class BeamGeometry:
         """:meth:`seen_through` of inputs already checked and packed: ``points`` (n, 2) and
         ``poses`` (K, 3) C-contiguous float64, ``ranges`` every sensor's readings in one
         float64 array."""
-        return _seen_through_kernel(points, poses, ranges, self.starts, self.relative_angles,
-                                    self.order, self.params, margin, min_range, resolution)
+        return self.judge_free(points, poses, self.free(ranges, min_range), margin, min_range,
+                               resolution)
+
+    def free(self, ranges: NDArray[np.float64], min_range: float) -> NDArray[np.float64]:
+        """The packed readings ``ranges`` (float64, beam order) as :func:`_free_ranges`: how far
+        [m] each beam and its neighbours saw free, for :meth:`judge_free` (a scan judged more
+        than once is packed once)."""
+        return _free_ranges(ranges, self.starts, self.order, self.params, min_range)
+
+    def judge_free(self, points: NDArray[np.float64], poses: NDArray[np.float64],
+                   free: NDArray[np.float64], margin: float, min_range: float,
+                   resolution: float) -> NDArray[np.bool_]:
+        """:meth:`judge` of readings packed by :meth:`free` (with the same ``min_range``)."""
+        return _seen_through_free(points, poses, free, self.starts, self.relative_angles,
+                                  self.params, margin, min_range, resolution)
 
 
 def seen_through(
