@@ -11,6 +11,7 @@ Units: metres, radians, seconds; points in the world frame unless said otherwise
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from collections.abc import Mapping
@@ -20,17 +21,15 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.scan_matching import voxel_downsample
 from estimators.odometry.free_space import BeamGeometry
 from lidar_env.errors import ConfigError
-from lidar_env.se2 import compose, transform_points
+from lidar_env.se2 import compose_floats, transform_points
 
 
 @numba.njit(cache=True)
-def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
-              radius: float) -> NDArray[np.bool_]:
-    """``(n,)`` True where ``points[i]`` lies within ``radius`` of one of ``anchors`` (m, 2)
-    (brute force: the anchors are the few points a scan sees through)."""
+def _near_any_plain(points: NDArray[np.float64], anchors: NDArray[np.float64],
+                    radius: float) -> NDArray[np.bool_]:
+    """:func:`_near_any` by brute force over every pair (the tests' reference)."""
     out = np.zeros(points.shape[0], dtype=np.bool_)
     limit = radius * radius
     for i in range(points.shape[0]):
@@ -41,6 +40,172 @@ def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
                 break
     return out
 
+
+#: [m] coordinates beyond it (or not finite) send :func:`_near_any` to brute force: their
+#: cells would not fit an int64 key.
+_GRID_LIMIT = 1e9
+
+
+@numba.njit(cache=True)
+def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
+              radius: float) -> NDArray[np.bool_]:
+    """``(n,)`` True where ``points[i]`` lies within ``radius`` [m] of one of ``anchors``
+    (m, 2), same frame: :func:`_near_any_plain`'s test, asked only of the anchors in the 3 x 3
+    cells around the point (cells a little wider than ``radius``, the anchors sorted by cell):
+    any anchor the test passes has ``|dx|, |dy| < radius``, so it lies in one of them."""
+    cell = radius * (1.0 + 1e-6)
+    if not (cell > 0.0 and np.all(np.abs(points) < _GRID_LIMIT * cell)
+            and np.all(np.abs(anchors) < _GRID_LIMIT * cell)):
+        return _near_any_plain(points, anchors, radius)
+    keys = np.empty(anchors.shape[0], dtype=np.int64)
+    for j in range(anchors.shape[0]):  # row-major cell index: a row's cells are one run
+        keys[j] = (np.int64(math.floor(anchors[j, 0] / cell)) << 32) + np.int64(
+            math.floor(anchors[j, 1] / cell))
+    order = np.argsort(keys)
+    keys, near = keys[order], anchors[order]
+    out = np.zeros(points.shape[0], dtype=np.bool_)
+    limit = radius * radius
+    for i in range(points.shape[0]):
+        cx = np.int64(math.floor(points[i, 0] / cell))
+        cy = np.int64(math.floor(points[i, 1] / cell))
+        for row in (cx - 1, cx, cx + 1):
+            lo = np.searchsorted(keys, (row << 32) + cy - 1)
+            hi = np.searchsorted(keys, (row << 32) + cy + 1, side="right")
+            for j in range(lo, hi):
+                dx, dy = points[i, 0] - near[j, 0], points[i, 1] - near[j, 1]
+                if dx * dx + dy * dy < limit:
+                    out[i] = True
+                    break
+            if out[i]:
+                break
+    return out
+
+
+@numba.njit(cache=True)
+def _mark_cells(points: NDArray[np.float64], spacing: float, table: NDArray[np.int64],
+                last: NDArray[np.int64], scan: int) -> tuple[NDArray[np.int64], int]:
+    """Each of a scan's world ``points`` (n, 2)' previous scan: the last ``scan`` number before
+    this one with a point in its ``spacing`` [m] cell (-1: none known), ``scan`` itself for a
+    point after the first in its cell; then the cells are marked as seen in ``scan``. The cells
+    are :func:`~estimators.matching.scan_matching.first_in_each_cell`'s (its keys, its hash);
+    ``table`` (cell keys) and ``last`` (their scans, -1: a free slot) are an open-addressing
+    hash set, a power of two long, updated in place. Returns (previous scans, slots filled)."""
+    mask = len(table) - 1
+    shift = np.uint64(64 - int(np.log2(len(table))))
+    previous = np.empty(len(points), np.int64)
+    filled = 0
+    for i in range(len(points)):
+        cx = np.int64(np.floor(points[i, 0] / spacing))
+        cy = np.int64(np.floor(points[i, 1] / spacing))
+        key = (cx << 32) + (cy & 0xFFFFFFFF)
+        slot = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+        while last[slot] >= 0 and table[slot] != key:
+            slot = (slot + 1) & mask
+        if last[slot] < 0:
+            filled += 1
+            table[slot] = key
+        previous[i] = last[slot]
+        last[slot] = scan
+    return previous, filled
+
+
+@numba.njit(cache=True)
+def _rows_before(points: NDArray[np.float64], previous: NDArray[np.int64],
+                 oldest: int) -> NDArray[np.float64]:
+    """The rows of ``points`` (n, 2) whose ``previous`` scan is before ``oldest``, in order."""
+    count = 0
+    for i in range(len(previous)):
+        count += previous[i] < oldest
+    out = np.empty((count, 2))
+    row = 0
+    for i in range(len(previous)):
+        if previous[i] < oldest:
+            out[row, 0], out[row, 1] = points[i, 0], points[i, 1]
+            row += 1
+    return out
+
+
+class _ThinnedScans:
+    """The last scans' world points and, as :func:`~estimators.matching.scan_matching.
+    voxel_downsample` of the concatenation of any last few of them would keep them, their
+    first point per cell, kept incrementally: a point is the first of its cell in the last
+    scans from ``oldest`` on when it is the first in its own scan and no scan from ``oldest``
+    on before its own had a point there. Which scan last had a point in a cell is found once,
+    when the point's scan arrives (:func:`_mark_cells`), in a hash set that keeps the cells of
+    the last ``length`` scans (rebuilt from them when half full). The points are packed in
+    one buffer, the kept scans one run at its end (moved to the front when it fills).
+
+    Args:
+        length: [scans] how many are kept.
+        spacing: [m] the cells' size.
+    """
+
+    def __init__(self, length: int, spacing: float) -> None:
+        self.spacing = spacing
+        self._scans: deque[tuple[int, int, int]] = deque(maxlen=length)  # number, start, end
+        self._count = 0  # scans added
+        self._points = np.empty((1024, 2))
+        self._previous = np.empty(1024, np.int64)
+        self._table = np.zeros(1024, np.int64)
+        self._last = np.full(1024, -1, np.int64)
+        self._filled = 0
+
+    def add(self, points: NDArray[np.float64]) -> None:
+        """Keep the next scan's world ``points`` (n, 2) [m] (C-contiguous float64)."""
+        if len(self._scans) == self._scans.maxlen:
+            self._scans.popleft()
+        if 2 * (self._filled + len(points)) > len(self._table):
+            self._rebuild(len(points))
+        previous, filled = _mark_cells(points, self.spacing, self._table, self._last,
+                                       self._count)
+        self._filled += filled
+        start = self._make_room(len(points))
+        self._points[start:start + len(points)] = points
+        self._previous[start:start + len(points)] = previous
+        self._scans.append((self._count, start, start + len(points)))
+        self._count += 1
+
+    def _make_room(self, incoming: int) -> int:
+        """Where the next ``incoming`` points go: after the kept ones, which move to the
+        buffer's front (into a larger buffer if they would fill over half of it) first when
+        there is no room."""
+        first = self._scans[0][1] if self._scans else 0
+        end = self._scans[-1][2] if self._scans else 0
+        if end + incoming <= len(self._points):
+            return end
+        kept = end - first
+        size = len(self._points)
+        while 2 * (kept + incoming) > size:
+            size *= 2
+        points, previous = np.empty((size, 2)), np.empty(size, np.int64)
+        points[:kept], previous[:kept] = self._points[first:end], self._previous[first:end]
+        self._points, self._previous = points, previous
+        self._scans = deque(((scan, a - first, b - first) for scan, a, b in self._scans),
+                            maxlen=self._scans.maxlen)
+        return kept
+
+    def _rebuild(self, incoming: int) -> None:
+        """The hash set anew from the kept scans alone (the older ones' cells say nothing), a
+        size that leaves it at most a quarter full with ``incoming`` more points."""
+        kept = sum(b - a for _, a, b in self._scans)
+        size = 1024
+        while size < 4 * (kept + incoming):
+            size *= 2
+        self._table = np.zeros(size, np.int64)
+        self._last = np.full(size, -1, np.int64)
+        self._filled = 0
+        for scan, a, b in self._scans:
+            self._filled += _mark_cells(self._points[a:b], self.spacing, self._table,
+                                        self._last, scan)[1]
+
+    def thinned(self, count: int) -> NDArray[np.float64]:
+        """The last ``count`` scans' points (m, 2), first per cell, in order:
+        ``voxel_downsample(np.concatenate(last count scans), spacing)``, row for row."""
+        if not count or not self._scans:
+            return np.zeros((0, 2))
+        oldest, start, _ = self._scans[-min(count, len(self._scans))]
+        end = self._scans[-1][2]
+        return _rows_before(self._points[start:end], self._previous[start:end], oldest)
 
 
 class MovingPointFilter:
@@ -123,18 +288,40 @@ class MovingPointFilter:
         self._past_beams = [BeamGeometry(angles * n, ranges * n)
                             for n in range(1, max(history, 1) + 1)]
         self._beams = self._past_beams[0]
-        self._history: deque[tuple[NDArray[np.float64], list[NDArray[np.float64]]]] = deque(
+        self._mounts = [[float(v) for v in s.mount] for s in setup.sensors]
+        # the last scans' sensor poses and free reach (BeamGeometry.free), packed
+        self._history: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque(
             maxlen=history)
         self._past_poses = np.zeros((0, 3))
-        self._past_ranges = np.zeros(0)
-        self._anchor_scans: deque[NDArray[np.float64]] = deque(
-            maxlen=max(max_anchor_scans, history))
+        self._past_free = np.zeros(0)
+        self._anchor_scans = _ThinnedScans(max(max_anchor_scans, history), anchor_spacing)
         self._anchors = np.zeros((0, 2))  # their points, world frame, thinned
         self._anchor_resolution = math.inf
         self._jumps: deque[float] = deque(maxlen=max(history, 1))
+        self._last_scan: tuple[Any, ...] | None = None  # what _at saw and gave last
 
-    def _sensor_poses(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.array([compose(pose, s.mount) for s in self.setup.sensors])
+    def _at(self, pose: NDArray[np.float64], points: NDArray[np.float64],
+            scans: Mapping[str, NDArray[np.float64]],
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The scan's world points (n, 2), its sensors' world poses (K, 3) (:func:`compose`'s
+        floats) and its beams' free reach (:meth:`BeamGeometry.free`) at car ``pose``: the last
+        ones again for the same arrays (as the filter keeps the scans it is given, it takes
+        them as read-only), the reach for the same scans at any pose (a scan is classified at
+        up to two poses, then remembered at the last)."""
+        car = np.asarray(pose, dtype=np.float64)
+        arrays = [scans[key] for key in self.setup.keys]
+        last = self._last_scan
+        same_scans = last is not None and all(
+            a is b for a, b in zip(arrays, last[2], strict=True))
+        if last is not None and same_scans and points is last[1] and car.tobytes() == last[0]:
+            return last[3], last[4], last[5]
+        free = (last[5] if last is not None and same_scans else
+                self._beams.free(self._beams.pack(arrays), self.min_range))
+        world = np.ascontiguousarray(transform_points(car, points), dtype=np.float64)
+        floats = car.tolist()
+        sensor_poses = np.array([compose_floats(floats, mount) for mount in self._mounts])
+        self._last_scan = (car.tobytes(), points, arrays, world, sensor_poses, free)
+        return world, sensor_poses, free
 
     def classify(
         self, points: NDArray[np.float64], pose: NDArray[np.float64],
@@ -142,26 +329,25 @@ class MovingPointFilter:
     ) -> tuple[NDArray[np.bool_], list[NDArray[np.bool_]]]:
         """``(moving (n,), stale masks)`` for the new scan's car-frame ``points`` (n, 2) at
         (estimated) car ``pose`` and each world ``map_points`` array."""
-        world = np.ascontiguousarray(transform_points(pose, points), dtype=np.float64)
+        world, sensor_poses, free = self._at(pose, points, scans)
         if self._history:  # moved in: seen through by one of the last scans
             past = self._past_beams[len(self._history) - 1]
-            moving = past.judge(world, self._past_poses, self._past_ranges, self.margin,
-                                self.min_range, math.inf)
+            moving = past.judge_free(world, self._past_poses, self._past_free, self.margin,
+                                     self.min_range, math.inf)
         else:
             moving = np.zeros(len(points), dtype=np.bool_)
-        sensor_poses, ranges = self._sensor_poses(pose), [scans[key] for key in self.setup.keys]
         sizes = [len(p) for p in map_points]
         flags = [np.zeros(0, dtype=np.bool_) for _ in map_points]
-        anchors = [self._anchors[self._beams.seen_through(  # the recent scans'
-            self._anchors, sensor_poses, ranges, self.margin, self.min_range,
-            self._anchor_resolution)]]
+        anchors = [np.compress(self._beams.judge_free(  # the recent scans'
+            self._anchors, sensor_poses, free, self.margin, self.min_range,
+            self._anchor_resolution), self._anchors, axis=0)]
         if sum(sizes):  # stale: map points it sees through, where its beams are dense
-            stacked = np.concatenate(map_points)
-            seen = self._beams.seen_through(stacked, sensor_poses, ranges, self.margin,
-                                            self.min_range, self.stale_resolution)
-            ends = np.cumsum(sizes)
+            stacked = np.ascontiguousarray(np.concatenate(map_points), dtype=np.float64)
+            seen = self._beams.judge_free(stacked, sensor_poses, free, self.margin,
+                                          self.min_range, self.stale_resolution)
+            ends = list(itertools.accumulate(sizes))
             flags = [seen[end - size:end] for size, end in zip(sizes, ends, strict=True)]
-            anchors.append(stacked[seen])
+            anchors.append(np.compress(seen, stacked, axis=0))
         near = np.concatenate(anchors)
         if len(near) and len(world):  # moved on: next to a point the new scan sees through
             moving |= _near_any(world, near, self.radius)
@@ -173,7 +359,8 @@ class MovingPointFilter:
         """Keep the scans (and their car-frame ``points``) taken at car ``pose`` for the next
         :meth:`classify`; ``interval`` [s]: the typical scan interval (None: unknown); ``jump``
         [m]: how far ``pose`` landed from the motion model's guess."""
-        self._anchor_scans.append(transform_points(pose, points))
+        world, sensor_poses, free = self._at(pose, points, scans)
+        self._anchor_scans.add(world)
         self._jumps.append(jump)
         count = self._history_length
         steady = max(self._jumps) <= self.anchor_break
@@ -182,13 +369,10 @@ class MovingPointFilter:
         self._anchor_resolution = math.inf if steady else self.stale_resolution
         if steady and interval is not None and interval > 0:
             count = max(count, math.ceil(self.anchor_time / interval))
-        recent = list(self._anchor_scans)[-count:] if count else []
-        self._anchors = (voxel_downsample(np.concatenate(recent), self.anchor_spacing) if recent
-                         else np.zeros((0, 2)))
-        self._history.append((self._sensor_poses(pose), [scans[key] for key in self.setup.keys]))
-        if not self._history:  # history=0: nothing is kept
+        self._anchors = self._anchor_scans.thinned(count)
+        if not self._history.maxlen:  # history=0: nothing is kept
             return
+        self._history.append((sensor_poses, free))
         # packed once here rather than at each classify (it runs up to twice a scan)
         self._past_poses = np.concatenate([poses for poses, _ in self._history])
-        self._past_ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel()
-                                            for _, ranges in self._history for r in ranges])
+        self._past_free = np.concatenate([free for _, free in self._history])

@@ -1,5 +1,6 @@
 """The moving-point filter's fast kernels give their plain forms' answers exactly: the
-seen-through test from each beam's free reach."""
+seen-through test from each beam's free reach, the near-anchor test on a grid, the anchors'
+thinning kept scan by scan."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from estimators.matching.scan_matching import voxel_downsample
 from estimators.odometry.free_space import (
     BeamGeometry,
     _free_ranges,
     _seen_through_free,
     _seen_through_kernel,
 )
+from estimators.odometry.moving_points import _near_any, _near_any_plain, _ThinnedScans
 
 
 def _beam_angles(kind: int, n: int, first: float, rng: np.random.Generator) -> np.ndarray:
@@ -56,3 +59,47 @@ def test_seen_through_from_free_reach_matches_the_beam_by_beam_kernel(
     np.testing.assert_array_equal(fast, plain)
     np.testing.assert_array_equal(beams.judge(points, poses, ranges, margin, min_range,
                                               resolution), plain)
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), radius=st.sampled_from([0.3, 0.05, 1.0, 0.25]),
+       scale=st.sampled_from([1.0, 10.0, 1e3]))
+def test_near_any_on_a_grid_matches_brute_force(seed: int, radius: float, scale: float) -> None:
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-scale, scale, (int(rng.integers(0, 200)), 2))
+    anchors = rng.uniform(-scale, scale, (int(rng.integers(0, 100)), 2))
+    if len(anchors) and len(points):  # anchors next to points, some on cell edges
+        picks = rng.integers(0, len(points), len(anchors) // 2)
+        anchors[: len(picks)] = points[picks] + rng.uniform(-radius, radius, (len(picks), 2))
+        anchors[: len(picks) // 4] = np.round(anchors[: len(picks) // 4] / radius) * radius
+        points[: len(points) // 4] = np.round(points[: len(points) // 4] / radius) * radius
+    np.testing.assert_array_equal(_near_any(points, anchors, radius),
+                                  _near_any_plain(points, anchors, radius))
+
+
+def test_near_any_far_out_or_not_finite_falls_back_to_brute_force() -> None:
+    points = np.array([[1e12, 0.0], [np.nan, 0.0], [0.0, 0.0]])
+    anchors = np.array([[1e12 + 0.1, 0.0], [0.2, 0.0]])
+    np.testing.assert_array_equal(_near_any(points, anchors, 0.3), [True, False, True])
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), length=st.integers(1, 8),
+       spacing=st.sampled_from([0.05, 0.5]))
+def test_thinned_scans_match_voxel_downsample_of_the_last_scans(
+        seed: int, length: int, spacing: float) -> None:
+    """Row for row, over enough scans for the hash set to fill and be rebuilt."""
+    rng = np.random.default_rng(seed)
+    thinned = _ThinnedScans(length, spacing)
+    scans: list[np.ndarray] = []
+    for _ in range(int(rng.integers(1, 40))):
+        n = int(rng.integers(0, 400))
+        scan = rng.uniform(-3, 3, (n, 2)) + rng.uniform(-2, 2, 2)
+        scan[: n // 3] = np.round(scan[: n // 3] / spacing) * spacing  # on cell edges
+        scans.append(scan)
+        thinned.add(scan)
+        for count in {0, 1, int(rng.integers(1, length + 2)), length}:
+            recent = scans[-length:][-count:] if count else []
+            expected = (voxel_downsample(np.concatenate(recent), spacing) if recent
+                        else np.zeros((0, 2)))
+            np.testing.assert_array_equal(thinned.thinned(count), expected)
