@@ -5,10 +5,10 @@ seconds for the ray caster on a 2-core machine) and writes the machine code besi
 in ``__pycache__``; later processes load it in milliseconds. Left alone, each worker of a cold
 run compiles every kernel it touches, all of them twice over with two workers. Here two warm-up
 tasks run on the pool first, one compiling the env and mapping kernels, the other the
-estimators' (both record the same few-step scenario first, so the ray caster is the only kernel
-compiled twice), and a marker keyed by the source digest skips the warm-up once this source has
-been compiled. One worker (no pool) or a Dask cluster (whose workers cache elsewhere) gain
-nothing from it and skip it.
+estimators' (both record a drive first, so the ray caster is the only kernel compiled twice),
+and a marker keyed by the source digest skips the warm-up once this source has been compiled.
+One worker (no pool) or a Dask cluster (whose workers cache elsewhere) gain nothing from it and
+skip it.
 """
 
 from __future__ import annotations
@@ -24,8 +24,14 @@ from estimators.leaderboard.records import Scenario, source_digest
 from estimators.matching.nearest import PointIndex
 from estimators.paths import PROJECT_ROOT
 
-#: A short drive past cylinders: every kernel of a real scenario runs on it, in a few steps.
+#: A short drive past cylinders: every kernel of the env and the mapping runs on it, in a few
+#: steps.
 WARMUP_SCENARIO = Scenario("open_cylinders", "straight", 0, config={"max_episode_time": 0.5})
+#: Down a corridor and back (25 s, 251 steps): the estimators' kernels that a few steps do not
+#: reach run on it too, loop closure's search and solver and the moving-point filter's
+#: "moved on" test; left to the workers, each compiled them inside its first such scenario
+#: (2026-12-06: a cold run's ms/step of `slam` 11.4 against 5.1 warm).
+WARMUP_REVISIT = Scenario("hallway", "out_and_back", 0, config={"max_episode_time": 25.0})
 
 
 def marker_path() -> Path:
@@ -43,9 +49,10 @@ def warm_env_and_mapping() -> None:
 
 
 def warm_estimators(names: tuple[str, ...]) -> None:
-    """Compile the kernels of the named estimators by running each over a short drive, and
-    the nearest-neighbour queries a short drive may not reach (loop closure's pairing)."""
-    dataset = record(WARMUP_SCENARIO)
+    """Compile the kernels of the named estimators by running each over a drive that revisits
+    a place, and the nearest-neighbour queries a drive may not reach (loop closure's
+    pairing)."""
+    dataset = record(WARMUP_REVISIT)
     for name in names:
         replay(dataset, name)
     index = PointIndex(np.zeros((2, 2)))
