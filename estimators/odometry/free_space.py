@@ -66,6 +66,38 @@ def _bearing(y: float, x: float) -> float:
 
 
 @numba.njit(cache=True)
+def _nearest_beam(bearing: float, relative_angles: NDArray[np.float64], a: int, n: int,
+                  step: float, full_turn: bool, last: float, half_spacing: float) -> int:
+    """The index (0..n-1) of the beam nearest ``bearing`` [rad] from beam 0 of the sensor whose
+    sorted relative angles start at ``relative_angles[a]`` (:func:`_seen_through_kernel`'s
+    packing), or -1 outside its field of view."""
+    while bearing < 0.0:
+        bearing += _TWO_PI
+    while bearing >= _TWO_PI:
+        bearing -= _TWO_PI
+    if step > 0.0:  # uniform beams: the nearest by arithmetic
+        j = int(bearing / step + 0.5)
+        if j >= n:
+            if full_turn:
+                j = 0 if j * step >= _TWO_PI - 0.5 * step else n - 1
+            elif bearing - last <= half_spacing:
+                j = n - 1
+            else:
+                return -1
+        return j
+    j = np.searchsorted(relative_angles[a:a + n], bearing)
+    if j == n:  # past the last beam: it, or (on a full turn) beam 0 a turn on
+        if full_turn and _TWO_PI - bearing < bearing - last:
+            return 0
+        if full_turn or bearing - last <= half_spacing:
+            return n - 1
+        return -1
+    if j > 0 and (bearing - relative_angles[a + j - 1] < relative_angles[a + j] - bearing):
+        j -= 1
+    return j
+
+
+@numba.njit(cache=True)
 def _seen_through_kernel(
     points: NDArray[np.float64],
     poses: NDArray[np.float64],
@@ -109,31 +141,10 @@ def _seen_through_kernel(
                     or 2.0 * half_spacing * distance > resolution):
                 continue
             bearing = _bearing(-s * dx + c * dy, c * dx + s * dy) - first_angle
-            while bearing < 0.0:
-                bearing += _TWO_PI
-            while bearing >= _TWO_PI:
-                bearing -= _TWO_PI
-            if step > 0.0:  # uniform beams: the nearest by arithmetic
-                j = int(bearing / step + 0.5)
-                if j >= n:
-                    if full_turn:
-                        j = 0 if j * step >= _TWO_PI - 0.5 * step else n - 1
-                    elif bearing - last <= half_spacing:
-                        j = n - 1
-                    else:
-                        continue  # outside the field of view: this sensor says nothing
-            else:
-                j = np.searchsorted(relative_angles[a:b], bearing)
-                if j == n:  # past the last beam: it, or (on a full turn) beam 0 a turn on
-                    if full_turn and _TWO_PI - bearing < bearing - last:
-                        j = 0
-                    elif full_turn or bearing - last <= half_spacing:
-                        j = n - 1
-                    else:
-                        continue
-                elif j > 0 and (bearing - relative_angles[a + j - 1]
-                                < relative_angles[a + j] - bearing):
-                    j -= 1
+            j = _nearest_beam(bearing, relative_angles, a, n, step, full_turn, last,
+                              half_spacing)
+            if j < 0:
+                continue  # outside the field of view: this sensor says nothing
             free = True
             for offset in (-1, 0, 1):
                 m = j + offset
@@ -234,31 +245,10 @@ def _seen_through_free(
                     or 2.0 * half_spacing * distance > resolution):
                 continue
             bearing = bearings[i] - first_angle
-            while bearing < 0.0:
-                bearing += _TWO_PI
-            while bearing >= _TWO_PI:
-                bearing -= _TWO_PI
-            if step > 0.0:  # uniform beams: the nearest by arithmetic
-                j = int(bearing / step + 0.5)
-                if j >= n:
-                    if full_turn:
-                        j = 0 if j * step >= _TWO_PI - 0.5 * step else n - 1
-                    elif bearing - last <= half_spacing:
-                        j = n - 1
-                    else:
-                        continue  # outside the field of view: this sensor says nothing
-            else:
-                j = np.searchsorted(relative_angles[a:b], bearing)
-                if j == n:  # past the last beam: it, or (on a full turn) beam 0 a turn on
-                    if full_turn and _TWO_PI - bearing < bearing - last:
-                        j = 0
-                    elif full_turn or bearing - last <= half_spacing:
-                        j = n - 1
-                    else:
-                        continue
-                elif j > 0 and (bearing - relative_angles[a + j - 1]
-                                < relative_angles[a + j] - bearing):
-                    j -= 1
+            j = _nearest_beam(bearing, relative_angles, a, n, step, full_turn, last,
+                              half_spacing)
+            if j < 0:
+                continue  # outside the field of view: this sensor says nothing
             out[i] = free[a + j] > distance + margin
     return out
 
