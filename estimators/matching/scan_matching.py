@@ -116,6 +116,18 @@ class CarPoints:
 
 
 @njit(cache=True)
+def cell_key_and_slot(x: float, y: float, voxel_size: float, shift: np.uint64
+                      ) -> tuple[np.int64, np.int64]:
+    """The ``voxel_size`` [m] cell of point ``(x, y)`` [m] as :func:`voxel_downsample` keys it
+    (``floor(x / voxel_size) << 32`` plus the low 32 bits of ``floor(y / voxel_size)``) and its
+    first slot (Fibonacci hashing) in an open-addressing table of ``2 ** (64 - shift)`` slots."""
+    cx = np.int64(np.floor(x / voxel_size))
+    cy = np.int64(np.floor(y / voxel_size))
+    key = (cx << 32) + (cy & 0xFFFFFFFF)
+    return key, np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+
+
+@njit(cache=True)
 def first_in_each_cell(points: NDArray[np.float64], voxel_size: float) -> NDArray[np.bool_]:
     """Whether each of ``points`` (N, 2) [m] is the first in its ``voxel_size`` cell: the
     cells' keys as :func:`voxel_downsample` forms them, in an open-addressing hash set (linear
@@ -130,10 +142,7 @@ def first_in_each_cell(points: NDArray[np.float64], voxel_size: float) -> NDArra
     used = np.zeros(size, np.bool_)
     first = np.zeros(len(points), np.bool_)
     for i in range(len(points)):
-        cx = np.int64(np.floor(points[i, 0] / voxel_size))
-        cy = np.int64(np.floor(points[i, 1] / voxel_size))
-        key = (cx << 32) + (cy & 0xFFFFFFFF)
-        slot = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+        key, slot = cell_key_and_slot(points[i, 0], points[i, 1], voxel_size, shift)
         while used[slot] and table[slot] != key:
             slot = (slot + 1) & mask
         if not used[slot]:

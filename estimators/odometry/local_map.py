@@ -370,7 +370,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
             if self._moving is not None:
                 points = self._static_points(points, guess, scans)
             self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
-            self._remember(guess, scans, seen, float("inf"))  # a guess: no anchor
+            self._remember(guess, scans, seen, float("inf"))  # a guess: a jump
             if len(points) >= 2:
                 self._add_keyframe(guess, points)
             return guess

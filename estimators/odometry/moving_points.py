@@ -21,6 +21,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.matching.scan_matching import cell_key_and_slot
 from estimators.odometry.free_space import BeamGeometry
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose_floats, transform_points
@@ -87,7 +88,8 @@ def _mark_cells(points: NDArray[np.float64], spacing: float, table: NDArray[np.i
     """Each of a scan's world ``points`` (n, 2)' previous scan: the last ``scan`` number before
     this one with a point in its ``spacing`` [m] cell (-1: none known), ``scan`` itself for a
     point after the first in its cell; then the cells are marked as seen in ``scan``. The cells
-    are :func:`~estimators.matching.scan_matching.first_in_each_cell`'s (its keys, its hash);
+    and their hash are :func:`~estimators.matching.scan_matching.first_in_each_cell`'s
+    (:func:`~estimators.matching.scan_matching.cell_key_and_slot`);
     ``table`` (cell keys) and ``last`` (their scans, -1: a free slot) are an open-addressing
     hash set, a power of two long, updated in place. Returns (previous scans, slots filled)."""
     mask = len(table) - 1
@@ -95,10 +97,7 @@ def _mark_cells(points: NDArray[np.float64], spacing: float, table: NDArray[np.i
     previous = np.empty(len(points), np.int64)
     filled = 0
     for i in range(len(points)):
-        cx = np.int64(np.floor(points[i, 0] / spacing))
-        cy = np.int64(np.floor(points[i, 1] / spacing))
-        key = (cx << 32) + (cy & 0xFFFFFFFF)
-        slot = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+        key, slot = cell_key_and_slot(points[i, 0], points[i, 1], spacing, shift)
         while last[slot] >= 0 and table[slot] != key:
             slot = (slot + 1) & mask
         if last[slot] < 0:
