@@ -10,23 +10,23 @@ al. 2016, Cartographer's local SLAM); pairing on the fitted curve rather than on
 reading that happened to land first in a voxel averages the map's own noise too.
 
 The initial guess and a weak prior come from a constant-velocity model of the estimator's own
-recent increments (never odometry): the translation averaged over the last few, the rotation
-from the last one. By default the model counts scans, not seconds: logged
-timestamps cannot be trusted (``intel.clf`` has 631 stamps out of order and bursts of nearly
-equal ones; a per-second model fed those diverges: 0.52 m vs 0.029 m per relation on its
-first 3000 scans). ``use_timestamps=True`` scales the increment by the time step instead
-(for sources with clean clocks and dropped scans), with steps outside [0.5, 2] x the running
-median clipped and non-positive ones replaced by the median (ACES: 0.0339 m / 0.311 deg per
-local relation vs 0.0338 m / 0.324 deg per scan; Intel's first 3000 scans: 0.0288 m vs
+recent increments (never odometry; :mod:`estimators.odometry.velocity_model`): the translation
+averaged over the last few, the rotation from the last one. By default the model counts scans,
+not seconds: logged timestamps cannot be trusted (``intel.clf`` has 631 stamps out of order and
+bursts of nearly equal ones; a per-second model fed those diverges: 0.52 m vs 0.029 m per
+relation on its first 3000 scans). ``use_timestamps=True`` scales the increment by the time step
+instead (for sources with clean clocks and dropped scans), with steps outside [0.5, 2] x the
+running median clipped and non-positive ones replaced by the median (ACES: 0.0339 m / 0.311 deg
+per local relation vs 0.0338 m / 0.324 deg per scan; Intel's first 3000 scans: 0.0288 m vs
 0.0289 m per keyframe pair). Where the scan constrains the pose the data dominate; down a bare
 corridor the prior holds the motion, so two things decide the error there: the corridor's axis
-must be recognised as free (wall normals fitted through 9 neighbours rather than 5: the noise
-of 5-point normals passed for ~25 points' worth of information along a 14 m wide hall's axis,
-and the map dragged the car: +0.7 m over 3.5 m of the hallway), and the speed carried into
-it must be the average of several increments, not the last one (one increment is off by
-1-2 % of a step). The prior's strength follows the scan clock: a steady 10 Hz clock vouches
-for the constant-velocity guess to ~5 mm, which damps the step noise of every scan; a jittery
-one (Intel's) leaves it weak.
+must be recognised as free (wall normals fitted through 9 neighbours rather than 5: the noise of
+5-point normals passed for ~25 points' worth of information along a 14 m wide hall's axis, and
+the map dragged the car: +0.7 m over 3.5 m of the hallway), and the speed carried into it must
+be the average of several increments, not the last one (one increment is off by 1-2 % of a
+step). The prior's strength follows the scan clock: a steady 10 Hz clock vouches for the
+constant-velocity guess to ~5 mm, which damps the step noise of every scan; a jittery one
+(Intel's) leaves it weak.
 
 Measured before -> after each of these choices: ``benchmarks/bench_synthetic.py`` (sim eq.-11
 accuracy 95.8-98.5 % -> 99.1-99.3 %, hallway ATE 0.50-0.85 m -> 0.02-0.04 m) and
@@ -57,7 +57,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-import estimators.odometry.motion_prior as motion_prior
 from estimators.base import Estimator
 from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
 from estimators.matching.point_to_line import PointToLineReference
@@ -67,9 +66,10 @@ from estimators.matching.scan_matching import (
     voxel_downsample,
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
-from estimators.odometry.motion_prior import ScanClock, missed_sigma, prediction_sigma
+from estimators.odometry.motion_prior import constant_velocity_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.unknown_start import UnknownStartSpeed
+from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
 
@@ -78,7 +78,7 @@ MIN_MOVING_POINTS = 3
 
 
 @dataclass
-class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
+class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel, Estimator):
     """Scan-to-local-map Lidar odometry with a robust loss, a constant-velocity motion prior
     and a correlative fallback. Distances [m], angles [rad]; defaults chosen for indoor 2D
     Lidars (1-3 cm range noise, 5-40 Hz), not for one log:
@@ -248,12 +248,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         )
         self._reference: PointToLineReference | None = None
         self._search: GlobalSearch | None = None
-        self._velocity = np.zeros(3)  # car frame, per second or per scan
-        self._translations: deque[NDArray[np.float64]] = deque(maxlen=self.velocity_window)
-        self._misses: deque[float] = deque(maxlen=self.velocity_window)
-        self._degenerate = False  # the scan at the guess leaves a direction free
-        self._last_time = 0.0
-        self._clock = ScanClock()
+        self._reset_motion_model()
         self._car_points = CarPoints(self.setup, self.min_range)
         dynamic = self.reject_dynamic and not self.setup.world_aligned
         self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
@@ -308,54 +303,6 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
         self._remember(self._initial_pose, scans, points)
         self._watch_start(scans, t)
 
-    def _time_step(self, t: float) -> float:
-        """Scans since the last one (1), or with ``use_timestamps`` the time since it [s],
-        guarded against glitching stamps."""
-        dt = t - self._last_time
-        self._last_time = t
-        self._clock.add(dt)
-        if not self.use_timestamps or not self._clock.steps:
-            return 1.0  # count in scans
-        typical = self._clock.typical_step
-        return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
-
-    def _prediction_information(self) -> NDArray[np.float64]:
-        """The motion prior's information (3, 3): none while the start velocity is unknown."""
-        return np.zeros((3, 3)) if self.speed_unknown else self._model_information()
-
-    def _model_information(self) -> NDArray[np.float64]:
-        """Information (3, 3) of the constant-velocity guess and the no-sideslip prior, in the
-        point residuals' units. The guess misses by ``prediction_acceleration * dt^2`` over a
-        typical scan interval ``dt`` plus, counting scans, speed times the interval's typical
-        jitter (a late scan has moved further); clipped to [``motion_prior.MIN_PREDICTION_
-        SIGMA``, ``prior_sigma_translation``], which also holds until the clock has been seen
-        for a few scans or when it does not run forward. Where the scan leaves a direction
-        free, sideways motion is held to ``sideslip_sigma`` (an assumption, the car frame at
-        the wheels' no-slip point, so only where the scan cannot overrule it: on every scan it
-        cost ACES 0.033 -> 0.034 m per local relation and 0.19 -> 0.29 m over all; only there,
-        0.0346 m and 0.22 m)."""
-        information = self._prior_information.copy()
-        typical = self._clock.median if self._clock.settled else 0.0
-        step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
-        if typical > 0:
-            sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
-                                     self._clock.jitter, self.prediction_acceleration,
-                                     self.prior_sigma_translation)
-            sigma = missed_sigma(sigma, self._misses, self.prior_sigma_translation)
-            information[:2] = (self.noise_sigma / sigma) ** 2
-        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0
-        return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
-                                                    step[0], sideways)
-
-    def _updated_velocity(self, increment: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
-        translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
-        averaged over the last ``velocity_window`` increments (one carries the noise of two
-        registrations, ~1-2 % of a step, which a corridor's axis dead-reckons), the turn rate
-        from the last one (turn rates change faster than speeds and are rarely unobservable)."""
-        self._translations.append(motion_prior.midpoint_velocity(increment, dt)[:2])
-        return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
-
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         return (self._watched_step if self._kept is not None else self._odometry_step)(scans, t)
 
@@ -363,7 +310,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, Estimator):
                        t: float) -> NDArray[np.float64]:
         interval = t - self._last_time
         dt = self._time_step(t)
-        predicted = motion_prior.constant_velocity_increment(self._velocity, dt)
+        predicted = constant_velocity_increment(self._velocity, dt)
         guess = compose(self.pose, predicted)
         points = seen = self._points(scans)
         if self._reference is None or len(points) < 3:

@@ -1,0 +1,98 @@
+"""The constant-velocity model of ``lidar_odometry``: its guess, its prior's weight, its update.
+
+:class:`ConstantVelocityModel` keeps the estimator's own recent increments (never odometry):
+the translation averaged over the last ``velocity_window`` in each increment's midpoint frame,
+the turn rate from the last one, counted per scan or, with ``use_timestamps``, per second of
+a guarded clock. Its information is the prior :func:`estimators.matching.icp.register` weighs
+against the points. Why each choice, with the measurements: the module docstring of
+:mod:`estimators.odometry.local_map`; the math is in :mod:`estimators.odometry.motion_prior`.
+Distances [m], angles [rad], times [s] or scans.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+import estimators.odometry.motion_prior as motion_prior
+from estimators.odometry.motion_prior import ScanClock, missed_sigma, prediction_sigma
+
+FloatArray = NDArray[np.float64]
+
+
+class ConstantVelocityModel:
+    """The motion model of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin:
+    it reads the front end's settings (``use_timestamps``, ``velocity_window``,
+    ``noise_sigma``, ``prior_sigma_translation``, ``prediction_acceleration``,
+    ``sideslip_sigma``), ``_prior_information``, ``pose`` and ``speed_unknown``, and keeps
+    ``_velocity``, ``_translations``, ``_misses``, ``_clock``, ``_last_time`` and
+    ``_degenerate`` (set by the matching step: the scan at the guess leaves a direction free)."""
+
+    use_timestamps: bool
+    velocity_window: int
+    noise_sigma: float
+    prior_sigma_translation: float
+    prediction_acceleration: float
+    sideslip_sigma: float
+    speed_unknown: bool
+    pose: FloatArray  # the estimator's current pose (``Estimator.pose``)
+    _prior_information: FloatArray
+
+    def _reset_motion_model(self) -> None:
+        """At rest, no clock seen (called by ``_reset_state``)."""
+        self._velocity = np.zeros(3)  # car frame, per second or per scan
+        self._translations: deque[FloatArray] = deque(maxlen=self.velocity_window)
+        self._misses: deque[float] = deque(maxlen=self.velocity_window)
+        self._degenerate = False  # the scan at the guess leaves a direction free
+        self._last_time = 0.0
+        self._clock = ScanClock()
+
+    def _time_step(self, t: float) -> float:
+        """Scans since the last one (1), or with ``use_timestamps`` the time since it [s],
+        guarded against glitching stamps."""
+        dt = t - self._last_time
+        self._last_time = t
+        self._clock.add(dt)
+        if not self.use_timestamps or not self._clock.steps:
+            return 1.0  # count in scans
+        typical = self._clock.typical_step
+        return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
+
+    def _prediction_information(self) -> FloatArray:
+        """The motion prior's information (3, 3): none while the start velocity is unknown."""
+        return np.zeros((3, 3)) if self.speed_unknown else self._model_information()
+
+    def _model_information(self) -> FloatArray:
+        """Information (3, 3) of the constant-velocity guess and the no-sideslip prior, in the
+        point residuals' units. The guess misses by ``prediction_acceleration * dt^2`` over a
+        typical scan interval ``dt`` plus, counting scans, speed times the interval's typical
+        jitter (a late scan has moved further); clipped to [``motion_prior.MIN_PREDICTION_
+        SIGMA``, ``prior_sigma_translation``], which also holds until the clock has been seen
+        for a few scans or when it does not run forward. Where the scan leaves a direction
+        free, sideways motion is held to ``sideslip_sigma`` (an assumption, the car frame at
+        the wheels' no-slip point, so only where the scan cannot overrule it: on every scan it
+        cost ACES 0.033 -> 0.034 m per local relation and 0.19 -> 0.29 m over all; only there,
+        0.0346 m and 0.22 m)."""
+        information = self._prior_information.copy()
+        typical = self._clock.median if self._clock.settled else 0.0
+        step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
+        if typical > 0:
+            sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
+                                     self._clock.jitter, self.prediction_acceleration,
+                                     self.prior_sigma_translation)
+            sigma = missed_sigma(sigma, self._misses, self.prior_sigma_translation)
+            information[:2] = (self.noise_sigma / sigma) ** 2
+        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0
+        return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
+                                                    step[0], sideways)
+
+    def _updated_velocity(self, increment: FloatArray, dt: float) -> FloatArray:
+        """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
+        translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
+        averaged over the last ``velocity_window`` increments (one carries the noise of two
+        registrations, ~1-2 % of a step, which a corridor's axis dead-reckons), the turn rate
+        from the last one (turn rates change faster than speeds and are rarely unobservable)."""
+        self._translations.append(motion_prior.midpoint_velocity(increment, dt)[:2])
+        return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
