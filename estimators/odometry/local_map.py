@@ -41,12 +41,14 @@ the car can have reached; a poor match gets correlative searches in ever wider w
 one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). All
 Lidars are merged in the car frame (:func:`estimators.matching.scan_matching.scans_to_car_points`).
 
-Moving things (``reject_dynamic``, on by default, :class:`~estimators.odometry.moving_points.
-MovingPointFilter`): points in space recent scans saw as free, or next to points the new scan
-sees through, neither pull the registration nor enter the map, and map points the new scan
-sees through leave it (from :data:`MIN_MOVING_POINTS` on). Judged at the matched pose, then
-matched again without them, twice (once: Intel 0.0425 -> 0.0449 m per keyframe pair); judged
-at the guess, a fast turn condemned static points (ACES 0.034 -> 0.059 m).
+Moving things (``reject_dynamic``, on by default,
+:class:`~estimators.odometry.moving_points.MovingPointFilter`, used by
+:mod:`estimators.odometry.moving_rejection`): points in space recent scans saw as free, or next
+to points the new scan sees through, neither pull the registration nor enter the map, and map
+points the new scan sees through leave it (from
+:data:`~estimators.odometry.moving_rejection.MIN_MOVING_POINTS` on). Judged at the matched pose,
+then matched again without them, twice (once: Intel 0.0425 -> 0.0449 m per keyframe pair);
+judged at the guess, a fast turn condemned static points (ACES 0.034 -> 0.059 m).
 """
 
 from __future__ import annotations
@@ -67,18 +69,16 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.motion_prior import constant_velocity_increment
-from estimators.odometry.moving_points import MovingPointFilter
+from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.errors import ConfigError
 from lidar_env.se2 import compose, relative, transform_points, wrap_angle
 
-#: Fewer points judged moving (or stale) change nothing: the robust loss bounds what 1-2 pull.
-MIN_MOVING_POINTS = 3
-
 
 @dataclass
-class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel, Estimator):
+class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel,
+                       MovingPointRejection, Estimator):
     """Scan-to-local-map Lidar odometry with a robust loss, a constant-velocity motion prior
     and a correlative fallback. Distances [m], angles [rad]; defaults chosen for indoor 2D
     Lidars (1-3 cm range noise, 5-40 Hz), not for one log:
@@ -250,9 +250,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self._search: GlobalSearch | None = None
         self._reset_motion_model()
         self._car_points = CarPoints(self.setup, self.min_range)
-        dynamic = self.reject_dynamic and not self.setup.world_aligned
-        self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
-                        if dynamic else None)
+        self._reset_moving_filter()
         self.fallbacks = self.far_searches = 0
         self._far_steps: deque[tuple[float, float]] = deque(maxlen=self.velocity_window)
         self.poor_matches: list[int] = []
@@ -260,25 +258,6 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         points = self._car_points(scans)
         return voxel_downsample(points, self.scan_voxel_size) if len(points) else points
-
-    def _static_points(self, points: NDArray[np.float64], guess: NDArray[np.float64],
-                       scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
-        """``points`` less those on moving things; the map loses its stale points."""
-        assert self._moving is not None
-        moving, stale = self._moving.classify(points, guess, scans,
-                                              [world for _, world in self._keyframes])
-        if sum(np.count_nonzero(mask) for mask in stale) >= MIN_MOVING_POINTS:
-            self._keyframes = deque([(key_pose, world[~mask]) for (key_pose, world), mask
-                                     in zip(self._keyframes, stale, strict=True)],
-                                    maxlen=self.n_keyframes)
-            self._build_reference()
-        return points[~moving] if np.count_nonzero(~moving) >= 3 else points
-
-    def _remember(self, pose: NDArray[np.float64], scans: dict[str, NDArray[np.float64]],
-                  points: NDArray[np.float64], jump: float = 0.0) -> None:
-        if self._moving is not None:  # the scans and all their points, moving or not
-            self._moving.remember(pose, scans, points,
-                                  self._clock.median if self._clock.settled else None, jump)
 
     def _add_keyframe(self, pose: NDArray[np.float64], points: NDArray[np.float64]) -> None:
         self._keyframes.append((pose.copy(), transform_points(pose, points)))
