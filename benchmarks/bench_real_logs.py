@@ -4,6 +4,7 @@
     python benchmarks/bench_real_logs.py                      # icp and lidar_odometry, full logs
     python benchmarks/bench_real_logs.py --limit 1500 --estimators lidar_odometry
     python benchmarks/bench_real_logs.py --estimators lidar_odometry --set reject_dynamic=true
+    python benchmarks/bench_real_logs.py --estimators lidar_odometry --set moving_filter.radius=0.4
 
 No estimator reads odometry. ``icp`` (scan-to-previous-scan PL-ICP from a constant-velocity
 guess) is the reference every ratio is measured against, in the same run on the same machine.
@@ -13,7 +14,8 @@ refuse: they are fed the stamps made to run forward
 (``estimators.datasets.real_log.forward_clock``: a stamp that jumps back is moved 1 us past its
 predecessor) and scored on the logged ones.
 ``--set NAME=VALUE`` (a number, ``true``/``false``) passes parameters to every estimator but
-the reference.
+the reference; a dotted NAME sets one key of a mapping parameter (``moving_filter.radius=0.4``;
+``frontend_params.moving_filter.radius=0.4`` for ``slam``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import dataclasses
 import os
 import platform
 import time
+from typing import Any
 
 from bench_layouts import parameter
 
@@ -48,6 +51,27 @@ PUBLISHED_ACES = (
 )
 #: Intel pseudo ground-truth poses come from SLAM with a few cm of error of their own.
 INTEL_WINDOWS: tuple[float | None, ...] = (None, 1.0, 5.0)
+
+
+def estimator_params(settings: list[tuple[str, object]]) -> dict[str, Any]:
+    """``--set`` pairs as keyword parameters, a dotted name as nested mappings:
+    ``[("moving_filter.radius", 0.4)]`` -> ``{"moving_filter": {"radius": 0.4}}``."""
+    params: dict[str, Any] = {}
+    for name, value in settings:
+        *outer, last = keys = name.split(".")
+        if not all(keys):
+            raise argparse.ArgumentTypeError(f"--set {name}: expected NAME or NAME.KEY, "
+                                             "with no empty part")
+        group = params
+        for key in outer:
+            group = group.setdefault(key, {})
+            if not isinstance(group, dict):
+                break
+        if not isinstance(group, dict) or isinstance(group.get(last), dict):
+            raise argparse.ArgumentTypeError(f"--set {name}: expected each NAME set either "
+                                             "to a value or key by key, not both")
+        group[last] = value
+    return params
 
 
 def _line(name: str, label: str, summary: object, run: LogRun) -> str:
@@ -120,7 +144,10 @@ def main() -> None:
     parser.add_argument("--set", type=parameter, nargs="+", default=[], metavar="NAME=VALUE",
                         help="estimator parameters over their defaults (not for the reference)")
     args = parser.parse_args()
-    params = dict(args.set)
+    try:
+        params = estimator_params(args.set)
+    except argparse.ArgumentTypeError as error:
+        parser.error(str(error))
     if params:
         print(f"parameters of every estimator but {REFERENCE}: {params}")
     if not DATA.is_dir():

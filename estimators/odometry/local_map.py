@@ -54,6 +54,7 @@ judged at the guess, a fast turn condemned static points (ACES 0.034 -> 0.059 m)
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -163,6 +164,11 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         reject_dynamic, dynamic_margin: drop points on moving things (module docstring) lying
             this far inside space seen free (0.2 m). On: walkers drag the plain odometry up to
             0.8 m; ACES and Intel level, at ~1.5x the CPU (README, "Moving obstacles: ...").
+        moving_filter: the filter's other settings by name, over its defaults (None: all
+            defaults): ``radius`` [m], ``history`` [scans], ``stale_resolution`` [m],
+            ``anchor_time`` [s], ``max_anchor_scans``, ``anchor_spacing`` [m],
+            ``anchor_break`` [m] (see :class:`~estimators.odometry.moving_points.
+            MovingPointFilter`); its margin is ``dynamic_margin``, its ``min_range`` ours.
         sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
             scan leaves a direction free (``motion_prior.no_sideslip_information``); inf, the
             default, for none of it (a holonomic base, or a car frame away from the wheels'
@@ -212,6 +218,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     sideslip_sigma: float = np.inf
     start_speed_scans: int = 20
     max_start_replay: int = 300
+    moving_filter: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -233,6 +240,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                 raise ConfigError(f"{name}: expected an integer >= {said}, got {value!r}")
         if not 0 <= self.min_quality <= 1:
             raise ConfigError(f"min_quality: expected a share in [0, 1], got {self.min_quality}")
+        self._check_moving_filter()
         self.params = ICPParams(
             max_iterations=self.max_iterations,
             max_correspondence_distance=self.max_correspondence_distance, loss=self.loss,

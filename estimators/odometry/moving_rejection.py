@@ -1,6 +1,7 @@
 """``lidar_odometry``'s points on moving things left out: its
-:class:`~estimators.odometry.moving_points.MovingPointFilter` and what the filter's verdicts do
-to the scan and to the local map.
+:class:`~estimators.odometry.moving_points.MovingPointFilter`, its settings
+(``dynamic_margin``, ``moving_filter``) and what the filter's verdicts do to the scan and to
+the local map.
 
 Why the points are judged at the matched pose and matched again without them, with the
 measurements: the module docstring of :mod:`estimators.odometry.local_map` and the README's
@@ -9,8 +10,10 @@ measurements: the module docstring of :mod:`estimators.odometry.local_map` and t
 
 from __future__ import annotations
 
+import inspect
+import numbers
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,23 +21,34 @@ from numpy.typing import NDArray
 from estimators.base import SensorSetup
 from estimators.odometry.motion_prior import ScanClock
 from estimators.odometry.moving_points import MovingPointFilter
+from lidar_env.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]
 
 #: Fewer points judged moving (or stale) change nothing: the robust loss bounds what 1-2 pull.
 MIN_MOVING_POINTS = 3
+#: The filter's parameters lidar_odometry's own settings give it (besides the sensor setup).
+OWN_PARAMETERS = {"margin": "dynamic_margin", "min_range": "min_range"}
+#: What ``moving_filter`` may set: the rest of :class:`MovingPointFilter`'s parameters.
+MOVING_FILTER_KEYS = tuple(sorted(set(inspect.signature(MovingPointFilter).parameters)
+                                  - {"setup", *OWN_PARAMETERS}))
+#: Of those, the scan counts (integers).
+_COUNTS = ("history", "max_anchor_scans")
+#: Those whose values the filter itself leaves unchecked, and what they must be.
+_UNCHECKED = {"history": "a scan count >= 0", "radius": "a distance >= 0 [m]"}
 
 
 class MovingPointRejection:
     """Moving points of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin: it
-    reads the front end's settings (``reject_dynamic``, ``dynamic_margin``, ``min_range``,
-    ``n_keyframes``) and state (``setup``, ``_keyframes``, ``_clock``), rebuilds the map
-    (``_build_reference``) when it loses stale points, and keeps the filter (``_moving``:
-    None when off, or on a world-aligned setup)."""
+    reads the front end's settings (``reject_dynamic``, ``dynamic_margin``, ``moving_filter``,
+    ``min_range``, ``n_keyframes``) and state (``setup``, ``_keyframes``, ``_clock``),
+    rebuilds the map (``_build_reference``) when it loses stale points, and keeps the filter
+    (``_moving``: None when off, or on a world-aligned setup)."""
 
     reject_dynamic: bool
     dynamic_margin: float
+    moving_filter: Mapping[str, float] | None
     min_range: float
     n_keyframes: int
     setup: SensorSetup | None
@@ -42,12 +56,49 @@ class MovingPointRejection:
     _clock: ScanClock
     _build_reference: Callable[[], None]
 
+    def _check_moving_filter(self) -> None:
+        """``moving_filter`` checked at construction rather than at the first reset (called by
+        ``__post_init__``, after ``dynamic_margin`` and ``min_range``): known keys, numbers
+        (integers for the scan counts), values the filter leaves unchecked, then its own
+        checks."""
+        settings = {} if self.moving_filter is None else self.moving_filter
+        if not isinstance(settings, Mapping):
+            raise ConfigError(f"moving_filter: expected a mapping of "
+                              f"{', '.join(MOVING_FILTER_KEYS)} to numbers, or None, "
+                              f"got {settings!r}")
+        for key, value in settings.items():
+            if key in OWN_PARAMETERS:
+                raise ConfigError(f"moving_filter: {key!r} is set by lidar_odometry's "
+                                  f"{OWN_PARAMETERS[key]}, not here")
+            if key not in MOVING_FILTER_KEYS:
+                raise ConfigError(f"moving_filter: unknown key {key!r}: expected one of "
+                                  f"{', '.join(MOVING_FILTER_KEYS)}")
+            count = key in _COUNTS
+            if isinstance(value, bool) or not isinstance(
+                    value, numbers.Integral if count else numbers.Real):
+                raise ConfigError(f"moving_filter: {key}: expected "
+                                  f"{'an integer' if count else 'a number'}, got {value!r}")
+        for key, expected in _UNCHECKED.items():
+            if not settings.get(key, 0) >= 0:  # NaN fails too
+                raise ConfigError(f"moving_filter: {key}: expected {expected}, got "
+                                  f"{settings[key]!r}")
+        self._moving_settings = dict(settings)  # as checked, whatever becomes of the mapping
+        if settings:  # the filter's own checks, on a three-beam setup
+            try:
+                self._new_moving_filter(SensorSetup([[0.0, 0.0, 0.0]], [0.0, 2.0, 4.0], 1.0))
+            except ConfigError as error:
+                raise ConfigError(f"moving_filter: {error}") from error
+
+    def _new_moving_filter(self, setup: SensorSetup) -> MovingPointFilter:
+        """A filter for ``setup`` with the estimator's margin, min_range and settings."""
+        return MovingPointFilter(setup, self.dynamic_margin, min_range=self.min_range,
+                                 **self._moving_settings)
+
     def _reset_moving_filter(self) -> None:
         """A new filter, or None (called by ``_reset_state``)."""
         assert self.setup is not None
         dynamic = self.reject_dynamic and not self.setup.world_aligned
-        self._moving = (MovingPointFilter(self.setup, self.dynamic_margin, min_range=self.min_range)
-                        if dynamic else None)
+        self._moving = self._new_moving_filter(self.setup) if dynamic else None
 
     def _static_points(self, points: FloatArray, guess: FloatArray, scans: Scans) -> FloatArray:
         """``points`` less those on moving things; the map loses its stale points."""
