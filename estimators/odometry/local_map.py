@@ -306,7 +306,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
             self._remember(guess, scans, seen, float("inf"))  # a guess: a jump
             if len(points) >= 2:
-                self._add_keyframe(guess, points)
+                self._add_keyframe(guess, self._map_points(guess, seen, points))
             return guess
         self._degenerate = bool(np.isfinite(self.sideslip_sigma)) and leaves_a_direction_free(
             self._reference, points, guess, self.params)
@@ -329,6 +329,6 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             np.hypot(step[0], step[1]) >= self.keyframe_distance
             or abs(wrap_angle(step[2])) >= self.keyframe_angle
         ):
-            self._add_keyframe(pose, points)
+            self._add_keyframe(pose, self._map_points(pose, seen, points))
         return pose
 

@@ -254,13 +254,16 @@ class MovingPointFilter:
             quarter of ``margin``; a second of scans holds each surface ten times over).
         anchor_break: [m] a pose this far from the motion model's guess (0.05: a quarter of
             ``margin``; ten times the prior's 5 mm at 10 Hz) counts as a jump (above).
+        map_clearance, map_support: [m] :meth:`mappable` (0.3: ``radius``; 0.1: two of the
+            local map's 5 cm voxels).
     """
 
     def __init__(self, setup: Any, margin: float = 0.2, radius: float = 0.3,
                  history: int = 5, min_range: float = 0.0,
                  stale_resolution: float = 0.1, anchor_time: float = 1.0,
                  max_anchor_scans: int = 20, anchor_spacing: float = 0.05,
-                 anchor_break: float = 0.05) -> None:
+                 anchor_break: float = 0.05, map_clearance: float = 0.3,
+                 map_support: float = 0.1) -> None:
         self.setup = setup
         self.margin = margin
         self.radius = radius
@@ -273,13 +276,16 @@ class MovingPointFilter:
                   "max_anchor_scans": (max_anchor_scans, max_anchor_scans >= 1,
                                        "a scan count >= 1"),
                   "anchor_spacing": (anchor_spacing, anchor_spacing > 0, "a spacing > 0 [m]"),
-                  "anchor_break": (anchor_break, anchor_break >= 0, "a distance >= 0 [m]")}
+                  "anchor_break": (anchor_break, anchor_break >= 0, "a distance >= 0 [m]"),
+                  "map_clearance": (map_clearance, map_clearance >= 0, "a distance >= 0 [m]"),
+                  "map_support": (map_support, map_support >= 0, "a distance >= 0 [m]")}
         for name, (value, valid, expected) in checks.items():
             if not valid:  # NaN fails every comparison
                 raise ConfigError(f"{name}: expected {expected}, got {value!r}")
         self.anchor_time = anchor_time
         self.anchor_spacing = anchor_spacing
         self.anchor_break = anchor_break
+        self.map_clearance, self.map_support = map_clearance, map_support
         self._history_length = history
         angles = [s.beam_angles for s in setup.sensors]
         ranges = [s.max_range for s in setup.sensors]
@@ -351,6 +357,23 @@ class MovingPointFilter:
         if len(near) and len(world):  # moved on: next to a point the new scan sees through
             moving |= _near_any(world, near, self.radius)
         return moving, flags
+
+    def mappable(self, world: NDArray[np.float64], moving: NDArray[np.bool_],
+                 map_points: list[NDArray[np.float64]]) -> NDArray[np.bool_]:
+        """``(n,)`` True for the scan's ``world`` points (n, 2) fit for the map, given which
+        are ``moving`` (:meth:`classify`): neither moving nor within ``map_clearance`` of a
+        moving one, unless one of ``map_points`` lies within ``map_support`` (a wall the map
+        knows, beside a walker). The few points of a walker the filter misses lie next to
+        those it caught; in a keyframe they stay while the walker walks on, and drag the
+        estimate where little else pins it (README, "Moving obstacles: odometry, ...")."""
+        keep = ~moving
+        if not np.any(moving) or self.map_clearance <= 0:
+            return keep
+        near = _near_any(world, np.ascontiguousarray(world[moving]), self.map_clearance)
+        known = np.ascontiguousarray(np.concatenate([np.zeros((0, 2)), *map_points]))
+        if np.any(near & keep) and self.map_support > 0 and len(known):
+            near &= ~_near_any(world, known, self.map_support)
+        return keep & ~near
 
     def remember(self, pose: NDArray[np.float64], scans: Mapping[str, NDArray[np.float64]],
                  points: NDArray[np.float64], interval: float | None = None,

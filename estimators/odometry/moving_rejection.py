@@ -22,6 +22,7 @@ from estimators.base import SensorSetup
 from estimators.odometry.motion_prior import ScanClock
 from estimators.odometry.moving_points import MovingPointFilter
 from lidar_env.errors import ConfigError
+from lidar_env.se2 import transform_points
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]
@@ -99,6 +100,7 @@ class MovingPointRejection:
         assert self.setup is not None
         dynamic = self.reject_dynamic and not self.setup.world_aligned
         self._moving = self._new_moving_filter(self.setup) if dynamic else None
+        self._moving_mask = np.zeros(0, dtype=np.bool_)  # the last verdict on the scan
 
     def _static_points(self, points: FloatArray, guess: FloatArray, scans: Scans) -> FloatArray:
         """``points`` less those on moving things; the map loses its stale points."""
@@ -110,7 +112,21 @@ class MovingPointRejection:
                                      in zip(self._keyframes, stale, strict=True)],
                                     maxlen=self.n_keyframes)
             self._build_reference()
+        self._moving_mask = moving
         return points[~moving] if np.count_nonzero(~moving) >= 3 else points
+
+    def _map_points(self, pose: FloatArray, seen: FloatArray,
+                    registered: FloatArray) -> FloatArray:
+        """What a keyframe at ``pose`` keeps of the scan's points ``seen`` (car frame), of
+        which ``registered`` matched: those the filter's last verdict on them leaves fit for
+        the map (:meth:`MovingPointFilter.mappable`), if three are; without the filter,
+        ``registered``."""
+        if self._moving is None or len(self._moving_mask) != len(seen):
+            return registered
+        world = np.ascontiguousarray(transform_points(pose, seen), dtype=np.float64)
+        keep = self._moving.mappable(world, self._moving_mask,
+                                     [known for _, known in self._keyframes])
+        return seen[keep] if np.count_nonzero(keep) >= 3 else registered
 
     def _remember(self, pose: FloatArray, scans: Scans, points: FloatArray,
                   jump: float = 0.0) -> None:

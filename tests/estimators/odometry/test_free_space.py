@@ -234,8 +234,8 @@ def test_after_a_jump_the_last_scans_are_judged_only_where_beams_are_dense() -> 
 
 
 @pytest.mark.parametrize("name", ["anchor_time", "max_anchor_scans", "anchor_spacing",
-                                  "anchor_break"])
-def test_an_anchor_setting_out_of_range_is_named(name: str) -> None:
+                                  "anchor_break", "map_clearance", "map_support"])
+def test_a_filter_setting_out_of_range_is_named(name: str) -> None:
     from estimators.base import SensorSetup
     from estimators.odometry.moving_points import MovingPointFilter
     from lidar_env.errors import ConfigError
@@ -243,3 +243,25 @@ def test_an_anchor_setting_out_of_range_is_named(name: str) -> None:
     for bad in (-1, float("nan")):
         with pytest.raises(ConfigError, match=name):
             MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), **{name: bad})
+
+
+def test_points_beside_a_moving_one_stay_out_of_the_map_unless_the_map_knows_them() -> None:
+    """A walker's points the filter missed lie beside those it caught: they stay out of the
+    keyframe; a wall point as near, which the map already holds, stays in."""
+    from estimators.base import SensorSetup
+    from estimators.odometry.moving_points import MovingPointFilter
+
+    moving_filter = MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0))
+    world = np.array([[3.0, 0.0], [3.0, 0.1], [3.0, 0.2],  # caught
+                      [3.0, 0.35], [3.05, -0.2],  # missed, within map_clearance (0.3 m)
+                      [3.2, 0.3],  # a wall point as near, the map holds one 5 cm off
+                      [3.0, 0.9], [6.0, 0.0]])  # static, farther out
+    moving = np.array([True, True, True, False, False, False, False, False])
+    known = [np.array([[3.25, 0.3]]), np.array([[9.0, 9.0]])]
+    keep = moving_filter.mappable(world, moving, known)
+    assert keep.tolist() == [False, False, False, False, False, True, True, True]
+    assert moving_filter.mappable(world, moving, []).tolist()[5] is False  # no map: out
+    nothing = np.zeros(len(world), dtype=np.bool_)
+    assert moving_filter.mappable(world, nothing, known).all()
+    off = MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), map_clearance=0.0)
+    assert off.mappable(world, moving, known).tolist() == (~moving).tolist()

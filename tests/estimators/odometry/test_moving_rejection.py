@@ -18,7 +18,8 @@ SETUP = SensorSetup([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]], 2 * np.pi * np.arange
                     20.0)
 #: Every setting away from the filter's default.
 SETTINGS = {"radius": 0.4, "history": 3, "stale_resolution": 0.2, "anchor_time": 0.5,
-            "max_anchor_scans": 12, "anchor_spacing": 0.1, "anchor_break": 0.08}
+            "max_anchor_scans": 12, "anchor_spacing": 0.1, "anchor_break": 0.08,
+            "map_clearance": 0.2, "map_support": 0.05}
 
 
 @pytest.fixture
@@ -79,7 +80,8 @@ def test_slam_passes_them_to_its_front_end() -> None:
 def test_an_unknown_key_is_named_with_the_valid_ones() -> None:
     with pytest.raises(ConfigError, match="unknown key 'raduis': expected one of anchor_break, "
                                           "anchor_spacing, anchor_time, history, "
-                                          "max_anchor_scans, radius, stale_resolution"):
+                                          "map_clearance, map_support, max_anchor_scans, "
+                                          "radius, stale_resolution"):
         make("lidar_odometry", moving_filter={"raduis": 0.4})
 
 
