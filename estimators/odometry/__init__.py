@@ -1,8 +1,15 @@
-"""Odometry front ends, which chain scan matches into car poses: scan-to-local-map odometry
-(``local_map``: ``lidar_odometry``, with ``far_scans`` for scans far apart and ``free_space``
-for moving points), two-Lidar least-squares fusion (``fusion``: ``pc_fusion``)
-and the constant-velocity motion prior both share (``motion_prior``). It imports
-``estimators.base``, ``estimators.matching``, ``estimators.paper`` and ``lidar_env``.
+"""Odometry front ends, which chain scan matches into car poses.
+
+- scan-to-local-map odometry (``local_map``: ``lidar_odometry``), built from mixins:
+  ``velocity_model`` (its constant-velocity guess), ``far_scans`` (scans far apart),
+  ``unknown_start`` (an unknown start speed) and ``moving_rejection`` (points on moving
+  things left out, by ``moving_points``' filter, which asks ``free_space`` what the beams saw
+  free and keeps its recent points in ``thinned_scans``);
+- two-Lidar least-squares fusion (``fusion``: ``pc_fusion``, its graph in ``sensor_graph``);
+- the motion prior both share (``motion_prior``).
+
+It imports ``estimators.base``, ``estimators.matching``, ``estimators.paper`` and
+``lidar_env``.
 """
 
 from estimators.odometry.fusion import FusionEstimator

@@ -36,8 +36,6 @@ MOVING_FILTER_KEYS = tuple(sorted(set(inspect.signature(MovingPointFilter).param
                                   - {"setup", *OWN_PARAMETERS}))
 #: Of those, the scan counts (integers).
 _COUNTS = ("history", "max_anchor_scans")
-#: Those whose values the filter itself leaves unchecked, and what they must be.
-_UNCHECKED = {"history": "a scan count >= 0", "radius": "a distance >= 0 [m]"}
 
 
 class MovingPointRejection:
@@ -60,8 +58,7 @@ class MovingPointRejection:
     def _check_moving_filter(self) -> None:
         """``moving_filter`` checked at construction rather than at the first reset (called by
         ``__post_init__``, after ``dynamic_margin`` and ``min_range``): known keys, numbers
-        (integers for the scan counts), values the filter leaves unchecked, then its own
-        checks."""
+        (integers for the scan counts), then the filter's own checks."""
         settings = {} if self.moving_filter is None else self.moving_filter
         if not isinstance(settings, Mapping):
             raise ConfigError(f"moving_filter: expected a mapping of "
@@ -79,10 +76,6 @@ class MovingPointRejection:
                     value, numbers.Integral if count else numbers.Real):
                 raise ConfigError(f"moving_filter: {key}: expected "
                                   f"{'an integer' if count else 'a number'}, got {value!r}")
-        for key, expected in _UNCHECKED.items():
-            if not settings.get(key, 0) >= 0:  # NaN fails too
-                raise ConfigError(f"moving_filter: {key}: expected {expected}, got "
-                                  f"{settings[key]!r}")
         self._moving_settings = dict(settings)  # as checked, whatever becomes of the mapping
         if settings:  # the filter's own checks, on a three-beam setup
             try:

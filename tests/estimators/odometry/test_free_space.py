@@ -233,8 +233,9 @@ def test_after_a_jump_the_last_scans_are_judged_only_where_beams_are_dense() -> 
     assert not any(moving.any() for moving, _ in jumpy)
 
 
-@pytest.mark.parametrize("name", ["anchor_time", "max_anchor_scans", "anchor_spacing",
-                                  "anchor_break", "map_clearance", "map_support"])
+@pytest.mark.parametrize("name", ["radius", "history", "anchor_time", "max_anchor_scans",
+                                  "anchor_spacing", "anchor_break", "map_clearance",
+                                  "map_support"])
 def test_a_filter_setting_out_of_range_is_named(name: str) -> None:
     from estimators.base import SensorSetup
     from estimators.odometry.moving_points import MovingPointFilter

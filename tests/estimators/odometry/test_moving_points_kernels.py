@@ -17,7 +17,8 @@ from estimators.odometry.free_space import (
     _seen_through_free,
     _seen_through_kernel,
 )
-from estimators.odometry.moving_points import _near_any, _near_any_plain, _ThinnedScans
+from estimators.odometry.moving_points import _near_any, _near_any_plain
+from estimators.odometry.thinned_scans import ThinnedScans
 
 
 def _beam_angles(kind: int, n: int, first: float, rng: np.random.Generator) -> np.ndarray:
@@ -90,7 +91,7 @@ def test_thinned_scans_match_voxel_downsample_of_the_last_scans(
         seed: int, length: int, spacing: float) -> None:
     """Row for row, over enough scans for the hash set to fill and be rebuilt."""
     rng = np.random.default_rng(seed)
-    thinned = _ThinnedScans(length, spacing)
+    thinned = ThinnedScans(length, spacing)
     scans: list[np.ndarray] = []
     for _ in range(int(rng.integers(1, 40))):
         n = int(rng.integers(0, 400))
