@@ -4,6 +4,8 @@ in :mod:`agents.interface`)."""
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
+from typing import Any
 
 from agents.interface import Driver
 from lidar_env.errors import ConfigError
@@ -18,17 +20,22 @@ DRIVERS: dict[str, str] = {
 }
 
 
-def make_driver(name: str, pose_source: str = "true") -> Driver:
+def make_driver(name: str, pose_source: str = "true",
+                pose_params: Mapping[str, Any] | None = None) -> Driver:
     """A fresh driver by name: ``scripted`` (pure pursuit), ``scan_aware`` (pure pursuit that
     brakes and backs off for what its scans show ahead) or ``sb3`` (the shipped learned policy).
 
     ``pose_source`` is where the driver takes the car's pose from: ``"true"`` (the env's
     ``info["pose"]``) or the name of an estimator (``estimators.registry.names()``) that runs
-    online on the scans (:class:`agents.pose_source.EstimatedPoseDriver`).
+    online on the scans (:class:`agents.pose_source.EstimatedPoseDriver`), built with
+    ``pose_params`` over its defaults.
     """
     if name not in DRIVERS:
         raise ConfigError(
             f"unknown driver {name!r}: expected one of {', '.join(sorted(DRIVERS))}")
+    if pose_source == "true" and pose_params:
+        raise ConfigError(f"pose_params: only with an estimator as pose_source, got "
+                          f"{dict(pose_params)!r} with pose_source='true'")
     if pose_source != "true":
         from agents.pose_source import check_pose_source
 
@@ -39,4 +46,4 @@ def make_driver(name: str, pose_source: str = "true") -> Driver:
         return driver
     from agents.pose_source import EstimatedPoseDriver
 
-    return EstimatedPoseDriver(driver, pose_source)
+    return EstimatedPoseDriver(driver, pose_source, pose_params)

@@ -2,6 +2,8 @@
 
     python -m agents.evaluate --episodes 50 --drivers scripted sb3
     python -m agents.evaluate --episodes 10 --pose-sources true lidar_odometry slam
+    python -m agents.evaluate --pose-sources lidar_odometry \
+        --pose-params '{"lidar_odometry": {"sideslip_sigma": 6e-4}}'
     python -m agents.evaluate --moving-obstacles 10 --worlds open_cylinders random
     python -m agents.evaluate --drivers sb3 --sb3-model runs/ppo_driver.zip
     python -m agents.evaluate --moving-obstacles 10 --mover-model waypoints --worlds random
@@ -23,7 +25,8 @@ something.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -118,10 +121,12 @@ def evaluate(
     )
 
 
-def build_driver(name: str, pose_source: str = "true", sb3_model: Path | None = None) -> Driver:
-    """``make_driver(name, pose_source)``, or for ``sb3`` with ``sb3_model`` that model."""
+def build_driver(name: str, pose_source: str = "true", sb3_model: Path | None = None,
+                 pose_params: Mapping[str, Any] | None = None) -> Driver:
+    """``make_driver(name, pose_source, pose_params)``, or for ``sb3`` with ``sb3_model`` that
+    model."""
     if name != "sb3" or sb3_model is None:
-        return make_driver(name, pose_source=pose_source)
+        return make_driver(name, pose_source=pose_source, pose_params=pose_params)
     from agents.sb3_driver import SB3Driver
 
     driver: Driver = SB3Driver(sb3_model)
@@ -129,7 +134,20 @@ def build_driver(name: str, pose_source: str = "true", sb3_model: Path | None = 
         return driver
     from agents.pose_source import EstimatedPoseDriver, check_pose_source
 
-    return EstimatedPoseDriver(driver, check_pose_source(pose_source))
+    return EstimatedPoseDriver(driver, check_pose_source(pose_source), pose_params)
+
+
+def pose_params_by_source(text: str) -> dict[str, dict[str, Any]]:
+    """``--pose-params``: a JSON object of pose source -> that estimator's parameters."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"expected JSON, {error}") from error
+    if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+        raise argparse.ArgumentTypeError(
+            f"expected an object of pose source -> parameters, e.g. "
+            f'{{"lidar_odometry": {{"sideslip_sigma": 6e-4}}}}, got {text!r}')
+    return value
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -149,7 +167,14 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="how the pedestrians walk (config mover_model; default %(default)s)")
     parser.add_argument("--sb3-model", type=Path, default=None,
                         help="the sb3 driver's model .zip (default: the shipped one)")
+    parser.add_argument("--pose-params", type=pose_params_by_source, default={},
+                        help="JSON: pose source -> its estimator's parameters, e.g. "
+                             '\'{"lidar_odometry": {"sideslip_sigma": 6e-4}}\'')
     args = parser.parse_args(argv)
+    unknown = sorted(set(args.pose_params) - set(args.pose_sources) - {"true"})
+    if unknown or "true" in args.pose_params:
+        parser.error(f"--pose-params: {', '.join(unknown or ['true'])} is not an estimator "
+                     f"among --pose-sources ({', '.join(args.pose_sources)})")
     print("| driver | pose | world | trace | movers | success | cross-track [m] | end-point [m] | "
           "time [s] | collisions | closest mover [m] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -159,7 +184,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         (world, trace) for world in args.worlds for trace in args.traces]
     for name in args.drivers:
         for source in args.pose_sources:
-            driver = build_driver(name, source, args.sb3_model)
+            driver = build_driver(name, source, args.sb3_model,
+                                  args.pose_params.get(source))
             for world, trace in pairs:
                 s = evaluate(driver, world, trace, args.episodes, args.base_seed,
                              args.moving_obstacles, args.mover_model)

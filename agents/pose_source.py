@@ -45,14 +45,25 @@ class EstimatedPoseDriver:
         driver: any :class:`~agents.driver.Driver` that reads ``info["pose"]``.
         estimator: a registered estimator name (``estimators.registry.names()``) or an
             :class:`~estimators.base.Estimator` instance (reset at every episode).
+        params: the named estimator's parameters over its defaults (``estimators.make``), e.g.
+            ``{"sideslip_sigma": 6e-4}`` for ``lidar_odometry`` on a car whose frame is the
+            wheels' no-slip point, as the simulated car's is (README, "Driving on estimated
+            poses").
 
     ``last_estimate`` is the pose (x [m], y [m], heading [rad], world frame) given to the
     driver at the latest step.
     """
 
-    def __init__(self, driver: Driver, estimator: str | Estimator) -> None:
+    def __init__(self, driver: Driver, estimator: str | Estimator,
+                 params: Mapping[str, Any] | None = None) -> None:
         if isinstance(estimator, str):
-            estimator = registry.make(check_pose_source(estimator))
+            if estimator == TRUE_POSE:
+                raise ConfigError("estimator: expected an estimator name, got 'true' (the env's "
+                                  "pose needs no EstimatedPoseDriver)")
+            estimator = registry.make(check_pose_source(estimator), **(params or {}))
+        elif params:
+            raise ConfigError(f"params: only with an estimator name, not with an Estimator "
+                              f"instance (got {dict(params)!r})")
         if not isinstance(estimator, Estimator):
             raise ArgumentTypeError(f"estimator: expected an estimator name or an Estimator, got "
                             f"{type(estimator).__name__}")

@@ -7,10 +7,11 @@ and a module's heavy dependencies load only when one of its estimators is made.
 from __future__ import annotations
 
 import importlib
+import inspect
 from typing import Any
 
 from estimators.base import Estimator
-from lidar_env.errors import UnknownNameError
+from lidar_env.errors import ConfigError, UnknownNameError
 
 #: name -> ("module:Class", default keyword parameters)
 _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
@@ -52,4 +53,10 @@ def make(name: str, **params: Any) -> Estimator:
     target, defaults = _ENTRIES[name]
     module_name, class_name = target.split(":")
     cls = getattr(importlib.import_module(module_name), class_name)
+    accepted = inspect.signature(cls).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in accepted.values()):
+        unknown = sorted(set(params) - set(accepted))
+        if unknown:
+            raise ConfigError(f"{name}: unknown parameter(s) {', '.join(unknown)}: expected "
+                              f"some of {', '.join(accepted)}")
     return cls(**{**defaults, **params})

@@ -173,6 +173,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             scan leaves a direction free (``motion_prior.no_sideslip_information``); inf, the
             default, for none of it (a holonomic base, or a car frame away from the wheels'
             no-slip point, as a CARMEN log's laser frame). 6e-4 suits the simulated car.
+            Finite, the constant-velocity model also keeps no sideways velocity.
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).

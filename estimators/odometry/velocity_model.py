@@ -93,6 +93,13 @@ class ConstantVelocityModel:
         translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
         averaged over the last ``velocity_window`` increments (one carries the noise of two
         registrations, ~1-2 % of a step, which a corridor's axis dead-reckons), the turn rate
-        from the last one (turn rates change faster than speeds and are rarely unobservable)."""
-        self._translations.append(motion_prior.midpoint_velocity(increment, dt)[:2])
+        from the last one (turn rates change faster than speeds and are rarely unobservable).
+        With a finite ``sideslip_sigma`` (the car frame at the wheels' no-slip point) the
+        velocity has no sideways part: where the scan leaves an axis free, the increments'
+        error along it shows up sideways in the car frame, and carried on in the guess it
+        drifted down a corridor while the car rocked back and forth (3.3 m)."""
+        translation = motion_prior.midpoint_velocity(increment, dt)[:2]
+        if np.isfinite(self.sideslip_sigma):
+            translation[1] = 0.0
+        self._translations.append(translation)
         return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])

@@ -80,3 +80,27 @@ def test_evaluate_drives_the_paper_groups_on_each_pose_source(capsys: pytest.Cap
     with pytest.raises(ConfigError, match="pose_source: expected one of"):
         main(["--drivers", "scripted", "--paper-groups", "--episodes", "1",
               "--pose-sources", "gps"])
+
+
+def test_pose_params_reach_the_estimator_and_are_refused_where_they_mean_nothing() -> None:
+    from estimators import make
+
+    driver = make_driver("scripted", pose_source="lidar_odometry",
+                         pose_params={"sideslip_sigma": 6e-4})
+    assert isinstance(driver, EstimatedPoseDriver)
+    assert driver.estimator.sideslip_sigma == 6e-4
+    with pytest.raises(ConfigError, match="pose_params: only with an estimator"):
+        make_driver("scripted", pose_params={"sideslip_sigma": 6e-4})
+    with pytest.raises(ConfigError, match="lidar_odometry: unknown parameter.*sideslip"):
+        make_driver("scripted", pose_source="lidar_odometry", pose_params={"sideslip": 1e-3})
+    with pytest.raises(ConfigError, match="params: only with an estimator name"):
+        EstimatedPoseDriver(PurePursuitDriver(), make("icp"), {"max_iterations": 3})
+
+
+def test_evaluate_refuses_pose_params_for_a_source_it_does_not_drive() -> None:
+    from agents.evaluate import main
+
+    for bad in ('{"slam": {}}', "not json", '{"lidar_odometry": 3}'):
+        with pytest.raises(SystemExit):
+            main(["--drivers", "scripted", "--paper-groups", "--episodes", "1",
+                  "--pose-sources", "lidar_odometry", "--pose-params", bad])

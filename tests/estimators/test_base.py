@@ -67,6 +67,16 @@ def test_unknown_estimator_lists_valid_names() -> None:
         estimators.make("no_such_estimator")
 
 
+def test_an_unknown_parameter_is_named_with_the_valid_ones() -> None:
+    from lidar_env.errors import ConfigError
+
+    for name in estimators.names():
+        with pytest.raises(ConfigError, match=f"{name}: unknown parameter.*no_such"):
+            estimators.make(name, no_such=1)
+    with pytest.raises(ConfigError, match="expected some of .*sideslip_sigma"):
+        estimators.make("lidar_odometry", sideslip=1e-3)
+
+
 def test_registry_defaults_are_what_make_uses() -> None:
     for name in estimators.names():
         params = estimators.registry.defaults(name)
