@@ -5,7 +5,8 @@ seconds for the ray caster on a 2-core machine) and writes the machine code besi
 in ``__pycache__``; later processes load it in milliseconds. Left alone, each worker of a cold
 run compiles every kernel it touches, all of them twice over with two workers. Here two warm-up
 tasks run on the pool first, one compiling the env and mapping kernels, the other the
-estimators' (both record a drive first, so the ray caster is the only kernel compiled twice),
+estimators' (both record a drive first, so the simulator's kernels, the ray caster's above all,
+are the ones compiled twice),
 and a marker keyed by the source digest skips the warm-up once this source has been compiled.
 One worker (no pool) or a Dask cluster (whose workers cache elsewhere) gain nothing from it and
 skip it.
@@ -20,16 +21,26 @@ from pathlib import Path
 import numpy as np
 
 from estimators.base import SensorSetup
-from estimators.leaderboard.recording import map_reference, record, replay, score_map
+from estimators.leaderboard.recording import record, replay
 from estimators.leaderboard.records import Scenario, source_digest
+from estimators.leaderboard.tasks import EstimatorSpec, ScenarioTask, run_scenario_task
+from estimators.matching.correlative import correlative_search
 from estimators.matching.nearest import PointIndex
-from estimators.matching.scan_matching import scans_to_car_points
+from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.paths import PROJECT_ROOT
 
-#: A short drive past cylinders: every kernel of the env and the mapping runs on it, in a few
-#: steps.
-WARMUP_SCENARIO = Scenario("open_cylinders", "straight", 0, config={"max_episode_time": 0.5})
+#: Short drives through the map scoring a worker runs (:func:`run_scenario_task`, with the
+#: cheapest estimator): past cylinders, where from 2 s on the detector cuts a round arc out of
+#: a cluster not round as a whole (the circle fit's arc kernels), and among walkers in
+#: the closed area, whose world asks the primitive grid for the clearance of writable points
+#: (and the movers' labels and scores). Left to the workers, those compiled inside their first
+#: such scenario.
+WARMUP_SCENARIOS = (
+    Scenario("open_cylinders", "right_turn", 0, config={"max_episode_time": 2.5}),
+    Scenario("closed_to_open", "zigzag", 0, config={
+        "max_episode_time": 1.0, "moving_obstacles": 5, "mover_model": "yielding"}),
+)
 #: Down a corridor and back (25 s, 251 steps): the estimators' kernels that a few steps do not
 #: reach run on it too, loop closure's search and solver and the moving-point filter's
 #: "moved on" test; left to the workers, each compiled them inside its first such scenario
@@ -44,11 +55,13 @@ def marker_path() -> Path:
 
 
 def warm_env_and_mapping() -> None:
-    """Compile the simulator's and the mapper's kernels (ray casting, car, map reference)."""
-    dataset = record(WARMUP_SCENARIO)
-    reference = map_reference(dataset)
-    if reference is not None:
-        score_map(reference, dataset.poses, dataset)
+    """Compile the simulator's and the mapper's kernels (ray casting, car, map reference and
+    scores, the movers' scores) and the correlative search (raises if a stage failed)."""
+    for scenario in WARMUP_SCENARIOS:
+        outcome = run_scenario_task(ScenarioTask(scenario, (EstimatorSpec("zero"),)))
+        if outcome.failures:
+            raise RuntimeError(f"warm-up on {scenario.label} failed: {outcome.failures}")
+    _search_exhaustively()
 
 
 def warm_estimators(names: tuple[str, ...]) -> None:
@@ -62,6 +75,15 @@ def warm_estimators(names: tuple[str, ...]) -> None:
     for k in (1, 2):
         index.query(np.zeros((1, 2)), k=k, distance_upper_bound=1.0)
     _walk_away()
+
+
+def _search_exhaustively() -> None:
+    """The correlative search of the odometry's fallback, which a drive reaches only where ICP
+    loses track: 3 headings x 9 translations of 3 points. Here rather than in
+    :func:`warm_estimators`, the longer task."""
+    points = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
+    correlative_search(LikelihoodField(points, resolution=0.1), points, np.zeros(3),
+                       linear_window=0.1, angular_window=np.radians(1.0))
 
 
 def _walk_away() -> None:

@@ -62,3 +62,27 @@ def test_the_warm_up_reaches_the_moved_on_test(monkeypatch: pytest.MonkeyPatch) 
                         lambda *args: calls.append(args) or kernel(*args))
     warmup._walk_away()
     assert calls and calls[0][0].shape[1] == 2
+
+
+def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The kernels the leaderboard's map scoring needs in variants a few steps of a plain drive
+    do not reach: each compiled inside the workers' first such scenario until 2026-12-06.
+    numba compiles once per argument type, so the calls are checked for those types."""
+    from estimators.mapping import obstacles
+    from estimators.matching import correlative
+    from lidar_env import world
+
+    calls: dict[str, list[tuple]] = {}
+    for module, name in ((world, "point_queries"), (correlative, "_shifted_scores"),
+                         (obstacles, "_cluster_statistics"), (obstacles, "_longest_arc")):
+        kernel, seen = getattr(module, name), calls.setdefault(name, [])
+        monkeypatch.setattr(module, name,
+                            lambda *args, kernel=kernel, seen=seen: seen.append(args)
+                            or kernel(*args))
+    warmup.warm_env_and_mapping()
+    # building the closed area's world asks for the clearance of writable points
+    assert any(args[0].flags.writeable for args in calls["point_queries"])
+    assert calls["_shifted_scores"]
+    # an arc cut out of a cluster: its bounds are columns of one array, not contiguous
+    assert any(not args[1].flags.c_contiguous for args in calls["_cluster_statistics"])
+    assert calls["_longest_arc"]
