@@ -29,6 +29,7 @@ from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.paths import PROJECT_ROOT
+from lidar_env.errors import DualLidarError
 
 #: Short drives through the map scoring a worker runs (:func:`run_scenario_task`, with the
 #: cheapest estimator): past cylinders, where from 2 s on the detector cuts a round arc out of
@@ -60,7 +61,7 @@ def warm_env_and_mapping() -> None:
     for scenario in WARMUP_SCENARIOS:
         outcome = run_scenario_task(ScenarioTask(scenario, (EstimatorSpec("zero"),)))
         if outcome.failures:
-            raise RuntimeError(f"warm-up on {scenario.label} failed: {outcome.failures}")
+            raise DualLidarError(f"warm-up on {scenario.label} failed: {outcome.failures}")
     _search_exhaustively()
 
 

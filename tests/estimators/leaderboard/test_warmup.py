@@ -70,7 +70,7 @@ def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyP
     numba compiles once per argument type, so the calls are checked for those types."""
     from estimators.mapping import obstacles
     from estimators.matching import correlative
-    from lidar_env import world
+    from lidar_env import world, worlds
 
     calls: dict[str, list[tuple]] = {}
     for module, name in ((world, "point_queries"), (correlative, "_shifted_scores"),
@@ -79,6 +79,7 @@ def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyP
         monkeypatch.setattr(module, name,
                             lambda *args, kernel=kernel, seen=seen: seen.append(args)
                             or kernel(*args))
+    worlds.built_in_layout.cache_clear()  # built once per process: maybe by an earlier test
     warmup.warm_env_and_mapping()
     # building the closed area's world asks for the clearance of writable points
     assert any(args[0].flags.writeable for args in calls["point_queries"])
