@@ -56,6 +56,9 @@ class EstimatedPoseDriver:
 
     def __init__(self, driver: Driver, estimator: str | Estimator,
                  params: Mapping[str, Any] | None = None) -> None:
+        if params is not None and not isinstance(params, Mapping):
+            raise ArgumentTypeError(f"params: expected a mapping of parameter names to values, "
+                                    f"got {type(params).__name__}")
         if isinstance(estimator, str):
             if estimator == TRUE_POSE:
                 raise ConfigError("estimator: expected an estimator name, got 'true' (the env's "

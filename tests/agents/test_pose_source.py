@@ -14,7 +14,7 @@ from agents.driver import make_driver
 from agents.evaluate import drive_episode
 from agents.pose_source import EstimatedPoseDriver
 from agents.scripted import PurePursuitDriver
-from lidar_env.errors import ConfigError
+from lidar_env.errors import ArgumentTypeError, ConfigError
 
 
 class _Recorder(PurePursuitDriver):
@@ -95,6 +95,10 @@ def test_pose_params_reach_the_estimator_and_are_refused_where_they_mean_nothing
         make_driver("scripted", pose_source="lidar_odometry", pose_params={"sideslip": 1e-3})
     with pytest.raises(ConfigError, match="params: only with an estimator name"):
         EstimatedPoseDriver(PurePursuitDriver(), make("icp"), {"max_iterations": 3})
+    with pytest.raises(ArgumentTypeError, match="params: expected a mapping"):
+        make_driver("scripted", pose_source="icp", pose_params=[("max_iterations", 3)])
+    with pytest.raises(ConfigError, match="estimator: expected an estimator name, got 'true'"):
+        EstimatedPoseDriver(PurePursuitDriver(), "true")
 
 
 def test_evaluate_refuses_pose_params_for_a_source_it_does_not_drive() -> None:
