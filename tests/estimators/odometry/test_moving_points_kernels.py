@@ -104,3 +104,31 @@ def test_thinned_scans_match_voxel_downsample_of_the_last_scans(
             expected = (voxel_downsample(np.concatenate(recent), spacing) if recent
                         else np.zeros((0, 2)))
             np.testing.assert_array_equal(thinned.thinned(count), expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), clearance=st.sampled_from([0.0, 0.1, 0.3, 1.0]),
+       support=st.sampled_from([0.0, 0.05, 0.1]))
+def test_mappable_is_its_definition_by_brute_force(seed: int, clearance: float,
+                                                    support: float) -> None:
+    """Kept: not moving, and farther than ``map_clearance`` from every moving point or within
+    ``map_support`` of a map point; every pair measured."""
+    from estimators.base import SensorSetup
+    from estimators.odometry.moving_points import MovingPointFilter
+
+    rng = np.random.default_rng(seed)
+    world = rng.uniform(-2, 2, (int(rng.integers(0, 60)), 2))
+    moving = rng.random(len(world)) < rng.uniform(0, 0.5)
+    known = [rng.uniform(-2, 2, (int(rng.integers(0, 40)), 2)) for _ in range(3)]
+    moving_filter = MovingPointFilter(SensorSetup(np.zeros((1, 3)), [0.0, 2.0, 4.0], 10.0),
+                                      map_clearance=clearance, map_support=support)
+
+    def within(a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+        if not len(b) or not len(a):
+            return np.zeros(len(a), dtype=bool)
+        return (np.hypot(*(a[:, None, :] - b[None, :, :]).transpose(2, 0, 1)) < radius).any(1)
+
+    near = within(world, world[moving], clearance)
+    supported = within(world, np.concatenate(known), support)
+    expected = ~moving & ~(near & ~supported)
+    np.testing.assert_array_equal(moving_filter.mappable(world, moving, known), expected)
