@@ -171,9 +171,9 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="JSON: pose source -> its estimator's parameters, e.g. "
                              '\'{"lidar_odometry": {"sideslip_sigma": 6e-4}}\'')
     args = parser.parse_args(argv)
-    unknown = sorted(set(args.pose_params) - set(args.pose_sources) - {"true"})
-    if unknown or "true" in args.pose_params:
-        parser.error(f"--pose-params: {', '.join(unknown or ['true'])} is not an estimator "
+    unknown = sorted(set(args.pose_params) - (set(args.pose_sources) - {"true"}))
+    if unknown:
+        parser.error(f"--pose-params: {', '.join(unknown)} is not an estimator "
                      f"among --pose-sources ({', '.join(args.pose_sources)})")
     print("| driver | pose | world | trace | movers | success | cross-track [m] | end-point [m] | "
           "time [s] | collisions | closest mover [m] |")

@@ -167,8 +167,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         moving_filter: the filter's other settings by name, over its defaults (None: all
             defaults): ``radius`` [m], ``history`` [scans], ``stale_resolution`` [m],
             ``anchor_time`` [s], ``max_anchor_scans``, ``anchor_spacing`` [m],
-            ``anchor_break`` [m] (see :class:`~estimators.odometry.moving_points.
-            MovingPointFilter`); its margin is ``dynamic_margin``, its ``min_range`` ours.
+            ``anchor_break`` [m], ``map_clearance`` [m], ``map_support`` [m] (see
+            :class:`~estimators.odometry.moving_points.MovingPointFilter`); its margin is
+            ``dynamic_margin``, its ``min_range`` ours.
         sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
             scan leaves a direction free (``motion_prior.no_sideslip_information``); inf, the
             default, for none of it (a holonomic base, or a car frame away from the wheels'

@@ -104,7 +104,7 @@ def test_pose_params_reach_the_estimator_and_are_refused_where_they_mean_nothing
 def test_evaluate_refuses_pose_params_for_a_source_it_does_not_drive() -> None:
     from agents.evaluate import main
 
-    for bad in ('{"slam": {}}', "not json", '{"lidar_odometry": 3}'):
+    for bad in ('{"slam": {}}', '{"true": {}}', "not json", '{"lidar_odometry": 3}'):
         with pytest.raises(SystemExit):
             main(["--drivers", "scripted", "--paper-groups", "--episodes", "1",
                   "--pose-sources", "lidar_odometry", "--pose-params", bad])
