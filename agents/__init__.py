@@ -2,5 +2,6 @@
 
 from agents.driver import DRIVERS, Driver, make_driver
 from agents.scripted import PurePursuitDriver
+from lidar_env import __version__
 
-__all__ = ["DRIVERS", "Driver", "PurePursuitDriver", "make_driver"]
+__all__ = ["DRIVERS", "__version__", "Driver", "PurePursuitDriver", "make_driver"]

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from agents.interface import Driver
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 __all__ = ["DRIVERS", "Driver", "make_driver"]
 

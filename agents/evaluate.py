@@ -36,7 +36,7 @@ import numpy as np
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.driver import DRIVERS, Driver, make_driver
-from lidar_env.config import MOVER_MODELS
+from lidar_env.movers import MOVER_MODELS
 
 BUILT_IN_WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 TRACE_SEEDS = ("straight", "right_turn", "zigzag")

@@ -44,7 +44,7 @@ from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
 from agents.scan_aware import ScanAwareDriver
 from agents.train import TrainingExistsError, new_model_path
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 DEFAULT_OUT = Path("runs/imitation_driver.zip")
 #: (moving_obstacles, mover_model) of the training envs, one env each, stepped in lockstep.

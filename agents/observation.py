@@ -45,8 +45,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env import se2
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError, se2
 
 
 class TraceFollowingObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from agents.interface import Driver
 from estimators import registry
 from estimators.base import Estimator, SensorSetup
-from lidar_env.errors import ArgumentTypeError, ConfigError
+from lidar_env.core import ArgumentTypeError, ConfigError
 
 #: ``pose_source`` value for the env's ground-truth pose (no estimator).
 TRUE_POSE = "true"

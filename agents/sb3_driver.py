@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.observation import TraceFollowingObservation
-from lidar_env.errors import ConfigError, ResetNeededError
+from lidar_env.core import ConfigError, ResetNeededError
 
 #: The policy shipped with the package (trained by ``python -m agents.imitate``: it imitates
 #: the scan-aware driver and gives way to pedestrians; ``ppo_driver.json`` beside it records

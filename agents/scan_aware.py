@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.scripted import PurePursuitDriver
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 #: [m/s] a return ahead closing in faster than this (beyond the car's own motion) is a threat.
 CLOSING_SPEED = 0.15

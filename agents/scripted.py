@@ -15,8 +15,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
-from lidar_env.traces import Trace
+from lidar_env.core import ArgumentTypeError, ConfigError, ResetNeededError
+from lidar_env.routes import Trace
 
 
 class PurePursuitDriver:

@@ -35,7 +35,7 @@ import yaml
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 HYPERPARAMETERS = Path(__file__).with_name("ppo_driver.yaml")
 DEFAULT_OUT = Path("runs/ppo_driver.zip")
@@ -94,7 +94,7 @@ def make_training_vec_env(
                          f"{vectorization!r}")
     if vectorization == "auto":
         from lidar_env.config import EnvConfig
-        from lidar_env.vector.env import not_batched
+        from lidar_env.vector import not_batched
 
         batchable = not_batched(EnvConfig.from_dict(config)) is None
         vectorization = "batched" if batchable else "single"

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.observation import TraceFollowingObservation
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 
 class SB3VecEnv(VecEnv):

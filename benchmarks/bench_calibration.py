@@ -28,7 +28,7 @@ import numpy as np
 from estimators.calibration import calibrate
 from estimators.leaderboard.recording import record, replay
 from estimators.leaderboard.records import Scenario
-from lidar_env.se2 import relative, wrap_angle
+from lidar_env.core.se2 import relative, wrap_angle
 
 LAYOUTS = {
     "360": {},

@@ -33,8 +33,8 @@ import numpy as np
 from gymnasium.utils.performance import benchmark_step
 
 import lidar_env  # registers DualLidar-v0
-from lidar_env.lidar import cast_rays
-from lidar_env.worlds import WORLD_NAMES
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.built_in import WORLD_NAMES
 
 TARGET_STEPS_PER_SECOND = 20_000
 

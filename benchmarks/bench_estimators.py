@@ -40,7 +40,7 @@ from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
 from estimators.paths import SHARED_DATA
 from lidar_env import lidars_with_noise
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core.errors import EstimatorInputError
 
 REFERENCE = "icp"
 DATA = SHARED_DATA / "radish"

@@ -43,7 +43,7 @@ from estimators.evaluation.metrics import evaluate
 from estimators.odometry.far_scans import GlobalSearch
 from estimators.odometry.local_map import LocalMapOdometry
 from estimators.paths import SHARED_DATA
-from lidar_env.se2 import relative, wrap_angle
+from lidar_env.core.se2 import relative, wrap_angle
 
 BUILT_IN = (("open_cylinders", "right_turn"), ("hallway", "zigzag"),
             ("closed_to_open", "zigzag"))

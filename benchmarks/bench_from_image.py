@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from lidar_env.world import World
+from lidar_env.world.world import World
 
 
 def cpu_seconds(side: int) -> tuple[float, int]:

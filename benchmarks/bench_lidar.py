@@ -3,7 +3,7 @@
 Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 15 s).
 
 Then other layouts (issue 15): 1, 2 and 4 Lidars of 360 degrees, and 1 x 180, 2 x 270 and
-4 x 90 degrees, every scan of a car in one :meth:`lidar_env.lidar_layout.LidarLayout.scan`
+4 x 90 degrees, every scan of a car in one :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`
 call (the env's whole sensor model, float32 readings), against pymunk per beam. Target: >= 80x.
 
 The worlds are built inline and bracket the built-in ones: 40 cylinders + 100 free-standing
@@ -25,11 +25,11 @@ import numba
 import numpy as np
 import pymunk
 
-from lidar_env.lidar import Lidar, cast_rays, pymunk_cast_rays
-from lidar_env.lidar_config import LidarConfig
-from lidar_env.lidar_layout import LidarLayout
-from lidar_env.se2 import compose
-from lidar_env.world import World
+from lidar_env.core.se2 import compose
+from lidar_env.sensors.lidar import Lidar, cast_rays, pymunk_cast_rays
+from lidar_env.sensors.lidar_config import LidarConfig
+from lidar_env.sensors.lidar_layout import LidarLayout
+from lidar_env.world.world import World
 
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
 #: Other layouts (issue 15): K Lidars of their own fov, cast in one call by LidarLayout.scan.

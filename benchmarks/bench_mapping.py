@@ -249,8 +249,8 @@ def map_aces(estimators: list[str], path: Path) -> Path:
     from estimators.datasets.real_log import run_on_log, setup_from_log
     from estimators.leaderboard.alignment import align_to_reference
     from estimators.leaderboard.figures import draw_occupancy_panels
-    from estimators.mapping.map_figure import _panel_image
-    from lidar_env.se2 import relative
+    from estimators.mapping.map_figure import panel_image
+    from lidar_env.core.se2 import relative
 
     radish = SHARED_DATA / "radish"
     if not radish.is_dir():
@@ -281,7 +281,7 @@ def map_aces(estimators: list[str], path: Path) -> Path:
         agreement = return_agreement(grid, poses, observations, setup)
         print(f"  aces {name}: return agreement {agreement:.3f} at one-cell tolerance")
         title = "pseudo truth: SLAM (aces-corrected)" if name == "truth" else f"at {name} poses"
-        panels[f"{title} (agreement {agreement:.2f})"] = _panel_image(grid, None)
+        panels[f"{title} (agreement {agreement:.2f})"] = panel_image(grid, None)
     trajectories = {name: poses for name, (_, poses) in runs.items()}
     drawn = draw_occupancy_panels(
         panels, bounds, trajectories, path=path,

@@ -3,8 +3,8 @@
 Run: ``python benchmarks/bench_movers.py [--poses 200] [--movers 20] [--seed 0]`` (about 30 s).
 
 Target: the compiled scan (both default 360-beam Lidars in one
-:meth:`lidar_env.lidar_layout.LidarLayout.scan` call, float32 readings) stays >= 80x faster than
-pymunk's ``segment_query_first`` per beam with 20 movers in view, the movers added to pymunk's
+:meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan` call, float32 readings) stays >= 80x faster
+than pymunk's ``segment_query_first`` per beam with 20 movers in view, the movers added to pymunk's
 space as circles. Both scan the same random free car poses, each with its own 20 movers of
 0.25 m radius scattered within 8 m of the car (free of the obstacles and of each other), so many
 beams end on a mover; the results are checked to agree. The worlds are bench_lidar's two
@@ -28,11 +28,11 @@ from bench_lidar import machine, representative_world
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env.config import EnvConfig
-from lidar_env.lidar import pymunk_cast_rays
-from lidar_env.lidar_layout import LidarLayout
-from lidar_env.se2 import compose
-from lidar_env.world import World
-from lidar_env.worlds import make_world
+from lidar_env.core.se2 import compose
+from lidar_env.sensors.lidar import pymunk_cast_rays
+from lidar_env.sensors.lidar_layout import LidarLayout
+from lidar_env.world.built_in import make_world
+from lidar_env.world.world import World
 
 RADIUS = 0.25  # [m] the env's default mover radius
 

@@ -45,7 +45,8 @@ from estimators.leaderboard.recording import (
     world_geometry,
 )
 from estimators.leaderboard.records import SensorDataset
-from lidar_env.config import MOVER_MODELS, EnvConfig
+from lidar_env.config import EnvConfig
+from lidar_env.movers import MOVER_MODELS
 
 GROUPS = (("open_cylinders", "right_turn", 10), ("hallway", "zigzag", 5),
           ("closed_to_open", "zigzag", 5))

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar_env.lidar import cast_rays, pymunk_cast_rays
-from lidar_env.ros_map import read_ros_map, save_ros_map
-from lidar_env.world import World
+from lidar_env.sensors.lidar import cast_rays, pymunk_cast_rays
+from lidar_env.world.ros_map import read_ros_map, save_ros_map
+from lidar_env.world.world import World
 
 
 def building(pixels: int, rng: np.random.Generator) -> np.ndarray:

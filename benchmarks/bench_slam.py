@@ -50,7 +50,7 @@ from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.solver import optimize
 from lidar_env import lidars_with_noise
-from lidar_env.se2 import compose, relative
+from lidar_env.core.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"
 WORLDS = ("open_cylinders", "hallway", "closed_to_open", "random")

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 import lidar_env  # registers DualLidar-v0
 from lidar_env.config import MOVER_MODELS
-from lidar_env.world import World
+from lidar_env.world.world import World
 
 TARGET_STEPS_PER_SECOND = 200_000
 TARGET_RATIO = 5.0

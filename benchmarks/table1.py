@@ -4,7 +4,7 @@ Run: ``python benchmarks/table1.py [--seed 0] [--frames world sensor] [--tum-dir
 [--plot table1.png] [--feature-density 0]`` (the plot, like the paper's Fig. 8, needs
 matplotlib). ``--feature-density`` [features per 10 m of wall] adds door recesses, pillars,
 corners and clutter to the two closed areas, placed from the seed
-(:mod:`lidar_env.feature_worlds`; ``benchmarks/table1_sweep.py`` sweeps it).
+(:mod:`lidar_env.world.feature_worlds`; ``benchmarks/table1_sweep.py`` sweeps it).
 
 Three surroundings as in the paper (section IV.B): a right turn in ``open_cylinders``, a
 zigzag in ``hallway`` and in ``closed_to_open``; one seeded episode each, 1 cm range noise,
@@ -33,7 +33,7 @@ from agents.scripted import PurePursuitDriver
 from estimators.base import SensorSetup
 from estimators.evaluation.metrics import evaluate
 from estimators.evaluation.tum import write_tum
-from lidar_env.feature_worlds import FEATURE_WORLDS, feature_world_name
+from lidar_env.world.feature_worlds import FEATURE_WORLDS, feature_world_name
 
 #: (world, trace, {estimator: Table I case and accuracy [%]})
 GROUPS = (

@@ -7,7 +7,7 @@ Run: ``python -m benchmarks.table1_sweep [--densities 0 0.5 1 2 4 8] [--seeds 0 
 
 The paper's closed (``hallway``, narrow-broad-narrow) and closed-to-open (``closed_to_open``)
 areas, driven along the paper's zigzag, with door recesses, pillars, corners and clutter at each
-feature density [features per 10 m of wall] (:mod:`lidar_env.feature_worlds`); each seed draws
+feature density [features per 10 m of wall] (:mod:`lidar_env.world.feature_worlds`); each seed draws
 both the range noise (1 cm) and the features' placement (``feature_seed`` = the env seed). Every
 scenario is recorded once, world-aligned (the paper's setting) and sensor-frame, into an
 experiment database and replayed through ``pc``, ``pc_offset``, ``pc_pg`` and ``lidar_odometry``
@@ -42,7 +42,7 @@ from estimators.leaderboard.runner import SideRun, run_matrix
 from estimators.leaderboard.tables import current_records
 from estimators.leaderboard.tasks import EstimatorSpec
 from lidar_env import lidars_with_noise
-from lidar_env.feature_worlds import feature_world_name
+from lidar_env.world.feature_worlds import feature_world_name
 
 #: The two closed areas of Table I (the open area has its features already).
 AREAS: tuple[str, ...] = ("hallway", "closed_to_open")

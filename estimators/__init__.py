@@ -11,6 +11,7 @@ from estimators import evaluation
 from estimators.base import LIDAR_KEYS, Estimator, SensorSetup
 from estimators.evaluation import ScoreEstimator, metrics
 from estimators.registry import make, names
+from lidar_env import __version__
 
 __all__ = [
     "LIDAR_KEYS",
@@ -21,4 +22,5 @@ __all__ = [
     "make",
     "metrics",
     "names",
+    "__version__",
 ]

@@ -15,8 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.clock import check_time
-from lidar_env.errors import EstimatorInputError, ResetNeededError
+from lidar_env.core import EstimatorInputError, ResetNeededError, check_time
 
 #: Observation keys ``lidar_1 .. lidar_8``; sensor ``k`` of a setup reads ``LIDAR_KEYS[k]``.
 LIDAR_KEYS: tuple[str, ...] = tuple(f"lidar_{k}" for k in range(1, 9))

@@ -11,7 +11,7 @@ import inspect
 from typing import Any
 
 from estimators.base import Estimator
-from lidar_env.errors import ConfigError, UnknownNameError
+from lidar_env.core import ConfigError, UnknownNameError
 
 #: name -> ("module:Class", default keyword parameters)
 _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {

@@ -23,8 +23,8 @@ import numpy as np
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents import PurePursuitDriver
 from estimators.base import SensorSetup
-from lidar_env.traces import TRACE_NAMES
-from lidar_env.worlds import WORLD_NAMES
+from lidar_env.routes.traces import TRACE_NAMES
+from lidar_env.world.built_in import WORLD_NAMES
 
 #: Length of the scale bar in every panel [m].
 SCALE_BAR = 5.0

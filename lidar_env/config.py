@@ -16,14 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from lidar_env.errors import ConfigError
-from lidar_env.lidar_config import LidarConfig, check_lidars
+from lidar_env.core.errors import ConfigError
+from lidar_env.movers import MOVER_MODELS
+from lidar_env.sensors.lidar_config import LidarConfig, check_lidars
 
 #: Valid values of :attr:`EnvConfig.scan_frame`.
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
 
-#: Valid values of :attr:`EnvConfig.mover_model` (see :mod:`lidar_env.movers`).
-MOVER_MODELS: tuple[str, ...] = ("yielding", "waypoints")
 
 #: Most moving obstacles an env may hold (each costs a little per step and per beam).
 MAX_MOVERS = 256
@@ -55,14 +54,15 @@ class EnvConfig:
           tightest turn at full speed has a 1 m radius.
         * car 0.8 m x 0.5 m with the two Lidars 0.5 m apart on its axis (the paper's "unchangeable
           offset"), 360 beams over 360 degrees and 10 m range (the paper's 360 readings per round).
-          ``lidars`` holds 1 to 8 Lidars, each a :class:`~lidar_env.lidar_config.LidarConfig` or
-          a dict ``{"mount": (x, y, heading), "n_beams", "fov", "max_range",
-          "range_noise_std", "dropout_prob"}``; mounts lie within the car's half-diagonal.
+          ``lidars`` holds 1 to 8 Lidars, each a
+          :class:`~lidar_env.sensors.lidar_config.LidarConfig` or a dict ``{"mount": (x, y,
+          heading), "n_beams", "fov", "max_range", "range_noise_std", "dropout_prob"}``; mounts lie
+          within the car's half-diagonal.
         * each Lidar's ``range_noise_std`` 0.01 m (the typical 1 sigma of a cheap time-of-flight
           Lidar) and ``dropout_prob`` 0 are its own; :func:`lidars_with_noise` sets them on
           every Lidar of a layout at once.
         * ``moving_obstacles`` 0: no movers, so every result without them stays as it was. Movers
-          (:mod:`lidar_env.movers`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
+          (:mod:`lidar_env.movers.crowd`) are pedestrians: circles of ``mover_radius`` 0.25 m (a
           person's shoulders) walking at a speed drawn from ``mover_speed_range`` 0.5-1.5 m/s
           (slow to brisk walking), placed at least ``mover_clearance`` 1 m from the car.
         * ``mover_model`` "yielding": movers keep clear of the car's box where it stands, like
@@ -236,7 +236,7 @@ def lidars_with_noise(
             Lidar's own (0 unless set).
 
     Returns:
-        A new ``lidars`` list, one dict of :class:`~lidar_env.lidar_config.LidarConfig`'s
+        A new ``lidars`` list, one dict of :class:`~lidar_env.sensors.lidar_config.LidarConfig`'s
         fields per Lidar, in ``config``'s order.
 
     Example (every default Lidar noiseless, world-aligned scans)::

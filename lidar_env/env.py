@@ -11,19 +11,19 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.actions import checked_action
-from lidar_env.car import Car, mount_poses
 from lidar_env.config import EnvConfig
+from lidar_env.core.errors import ArgumentTypeError, ConfigError, ResetNeededError
 from lidar_env.env_views import EnvViews
-from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
-from lidar_env.lidar_layout import LidarLayout
-from lidar_env.movers import Crowd, car_circles
+from lidar_env.movers.crowd import Crowd, car_circles
+from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
+from lidar_env.routes.traces import check_trace_name
+from lidar_env.routes.user_traces import check_waypoints
 from lidar_env.scenes import SceneCache, check_reset_options
-from lidar_env.trace_geometry import Trace, project_onto_polyline
-from lidar_env.traces import check_trace_name
-from lidar_env.user_traces import check_waypoints
-from lidar_env.user_worlds import resolve_world
-from lidar_env.world import World
+from lidar_env.sensors.lidar_layout import LidarLayout
+from lidar_env.vehicle.actions import checked_action
+from lidar_env.vehicle.car import Car, mount_poses
+from lidar_env.world.user_worlds import resolve_world
+from lidar_env.world.world import World
 
 #: [m] half-width of the arc window searched when tracking progress along the trace: far more
 #: than the car moves per step (0.15 m at default settings), far less than the spacing between
@@ -99,7 +99,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
 
     The car stands at the trace's start pose: each built-in world has a default start per trace
     seed; a user world starts at its free point of largest clearance near the map's centre
-    (:mod:`lidar_env.user_worlds`). ``reset(options={"start": (x, y, heading)})`` overrides it
+    (:mod:`lidar_env.world.user_worlds`). ``reset(options={"start": (x, y, heading)})`` overrides it
     (the trace is then fitted to the world from there). A start where the car's box touches or
     lies inside an obstacle, or outside the map, raises :class:`~lidar_env.scenes.StartPoseError`.
     Movers (if any) are placed at random free points from which they can walk straight to the
@@ -115,7 +115,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     substep; movers move during the substeps too, in a straight line at the velocity they hold
     over the step).
     Truncation: 3. the episode time reaches ``max_episode_time`` (120 s).
-    After either, ``step()`` raises :class:`~lidar_env.errors.ResetNeededError` until
+    After either, ``step()`` raises :class:`~lidar_env.core.errors.ResetNeededError` until
     ``reset()`` (Gymnasium leaves stepping on undefined; the car must not drive on unnoticed).
 
     ## Info
@@ -144,12 +144,13 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     | world       | "open_cylinders" | "open_cylinders", "hallway", "closed_to_open", "random"; |
     |             |                  | a World; a 2-D array (0 free, > 0 obstacle, pixel size   |
     |             |                  | config map_resolution, 0.05 m); an image path; a ROS     |
-    |             |                  | map_server YAML path (:mod:`lidar_env.ros_map`)          |
+    |             |                  | map_server YAML path (:mod:`lidar_env.world.ros_map`)    |
     | trace       | None             | "straight", "right_turn", "zigzag", "loop",              |
     |             |                  | "out_and_back"; None: the world's paper trace            |
     |             |                  | (right_turn, zigzag, zigzag, zigzag; straight in a user  |
     |             |                  | world); or a route: (N, 2) waypoints [m] or a Trace,     |
-    |             |                  | checked for clearance and rounded (lidar_env.user_traces)|
+    |             |                  | checked for clearance and rounded                        |
+    |             |                  | (:mod:`lidar_env.routes.user_traces`)                    |
     | config      | None             | an :class:`EnvConfig` or a dict of its fields; each      |
     |             |                  | Lidar's noise is set in ``config["lidars"]``             |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
@@ -160,9 +161,9 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     (their places and speeds at reset, their waypoints during the episode; none without movers,
     so M = 0 leaves every random stream as before).
     ``env.unwrapped.space`` is the pymunk ``Space`` (obstacles, the car's and movers' kinematic
-    bodies), ``.crowd`` the :class:`~lidar_env.movers.Crowd` (None without movers),
-    ``.world`` the :class:`~lidar_env.world.World`, ``.trace`` the active
-    :class:`~lidar_env.traces.Trace`, ``.config`` the :class:`EnvConfig`.
+    bodies), ``.crowd`` the :class:`~lidar_env.movers.crowd.Crowd` (None without movers),
+    ``.world`` the :class:`~lidar_env.world.world.World`, ``.trace`` the active
+    :class:`~lidar_env.routes.traces.Trace`, ``.config`` the :class:`EnvConfig`.
 
     ## Version History
 

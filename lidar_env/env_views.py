@@ -3,7 +3,7 @@ rendered frames (a mixin of :class:`lidar_env.env.DualLidarEnv`, kept apart so t
 holds only the episode logic).
 
 Poses are ``(x [m], y [m], heading [rad])`` in the world frame. pygame is imported only when a
-``human`` window is first shown (:mod:`lidar_env.rendering`).
+``human`` window is first shown (:mod:`lidar_env.rendering.renderer`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ArgumentTypeError, ConfigError, ResetNeededError
+from lidar_env.core.errors import ArgumentTypeError, ConfigError, ResetNeededError
 
 #: ``collision_type`` of the movers' pymunk shapes.
 MOVER_COLLISION_TYPE: int = 3
@@ -50,7 +50,7 @@ class EnvViews:
 
         Built on first access for each world; the car's and movers' bodies are moved to their
         current poses on every access (the simulation itself does not need pymunk; see
-        :mod:`lidar_env.car` and :mod:`lidar_env.movers`).
+        :mod:`lidar_env.vehicle.car` and :mod:`lidar_env.movers.crowd`).
         """
         if self.world is None or self.car is None:
             raise ResetNeededError("call reset() before reading space")
@@ -108,13 +108,13 @@ class EnvViews:
     def set_render_map(self, grid: Any) -> None:
         """An occupancy map to draw under the trajectories, or ``None`` for none: anything with
         ``bounds``, ``resolution`` and ``probabilities()``
-        (:class:`lidar_env.rendering.OccupancyMap`, e.g. an
+        (:class:`lidar_env.rendering.renderer.OccupancyMap`, e.g. an
         ``estimators.mapping.occupancy.OccupancyGrid``; the env imports no estimator).
         The env builds no map itself: a user (or the scoring wrapper) builds one from the scans
         at its estimated poses. The grid is kept by reference, so cells integrated into it
         later show in the next frame. Cleared at every reset.
         """
-        from lidar_env.rendering import OccupancyMap
+        from lidar_env.rendering.renderer import OccupancyMap
 
         if grid is not None and not isinstance(grid, OccupancyMap):
             raise ArgumentTypeError(
@@ -131,7 +131,7 @@ class EnvViews:
             return None
         if self.car is None or self._last_scans is None:
             raise ResetNeededError("call reset() before render()")
-        from lidar_env.rendering import Renderer, show_in_window
+        from lidar_env.rendering.renderer import Renderer, show_in_window
 
         if self._renderer is None or self._renderer.world is not self.world:
             window = self._renderer.window if self._renderer is not None else None

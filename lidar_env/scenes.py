@@ -1,7 +1,7 @@
 """Which scene an episode of ``DualLidar-v0`` starts in: reset options, start-pose checks and
 the bounded cache of fitted scenes.
 
-A scene is a world and a trace fitted to it (:class:`lidar_env.worlds.Scene`). Poses are
+A scene is a world and a trace fitted to it (:class:`lidar_env.world.built_in.Scene`). Poses are
 ``(x [m], y [m], heading [rad])`` in the world frame; clearances and car sizes are metres.
 """
 
@@ -12,14 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from lidar_env.car import Car
-from lidar_env.errors import ConfigError
-from lidar_env.trace_geometry import Trace
-from lidar_env.traces import check_trace_name
-from lidar_env.user_traces import check_waypoints, user_trace
-from lidar_env.user_worlds import resolve_world, user_scene
-from lidar_env.world import World
-from lidar_env.worlds import PAPER_TRACES, Scene, built_in_layout, make_scene
+from lidar_env.core.errors import ConfigError
+from lidar_env.routes.trace_geometry import Trace
+from lidar_env.routes.traces import check_trace_name
+from lidar_env.routes.user_traces import check_waypoints, user_trace
+from lidar_env.vehicle.car import Car
+from lidar_env.world.built_in import PAPER_TRACES, Scene, built_in_layout, make_scene
+from lidar_env.world.user_worlds import resolve_world, user_scene
+from lidar_env.world.world import World
 
 #: Keys accepted in ``reset(options=...)``.
 RESET_OPTIONS: tuple[str, ...] = ("world", "trace", "start")
@@ -172,7 +172,7 @@ class SceneCache:
         start: tuple[float, float, float] | None,
         clearance: float,
     ) -> Scene:
-        """The scene of a user :class:`~lidar_env.world.World`, cached per world object."""
+        """The scene of a user :class:`~lidar_env.world.world.World`, cached per world object."""
         return self._cached((("world", id(world)), trace_name, start), world,
                             lambda: user_scene(world, trace_name, start, clearance))
 

@@ -1,4 +1,4 @@
-"""The package layout (issue 14): dependencies run one way, modules stay small and documented.
+"""The package layout: dependencies run one way, modules stay small and documented.
 
 The import graph is read from the source with ``ast`` (nothing is imported), so a cycle or an
 upward import is caught even where it would only fail at run time.
@@ -112,3 +112,85 @@ def test_every_module_is_small_and_documented(module: str) -> None:
     assert ast.get_docstring(tree), f"{relative} has no module docstring"
     lines = len(path.read_text().splitlines())
     assert lines <= MAX_LINES, f"{relative} has {lines} lines, over {MAX_LINES}"
+
+
+#: lidar_env's subpackages from the bottom up: each may import only those before it. The top
+#: modules (``config``, ``scenes``, ``env_views``, ``env``) may import every subpackage, and
+#: ``vector`` (the batched env) the top modules too.
+ENV_LAYERS = ("core", "routes", "world", "sensors", "vehicle", "movers", "rendering")
+ENV_TOP = {"lidar_env.config", "lidar_env.scenes", "lidar_env.env_views", "lidar_env.env",
+           "lidar_env.moved_modules"}
+
+
+def _env_layer(module: str) -> int | None:
+    parts = module.split(".")
+    if parts[0] != "lidar_env" or len(parts) < 2:
+        return None
+    if parts[1] in ENV_LAYERS:
+        return ENV_LAYERS.index(parts[1])
+    if module in ENV_TOP:
+        return len(ENV_LAYERS)
+    return len(ENV_LAYERS) + 1 if parts[1] == "vector" else None
+
+
+def test_env_subpackages_import_only_downwards() -> None:
+    upward = [f"{module} imports {target}"
+              for module, targets in GRAPH.items() if (layer := _env_layer(module)) is not None
+              for target in targets
+              if (other := _env_layer(target)) is not None and other > layer]
+    assert not upward, ("imports against the layer order " + " < ".join(ENV_LAYERS)
+                        + " < top modules < vector:\n" + "\n".join(upward))
+
+
+def test_the_base_layer_imports_nothing_of_the_project() -> None:
+    outside = [f"{module} imports {target}" for module, targets in GRAPH.items()
+               if module.startswith("lidar_env.core") for target in targets
+               if not target.startswith("lidar_env.core")]
+    assert not outside, "\n".join(outside)
+
+
+def _faces() -> set[str]:
+    """What estimators and agents may import from lidar_env: the package, its subpackages'
+    ``__init__`` (their faces), the top modules and every module of the base layer."""
+    faces = {"lidar_env", "lidar_env.config", "lidar_env.env", "lidar_env.vector"}
+    faces.update(f"lidar_env.{layer}" for layer in ENV_LAYERS)
+    faces.update(name for name in MODULES if name.startswith("lidar_env.core."))
+    return faces
+
+
+def test_estimators_and_agents_use_only_the_env_faces() -> None:
+    faces = _faces()
+    reaching = [f"{module} imports {target}" for module, targets in GRAPH.items()
+                if module.split(".")[0] in ("estimators", "agents") for target in targets
+                if target.startswith("lidar_env") and target not in faces]
+    assert not reaching, ("import these from a face of lidar_env (" + ", ".join(sorted(faces))
+                          + "):\n" + "\n".join(reaching))
+
+
+def test_no_private_name_is_imported_from_another_module() -> None:
+    found = []
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                private = [alias.name for alias in node.names if alias.name.startswith("_")
+                           and not alias.name.startswith("__")]
+                if private and node.module.split(".")[0] in PACKAGES:
+                    found.append(f"{name} imports {', '.join(private)} from {node.module}")
+    assert not found, "make these public or keep them in their module:\n" + "\n".join(found)
+
+
+def test_nothing_in_the_project_imports_a_moved_path() -> None:
+    from lidar_env.moved_modules import MOVED
+
+    found = []
+    for path in sorted(ROOT.glob("*/**/*.py")):
+        if path.parts[len(ROOT.parts)] in (".venv", "site") or path.name == "moved_modules.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([alias.name for alias in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if isinstance(node, ast.ImportFrom) and node.module in {"lidar_env", "estimators"}:
+                names += [f"{node.module}.{alias.name}" for alias in node.names]
+            found += [f"{path.relative_to(ROOT)}: {name} (now {MOVED[name]})"
+                      for name in names if name in MOVED]
+    assert not found, "\n".join(found)

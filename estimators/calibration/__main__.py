@@ -32,8 +32,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from estimators.calibration.self_calibration import NoOverlapWarning, calibrate
-from lidar_env.errors import DualLidarError
-from lidar_env.se2 import compose, relative
+from lidar_env.core import DualLidarError
+from lidar_env.core.se2 import compose, relative
 
 
 def _parser() -> argparse.ArgumentParser:

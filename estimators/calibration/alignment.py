@@ -27,7 +27,7 @@ from estimators.matching.point_to_line import (
     robust_weights,
 )
 from estimators.matching.scan_matching import scan_to_points
-from lidar_env.se2 import transform_points, wrap_angle
+from lidar_env.core.se2 import transform_points, wrap_angle
 
 #: Steps aligned at most (evenly spread over the drive).
 MAX_STEPS = 60

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 from estimators.base import Sensor, SensorSetup
 from estimators.calibration.self_calibration import calibrate
 from estimators.leaderboard.recording import replay, score
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 #: Metrics :func:`compare_mounts` reports, in table order.
 REPORTED = ("ate_rmse_m", "heading_rmse_deg", "rpe_translation_rmse_m", "accuracy_percent")

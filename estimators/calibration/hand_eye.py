@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.point_to_line import robust_weights
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import relative, wrap_angle
+from lidar_env.core import EstimatorInputError
+from lidar_env.core.se2 import relative, wrap_angle
 
 #: Mount parameters in the order of every (3,) array here.
 PARAMETERS: tuple[str, ...] = ("x", "y", "heading")

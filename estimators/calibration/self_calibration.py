@@ -35,8 +35,8 @@ from estimators.calibration.hand_eye import (
     solve_hand_eye,
 )
 from estimators.registry import make
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import compose, relative
+from lidar_env.core import EstimatorInputError
+from lidar_env.core.se2 import compose, relative
 
 
 class UnobservableMountError(EstimatorInputError):

@@ -17,7 +17,7 @@ Lines starting with ``#`` and blank lines are comments. Any other message type (
 malformed line of a supported type (a beam count below 2, a negative range, a non-finite
 number, ``PARAM robot_frontlaser_offset`` that is not a finite number) and corrupt or
 truncated ``.gz``/``.bz2`` data raise :class:`CarmenFormatError` (a
-:class:`~lidar_env.errors.LogFormatError`) naming the file and line.
+:class:`~lidar_env.core.errors.LogFormatError`) naming the file and line.
 
 Beam geometry of ``FLASER`` (which carries none): CARMEN's front laser covers a 180 degree
 field of view starting at -90 degrees, ``n`` beams at ``180 / n`` degrees apart when ``n``
@@ -49,8 +49,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env.errors import ConfigError, LogFormatError
-from lidar_env.se2 import relative
+from lidar_env.core import ConfigError, LogFormatError
+from lidar_env.core.se2 import relative
 
 #: Messages this module parses; any other message name is counted, not parsed.
 PARSED_MESSAGES: tuple[str, ...] = ("FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2", "ODOM",

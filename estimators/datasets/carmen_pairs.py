@@ -20,7 +20,7 @@ from estimators.base import Sensor, SensorSetup
 from estimators.datasets.carmen import CarmenLog, LaserScan, load_log
 from estimators.datasets.real_log import setup_from_log
 from estimators.datasets.recording import Recording, check_monotonic, synchronise
-from lidar_env.errors import LogFormatError
+from lidar_env.core import LogFormatError
 
 
 def _stream(log: CarmenLog, scans: list[LaserScan], what: str, clock: str, index: int

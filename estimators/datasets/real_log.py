@@ -26,7 +26,7 @@ from estimators.evaluation.relations import (
     relation_errors,
     relations_from_trajectory,
 )
-from lidar_env.errors import ConfigError, LogFormatError
+from lidar_env.core import ConfigError, LogFormatError
 
 
 def setup_from_log(log: CarmenLog, max_range: float | None = None) -> SensorSetup:

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
-from lidar_env.errors import LogFormatError
+from lidar_env.core import LogFormatError
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import MAX_LIDARS, Sensor, SensorSetup, default_beam_angles
 from estimators.datasets.recording import Recording, check_monotonic, synchronise
-from lidar_env.errors import LogFormatError
-from lidar_env.se2 import compose, wrap_angle
+from lidar_env.core import LogFormatError
+from lidar_env.core.se2 import compose, wrap_angle
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 TF_TYPE = "tf2_msgs/msg/TFMessage"

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Sensor, SensorSetup
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 TRUTH_TOPIC = "/ground_truth"
 BASE_FRAME = "base_link"

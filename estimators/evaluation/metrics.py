@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import compose, relative, wrap_angle
 
 #: Steps of the true car shorter than this [m] are left out of eq. 11, which divides by the
 #: true step length and is undefined for a car standing still. 1 cm is the range noise of a

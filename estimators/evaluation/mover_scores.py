@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.mapping.motion_tracking import MovingTrack
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 
 @dataclass

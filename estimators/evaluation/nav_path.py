@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, LogFormatError
-from lidar_env.se2 import wrap_angle
+from lidar_env.core import ConfigError, LogFormatError
+from lidar_env.core.se2 import wrap_angle
 
 PATH_TYPE = "nav_msgs/msg/Path"
 PATH_TOPIC = "/estimate/path"

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, EstimatorInputError, LogFormatError
-from lidar_env.se2 import relative
+from lidar_env.core import ConfigError, EstimatorInputError, LogFormatError
+from lidar_env.core.se2 import relative
 
 #: Relations shorter than this [s] are "local" (scan-matching accuracy, no drift).
 LOCAL_RELATION_MAX_DT: float = 2.0

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from estimators.base import Estimator, SensorSetup
 from estimators.evaluation.metrics import ALIGNMENTS, DEFAULT_MIN_STEP, TrajectoryMetrics, evaluate
 from estimators.registry import make
-from lidar_env.errors import ArgumentTypeError, ConfigError
+from lidar_env.core import ArgumentTypeError, ConfigError
 
 if TYPE_CHECKING:  # numba loads only when a map is built
     from estimators.mapping.occupancy import OccupancyGrid

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import EstimatorInputError, LogFormatError
-from lidar_env.se2 import wrap_angle
+from lidar_env.core import EstimatorInputError, LogFormatError
+from lidar_env.core.se2 import wrap_angle
 
 #: Largest z [m] or roll/pitch quaternion component accepted as planar when reading.
 PLANAR_TOLERANCE = 1e-6

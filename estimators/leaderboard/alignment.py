@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import compose, inverse
+from lidar_env.core import EstimatorInputError
+from lidar_env.core.se2 import compose, inverse
 
 
 @dataclass(frozen=True)

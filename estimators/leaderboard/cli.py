@@ -93,7 +93,7 @@ from estimators.leaderboard.workers import process_pool
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
 from lidar_env import lidars_with_noise
-from lidar_env.errors import DualLidarError
+from lidar_env.core import DualLidarError
 
 DATA_DIR = SHARED_DATA / "radish"
 #: Scans of the ACES log replayed by default: the first ~2 minutes of the 7,374, enough for a
@@ -198,8 +198,8 @@ def _progress(total: int, label: str, enabled: bool) -> Any:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the leaderboard; returns the exit status (2 for bad input)."""
-    from lidar_env.traces import TRACE_NAMES
-    from lidar_env.worlds import WORLD_NAMES
+    from lidar_env.routes import TRACE_NAMES
+    from lidar_env.world import WORLD_NAMES
 
     parser = _parser()
     args = parser.parse_args(argv)

@@ -66,15 +66,15 @@ from estimators.leaderboard.records import (
     package_version,
 )
 from estimators.leaderboard.schema import (
-    _SCHEMA,
+    SCHEMA,
     SCHEMA_VERSION,
     CorruptDatabaseError,
     DatabaseLocationError,
-    _check_header,
+    check_header,
     check_writable,
     inspect_existing,
 )
-from lidar_env.errors import UnknownNameError
+from lidar_env.core import UnknownNameError
 
 
 def _blob(array: NDArray[Any], dtype: str) -> bytes:
@@ -97,7 +97,7 @@ class ExperimentDatabase:
         if self.path.is_dir():
             raise DatabaseLocationError(f"{self.path} is a directory; expected a database file")
         if self.path.exists():
-            _check_header(self.path)
+            check_header(self.path)
             inspect_existing(self.path, verify)
         check_writable(self.path)
         try:
@@ -108,7 +108,7 @@ class ExperimentDatabase:
             ).fetchone()
             if not has_schema:
                 with self._transaction():
-                    for statement in filter(str.strip, _SCHEMA.split(";")):
+                    for statement in filter(str.strip, SCHEMA.split(";")):
                         self._conn.execute(statement)
                     self._conn.execute(
                         "INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,)

@@ -21,7 +21,7 @@ from estimators.leaderboard.style import (
     figure_title,
     save_figure,
 )
-from estimators.leaderboard.tables import PAPER_ESTIMATOR, _fmt
+from estimators.leaderboard.tables import PAPER_ESTIMATOR, format_number
 from estimators.leaderboard.tasks import EstimatorSpec
 from estimators.leaderboard.trace_drawing import (
     draw_clipped_trace,
@@ -123,7 +123,7 @@ def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
     best-ranked estimator (first of ``ranked`` that ran there) and of :data:`PAPER_ESTIMATOR`,
     as scored (:data:`estimators.leaderboard.recording.MAP_RESOLUTION`). Returns the PNG paths."""
     from estimators.leaderboard.recording import MAP_RESOLUTION, world_from_geometry
-    from estimators.mapping.map_figure import _panel_image
+    from estimators.mapping.map_figure import panel_image
     from estimators.mapping.run_maps import from_estimator_run
 
     candidates = [(g, scenarios[g.name][0]) for g in groups if scenarios[g.name]]
@@ -146,7 +146,7 @@ def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
     world = world_from_geometry(dataset.world)
     observations = list(dataset.observations())
     by_id = {r.trace_id: r for r in db.traces(scenario)}
-    panels = {"true map": _panel_image(world.to_image(MAP_RESOLUTION), world.bounds)}
+    panels = {"true map": panel_image(world.to_image(MAP_RESOLUTION), world.bounds)}
     trajectories = {"truth": dataset.poses}
     for name in shown:
         record = records[(scenario, name)]
@@ -155,7 +155,7 @@ def draw_map_figure(db: ExperimentDatabase, groups: Sequence[Group],
         iou = record.metrics.get("map_iou", math.nan)
         grid = from_estimator_run(poses, observations, dataset.setup, MAP_RESOLUTION,
                                   bounds=world.bounds)
-        panels[f"map at {role} poses: {name} (IoU {_fmt(iou)})"] = _panel_image(grid, None)
+        panels[f"map at {role} poses: {name} (IoU {format_number(iou)})"] = panel_image(grid, None)
         trajectories[name] = poses
     title = (f"Occupancy maps, {group.name}, seed {scenario.seed}, {100 * MAP_RESOLUTION:.0f} "
              "cm cells: the true map and the maps built from the scans at estimated poses")

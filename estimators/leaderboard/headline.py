@@ -22,7 +22,7 @@ from estimators.leaderboard.ranking import (
     tied_ranks,
 )
 from estimators.leaderboard.records import Scenario, TraceRecord
-from estimators.leaderboard.tables import METRIC_COLUMNS, REAL_METRIC, _fmt, _markdown
+from estimators.leaderboard.tables import METRIC_COLUMNS, REAL_METRIC, format_number, markdown_table
 
 #: The headline's simulated metrics: (metric, column title, decimals).
 HEADLINE_METRICS: tuple[tuple[str, str, int], ...] = (
@@ -95,9 +95,10 @@ def headline_markdown(rows: Sequence[Mapping[str, Any]], real_name: str | None) 
         cells += [_cell(row, key, digits) for key, _, digits in HEADLINE_METRICS]
         if real_name:
             note = row.get("real_note")
-            cells.append(f"n/a ({note})" if note else _fmt(row.get(REAL_METRIC, math.nan), 3))
+            cells.append(f"n/a ({note})" if note
+                         else format_number(row.get(REAL_METRIC, math.nan), 3))
         body.append(cells)
-    return _markdown(header, body)
+    return markdown_table(header, body)
 
 
 def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
@@ -107,7 +108,7 @@ def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
     body = [[row["rank"], str(row["estimator"]),
              *(_cell(row, key, digits, f"{group.name} ") for key, _, digits in GROUP_METRICS),
              str(row.get(f"{group.name} runs", 0))] for row in rows]
-    return _markdown(header, body)
+    return markdown_table(header, body)
 
 
 def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
@@ -119,7 +120,7 @@ def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
     header = ["overall #", "estimator", *(title for _, title, _ in shown)]
     body = [[row["rank"], str(row["estimator"]),
              *(_cell(row, key, digits) for key, _, digits in shown)] for row in rows]
-    return _markdown(header, body)
+    return markdown_table(header, body)
 
 
 def board_markdown(rows: Sequence[Mapping[str, Any]], groups: Sequence[Group],

@@ -109,7 +109,7 @@ PAPER_DRIVER = "scripted"
 def build_groups(worlds: Sequence[str] | None, traces: Sequence[str] | None) -> list[Group]:
     """The scenario groups: the defaults, or ``worlds`` x ``traces`` (each defaulting to the
     paper's trace of the world / every world of the default groups)."""
-    from lidar_env.worlds import PAPER_TRACES
+    from lidar_env.world import PAPER_TRACES
 
     if worlds is None and traces is None:
         return list(DEFAULT_GROUPS)
@@ -130,7 +130,7 @@ def table_one_scenarios(groups: Sequence[Group], scenarios: Mapping[str, Sequenc
     :data:`PAPER_ESTIMATORS` runs); ``"matched"``: the world-aligned ones of the closed areas
     at :data:`MATCHED_DENSITY`, the features placed from each scenario's seed (keyed by the
     plain world's pair)."""
-    from lidar_env.feature_worlds import FEATURE_WORLDS, feature_world_name
+    from lidar_env.world import FEATURE_WORLDS, feature_world_name
 
     cases = {(case.world, case.trace) for case in TABLE_I}
     sensor = {(g.world, g.trace): list(scenarios[g.name]) for g in groups

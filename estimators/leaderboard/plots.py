@@ -25,7 +25,7 @@ from estimators.leaderboard.style import (
     save_figure,
 )
 from estimators.leaderboard.trace_drawing import legend_outside
-from lidar_env.se2 import relative
+from lidar_env.core.se2 import relative
 
 #: Segment lengths [m] of the relative-error plot (KITTI uses 100-800 m on car drives; these
 #: are scaled to indoor traces of tens of metres).

@@ -23,7 +23,7 @@ import numpy as np
 
 from estimators.evaluation.relations import Relations, load_relations, relations_from_trajectory
 from estimators.leaderboard.records import Scenario
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 #: Endings of the bag files :func:`estimators.datasets.load_bag` reads (or a ROS 2 directory).
 BAG_SUFFIXES: tuple[str, ...] = (".bag", ".db3", ".mcap")

@@ -32,7 +32,7 @@ from agents.driver import make_driver
 from estimators.base import SensorSetup
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.registry import make
-from lidar_env.errors import ConfigError, DatabaseError
+from lidar_env.core import ConfigError, DatabaseError
 
 if TYPE_CHECKING:
     from estimators.mapping.obstacles import Obstacle
@@ -278,7 +278,7 @@ def score_movers(dataset: SensorDataset, poses: NDArray[np.float64],
     from estimators.mapping.motion_tracking import MotionTracker
     from estimators.mapping.obstacles import detect_in_observation
     from estimators.matching.scan_matching import scans_to_car_points
-    from lidar_env.se2 import transform_points
+    from lidar_env.core.se2 import transform_points
 
     tracker, scores = MotionTracker(), MoverScore()
     setup = dataset.setup

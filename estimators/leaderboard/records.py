@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
 from estimators.paths import PROJECT_ROOT
-from lidar_env.errors import DatabaseError
+from lidar_env.core import DatabaseError
 
 #: The packages whose code makes a trace (hashed into :func:`package_version`).
 SOURCE_PACKAGES = ("agents", "estimators", "lidar_env")

@@ -48,7 +48,7 @@ from estimators.leaderboard.tasks import (
     run_task,
 )
 from estimators.leaderboard.workers import stop_workers
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 
 class FutureLike(Protocol):

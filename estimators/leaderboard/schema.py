@@ -12,7 +12,7 @@ import tempfile
 from functools import cache
 from pathlib import Path
 
-from lidar_env.errors import DatabaseError
+from lidar_env.core import DatabaseError
 
 #: The schema this module reads and writes (see the module docstring).
 SCHEMA_VERSION = 1
@@ -21,7 +21,7 @@ SCHEMA_VERSION = 1
 _SQLITE_HEADER = b"SQLite format 3\x00"
 
 
-_SCHEMA = """
+SCHEMA = """
 CREATE TABLE schema_version (version INTEGER NOT NULL);
 CREATE TABLE scenarios (
     id INTEGER PRIMARY KEY,
@@ -112,7 +112,7 @@ class DatabaseLocationError(DatabaseError):
     """The database file cannot be created or written where it was asked for."""
 
 
-def _check_header(path: Path) -> None:
+def check_header(path: Path) -> None:
     """Refuse a non-empty file that does not start with the SQLite header (reads 16 bytes)."""
     with path.open("rb") as handle:
         header = handle.read(len(_SQLITE_HEADER))
@@ -180,10 +180,10 @@ def _inspect(conn: sqlite3.Connection, path: Path, verify: bool) -> None:
 
 @cache
 def expected_columns() -> dict[str, tuple[str, ...]]:
-    """Table name -> its column names, as :data:`_SCHEMA` lays them out."""
+    """Table name -> its column names, as :data:`SCHEMA` lays them out."""
     conn = sqlite3.connect(":memory:")
     try:
-        conn.executescript(_SCHEMA)
+        conn.executescript(SCHEMA)
         return {table: _columns(conn, table) for (table,) in conn.execute(
             "SELECT name FROM sqlite_master WHERE type = 'table'")}
     finally:

@@ -15,7 +15,7 @@ import numpy as np
 
 from estimators.leaderboard.matrix import MATCHED_DENSITY, TABLE_I, TABLE_I_FRAMES
 from estimators.leaderboard.records import Scenario, TraceRecord
-from estimators.leaderboard.tables import _fmt, _markdown, _mean
+from estimators.leaderboard.tables import finite_mean, format_number, markdown_table
 
 
 def _seed_metrics(runs: Sequence[Scenario], estimator: str,
@@ -44,11 +44,11 @@ def table_one(by_frame: Mapping[str, Mapping[tuple[str, str], Sequence[Scenario]
             accuracy = [m["accuracy_percent"] for m in ours]
             main_only = [] if case.pose_graph else _seed_metrics(runs, "pc", records)
             row.update({
-                f"ours_{frame}_accuracy_percent": _mean(accuracy),
+                f"ours_{frame}_accuracy_percent": finite_mean(accuracy),
                 f"ours_{frame}_std_percent": float(np.std(accuracy)) if ours else math.nan,
                 f"ours_{frame}_seeds": len(ours),
-                f"ours_{frame}_ate_m": _mean([m.get("ate_rmse_m", math.nan) for m in ours]),
-                f"pc_main_only_{frame}_accuracy_percent": _mean(
+                f"ours_{frame}_ate_m": finite_mean([m.get("ate_rmse_m", math.nan) for m in ours]),
+                f"pc_main_only_{frame}_accuracy_percent": finite_mean(
                     [m["accuracy_percent"] for m in main_only]),
             })
         matched = [m["accuracy_percent"] for m in _seed_metrics(
@@ -56,7 +56,7 @@ def table_one(by_frame: Mapping[str, Mapping[tuple[str, str], Sequence[Scenario]
             records)]
         row.update({
             "matched_density": MATCHED_DENSITY,
-            "ours_matched_accuracy_percent": _mean(matched),
+            "ours_matched_accuracy_percent": finite_mean(matched),
             "ours_matched_std_percent": float(np.std(matched)) if matched else math.nan,
             "ours_matched_seeds": len(matched),
         })
@@ -74,14 +74,14 @@ def table_one_markdown(rows: Sequence[dict[str, Any]]) -> str:
               f"({MATCHED_DENSITY:g} features / 10 m, world-aligned) [%]"]
     body = []
     for r in rows:
-        ours = [f"{_fmt(r[f'ours_{frame}_accuracy_percent'])} ± "
-                f"{_fmt(r[f'ours_{frame}_std_percent'])} ({r[f'ours_{frame}_seeds']})"
+        ours = [f"{format_number(r[f'ours_{frame}_accuracy_percent'])} ± "
+                f"{format_number(r[f'ours_{frame}_std_percent'])} ({r[f'ours_{frame}_seeds']})"
                 if r[f"ours_{frame}_seeds"] else "not run" for frame in TABLE_I_FRAMES]
-        ate = " / ".join(_fmt(r[f"ours_{frame}_ate_m"], 3) for frame in TABLE_I_FRAMES)
+        ate = " / ".join(format_number(r[f"ours_{frame}_ate_m"], 3) for frame in TABLE_I_FRAMES)
         main_only = "" if r["pose_graph"] == "yes" else " / ".join(
-            _fmt(r[f"pc_main_only_{frame}_accuracy_percent"]) for frame in TABLE_I_FRAMES)
-        matched = (f"{_fmt(r['ours_matched_accuracy_percent'])} ± "
-                   f"{_fmt(r['ours_matched_std_percent'])} ({r['ours_matched_seeds']})"
+            format_number(r[f"pc_main_only_{frame}_accuracy_percent"]) for frame in TABLE_I_FRAMES)
+        matched = (f"{format_number(r['ours_matched_accuracy_percent'])} ± "
+                   f"{format_number(r['ours_matched_std_percent'])} ({r['ours_matched_seeds']})"
                    if r.get("ours_matched_seeds") else "")
         body.append([str(r["case"]), r["area"], r["feature"], r["pose_graph"], r["scenario"],
                      r["estimator"], f"{r['paper_accuracy_percent']:.2f}", *ours, ate,
@@ -97,4 +97,4 @@ def table_one_markdown(rows: Sequence[dict[str, Any]]) -> str:
         "method reaches the paper's closed-area figure; the columns before are the bare walls."
         "\n"
     )
-    return _markdown(header, body) + legend
+    return markdown_table(header, body) + legend

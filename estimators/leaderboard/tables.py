@@ -49,12 +49,12 @@ PAPER_ESTIMATOR = "pc_pg"
 REAL_METRIC = "relations_all_translation_m"
 
 
-def _mean(values: list[float]) -> float:
+def finite_mean(values: list[float]) -> float:
     finite = [v for v in values if v is not None and math.isfinite(v)]
     return float(np.mean(finite)) if finite else math.nan
 
 
-def _fmt(value: float, digits: int = 2) -> str:
+def format_number(value: float, digits: int = 2) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
@@ -87,13 +87,13 @@ def rank_table(groups: Sequence[Group], scenarios: dict[str, list[Scenario]],
         row: dict[str, Any] = {"estimator": spec.name, "scenarios": len(mine),
                                "scenarios_run": total}
         for key, _, _ in METRIC_COLUMNS:
-            row[key] = _mean([r.metrics.get(key, math.nan) for r in mine])
+            row[key] = finite_mean([r.metrics.get(key, math.nan) for r in mine])
         for group in groups:
             in_group = [records[(s, spec.name)] for s in scenarios[group.name]
                         if (s, spec.name) in records]
-            row[f"{group.name} accuracy_percent"] = _mean(
+            row[f"{group.name} accuracy_percent"] = finite_mean(
                 [r.metrics.get("accuracy_percent", math.nan) for r in in_group])
-            row[f"{group.name} ate_rmse_m"] = _mean(
+            row[f"{group.name} ate_rmse_m"] = finite_mean(
                 [r.metrics.get("ate_rmse_m", math.nan) for r in in_group])
         if real is not None:
             record = records.get((real, spec.name))
@@ -109,7 +109,7 @@ def rank_table(groups: Sequence[Group], scenarios: dict[str, list[Scenario]],
     return sorted(rows, key=order)
 
 
-def _markdown(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
+def markdown_table(header: Sequence[str], body: Sequence[Sequence[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cells) + " |" for cells in body]
     return "\n".join(lines) + "\n"
@@ -125,8 +125,9 @@ def map_ceiling_note(records: dict[tuple[Scenario, str], TraceRecord]) -> str:
     scores = []
     for key, title, _ in METRIC_COLUMNS:
         if key.startswith(("map_", "cylinder_")):
-            mean = _mean([m.get(f"{key}_true_poses", math.nan) for m in per_scenario.values()])
-            scores.append(f"{title} {_fmt(mean, 3)}")
+            mean = finite_mean([m.get(f"{key}_true_poses", math.nan)
+                                for m in per_scenario.values()])
+            scores.append(f"{title} {format_number(mean, 3)}")
     return f"\nMaps at the true poses (the mapper's ceiling): {', '.join(scores)}.\n"
 
 

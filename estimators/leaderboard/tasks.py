@@ -30,7 +30,7 @@ from estimators.leaderboard.recording import (
 from estimators.leaderboard.records import Scenario, SensorDataset, TraceDataset
 from estimators.mapping.run_maps import car_frame_obstacles
 from estimators.registry import defaults, make, names
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 
 @dataclass(frozen=True)

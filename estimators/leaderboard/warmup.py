@@ -29,7 +29,7 @@ from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.paths import PROJECT_ROOT
-from lidar_env.errors import DualLidarError
+from lidar_env.core import DualLidarError
 
 #: Short drives through the map scoring a worker runs (:func:`run_scenario_task`, with the
 #: cheapest estimator): past cylinders, where from 2 s on the detector cuts a round arc out of

@@ -14,10 +14,10 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
-# columns of the per-cluster statistics of _cluster_statistics
-_CX, _CY, _AXIS, _LENGTH, _WIDTH, _SPREAD, _FIT_X, _FIT_Y, _FIT_R, _FIT_RMS, _CORNER_RMS = range(11)
+# columns of the per-cluster statistics of cluster_statistics
+CX, CY, AXIS, LENGTH, WIDTH, SPREAD, FIT_X, FIT_Y, FIT_R, FIT_RMS, CORNER_RMS = range(11)
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class CircleFit:
 
 
 @numba.njit(cache=True)
-def _kasa_moments(
+def kasa_moments(
     points: NDArray[np.float64], origin: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The normal equations ``(A^T A (3, 3), A^T b (3,))`` of Kåsa's linear least squares
@@ -56,7 +56,7 @@ def _kasa_moments(
 
 
 @numba.njit(cache=True)
-def _solve_kasa(
+def solve_kasa(
     normal: NDArray[np.float64], rhs: NDArray[np.float64]
 ) -> tuple[float, float, float]:
     """Centre ``(cx, cy)`` and squared radius solving Kåsa's normal equations (cofactors of the
@@ -80,13 +80,13 @@ def _solve_kasa(
 
 
 @numba.njit(cache=True)
-def _kasa_circle(
+def kasa_circle(
     normal: NDArray[np.float64], rhs: NDArray[np.float64], points: NDArray[np.float64],
     origin: NDArray[np.float64],
 ) -> tuple[float, float, float, float]:
     """``cx, cy, r, rms`` [m] (world frame) of Kåsa's normal equations about ``origin``, the rms
     measured on ``points`` (N, 2); all NaN when degenerate."""
-    cx, cy, radius_squared = _solve_kasa(normal, rhs)
+    cx, cy, radius_squared = solve_kasa(normal, rhs)
     if not radius_squared > 0.0:
         return np.nan, np.nan, np.nan, np.nan
     radius = math.sqrt(radius_squared)
@@ -111,7 +111,7 @@ def fit_circle(points: ArrayLike) -> CircleFit | None:
     if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
         raise EstimatorInputError(f"points: expected shape (N >= 3, 2), got {points.shape}")
     origin = points.mean(axis=0)
-    cx, cy, radius, rms = _kasa_circle(*_kasa_moments(points, origin), points, origin)
+    cx, cy, radius, rms = kasa_circle(*kasa_moments(points, origin), points, origin)
     return None if math.isnan(radius) else CircleFit(cx, cy, radius, rms)
 
 
@@ -137,7 +137,7 @@ def _line_squares(points: NDArray[np.float64], begin: int, end: int) -> float:
 
 
 @numba.njit(cache=True)
-def _cluster_statistics(
+def cluster_statistics(
     points: NDArray[np.float64], begins: NDArray[np.int64], ends: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """``(C, 11)`` statistics of the clusters ``points[begins[c]:ends[c]]`` (world frame, in
@@ -169,14 +169,14 @@ def _cluster_statistics(
             low_a, high_a = min(low_a, along), max(high_a, along)
             low_b, high_b = min(low_b, across), max(high_b, across)
             spread = max(spread, math.hypot(dx, dy))
-        out[c, _CX], out[c, _CY], out[c, _AXIS] = mx, my, angle
-        out[c, _LENGTH], out[c, _WIDTH], out[c, _SPREAD] = high_a - low_a, high_b - low_b, spread
+        out[c, CX], out[c, CY], out[c, AXIS] = mx, my, angle
+        out[c, LENGTH], out[c, WIDTH], out[c, SPREAD] = high_a - low_a, high_b - low_b, spread
         if n < 3:
             continue
         origin = np.array([mx, my])
-        normal, rhs = _kasa_moments(cluster, origin)
-        fit = _kasa_circle(normal, rhs, cluster, origin)
-        out[c, _FIT_X], out[c, _FIT_Y], out[c, _FIT_R], out[c, _FIT_RMS] = fit
+        normal, rhs = kasa_moments(cluster, origin)
+        fit = kasa_circle(normal, rhs, cluster, origin)
+        out[c, FIT_X], out[c, FIT_Y], out[c, FIT_R], out[c, FIT_RMS] = fit
         chord_x = cluster[n - 1, 0] - cluster[0, 0]
         chord_y = cluster[n - 1, 1] - cluster[0, 1]
         split, farthest = 1, -1.0
@@ -186,7 +186,7 @@ def _cluster_statistics(
             if distance > farthest:
                 split, farthest = i, distance
         squares = _line_squares(cluster, 0, split + 1) + _line_squares(cluster, split, n)
-        out[c, _CORNER_RMS] = math.sqrt(squares / (n + 1))
+        out[c, CORNER_RMS] = math.sqrt(squares / (n + 1))
     return out
 
 
@@ -200,7 +200,7 @@ def _scatter_squares(s: NDArray[np.float64], n: int) -> float:
 
 
 @numba.njit(cache=True)
-def _longest_arc(
+def longest_arc(
     points: NDArray[np.float64], min_points: int, max_radius: float, tolerance: float
 ) -> tuple[int, int]:
     """``(begin, end)`` of the longest run ``points[begin:end]`` (m, 2), ordered along the scan,
@@ -241,7 +241,7 @@ def _longest_arc(
             normal[1, 0], normal[1, 1], normal[1, 2] = s[3], s[4], s[1]
             normal[2, 0], normal[2, 1], normal[2, 2] = s[0], s[1], n
             rhs[0], rhs[1], rhs[2] = -s[6], -s[7], -s[5]
-            cx, cy, radius_squared = _solve_kasa(normal, rhs)
+            cx, cy, radius_squared = solve_kasa(normal, rhs)
             if not radius_squared <= max_radius * max_radius:
                 continue
             d, e, f = -2.0 * cx, -2.0 * cy, cx * cx + cy * cy - radius_squared

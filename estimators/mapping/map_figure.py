@@ -1,5 +1,5 @@
 """Pictures of occupancy maps: a grid as an RGB overlay (:func:`occupancy_to_rgb`, the adapter
-to :func:`lidar_env.rendering.occupancy_to_rgb`), and figures of maps side by side
+to :func:`lidar_env.rendering.renderer.occupancy_to_rgb`), and figures of maps side by side
 (:func:`save_map_figure`: true map, maps at true and estimated poses, trajectories on top;
 needs matplotlib, ``pip install 'duallidar[plots]'``).
 """
@@ -15,10 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.mapping.occupancy import Bounds, OccupancyGrid
 from lidar_env import rendering
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 
-def _panel_image(
+def panel_image(
     panel: OccupancyGrid | ArrayLike, bounds: Bounds | None
 ) -> tuple[NDArray[np.float64], tuple[float, float, float, float]]:
     """A panel as occupancy probabilities and its matplotlib extent (left, right, bottom, top)."""
@@ -71,7 +71,7 @@ def save_map_figure(
             from error
     if not panels:
         raise EstimatorInputError("panels: expected at least one map to draw, got none")
-    images = {name: _panel_image(panel, bounds) for name, panel in panels.items()}
+    images = {name: panel_image(panel, bounds) for name, panel in panels.items()}
     aspect = max((e[3] - e[2]) / (e[1] - e[0]) for _, e in images.values())  # height / width
     n_cols = min(len(images), math.ceil(math.sqrt(len(images) / aspect)))  # near square
     n_rows = math.ceil(len(images) / n_cols)
@@ -106,7 +106,7 @@ def occupancy_to_rgb(
     grid: OccupancyGrid, bounds: Bounds | None = None, resolution: float | None = None
 ) -> NDArray[np.uint8]:
     """An ``(H, W, 3)`` uint8 picture of ``grid`` for overlays, row 0 = largest ``y``
-    (:func:`lidar_env.rendering.occupancy_to_rgb` of its probabilities).
+    (:func:`lidar_env.rendering.renderer.occupancy_to_rgb` of its probabilities).
 
     Grey level ``255 * (1 - p)``: occupied cells dark, free cells white, unobserved cells
     mid-grey (128). The picture spans ``bounds`` (default: the grid's) at ``resolution``

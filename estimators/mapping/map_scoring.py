@@ -13,7 +13,7 @@ The true occupied cells (:func:`true_occupancy`) are the cells that hold some ob
 that a circle or a polygon's edge reaches into, so every return of a noiseless beam lies in a
 true cell. The evaluated ones are the *visible* ones (:func:`visible_cells`): the true cells that
 a beam of the run hit, i.e. that hold the noiseless return of one of the Lidars' beams cast
-exactly against the world geometry (:func:`lidar_env.lidar.cast_rays`) from the true sensor
+exactly against the world geometry (:func:`lidar_env.sensors.lidar.cast_rays`) from the true sensor
 poses. A cell that no beam reached cannot be mapped by any mapper, whatever its quality: rays
 cast in every direction from the same positions (the previous definition) counted 7 % more
 true cells in ``open_cylinders`` at 5 cm (1642 vs 1537), parts of the cylinders' faces that
@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 
 from estimators.base import SensorSetup
 from estimators.mapping.occupancy import OccupancyGrid, sensor_poses
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,7 @@ def beam_hit_cells(
     """``(rows, cols)`` cells of ``grid`` that hold the noiseless return of a beam
     ``beam_angles`` (n,) [rad] from one of the world ``sensor_poses`` (N, 3) within
     ``max_range`` [m]."""
-    from lidar_env.lidar import cast_rays
+    from lidar_env.sensors import cast_rays
 
     poses = np.asarray(sensor_poses, dtype=np.float64).reshape(-1, 3)
     angles = np.asarray(beam_angles, dtype=np.float64)
@@ -241,7 +241,7 @@ def observable_cylinders(
 ) -> NDArray[np.bool_]:
     """``(len(world.circles),)`` True for each cylinder that got at least ``min_points``
     returns in one noiseless scan from one of ``true_sensor_poses`` (N, 3)."""
-    from lidar_env.lidar import cast_rays
+    from lidar_env.sensors import cast_rays
 
     circles = np.asarray(world.circles, dtype=np.float64).reshape(-1, 3)
     poses = np.asarray(true_sensor_poses, dtype=np.float64).reshape(-1, 3)

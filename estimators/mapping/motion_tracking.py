@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from estimators.mapping.circle_fit import fit_circle
 from estimators.mapping.obstacles import Obstacle
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 
 @dataclass

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from estimators.base import SensorSetup
 from estimators.mapping.motion_tracking import MotionTracker, MovingTrack
 from estimators.mapping.obstacles import DetectorParams, Obstacle, detect_per_lidar
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 #: [m] how far outside a moving track's circle the points of an untracked detection may lie
 #: and still be on the mover (its arc's range noise and the track's position error).

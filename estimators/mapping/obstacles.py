@@ -37,24 +37,24 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import SensorSetup
 from estimators.mapping.circle_fit import (
-    _AXIS,
-    _CORNER_RMS,
-    _CX,
-    _CY,
-    _FIT_R,
-    _FIT_RMS,
-    _FIT_X,
-    _FIT_Y,
-    _LENGTH,
-    _SPREAD,
-    _WIDTH,
+    AXIS,
+    CORNER_RMS,
+    CX,
+    CY,
+    FIT_R,
+    FIT_RMS,
+    FIT_X,
+    FIT_Y,
+    LENGTH,
+    SPREAD,
+    WIDTH,
     CircleFit,
-    _cluster_statistics,
-    _longest_arc,
+    cluster_statistics,
+    longest_arc,
 )
 from estimators.mapping.occupancy import sensor_poses
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import transform_points
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import transform_points
 
 
 @dataclass(frozen=True)
@@ -188,22 +188,22 @@ def _round_clusters(
     statistics: NDArray[np.float64], sizes: NDArray[np.int64],
     sensor_position: NDArray[np.float64], params: DetectorParams,
 ) -> NDArray[np.bool_]:
-    """Which clusters (rows of :func:`_cluster_statistics`, ``sizes`` points each) are round
+    """Which clusters (rows of :func:`cluster_statistics`, ``sizes`` points each) are round
     obstacles seen from ``sensor_position`` (2,) [m] (module doc)."""
-    fit_rms = statistics[:, _FIT_RMS]
-    centre_range = np.hypot(statistics[:, _FIT_X] - sensor_position[0],
-                            statistics[:, _FIT_Y] - sensor_position[1])
-    centroid_range = np.hypot(statistics[:, _CX] - sensor_position[0],
-                              statistics[:, _CY] - sensor_position[1])
+    fit_rms = statistics[:, FIT_RMS]
+    centre_range = np.hypot(statistics[:, FIT_X] - sensor_position[0],
+                            statistics[:, FIT_Y] - sensor_position[1])
+    centroid_range = np.hypot(statistics[:, CX] - sensor_position[0],
+                              statistics[:, CY] - sensor_position[1])
     return (
         (sizes >= params.min_circle_points)
-        & (statistics[:, _FIT_R] <= params.max_radius)  # NaN (no circle) compares False
+        & (statistics[:, FIT_R] <= params.max_radius)  # NaN (no circle) compares False
         & (fit_rms <= params.max_circle_rms * max(params.range_sigma, 1e-6))
         # convex towards the sensor: the centre lies beyond the arc, not in front of it
         & (centre_range > centroid_range)
         # a circle with fewer degrees of freedom (3) than two lines (4) must still fit better:
         # the convex corner of a box or of two walls is not a cylinder
-        & (fit_rms < statistics[:, _CORNER_RMS])
+        & (fit_rms < statistics[:, CORNER_RMS])
     )
 
 
@@ -247,13 +247,13 @@ def _cut_out_arcs(
     tolerance = 2.0 * max(params.range_sigma, 1e-6)
     searched = np.zeros(len(begins), dtype=bool)
     while True:
-        statistics = _cluster_statistics(points, begins, ends)
+        statistics = cluster_statistics(points, begins, ends)
         round_ = _round_clusters(statistics, ends - begins, sensor_position, params)
         todo = np.flatnonzero(~round_ & ~searched & (ends - begins > params.min_circle_points))
         searched[todo] = True
         cuts = {}
         for k in todo:
-            begin, end = _longest_arc(points[begins[k]:ends[k]], params.min_circle_points,
+            begin, end = longest_arc(points[begins[k]:ends[k]], params.min_circle_points,
                                       params.max_radius, tolerance)
             if begin < 0:
                 continue
@@ -263,7 +263,7 @@ def _cut_out_arcs(
                 cuts[k] = arc
         if cuts:  # keep only the arcs that pass the full roundness test
             arcs = np.array(list(cuts.values()), dtype=np.int64).reshape(-1, 2)
-            arc_round = _round_clusters(_cluster_statistics(points, arcs[:, 0], arcs[:, 1]),
+            arc_round = _round_clusters(cluster_statistics(points, arcs[:, 0], arcs[:, 1]),
                                         arcs[:, 1] - arcs[:, 0], sensor_position, params)
             cuts = {k: cut for (k, cut), keep in zip(cuts.items(), arc_round, strict=True)
                     if keep}
@@ -312,12 +312,12 @@ def detect_obstacles(
     begins, ends, statistics, round_ = _cut_out_arcs(points, begins, ends, pose[:2], params)
     obstacles = []
     for begin, end, row, is_round in zip(begins, ends, statistics, round_, strict=True):
-        circle = CircleFit(*(float(v) for v in row[_FIT_X:_FIT_RMS + 1])) if is_round else None
+        circle = CircleFit(*(float(v) for v in row[FIT_X:FIT_RMS + 1])) if is_round else None
         obstacles.append(Obstacle(
-            points[begin:end], beams[begin:end], row[_CX:_CY + 1].copy(),
-            row[_LENGTH:_WIDTH + 1].copy(), float(row[_AXIS]), circle,
+            points[begin:end], beams[begin:end], row[CX:CY + 1].copy(),
+            row[LENGTH:WIDTH + 1].copy(), float(row[AXIS]), circle,
             circle_tested=bool(end - begin >= params.min_circle_points),
-            spread=float(row[_SPREAD]),
+            spread=float(row[SPREAD]),
         ))
     return obstacles
 

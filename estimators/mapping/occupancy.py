@@ -1,6 +1,6 @@
 """Log-odds occupancy grid built from planar Lidar scans at (estimated) sensor poses.
 
-The grid uses the image convention of :meth:`lidar_env.world.World.to_image`: ``H, W =
+The grid uses the image convention of :meth:`lidar_env.world.world.World.to_image`: ``H, W =
 ceil(extent / res)`` anchored at ``(xmin, ymin)``, cell ``(row, col)`` covers ``x`` in
 ``xmin + [col, col + 1) * res`` and ``y`` in ``ymin + [H - 1 - row, H - row) * res`` (up to
 which side owns a boundary), so row 0 is the top (largest ``y``) and a map can be compared cell
@@ -42,8 +42,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import SensorSetup
 from lidar_env import rendering
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import compose
 
 #: ``(xmin, ymin, xmax, ymax)`` [m] of an axis-aligned world rectangle.
 Bounds = tuple[float, float, float, float]
@@ -184,8 +184,8 @@ def _trace_scans(
 class OccupancyGrid:
     """A log-odds occupancy grid over ``bounds`` at ``resolution`` [m/cell], image layout.
 
-    It has what :class:`lidar_env.rendering.OccupancyMap` asks for (``bounds``, ``resolution``,
-    ``probabilities()``), so ``env.unwrapped.set_render_map(grid)`` draws it.
+    It has what :class:`lidar_env.rendering.renderer.OccupancyMap` asks for (``bounds``,
+    ``resolution``, ``probabilities()``), so ``env.unwrapped.set_render_map(grid)`` draws it.
 
     Attributes:
         bounds: ``(xmin, ymin, xmax, ymax)`` [m] of the mapped world rectangle; the grid has

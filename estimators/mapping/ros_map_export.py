@@ -1,10 +1,10 @@
 """Save the mapper's occupancy grid as a ROS map_server map (PGM + YAML).
 
-The file format lives in :mod:`lidar_env.ros_map`; this module only places an
+The file format lives in :mod:`lidar_env.world.ros_map`; this module only places an
 :class:`~estimators.mapping.occupancy.OccupancyGrid` in it: the grid's lower-left corner
 ``(xmin, ymin)`` becomes the map origin (yaw 0), its cells (row 0 at max y) the pixels, cells
 never observed (probability 0.5) "unknown". A map built from estimated poses can then be loaded
-with :meth:`lidar_env.world.World.from_ros_map` and driven again.
+with :meth:`lidar_env.world.world.World.from_ros_map` and driven again.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from estimators.mapping.occupancy import OccupancyGrid
-from lidar_env.ros_map import save_ros_map
+from lidar_env.world import save_ros_map
 
 
 def save_grid_as_ros_map(

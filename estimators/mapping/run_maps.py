@@ -34,7 +34,7 @@ from estimators.mapping.obstacles import (
 )
 from estimators.mapping.occupancy import Bounds, OccupancyGrid, bounds_around, sensor_poses
 from estimators.mapping.tracking import ObstacleTracker
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 
 def from_estimator_run(

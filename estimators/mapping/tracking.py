@@ -19,12 +19,12 @@ from numpy.typing import NDArray
 
 from estimators.mapping.circle_fit import (
     CircleFit,
-    _kasa_circle,
-    _kasa_moments,
-    _solve_kasa,
+    kasa_circle,
+    kasa_moments,
+    solve_kasa,
 )
 from estimators.mapping.obstacles import Obstacle
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 
 @numba.njit(cache=True)
@@ -94,12 +94,12 @@ class Track:
                 self.position = obstacle.centroid.copy()
             return
         self.round_hits += 1
-        normal, rhs = _kasa_moments(obstacle.points, self._origin)
+        normal, rhs = kasa_moments(obstacle.points, self._origin)
         self._round.append((normal, rhs, obstacle.circle.cx, obstacle.circle.cy,
                             obstacle.circle.rms))
         self._normal += normal
         self._rhs += rhs
-        cx, cy, radius, rms = _kasa_circle(self._normal, self._rhs, obstacle.points,
+        cx, cy, radius, rms = kasa_circle(self._normal, self._rhs, obstacle.points,
                                            self._origin)
         if not math.isnan(radius):
             self.circle = CircleFit(cx, cy, radius, rms)
@@ -133,7 +133,7 @@ class Track:
         distances = np.hypot(*(centres - np.median(centres, axis=0)).T)
         keep = distances <= 3.0 * np.median(distances)
         kept = [d for d, k in zip(self._round, keep, strict=True) if k]
-        cx, cy, radius_squared = _solve_kasa(sum(d[0] for d in kept), sum(d[1] for d in kept))
+        cx, cy, radius_squared = solve_kasa(sum(d[0] for d in kept), sum(d[1] for d in kept))
         if not radius_squared > 0.0:
             return None
         return CircleFit(cx + self._origin[0], cy + self._origin[1], math.sqrt(radius_squared),

@@ -36,8 +36,8 @@ from estimators.matching.likelihood_grids import (
     max_pool_levels,
     pool_window,
 )
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
 

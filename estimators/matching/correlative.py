@@ -16,7 +16,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.scan_matching import LikelihoodField
-from lidar_env.se2 import wrap_angle
+from lidar_env.core.se2 import wrap_angle
 
 
 @njit(cache=True)

@@ -19,8 +19,8 @@ from estimators.matching.nearest import PointIndex
 from estimators.matching.normal_equations import nearest_on_surfaces, point_to_curve_system
 from estimators.matching.point_to_line import solve_normal_equations
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import rotate, transform_points, wrap_angle, wrap_float
+from lidar_env.core import EstimatorInputError
+from lidar_env.core.se2 import rotate, transform_points, wrap_angle, wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -336,7 +336,7 @@ def pose_difference(a: FloatArray, b: FloatArray) -> FloatArray:
     return difference
 
 
-def _full_turn(*angle_sets: FloatArray) -> bool:
+def covers_full_turn(*angle_sets: FloatArray) -> bool:
     """Beams evenly spread over a full turn in every set (range profiles then correlate)."""
     for angles in angle_sets:
         steps = np.diff(angles)

@@ -100,7 +100,7 @@ def _solved(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np
 
 @njit(cache=True)
 def _wrap(angle: float) -> float:
-    """``lidar_env.se2.wrap_angle`` of one angle."""
+    """``lidar_env.core.se2.wrap_angle`` of one angle."""
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -277,7 +277,7 @@ def curve_reference_arrays(
            NDArray[np.float64]]:
     """A ``CurveReference``'s arrays in one call: the beams with a return (``min_range`` <
     range < ``max_range``), their points ``(M, 2)`` in the sensor frame, :func:`chain_curves`'
-    quadratics (the beams counted a full turn as ``curve_refinement._full_turn`` counts them)
+    quadratics (the beams counted a full turn as ``curve_refinement.covers_full_turn`` counts them)
     and the points moved onto their curves -- each by the operations of the array form, in its
     order. With fewer than 3 returns, the quadratics and smoothed points are empty."""
     n_beams = len(ranges)

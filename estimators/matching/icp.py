@@ -37,8 +37,8 @@ from estimators.matching.point_to_line import (
 )
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.paper.pc import MIN_MATCH_RETURNS
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, transform_points, wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import compose, transform_points, wrap_angle
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 FloatArray = NDArray[np.float64]
 

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 #: Points per leaf of the tree: about what a few cache lines hold.
 LEAF_SIZE = 8

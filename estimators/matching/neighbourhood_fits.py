@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from estimators.matching.nearest import LEAF_SIZE, REUSE_MARGIN, STACK, PointIndex, k_nearest
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 #: The tuple :attr:`estimators.matching.nearest.PointIndex.arrays`.
 Tree = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],

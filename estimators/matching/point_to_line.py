@@ -22,7 +22,7 @@ from estimators.matching.scan_matching import (
     estimate_normals,
     fit_local_curves,
 )
-from lidar_env.errors import EstimatorInputError, UnknownNameError
+from lidar_env.core import EstimatorInputError, UnknownNameError
 
 #: Robust losses by name: weight of a residual r at scale c (IRLS weights).
 LOSSES: tuple[str, ...] = ("cauchy", "huber", "squared")

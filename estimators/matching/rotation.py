@@ -36,8 +36,8 @@ from estimators.paper.phase_correlation_kernel import (
     real_spectrum_of_rows,
     uint8_rows,
 )
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import wrap_float
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import wrap_float
 
 FloatArray = NDArray[np.float64]
 

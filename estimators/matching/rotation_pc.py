@@ -33,7 +33,7 @@ from estimators.matching.curve_refinement import (
     PRIOR_INFORMATION,
     PRIOR_SIGMA,
     CurveReference,
-    _full_turn,
+    covers_full_turn,
     pose_difference,
     refine_on_curves,
 )
@@ -53,8 +53,8 @@ from estimators.paper.scan_image import (
     pixel_shift_to_metres,
     scan_to_image,
 )
-from lidar_env.errors import ConfigError
-from lidar_env.se2 import compose, inverse, wrap_float
+from lidar_env.core import ConfigError
+from lidar_env.core.se2 import compose, inverse, wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -208,7 +208,7 @@ class ScanMatcher:
         if too_few_returns(earlier, later):
             return unmeasured_match(prior)
         profiles = None
-        if prior is None and _full_turn(earlier.beam_angles, later.beam_angles):
+        if prior is None and covers_full_turn(earlier.beam_angles, later.beam_angles):
             profiles = (earlier.ranges, later.ranges, earlier.beam_angles, self.max_range)
         hint = None if prior is None else float(np.asarray(prior, dtype=np.float64)[2])
         rotation = heading_change(earlier.polar_spectrum, later.polar_spectrum, hint, profiles)

@@ -23,8 +23,8 @@ from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
 from estimators.matching.neighbourhood_fits import local_fits
 from estimators.matching.prediction import median
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import transform_points
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import transform_points
 
 #: Readings at or below this [m] are treated as "no return" (CARMEN logs write 0 for none).
 DEFAULT_MIN_RANGE: float = 0.05
@@ -89,7 +89,7 @@ class CarPoints:
     rotation computed once rather than on every scan (a dozen numpy calls of a few
     microseconds per Lidar and scan): bit for bit the points of :func:`scan_to_points` mapped
     through each mount (the same products and the same matrix product as
-    :func:`lidar_env.se2.transform_points`)."""
+    :func:`lidar_env.core.se2.transform_points`)."""
 
     def __init__(self, setup: SensorSetup, min_range: float = DEFAULT_MIN_RANGE) -> None:
         self.min_range = float(min_range)

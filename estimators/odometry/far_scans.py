@@ -54,7 +54,7 @@ from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from estimators.odometry.motion_prior import ScanClock
-from lidar_env.se2 import relative
+from lidar_env.core.se2 import relative
 
 FloatArray = NDArray[np.float64]
 

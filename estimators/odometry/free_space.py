@@ -41,7 +41,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 _TWO_PI = 2.0 * math.pi
 

@@ -44,8 +44,8 @@ from estimators.odometry.sensor_graph import (
     fuse_car_motion,
     optimize_poses,
 )
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import PoseFloats, compose_floats, inverse, inverse_floats, wrap_float
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import PoseFloats, compose_floats, inverse, inverse_floats, wrap_float
 
 FloatArray = NDArray[np.float64]
 

@@ -73,8 +73,8 @@ from estimators.odometry.motion_prior import constant_velocity_increment
 from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
-from lidar_env.errors import ConfigError
-from lidar_env.se2 import compose, relative, transform_points, wrap_angle
+from lidar_env.core import ConfigError
+from lidar_env.core.se2 import compose, relative, transform_points, wrap_angle
 
 
 @dataclass

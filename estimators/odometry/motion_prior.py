@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
 from estimators.matching.prediction import median, prediction_horizon, within_prediction_horizon
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 FloatArray = NDArray[np.float64]
 
@@ -195,7 +195,7 @@ def midpoint_velocity(increment: ArrayLike, dt: float = 1.0) -> FloatArray:
         raise EstimatorInputError(
             f"increment, dt: expected a pose (3,) and a positive interval, got shape "
             f"{increment.shape} and {dt}")
-    x, y, turn = increment.tolist()  # lidar_env.se2.rotate's operations, on Python floats
+    x, y, turn = increment.tolist()  # lidar_env.core.se2.rotate's operations, on Python floats
     c, s = math.cos(-0.5 * turn), math.sin(-0.5 * turn)
     return np.array([(c * x - s * y) / dt, (s * x + c * y) / dt, turn / dt])
 
@@ -206,7 +206,7 @@ def constant_velocity_increment(velocity: ArrayLike, dt: float = 1.0) -> FloatAr
     ``velocity[:2] * dt`` turned by half the turn ``velocity[2] * dt``."""
     vx, vy, rate = np.asarray(velocity, dtype=np.float64).tolist()
     turn = rate * dt
-    x, y = vx * dt, vy * dt  # lidar_env.se2.rotate's operations, on Python floats
+    x, y = vx * dt, vy * dt  # lidar_env.core.se2.rotate's operations, on Python floats
     c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
     return np.array([c * x - s * y, s * x + c * y, turn])
 

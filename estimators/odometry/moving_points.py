@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 
 from estimators.odometry.free_space import BeamGeometry
 from estimators.odometry.thinned_scans import ThinnedScans
-from lidar_env.errors import ConfigError
-from lidar_env.se2 import compose_floats, transform_points
+from lidar_env.core import ConfigError
+from lidar_env.core.se2 import compose_floats, transform_points
 
 
 @numba.njit(cache=True)

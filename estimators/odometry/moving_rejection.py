@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from estimators.base import SensorSetup
 from estimators.odometry.motion_prior import ScanClock
 from estimators.odometry.moving_points import MovingPointFilter
-from lidar_env.errors import ConfigError
-from lidar_env.se2 import transform_points
+from lidar_env.core import ConfigError
+from lidar_env.core.se2 import transform_points
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]

@@ -18,8 +18,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, relative, rotate, wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import compose, relative, rotate, wrap_angle
 
 FloatArray = NDArray[np.float64]
 

@@ -35,7 +35,7 @@ from estimators.paper.scan_image import (
     pixel_shift_to_metres,
     scan_to_image,
 )
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 Scans = dict[str, NDArray[np.float64]]
 

@@ -37,7 +37,7 @@ from estimators.paper.phase_correlation_kernel import (
     whiten,
     whitened_spectrum_of_rows,
 )
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core import EstimatorInputError
 
 #: Newton stops when its step is below this [px]: convergence is quadratic, so the position
 #: is then good to ~1e-4 px, far under any accuracy we can claim.

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.errors import ConfigError
+from lidar_env.core import ConfigError
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.paper.scan_image_kernel import draw_scan
-from lidar_env.errors import ConfigError, EstimatorInputError
+from lidar_env.core import ConfigError, EstimatorInputError
 
 #: Default image side [px]: the paper's default 400 x 400.
 DEFAULT_SIZE = 400

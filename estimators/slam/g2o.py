@@ -20,8 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.slam.pose_graph import PoseGraph
-from lidar_env.errors import DualLidarError, LogFormatError
-from lidar_env.se2 import compose
+from lidar_env.core import DualLidarError, LogFormatError
+from lidar_env.core.se2 import compose
 
 _FIELDS = {"VERTEX_SE2": 5, "EDGE_SE2": 12}  # words per line, tag included
 _UPPER = np.triu_indices(3)

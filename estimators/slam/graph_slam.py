@@ -50,8 +50,8 @@ from estimators.slam.outputs import SlamOutputs
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import EliminationOrdering, optimize
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import compose, relative
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import compose, relative
 
 
 @dataclass

@@ -25,7 +25,7 @@ from estimators.slam.loop_closure import (
     verify_loop,
 )
 from estimators.slam.pose_graph import chain_covariance
-from lidar_env.se2 import compose, inverse, relative, transform_points
+from lidar_env.core.se2 import compose, inverse, relative, transform_points
 
 
 class KeyframeMatching:

@@ -40,8 +40,8 @@ from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from estimators.slam.place_grid import search_pyramid
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import transform_points, wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import transform_points, wrap_angle
 
 
 def range_histogram(

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from estimators.slam.figure import save_slam_figure
 from estimators.slam.g2o import write_g2o
 from estimators.slam.pose_graph import PoseGraph
-from lidar_env.se2 import transform_points
+from lidar_env.core.se2 import transform_points
 
 
 class SlamOutputs:

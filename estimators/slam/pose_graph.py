@@ -25,8 +25,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
 from estimators.slam.growing_rows import GrowingRows
-from lidar_env.errors import ConfigError, EstimatorInputError, UnknownNameError
-from lidar_env.se2 import compose, inverse
+from lidar_env.core import ConfigError, EstimatorInputError, UnknownNameError
+from lidar_env.core.se2 import compose, inverse
 
 Loss = Literal["linear", "huber", "cauchy"]
 LOSSES: tuple[str, ...] = ("linear", "huber", "cauchy")

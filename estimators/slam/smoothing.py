@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.core.se2 import compose, relative, wrap_angle
 
 
 def blend_on_keyframes(

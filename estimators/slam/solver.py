@@ -19,8 +19,8 @@ from scipy.sparse.linalg import splu
 
 from estimators.slam.pose_graph import LOSSES, Loss, PoseGraph, edge_residuals, robust_rho
 from estimators.slam.sparse_cholesky import cholesky_pattern, cholesky_solve, cholesky_values
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import wrap_angle
+from lidar_env.core import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import wrap_angle
 
 Solver = Literal["lm", "scipy"]
 

@@ -8,6 +8,6 @@ per-env moving obstacles. This package imports only from ``lidar_env`` (the sing
 Lidar layout, movers, scenes and trace geometry), never from ``estimators`` or ``agents``.
 """
 
-from lidar_env.vector.env import DualLidarVectorEnv
+from lidar_env.vector.env import DualLidarVectorEnv, not_batched
 
-__all__ = ["DualLidarVectorEnv"]
+__all__ = ["DualLidarVectorEnv", "not_batched"]

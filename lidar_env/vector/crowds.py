@@ -1,10 +1,11 @@
 """The moving obstacles of N envs, laid out for the compiled step of :mod:`lidar_env.vector.kernel`.
 
 Env ``i``'s M movers are row ``i`` of ``(N, M, ...)`` arrays: the state
-:func:`lidar_env.mover_kernels.advance_crowd` advances (:attr:`lidar_env.movers.Crowd.arrays`),
-stepped inside the kernel with the single env's own functions. A reset places env ``i``'s crowd
-with :meth:`lidar_env.movers.Crowd.spawn` (its draws from the env's generator, in the single
-env's order) and copies the result into row ``i``. Units: metres, seconds; world frame.
+:func:`lidar_env.movers.kernels.advance_crowd` advances
+(:attr:`lidar_env.movers.crowd.Crowd.arrays`), stepped inside the kernel with the single env's own
+functions. A reset places env ``i``'s crowd with :meth:`lidar_env.movers.crowd.Crowd.spawn` (its
+draws from the env's generator, in the single env's order) and copies the result into row ``i``.
+Units: metres, seconds; world frame.
 """
 
 from __future__ import annotations
@@ -15,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lidar_env.config import EnvConfig
-from lidar_env.movers import CAR_CIRCLES, WAYPOINT_TRIES, Crowd, car_circle_radius
-from lidar_env.trace_geometry import Trace
-from lidar_env.world import World
+from lidar_env.movers.crowd import CAR_CIRCLES, WAYPOINT_TRIES, Crowd, car_circle_radius
+from lidar_env.routes.trace_geometry import Trace
+from lidar_env.world.world import World
 
 
 class CrowdSlots:

@@ -14,16 +14,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.config import EnvConfig
+from lidar_env.core.errors import ConfigError
 from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
-from lidar_env.errors import ConfigError
+from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
-from lidar_env.trace_geometry import Trace, project_onto_polyline
 from lidar_env.vector.crowds import CrowdSlots
 from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_envs
 from lidar_env.vector.slots import SceneSlots
-from lidar_env.world import World
+from lidar_env.vehicle.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
+from lidar_env.world.world import World
 
 #: Keys of every step's and reset's info, in the single env's order.
 INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_position",
@@ -149,12 +149,12 @@ class DualLidarVectorEnv(VectorEnv):
 
     @property
     def worlds(self) -> list[World | None]:
-        """Each sub-env's current :class:`~lidar_env.world.World`."""
+        """Each sub-env's current :class:`~lidar_env.world.world.World`."""
         return list(self._slots.worlds)
 
     @property
     def traces(self) -> list[Trace | None]:
-        """Each sub-env's current :class:`~lidar_env.traces.Trace`."""
+        """Each sub-env's current :class:`~lidar_env.routes.traces.Trace`."""
         return list(self._slots.traces)
 
     def trace_of(self, i: int) -> Trace | None:

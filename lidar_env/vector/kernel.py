@@ -3,16 +3,18 @@ end and every Lidar's noisy scan, for all stepped envs in one numba call.
 
 Every per-env quantity is a row of an ``(N, ...)`` array; each env's scene (obstacles, their
 grid, its trace) and random generator are items of numba typed lists (:mod:`.slots`). The math
-is the single env's own compiled functions, called in its order: :func:`lidar_env.car.drive_arc`
-for the motion and collision, :func:`lidar_env.trace_geometry.project_onto_polyline` for the
-progress, :func:`lidar_env.car.mount_poses` and
-:func:`lidar_env.layout_kernels.cast_packed` and :func:`~lidar_env.layout_kernels.readings`
-for the scans; with moving obstacles, :func:`lidar_env.mover_kernels.advance_crowd` for the
-crowd (its waypoint draws first), :func:`lidar_env.movers.fill_car_circles` for the car as
-yielding movers see it and :func:`lidar_env.car.drive_arc_among_movers` for the car among
-them. Each env draws its noise (and its movers' waypoints) from its own
-``numpy.random.Generator`` inside the kernel (numba draws bit-identically to numpy and advances
-the same state), so an env's stream is the one a single env seeded alike would use.
+is the single env's own compiled functions, called in its order:
+:func:`lidar_env.vehicle.car.drive_arc` for the motion and collision,
+:func:`lidar_env.routes.trace_geometry.project_onto_polyline` for the progress,
+:func:`lidar_env.vehicle.car.mount_poses` and
+:func:`lidar_env.sensors.layout_kernels.cast_packed` and
+:func:`~lidar_env.sensors.layout_kernels.readings` for the scans; with moving obstacles,
+:func:`lidar_env.movers.kernels.advance_crowd` for the crowd (its waypoint draws first),
+:func:`lidar_env.movers.crowd.fill_car_circles` for the car as yielding movers see it and
+:func:`lidar_env.vehicle.car.drive_arc_among_movers` for the car among them. Each env draws its
+noise (and its movers' waypoints) from its own ``numpy.random.Generator`` inside the kernel (numba
+draws bit-identically to numpy and advances the same state), so an env's stream is the one a single
+env seeded alike would use.
 
 Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world frame.
 """
@@ -28,18 +30,19 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from lidar_env.car import drive_arc, drive_arc_among_movers, mount_poses
-from lidar_env.layout_kernels import cast_packed, readings
-from lidar_env.mover_kernels import advance_crowd
-from lidar_env.movers import WAYPOINT_TRIES, fill_car_circles
-from lidar_env.primitive_grid import cell_block, segment_distance2
-from lidar_env.trace_geometry import project_onto_polyline
+from lidar_env.movers.crowd import WAYPOINT_TRIES, fill_car_circles
+from lidar_env.movers.kernels import advance_crowd
+from lidar_env.routes.trace_geometry import project_onto_polyline
+from lidar_env.sensors.layout_kernels import cast_packed, readings
+from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
+from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
 #: [m] added to the reach of a move when picking the obstacles it may touch: far above the
 #: rounding of the arc's closed form (~1e-7 m on the flattest arcs, yaw rates near 1e-9 rad/s),
 #: far below any obstacle spacing, so the pick stays conservative and culls nearly all.
 REACH_MARGIN = 0.01
-#: The beam wedge of :func:`lidar_env.primitive_grid.cell_block` for a whole disc (width 2 pi).
+#: The beam wedge of :func:`lidar_env.world.primitive_grid.cell_block` for a whole disc
+#: (width 2 pi).
 WHOLE_DISC = (2.0 * math.pi, 1.0, 0.0, 1.0, 0.0)
 
 
@@ -61,13 +64,13 @@ def observe_envs(
     :attr:`lidar_env.vector.slots.SceneSlots.scene` (an env's items are taken from its typed
     lists only where its world differs from the env before); ``rngs`` a typed list of
     N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
-    with ``beams`` and ``params`` as :func:`~lidar_env.layout_kernels.cast_packed` takes them;
-    ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
+    with ``beams`` and ``params`` as :func:`~lidar_env.sensors.layout_kernels.cast_packed` takes
+    them; ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
     allocated per env); ``crowd`` :attr:`lidar_env.vector.crowds.CrowdSlots.kernel`, whose
     movers the Lidars see (none when M = 0). Draws per env: a standard normal per beam if any
     Lidar is noisy, then a uniform per beam if any drops out (the order of
-    :meth:`lidar_env.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws are
-    the steps of its (and numpy's) array draws.
+    :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws
+    are the steps of its (and numpy's) array draws.
     """
     circles, segments, first_edge, grids, world_key = scene[0], scene[1], scene[2], scene[3], \
         scene[8]
@@ -120,12 +123,12 @@ def obstacles_within(
     so with ``reach`` = the two plus a margin, the obstacles left out cannot touch it: the
     collision check over the rest gives the same answer as over all (the culling is the
     broad phase the single car does not need). Only the cells of the world's ``grid``
-    (:class:`~lidar_env.primitive_grid.PrimitiveGrid`) under the square of half side ``reach``
+    (:class:`~lidar_env.world.primitive_grid.PrimitiveGrid`) under the square of half side ``reach``
     are visited (a circle is listed in every cell its bounding box touches, a segment in every
     cell it passes through); ``seen`` ``(circle_seen, segment_seen)`` and the stamp
     ``stamp[0]`` (then advanced) make a primitive listed in several of them count once, as
-    :func:`lidar_env.ray_casting.cast_sensor` uses them. The near ones come in cell order, not
-    index order: the check only asks whether any touches.
+    :func:`lidar_env.sensors.ray_casting.cast_sensor` uses them. The near ones come in cell order,
+    not index order: the check only asks whether any touches.
     """
     circle_seen, segment_seen = seen
     mark = stamp[0]
@@ -243,7 +246,7 @@ def step_crowd(
     grid: Any,
 ) -> NDArray[np.float64]:
     """Env ``i``'s crowd (``crowd`` as :func:`step_envs` takes it) advanced by ``dt`` [s], as
-    :meth:`lidar_env.movers.Crowd.step` does, among the world's ``circles``, ``segments`` and
+    :meth:`lidar_env.movers.crowd.Crowd.step` does, among the world's ``circles``, ``segments`` and
     ``grid`` and (yielding movers) the car standing at ``car_pose``. Returns the movers'
     circles (M, 3) [m] before the step (a view of the crowd's scratch)."""
     positions, velocities, waypoints, speeds, stuck, needs, bounds, params, work = crowd
@@ -279,9 +282,9 @@ def plan_motion(
     checks: NDArray[np.int64],
 ) -> int:
     """Speed [m/s], yaw rate [rad/s] and collision checks of the sub-envs ``envs`` from their
-    ``actions`` (N, 2), as the single env's ``step`` and :meth:`lidar_env.car.Car.substeps_for`
-    compute them (the same float operations, in their order), into ``speed``, ``yaw_rate``,
-    ``checks``.
+    ``actions`` (N, 2), as the single env's ``step`` and
+    :meth:`lidar_env.vehicle.car.Car.substeps_for` compute them (the same float operations, in
+    their order), into ``speed``, ``yaw_rate``, ``checks``.
 
     ``limits`` holds max_speed [m/s], max_yaw_rate [rad/s], control_dt [s], the car's
     half-diagonal [m] and its largest move between two checks [m]; ``other_speed`` (N,) each

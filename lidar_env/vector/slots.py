@@ -1,8 +1,8 @@
 """Each env's scene and random generator, laid out for the compiled step of
 :mod:`lidar_env.vector.kernel`.
 
-Env ``i``'s obstacles, their :class:`~lidar_env.primitive_grid.PrimitiveGrid`, its trace and its
-generator are item ``i`` of numba typed lists; the scalars (first polygon edge, closed trace,
+Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid`, its trace and
+its generator are item ``i`` of numba typed lists; the scalars (first polygon edge, closed trace,
 trace length [m]) are ``(N,)`` arrays. Items are views of the World's and Trace's own arrays
 (made read-only, so every item has one numba type), never copies: N envs in one built-in world
 hold one copy of it.
@@ -17,9 +17,9 @@ from numba import njit
 from numba.typed import List
 from numpy.typing import DTypeLike, NDArray
 
-from lidar_env.primitive_grid import PrimitiveGrid
-from lidar_env.trace_geometry import Trace
-from lidar_env.world import World
+from lidar_env.routes.trace_geometry import Trace
+from lidar_env.world.primitive_grid import PrimitiveGrid
+from lidar_env.world.world import World
 
 
 def _read_only(array: Any, dtype: DTypeLike, columns: int | None = None) -> NDArray:
@@ -70,7 +70,7 @@ class SceneSlots:
         # kernel takes an item from the typed lists (~50 us a thousand) only when it changes
         self.world_key = np.zeros(n, dtype=np.int64)
         self.trace_key = np.zeros(n, dtype=np.int64)
-        #: seen marks for the casts (lidar_env.ray_casting.cast_sensor), as long as the
+        #: seen marks for the casts (lidar_env.sensors.ray_casting.cast_sensor), as long as the
         #: largest world's circles and segments, and the next free stamp (stamps only grow,
         #: so the marks are never cleared); room for the obstacles near a car [m]
         self.circle_seen = np.zeros(0, dtype=np.int64)

@@ -9,7 +9,7 @@ import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.evaluate import drive_episode
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 
 pytest.importorskip("stable_baselines3", reason="the agents extra is not installed")
 

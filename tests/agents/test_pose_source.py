@@ -14,7 +14,7 @@ from agents.driver import make_driver
 from agents.evaluate import drive_episode
 from agents.pose_source import EstimatedPoseDriver
 from agents.scripted import PurePursuitDriver
-from lidar_env.errors import ArgumentTypeError, ConfigError
+from lidar_env.core.errors import ArgumentTypeError, ConfigError
 
 
 class _Recorder(PurePursuitDriver):

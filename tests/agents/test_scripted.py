@@ -6,8 +6,8 @@ import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents import Driver, PurePursuitDriver
-from lidar_env.traces import TRACE_NAMES
-from lidar_env.worlds import WORLD_NAMES
+from lidar_env.routes.traces import TRACE_NAMES
+from lidar_env.world.built_in import WORLD_NAMES
 
 BUILT_IN = [name for name in WORLD_NAMES if name != "random"]
 

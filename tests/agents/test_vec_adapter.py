@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
 import lidar_env  # noqa: E402, F401 - registers DualLidar-v0
 from agents.observation import TraceFollowingObservation  # noqa: E402
 from agents.vec_adapter import SB3VecEnv, TraceFollowingVecEnv  # noqa: E402
-from lidar_env.errors import ConfigError  # noqa: E402
+from lidar_env.core.errors import ConfigError  # noqa: E402
 
 SHORT = {"max_episode_time": 4.0}
 

@@ -10,8 +10,8 @@ import numpy as np
 
 from estimators.base import SensorSetup
 from estimators.leaderboard.records import SensorDataset
-from lidar_env.lidar import cast_rays
-from lidar_env.world import World
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 _PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_movers_estimators.py"
 _SPEC = importlib.util.spec_from_file_location("bench_movers_estimators", _PATH)

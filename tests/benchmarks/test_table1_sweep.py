@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from estimators.leaderboard.records import TraceDataset, TraceRecord
-from lidar_env.feature_worlds import parse_world_name
+from lidar_env.world.feature_worlds import parse_world_name
 
 _PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "table1_sweep.py"
 _SPEC = importlib.util.spec_from_file_location("table1_sweep", _PATH)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimators.matching.scan_matching import scan_to_points
-from lidar_env.lidar import cast_rays
+from lidar_env.sensors.lidar import cast_rays
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 MAX_RANGE = 12.0

@@ -68,7 +68,7 @@ def test_unknown_estimator_lists_valid_names() -> None:
 
 
 def test_an_unknown_parameter_is_named_with_the_valid_ones() -> None:
-    from lidar_env.errors import ConfigError
+    from lidar_env.core.errors import ConfigError
 
     for name in estimators.names():
         with pytest.raises(ConfigError, match=f"{name}: unknown parameter.*no_such"):

@@ -17,9 +17,9 @@ import pytest
 import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from estimators import SensorSetup
-from estimators.clock import check_time
 from estimators.odometry.motion_prior import prediction_horizon, within_prediction_horizon
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core.clock import check_time
+from lidar_env.core.errors import EstimatorInputError
 
 STEPS = 15
 #: The paper's estimators ignore the car's turn (documented), so a match across two steps of

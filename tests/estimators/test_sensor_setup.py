@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimators.base import LIDAR_KEYS, Sensor, SensorSetup, default_beam_angles
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core.errors import EstimatorInputError
 
 
 def corner_setup() -> SensorSetup:
@@ -89,7 +89,7 @@ def test_every_estimator_runs_on_a_mixed_layout_or_says_why_not() -> None:
 
     import lidar_env  # noqa: F401  (registers DualLidar-v0)
     from estimators import registry
-    from lidar_env.errors import EstimatorInputError
+    from lidar_env.core.errors import EstimatorInputError
 
     config = {"lidars": [{"mount": (0.3, 0.0, 0.0)}, {"mount": (-0.3, 0.0, 0.0)},
                          {"mount": (0.0, 0.2, 1.57), "n_beams": 181, "fov": 3.14}]}

@@ -18,8 +18,8 @@ from estimators.datasets.carmen import load_log
 from estimators.leaderboard.database import ExperimentDatabase
 from estimators.slam.g2o import read_g2o
 from estimators.slam.solver import optimize
-from lidar_env.errors import DualLidarError
-from lidar_env.world import World
+from lidar_env.core.errors import DualLidarError
+from lidar_env.world.world import World
 from tests.fuzz.test_fuzz_logs import CARMEN, G2O
 
 TOKENS = ["nan", "inf", "-inf", "-1", "0", "1", "2", "abc", "", "1e308", "4294967296",

@@ -11,7 +11,7 @@ import numpy as np
 
 import estimators
 import lidar_env  # noqa: F401
-from lidar_env.errors import DualLidarError
+from lidar_env.core.errors import DualLidarError
 from tests.estimators.test_faults import hallway_drive
 
 setup, frames = hallway_drive()

@@ -1,7 +1,7 @@
 """Hypothesis profiles of the fuzz suite: ``fuzz`` (default, the whole suite in about a
 minute) and ``long`` (20x the examples): ``pytest tests/fuzz --hypothesis-profile=long``.
 
-Every property says: a named project error (a :class:`~lidar_env.errors.DualLidarError`) or a
+Every property says: a named project error (a :class:`~lidar_env.core.errors.DualLidarError`) or a
 correct result; any other exception, or a NaN pose, fails it.
 """
 
@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, settings
 
-from lidar_env.errors import DualLidarError
+from lidar_env.core.errors import DualLidarError
 
 BASE = {"deadline": None, "derandomize": True, "suppress_health_check": [HealthCheck.too_slow]}
 settings.register_profile("fuzz", max_examples=40, **BASE)

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from lidar_env.world import World
+from lidar_env.world.world import World
 from tests.fuzz.conftest import named_or_result
 
 dtypes = st.sampled_from([np.bool_, np.uint8, np.int16, np.float32, np.float64, np.complex128])

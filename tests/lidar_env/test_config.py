@@ -6,7 +6,7 @@ import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env.config import EnvConfig
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 
 
 def test_defaults_match_the_documented_car_and_sensors():

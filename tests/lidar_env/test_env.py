@@ -15,10 +15,11 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from lidar_env import lidars_with_noise, se2
-from lidar_env.car import Car
+from lidar_env import lidars_with_noise
+from lidar_env.core import se2
 from lidar_env.scenes import StartPoseError
-from lidar_env.worlds import WORLD_NAMES, make_world
+from lidar_env.vehicle.car import Car
+from lidar_env.world.built_in import WORLD_NAMES, make_world
 
 NOISELESS = {"lidars": lidars_with_noise(range_noise_std=0.0)}
 
@@ -265,7 +266,7 @@ def test_space_holds_the_obstacles_and_the_car_at_its_pose():
 
 
 def test_stepping_after_the_episode_ended_is_refused_until_reset() -> None:
-    from lidar_env.errors import ResetNeededError
+    from lidar_env.core.errors import ResetNeededError
 
     env = gym.make("DualLidar-v0", world="hallway", config={"max_episode_time": 0.2})
     env.reset(seed=0)
@@ -280,7 +281,7 @@ def test_stepping_after_the_episode_ended_is_refused_until_reset() -> None:
 
 @pytest.mark.parametrize("action", ["forward", ["a", None], None, [1.0, 2.0, 3.0]])
 def test_bad_actions_are_a_config_error_naming_the_action(action) -> None:
-    from lidar_env.errors import ConfigError
+    from lidar_env.core.errors import ConfigError
 
     env = gym.make("DualLidar-v0", world="hallway")
     env.reset(seed=0)

@@ -8,7 +8,7 @@ import pytest
 from estimators.calibration.comparison import compare_mounts, comparison_table, perturbed
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
-from lidar_env.errors import EstimatorInputError
+from lidar_env.core.errors import EstimatorInputError
 
 
 def test_perturbed_moves_only_the_chosen_lidar() -> None:

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from estimators.calibration.hand_eye import interval_motions, solve_hand_eye
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import compose, inverse
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import compose, inverse
 
 MOUNT = np.array([-0.42, 0.17, 2.3])
 

@@ -19,8 +19,8 @@ from estimators.datasets import Recording
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
 from lidar_env.config import EnvConfig
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import relative, wrap_angle
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import relative, wrap_angle
 
 CORNER_270 = {"lidars": [
     {"mount": [0.35, 0.2, np.pi / 4], "fov": 1.5 * np.pi, "n_beams": 270},

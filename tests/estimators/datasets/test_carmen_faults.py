@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from estimators.datasets.carmen import CarmenFormatError, load_log
-from lidar_env.errors import LogFormatError
+from lidar_env.core.errors import LogFormatError
 
 FLASER = "FLASER 4 1.0 2.0 3.0 4.5 0.1 0.2 0.3 1.1 1.2 1.3 100.5 host 0.5"
 LOG = "PARAM robot_frontlaser_offset 0.2 nohost 0\n" + "\n".join([FLASER] * 400) + "\n"

@@ -16,7 +16,7 @@ from estimators.datasets.carmen import load_log
 from estimators.datasets.carmen_pairs import carmen_recording
 from estimators.leaderboard.recording import record
 from estimators.leaderboard.records import Scenario
-from lidar_env.errors import LogFormatError
+from lidar_env.core.errors import LogFormatError
 
 #: Two 180-degree lasers (CARMEN's FLASER geometry: 181 beams, -90..+90 degrees) on the
 #: front corners, turned 45 degrees outward: their views overlap ahead of the car.

@@ -25,8 +25,8 @@ from estimators.evaluation.nav_path import read_path_bag, write_path_bag  # noqa
 from estimators.leaderboard.recording import record, replay  # noqa: E402
 from estimators.leaderboard.records import Scenario  # noqa: E402
 from estimators.registry import make  # noqa: E402
-from lidar_env.errors import LogFormatError  # noqa: E402
-from lidar_env.se2 import compose  # noqa: E402
+from lidar_env.core.errors import LogFormatError  # noqa: E402
+from lidar_env.core.se2 import compose  # noqa: E402
 
 BAG_NAMES = {"sqlite3": "drive", "mcap": "drive", "ros1": "drive.bag"}
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimators.evaluation.metrics import accuracy, align_se2, eq11_error, evaluate
-from lidar_env.se2 import compose
+from lidar_env.core.se2 import compose
 
 
 def _straight(n: int = 11, step: float = 0.1, heading: float = 0.0) -> np.ndarray:

@@ -10,9 +10,9 @@ import pytest
 from estimators.evaluation.mover_scores import MoverScore
 from estimators.mapping.motion_tracking import MotionTracker, MovingTrack
 from estimators.mapping.obstacles import detect_obstacles
-from lidar_env.lidar import cast_rays
-from lidar_env.se2 import transform_points
-from lidar_env.world import World
+from lidar_env.core.se2 import transform_points
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 SENSORS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])

@@ -16,7 +16,7 @@ from estimators.evaluation.relations import (
     relations_from_trajectory,
 )
 from estimators.paths import SHARED_DATA
-from lidar_env.se2 import compose, relative
+from lidar_env.core.se2 import compose, relative
 
 DATA = SHARED_DATA / "radish"
 

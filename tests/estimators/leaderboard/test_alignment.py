@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from estimators.leaderboard.alignment import align_to_reference
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import compose, inverse
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import compose, inverse
 
 
 def a_drive(times: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ import pytest
 
 from estimators.leaderboard.database import ExperimentDatabase
 from estimators.leaderboard.schema import CorruptDatabaseError, SchemaMismatchError
-from lidar_env.errors import DatabaseError
+from lidar_env.core.errors import DatabaseError
 from tests.estimators.leaderboard.test_database import (
     SCENARIO,
     synthetic_dataset,

@@ -14,7 +14,7 @@ from estimators.leaderboard.matrix import MOVER_GROUPS, table_one_scenarios
 from estimators.leaderboard.recording import mover_truth, record
 from estimators.leaderboard.records import Scenario
 from estimators.leaderboard.tasks import EstimatorSpec, ScenarioTask, run_scenario_task
-from lidar_env.errors import DatabaseError
+from lidar_env.core.errors import DatabaseError
 
 #: 5 s of the hallway with 10 pedestrians, seed 1: some walk past the car.
 SCENARIO = Scenario("hallway", "straight", 1, {"moving_obstacles": 10, "max_episode_time": 5.0})

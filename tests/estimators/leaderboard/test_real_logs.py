@@ -13,7 +13,7 @@ import pytest
 from estimators.leaderboard import cli as leaderboard
 from estimators.leaderboard import real_logs
 from estimators.leaderboard.real_logs import RealLog, real_logs_from, user_log
-from lidar_env.errors import ConfigError, LogFormatError
+from lidar_env.core.errors import ConfigError, LogFormatError
 
 pytest.importorskip("rosbags")
 

@@ -24,7 +24,7 @@ from estimators.leaderboard.recording import (
 from estimators.leaderboard.records import Scenario
 from estimators.mapping.run_maps import car_frame_obstacles
 from lidar_env import lidars_with_noise
-from lidar_env.se2 import compose
+from lidar_env.core.se2 import compose
 
 # 6 s of driving keeps the test short; the env truncates the episode there.
 SCENARIO = Scenario("open_cylinders", "right_turn", 7,

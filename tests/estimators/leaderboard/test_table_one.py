@@ -12,7 +12,7 @@ from estimators.leaderboard.records import Scenario, TraceDataset, TraceRecord
 from estimators.leaderboard.table_one import table_one, table_one_markdown
 from estimators.leaderboard.tasks import EstimatorSpec
 from lidar_env import lidars_with_noise
-from lidar_env.feature_worlds import FEATURE_WORLDS, parse_world_name
+from lidar_env.world.feature_worlds import FEATURE_WORLDS, parse_world_name
 
 
 def _scenarios(groups):

@@ -70,11 +70,12 @@ def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyP
     numba compiles once per argument type, so the calls are checked for those types."""
     from estimators.mapping import obstacles
     from estimators.matching import correlative
-    from lidar_env import world, worlds
+    from lidar_env.world import built_in as worlds
+    from lidar_env.world import world
 
     calls: dict[str, list[tuple]] = {}
     for module, name in ((world, "point_queries"), (correlative, "_shifted_scores"),
-                         (obstacles, "_cluster_statistics"), (obstacles, "_longest_arc")):
+                         (obstacles, "cluster_statistics"), (obstacles, "longest_arc")):
         kernel, seen = getattr(module, name), calls.setdefault(name, [])
         monkeypatch.setattr(module, name,
                             lambda *args, kernel=kernel, seen=seen: seen.append(args)
@@ -85,5 +86,5 @@ def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyP
     assert any(args[0].flags.writeable for args in calls["point_queries"])
     assert calls["_shifted_scores"]
     # an arc cut out of a cluster: its bounds are columns of one array, not contiguous
-    assert any(not args[1].flags.c_contiguous for args in calls["_cluster_statistics"])
-    assert calls["_longest_arc"]
+    assert any(not args[1].flags.c_contiguous for args in calls["cluster_statistics"])
+    assert calls["longest_arc"]

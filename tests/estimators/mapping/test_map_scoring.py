@@ -18,8 +18,8 @@ from estimators.mapping.map_scoring import (
 from estimators.mapping.occupancy import OccupancyGrid, bounds_around
 from estimators.mapping.run_maps import evaluate_run_map, from_estimator_run, map_truth
 from estimators.paths import SHARED_DATA
-from lidar_env.lidar import cast_rays
-from lidar_env.world import World
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 RADISH = SHARED_DATA / "radish"
 

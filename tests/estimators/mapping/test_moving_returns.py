@@ -10,9 +10,9 @@ from estimators.base import SensorSetup
 from estimators.mapping.moving_returns import MovingReturns, label_run
 from estimators.mapping.occupancy import OccupancyGrid
 from estimators.mapping.run_maps import from_estimator_run, track_obstacles
-from lidar_env.errors import EstimatorInputError
-from lidar_env.lidar import cast_rays
-from lidar_env.world import World
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])  # a standing car's two Lidars

@@ -17,8 +17,8 @@ from estimators.mapping.obstacles import (
     split_scan,
 )
 from estimators.mapping.tracking import ObstacleTracker
-from lidar_env.lidar import cast_rays
-from lidar_env.world import World
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 ANGLES = default_beam_angles(360)
 MAX_RANGE = 10.0
@@ -26,7 +26,8 @@ CIRCLES = np.array([[3.0, 0.5, 0.25], [-1.0, 4.0, 0.4], [-3.5, -2.0, 0.3], [1.5,
 
 
 def noisy_scan(world: World, pose: np.ndarray, rng: np.random.Generator, sigma: float = 0.01):
-    """The exact scan from ``lidar_env.lidar.cast_rays`` plus Gaussian noise on the returns."""
+    """The exact scan from ``lidar_env.sensors.lidar.cast_rays`` plus Gaussian noise on the
+    returns."""
     ranges = cast_rays(world, pose, ANGLES, MAX_RANGE)[0]
     return np.where(ranges < MAX_RANGE, ranges + rng.normal(0.0, sigma, ranges.shape), ranges)
 

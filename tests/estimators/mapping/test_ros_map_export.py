@@ -11,8 +11,8 @@ from estimators.base import SensorSetup
 from estimators.mapping.ros_map_export import save_grid_as_ros_map
 from estimators.mapping.run_maps import from_estimator_run
 from lidar_env import lidars_with_noise
-from lidar_env.ros_map import read_ros_map
-from lidar_env.world import World
+from lidar_env.world.ros_map import read_ros_map
+from lidar_env.world.world import World
 
 
 def test_a_mapped_drive_saves_as_a_ros_map_that_drives_again(tmp_path):

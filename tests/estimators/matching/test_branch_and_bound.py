@@ -20,8 +20,8 @@ from estimators.matching.branch_and_bound import (
 from estimators.matching.icp import register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
-from lidar_env.errors import ConfigError, EstimatorInputError
-from lidar_env.se2 import relative, wrap_angle
+from lidar_env.core.errors import ConfigError, EstimatorInputError
+from lidar_env.core.se2 import relative, wrap_angle
 from tests.estimators.room_scans import scan_points
 
 

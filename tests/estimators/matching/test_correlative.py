@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from estimators.matching.correlative import correlative_search
 from estimators.matching.scan_matching import LikelihoodField
-from lidar_env.se2 import transform_points
+from lidar_env.core.se2 import transform_points
 
 
 def _room(rng: np.random.Generator) -> np.ndarray:

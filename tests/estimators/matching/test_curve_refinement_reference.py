@@ -12,7 +12,7 @@ from estimators.matching.curve_refinement import (
     MAX_SURFACE_GAP,
     SURFACE_HALF_WINDOW,
     CurveReference,
-    _full_turn,
+    covers_full_turn,
 )
 from estimators.matching.curve_refinement_kernel import chain_curves
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
@@ -23,7 +23,7 @@ def _array_form(ranges: np.ndarray, beam_angles: np.ndarray, max_range: float) -
     hit = np.flatnonzero((ranges < max_range) & (ranges > DEFAULT_MIN_RANGE))
     angles = beam_angles[hit]
     points = np.column_stack([ranges[hit] * np.cos(angles), ranges[hit] * np.sin(angles)])
-    curves = chain_curves(points, hit.astype(np.int64), len(ranges), _full_turn(beam_angles),
+    curves = chain_curves(points, hit.astype(np.int64), len(ranges), covers_full_turn(beam_angles),
                           SURFACE_HALF_WINDOW, MAX_SURFACE_GAP)
     return (points, *curves, points + curves[5][:, None] * curves[1])
 

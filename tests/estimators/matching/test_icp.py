@@ -16,7 +16,7 @@ from estimators.matching.point_to_line import (
     robust_weights,
 )
 from estimators.matching.scan_matching import scan_to_points, voxel_downsample
-from lidar_env.se2 import compose, inverse, relative, transform_points, wrap_angle
+from lidar_env.core.se2 import compose, inverse, relative, transform_points, wrap_angle
 
 #: An L-shaped room with a pillar-like box: walls as segments (x1, y1, x2, y2) [m].
 ROOM = np.array(

@@ -8,8 +8,8 @@ import pytest
 
 from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
 from estimators.matching.point_to_line import PointToLineReference
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import transform_points
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import transform_points
 
 
 def _walls(corner: bool) -> np.ndarray:

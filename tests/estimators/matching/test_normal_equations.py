@@ -25,7 +25,7 @@ from estimators.matching.point_to_line import (
     point_to_line_jacobian,
     robust_weights,
 )
-from lidar_env.se2 import transform_points
+from lidar_env.core.se2 import transform_points
 
 
 def _room_scan(rng: np.random.Generator, n_beams: int = 360, noise: float = 0.01) -> tuple:

@@ -14,9 +14,9 @@ from estimators.matching.rotation import (
     spectrum_rotation,
 )
 from estimators.paper.scan_image import scan_to_image
-from lidar_env.lidar import Lidar
-from lidar_env.se2 import wrap_angle
-from lidar_env.world import World
+from lidar_env.core.se2 import wrap_angle
+from lidar_env.sensors.lidar import Lidar
+from lidar_env.world.world import World
 
 ANGLES = 2.0 * np.pi * np.arange(360) / 360
 MAX_RANGE = 10.0

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from estimators.matching.curve_refinement import PRIOR_SIGMA, pose_difference
 from estimators.matching.rotation import _subbin_peak, centred_spectrum, resolve_half_turn
 from estimators.matching.rotation_pc import refinement_starts
-from lidar_env.se2 import wrap_angle
+from lidar_env.core.se2 import wrap_angle
 
 angles = st.floats(-10.0, 10.0, allow_nan=False)
 

@@ -14,9 +14,9 @@ from estimators.matching.curve_refinement import PRIOR_INFORMATION, CurveReferen
 from estimators.matching.rotation_pc import RotationPhaseCorrelation, ScanMatcher
 from estimators.odometry.motion_prior import MIN_PREDICTION_SIGMA, prediction_information
 from lidar_env import lidars_with_noise
-from lidar_env.lidar import Lidar
-from lidar_env.se2 import compose, relative, wrap_angle
-from lidar_env.world import World
+from lidar_env.core.se2 import compose, relative, wrap_angle
+from lidar_env.sensors.lidar import Lidar
+from lidar_env.world.world import World
 
 ANGLES = default_beam_angles(360)
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])

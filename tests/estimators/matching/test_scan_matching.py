@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 
 from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import estimate_normals, fit_local_curves, voxel_downsample
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 
 
 def _noisy(points: np.ndarray, normals: np.ndarray, sigma: float, seed: int) -> np.ndarray:

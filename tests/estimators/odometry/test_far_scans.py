@@ -14,7 +14,7 @@ from estimators import SensorSetup
 from estimators.odometry.far_scans import SearchWindow, far_apart, reach_window
 from estimators.odometry.local_map import LocalMapOdometry
 from lidar_env import lidars_with_noise
-from lidar_env.se2 import relative
+from lidar_env.core.se2 import relative
 
 
 def drive(world: str, trace: str, seed: int, speed: float, steps: int):

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimators.odometry.free_space import seen_through
-from lidar_env.lidar import cast_rays
-from lidar_env.world import World
+from lidar_env.sensors.lidar import cast_rays
+from lidar_env.world.world import World
 
 FULL = 2 * np.pi * np.arange(360) / 360
 FRONT = np.linspace(-np.pi / 2, np.pi / 2, 181)  # a 180-degree Lidar, beam 0 to the right
@@ -175,7 +175,7 @@ def test_the_filter_clears_map_points_only_where_the_new_scan_resolves_them() ->
 def test_a_stale_resolution_that_is_no_spacing_is_named(bad: float) -> None:
     from estimators.base import SensorSetup
     from estimators.odometry.moving_points import MovingPointFilter
-    from lidar_env.errors import ConfigError
+    from lidar_env.core.errors import ConfigError
 
     with pytest.raises(ConfigError, match="stale_resolution"):
         MovingPointFilter(SensorSetup([[0.0, 0.0, 0.0]], FULL, 20.0), stale_resolution=bad)
@@ -239,7 +239,7 @@ def test_after_a_jump_the_last_scans_are_judged_only_where_beams_are_dense() -> 
 def test_a_filter_setting_out_of_range_is_named(name: str) -> None:
     from estimators.base import SensorSetup
     from estimators.odometry.moving_points import MovingPointFilter
-    from lidar_env.errors import ConfigError
+    from lidar_env.core.errors import ConfigError
 
     for bad in (-1, float("nan")):
         with pytest.raises(ConfigError, match=name):

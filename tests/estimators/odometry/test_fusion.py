@@ -16,10 +16,10 @@ from estimators.odometry.sensor_graph import (
     optimize_poses,
     predict_edges,
 )
-from lidar_env.errors import EstimatorInputError
-from lidar_env.lidar import Lidar
-from lidar_env.se2 import compose, relative
-from lidar_env.world import World
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import compose, relative
+from lidar_env.sensors.lidar import Lidar
+from lidar_env.world.world import World
 
 MOUNTS = np.array([[0.25, 0.05, 0.1], [-0.25, -0.1, -0.4]])
 

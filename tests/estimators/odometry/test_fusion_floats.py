@@ -1,4 +1,4 @@
-"""The pose algebra on Python floats (``pc_fusion``'s) against :mod:`lidar_env.se2`'s batches,
+"""The pose algebra on Python floats (``pc_fusion``'s) against :mod:`lidar_env.core.se2`'s batches,
 bit for bit
 (issue 21: a step composes some thirty poses, whose array conversions cost more than the
 arithmetic)."""
@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lidar_env.se2 import compose, compose_floats, inverse, inverse_floats, relative
+from lidar_env.core.se2 import compose, compose_floats, inverse, inverse_floats, relative
 
 coordinates = st.floats(-100.0, 100.0, allow_nan=False)
 poses = st.tuples(coordinates, coordinates, st.floats(-10.0, 10.0, allow_nan=False))

@@ -18,11 +18,11 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.local_map import LocalMapOdometry
 from lidar_env import lidars_with_noise
-from lidar_env.errors import ConfigError
-from lidar_env.lidar import Lidar
-from lidar_env.polygons import segment_distances
-from lidar_env.se2 import compose, relative, transform_points
-from lidar_env.world import World
+from lidar_env.core.errors import ConfigError
+from lidar_env.core.se2 import compose, relative, transform_points
+from lidar_env.sensors.lidar import Lidar
+from lidar_env.world.polygons import segment_distances
+from lidar_env.world.world import World
 
 
 def _distance_to_world(world, points: np.ndarray) -> np.ndarray:

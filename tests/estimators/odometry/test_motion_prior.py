@@ -17,7 +17,7 @@ from estimators.odometry.motion_prior import (
     no_sideslip_information,
     prediction_sigma,
 )
-from lidar_env.se2 import rotate
+from lidar_env.core.se2 import rotate
 
 
 def test_a_steady_clock_has_no_jitter_and_glitches_do_not_count() -> None:

@@ -15,10 +15,10 @@ from estimators.odometry.motion_prior import (
     midpoint_velocity,
     no_sideslip_information,
 )
-from lidar_env.errors import EstimatorInputError
-from lidar_env.lidar import Lidar
-from lidar_env.se2 import compose, relative
-from lidar_env.world import World
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import compose, relative
+from lidar_env.sensors.lidar import Lidar
+from lidar_env.world.world import World
 
 
 def _arc(length: float, turn: float) -> np.ndarray:

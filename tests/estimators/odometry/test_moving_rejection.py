@@ -12,7 +12,7 @@ import pytest
 import estimators.odometry.moving_rejection as moving_rejection
 from estimators import SensorSetup, make
 from estimators.odometry.moving_points import MovingPointFilter
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 
 SETUP = SensorSetup([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]], 2 * np.pi * np.arange(360) / 360,
                     20.0)

@@ -14,7 +14,7 @@ from estimators.odometry.sensor_graph import (
     predict_edges,
     robust_gauss_newton,
 )
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.core.se2 import compose, relative, wrap_angle
 
 
 def random_graph(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, list[SensorEdge]]:

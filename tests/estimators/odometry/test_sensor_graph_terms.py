@@ -15,7 +15,7 @@ from estimators.odometry.sensor_graph import (
     _solve_compiled,
     _solve_edges_compiled,
 )
-from lidar_env.se2 import rotate, wrap_angle
+from lidar_env.core.se2 import rotate, wrap_angle
 from tests.estimators.odometry.test_sensor_graph_solver import random_graph
 
 

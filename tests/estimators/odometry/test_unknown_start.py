@@ -9,9 +9,9 @@ import pytest
 
 from estimators import SensorSetup, make
 from estimators.odometry.local_map import LocalMapOdometry
-from lidar_env.errors import ConfigError
-from lidar_env.lidar import cast_rays
-from lidar_env.se2 import compose
+from lidar_env.core.errors import ConfigError
+from lidar_env.core.se2 import compose
+from lidar_env.sensors.lidar import cast_rays
 from tests.estimators.room_scans import room
 
 FRONT = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 181)  # a 180-degree Lidar facing forward

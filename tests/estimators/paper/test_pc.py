@@ -7,8 +7,8 @@ import pytest
 
 import estimators
 from estimators.base import SensorSetup, default_beam_angles
-from lidar_env.lidar import cast_rays
-from lidar_env.se2 import compose
+from lidar_env.core.se2 import compose
+from lidar_env.sensors.lidar import cast_rays
 
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
 MAX_RANGE = 10.0

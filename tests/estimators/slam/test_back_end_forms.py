@@ -18,7 +18,7 @@ from estimators.slam.keyframe_matching import Keyframe, KeyframeTable, largest_s
 from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _damped, _diagonal_positions, _WhitenedProblem
-from lidar_env.se2 import inverse, transform_points, wrap_angle
+from lidar_env.core.se2 import inverse, transform_points, wrap_angle
 
 
 @settings(max_examples=200, deadline=None)

@@ -10,7 +10,7 @@ import pytest
 from estimators.paths import SHARED_DATA
 from estimators.slam.g2o import G2oFormatError, read_g2o, write_g2o
 from estimators.slam.pose_graph import PoseGraph
-from lidar_env.se2 import compose
+from lidar_env.core.se2 import compose
 
 DATA = SHARED_DATA / "g2o"
 EDGE_INFO = "10 1 0 20 0 30"

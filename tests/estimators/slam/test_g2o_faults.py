@@ -9,7 +9,7 @@ import pytest
 
 from estimators.slam.g2o import G2oFormatError, read_g2o, write_g2o
 from estimators.slam.solver import optimize
-from lidar_env.errors import LogFormatError
+from lidar_env.core.errors import LogFormatError
 
 EDGE_INFO = "100 0 0 100 0 1000"
 GOOD = (

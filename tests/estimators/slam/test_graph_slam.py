@@ -21,8 +21,8 @@ from estimators.slam.g2o import read_g2o
 from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.pose_graph import chain_covariance
 from lidar_env import lidars_with_noise
-from lidar_env.lidar import cast_rays
-from lidar_env.se2 import compose, inverse, relative, wrap_angle
+from lidar_env.core.se2 import compose, inverse, relative, wrap_angle
+from lidar_env.sensors.lidar import cast_rays
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 MAX_RANGE = 12.0

@@ -17,8 +17,8 @@ from estimators.slam.loop_closure import (
     range_histogram,
     verify_loop,
 )
-from lidar_env.lidar import cast_rays
-from lidar_env.se2 import relative, transform_points, wrap_angle
+from lidar_env.core.se2 import relative, transform_points, wrap_angle
+from lidar_env.sensors.lidar import cast_rays
 from tests.estimators.room_scans import ANGLES, scan_points
 
 

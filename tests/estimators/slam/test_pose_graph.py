@@ -9,8 +9,8 @@ from estimators.paths import SHARED_DATA
 from estimators.slam.g2o import read_g2o
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _WhitenedProblem, optimize
-from lidar_env.errors import EstimatorInputError
-from lidar_env.se2 import compose, relative, wrap_angle
+from lidar_env.core.errors import EstimatorInputError
+from lidar_env.core.se2 import compose, relative, wrap_angle
 
 DATA = SHARED_DATA / "g2o"
 INFO = np.diag([100.0, 100.0, 400.0])

@@ -11,7 +11,7 @@ from scipy.sparse.linalg import splu
 
 from estimators.slam.solver import EliminationOrdering
 from estimators.slam.sparse_cholesky import cholesky_pattern, cholesky_solve, cholesky_values
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 
 
 def pose_graph_system(seed: int, nodes: int, loops: int) -> sp.csc_matrix:

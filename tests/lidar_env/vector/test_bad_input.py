@@ -1,5 +1,5 @@
 """Bad input to the batched env raises the errors the single env raises (``ConfigError`` from
-:mod:`lidar_env.errors`), naming the argument; what it cannot batch is refused, not ignored."""
+:mod:`lidar_env.core.errors`), naming the argument; what it cannot batch is refused, not ignored."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from lidar_env.errors import ConfigError
+from lidar_env.core.errors import ConfigError
 from lidar_env.vector import DualLidarVectorEnv
 
 

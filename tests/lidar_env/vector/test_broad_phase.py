@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidar_env.primitive_grid import segment_distance2
 from lidar_env.vector.kernel import obstacles_within
-from lidar_env.world import World
+from lidar_env.world.primitive_grid import segment_distance2
+from lidar_env.world.world import World
 from tests.lidar_env.vector.test_identity import assert_same, pair, wall_seeking_actions
 
 #: [m] the cluttered world's side and the half width of its clear band around y = SIDE / 2.

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from lidar_env import lidars_with_noise  # importing lidar_env registers DualLidar-v0
-from lidar_env.car import box_touches_obstacles
-from lidar_env.errors import ConfigError
-from lidar_env.world import World
+from lidar_env.core.errors import ConfigError
+from lidar_env.vehicle.car import box_touches_obstacles
+from lidar_env.world.world import World
 from tests.lidar_env.vector.test_identity import (
     assert_same,
     pair,

@@ -1,0 +1,400 @@
+"""The Lidar's compiled ray caster: exact beam ranges against circles and segments (numba).
+
+Instead of testing every beam against every primitive, :func:`cast_sensor` sweeps the
+primitives: each one within ``max_range`` updates only the beams inside the angular interval it
+subtends from the sensor, found by index arithmetic for uniformly spaced beams and by binary
+search otherwise. Every candidate beam then gets the exact ray-circle or ray-segment
+intersection, so the interval only has to be conservative (it is widened by
+:data:`lidar_env.sensors.beam_wedge.ANGLE_MARGIN`). Four culls keep the primitives a sensor touches
+few, none of which can change a range (each skips only primitives no beam can hit closer than
+it already reads):
+
+- the grid cells (:class:`~lidar_env.world.primitive_grid.PrimitiveGrid`) visited are those over the
+  bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
+  90-degree Lidar visits about a quarter of a 360-degree one's;
+- cells are visited in rings of growing distance from the sensor, and a cell (listing three
+  or more primitives) whose every beam already ends nearer than the cell's nearest point is
+  skipped with its primitives (on a map of thousands of edges, many cells behind the walls);
+- a cell or primitive wholly outside a narrow sensor's beam wedge
+  (:mod:`lidar_env.sensors.beam_wedge`) is skipped before bearings;
+- a polygon edge whose filled side faces the sensor is skipped (back-face culling, with the
+  free sides from :func:`lidar_env.sensors.edge_facing.edge_facing`): about half of a traced map's.
+
+Units and frames: positions and ranges in metres, angles in radians, world frame; a sensor pose
+is ``(x, y, heading)``, beam ``j`` points at world angle ``heading + beam_angles[j]``. Beam
+sets come as ``(sorted_angles, order, step)`` from :func:`.lidar_config.beam_geometry`. The
+callers' entry points are :func:`.lidar.cast_rays` and :meth:`.lidar_layout.LidarLayout.scan`,
+through :func:`.layout_kernels.cast_packed`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from lidar_env.core.errors import ConfigError
+from lidar_env.sensors.beam_wedge import ANGLE_MARGIN, beam_wedge, box_outside_wedge, outside_wedge
+from lidar_env.sensors.edge_facing import BACK_FACE_TOLERANCE
+from lidar_env.world.primitive_grid import cell_block, odd_crossings, point_segment_distance2
+
+#: Relative tolerance on the segment parameter so a beam through an end point still hits it.
+_ENDPOINT_TOLERANCE = 1e-12
+#: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
+_MIN_CULLED_ANGLE = 0.2
+#: A hit at ``t * denom`` beyond ``range * denom`` times this (far above rounding) is farther.
+_SURELY_FARTHER = 1.0 + 1e-12
+#: [m] a segment's bounding box farther than this from the sensor cannot touch it, and one whose
+#: nearest end is within ``max_range * sqrt(_IN_RANGE)`` is in range: no exact distance needed.
+_NEAR, _IN_RANGE = 1e-9, 1.0 - 1e-9
+#: A circle's ``b - r`` beyond a range by more than this times ``b + r`` surely hits farther (far
+#: above the rounding of ``b - sqrt(disc)``): its square root is not needed.
+_CIRCLE_SLACK = 1e-9
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True, fastmath=False)
+def _bearing(y: float, x: float) -> float:
+    """``atan2(y, x)`` [rad] to within 1.7e-6 rad, several times cheaper than libm's.
+
+    Octant reduction and a degree-11 odd polynomial for atan on [0, 1]. Only used to bound the
+    beams a primitive can hit, never for a range.
+    """
+    ax, ay = abs(x), abs(y)
+    a = min(ax, ay) / max(ax, ay)
+    s = a * a
+    poly = 0.19354346 + s * (-0.11643287 + s * (0.05265332 - s * 0.0117212))
+    r = a * (0.99997726 + s * (-0.33262347 + s * poly))
+    if ay > ax:
+        r = 0.5 * math.pi - r
+    if x < 0.0:
+        r = math.pi - r
+    return -r if y < 0.0 else r
+
+
+@njit(cache=True, fastmath=False)
+def _wrap_positive(angle: float) -> float:
+    """``angle`` in ``[-3 pi, 3 pi)`` wrapped to ``[0, 2 pi)`` without a float modulo."""
+    while angle < 0.0:
+        angle += _TWO_PI
+    while angle >= _TWO_PI:
+        angle -= _TWO_PI
+    return angle
+
+
+@njit(cache=True, fastmath=False)
+def _sorted_range(
+    lo: float, hi: float, sorted_angles: NDArray[np.float64], step: float
+) -> tuple[int, int]:
+    """Positions ``[first, last)`` in ``sorted_angles`` of the angles within ``[lo, hi]``."""
+    n = sorted_angles.shape[0]
+    if step > 0.0:
+        first = max(0, int(math.ceil((lo - sorted_angles[0]) / step)))
+        last = min(n, int(math.floor((hi - sorted_angles[0]) / step)) + 1)
+        return first, last
+    return np.searchsorted(sorted_angles, lo, "left"), np.searchsorted(sorted_angles, hi, "right")
+
+
+@njit(cache=True, fastmath=False)
+def _beam_span(
+    lo: float, width: float, sorted_angles: NDArray[np.float64], step: float
+) -> tuple[int, int, int, int]:
+    """Sorted-beam positions ``[f0, l0)`` and ``[f1, l1)`` of the beams within the interval
+    ``[lo, lo + width]`` (``lo`` in [0, 2 pi), ``width`` <= pi) widened by the margin.
+
+    The second range is the part that wraps past 0 or 2 pi (empty when none does).
+    """
+    a = lo - ANGLE_MARGIN
+    b = lo + width + ANGLE_MARGIN
+    f0, l0 = _sorted_range(a, b, sorted_angles, step)
+    if a < 0.0:
+        f1, l1 = _sorted_range(a + _TWO_PI, _TWO_PI, sorted_angles, step)
+    elif b >= _TWO_PI:
+        f1, l1 = _sorted_range(0.0, b - _TWO_PI, sorted_angles, step)
+    else:
+        f1, l1 = 0, 0
+    return f0, max(l0, f0), f1, max(l1, f1)
+
+
+@njit(cache=True, fastmath=False)
+def _subtended(v1x: float, v1y: float, v2x: float, v2y: float, heading: float):
+    """``(lo, width)``: the angles [rad] from ``heading`` (lo wrapped to [0, 2 pi)) of the
+    interval a segment from ``v1`` to ``v2`` (relative to the sensor, not through it) spans."""
+    a1 = _bearing(v1y, v1x)
+    a2 = _bearing(v2y, v2x)
+    # The sign of the cross product, not the rounded bearings, says which end is clockwise
+    # of the other; this stays right for a sensor next to a long wall (sweep near pi).
+    if v1x * v2y - v1y * v2x >= 0.0:
+        lo, width = a1, _wrap_positive(a2 - a1)
+    else:
+        lo, width = a2, _wrap_positive(a1 - a2)
+    if width > math.pi:  # rounding: the true sweep is ~pi (or ~0 when nearly collinear)
+        width = math.pi if width < 1.5 * math.pi else 0.0
+    return _wrap_positive(lo - heading), width
+
+
+@njit(cache=True, fastmath=False)
+def _circle_hit(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float, r: float):
+    """Distance along the unit ray ``o + t d`` to the circle (sensor outside), or inf."""
+    fx, fy = cx - ox, cy - oy
+    b = fx * dx + fy * dy  # distance along the ray to the foot of the centre
+    off_ray = fx * dy - fy * dx  # distance of the centre from the ray's line
+    # (r - p)(r + p) rather than b^2 - |f|^2 + r^2: no cancellation near tangency.
+    disc = (r - off_ray) * (r + off_ray)
+    if disc < 0.0 or b < 0.0:
+        return math.inf
+    return b - math.sqrt(disc)
+
+
+@njit(cache=True, fastmath=False)
+def segment_hit(ox: float, oy: float, dx: float, dy: float, x1: float, y1: float, x2: float,
+                y2: float, nearer_than: float) -> float:
+    """Distance along the unit ray ``o + t d`` to the segment if below ``nearer_than``, else
+    inf (parallel rays miss). The segment parameter is only worked out for such a ``t``."""
+    ex, ey = x2 - x1, y2 - y1
+    denom = dx * ey - dy * ex
+    if denom == 0.0:
+        return math.inf
+    wx, wy = x1 - ox, y1 - oy
+    t = (wx * ey - wy * ex) / denom
+    if t < 0.0 or t >= nearer_than:
+        return math.inf
+    u = (wx * dy - wy * dx) / denom
+    if u < -_ENDPOINT_TOLERANCE or u > 1.0 + _ENDPOINT_TOLERANCE:
+        return math.inf
+    return t
+
+
+@njit(cache=True, fastmath=False)
+def _circle_window(fx: float, fy: float, d: float, r: float, heading: float):
+    """``(lo in [0, 2 pi), width)`` [rad] from ``heading`` of a circle at ``(fx, fy)``, d > r."""
+    half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
+    return _wrap_positive(_bearing(fy, fx) - half - heading), 2.0 * half
+
+
+@njit(cache=True, fastmath=False)
+def _circle_lower(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float, r: float,
+                    current: float) -> float:
+    """A beam's range ``current`` lowered to its exact hit on the circle ``(cx, cy, r)``."""
+    b = (cx - ox) * dx + (cy - oy) * dy  # as in _circle_hit, whose t is >= b - r
+    if b - r - current > _CIRCLE_SLACK * (b + r):
+        return current  # surely not nearer: skip the square root
+    t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
+    return t if t < current else current
+
+
+# cast_sensor writes both sweeps out, guards odd_crossings and hands cell_block the grid's
+# scalars: each array handed to a call costs ~10 ns of reference counting (~40 ns a sweep).
+@njit(cache=True, fastmath=False)
+def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: float, cx: float,
+                 cy: float, r: float, sorted_angles: NDArray[np.float64],
+                 order: NDArray[np.int64], step: float, dir_x: NDArray[np.float64],
+                 dir_y: NDArray[np.float64], max_range: float) -> bool:
+    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
+    exact hits on the circle ``(cx, cy, r)`` [m], for the beams within the angle it subtends
+    only. The beams are ``sorted_angles, order, step`` (see
+    :func:`lidar_env.sensors.lidar_config.beam_geometry`) and their world-frame unit directions
+    ``dir_x, dir_y``. Returns False (all ranges 0) when the sensor is inside the circle."""
+    fx, fy = cx - ox, cy - oy
+    d = math.sqrt(fx * fx + fy * fy)
+    if d - r >= max_range:
+        return True
+    if d <= r:
+        ranges.fill(0.0)
+        return False
+    lo, width = _circle_window(fx, fy, d, r, heading)
+    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+    for q in range(l0 - f0 + l1 - f1):
+        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def _cell_hidden(
+    ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
+    x0: float, y0: float, x1: float, y1: float, sorted_angles: NDArray[np.float64],
+    order: NDArray[np.int64], step: float, max_range: float,
+) -> bool:
+    """True when nothing in the cell ``[x0, x1] x [y0, y1]`` [m] (padded) can shorten a beam:
+    it lies beyond ``max_range``, or every beam towards it already ends nearer than it."""
+    gx = max(x0 - ox, ox - x1, 0.0)
+    gy = max(y0 - oy, oy - y1, 0.0)
+    if gx == 0.0 and gy == 0.0:
+        return False  # the sensor is in the cell
+    nearest2 = gx * gx + gy * gy  # squared: the pad keeps the comparison below safe
+    if nearest2 >= max_range * max_range:
+        return True
+    # The two corners that bound the cell's silhouette seen from the sensor.
+    if gy == 0.0:  # beside the cell: its near side
+        ax = bx = x0 if ox < x0 else x1
+        ay, by = y0, y1
+    elif gx == 0.0:  # above or below it
+        ay = by = y0 if oy < y0 else y1
+        ax, bx = x0, x1
+    elif (ox < x0) == (oy < y0):  # diagonal, lower left or upper right
+        ax, ay, bx, by = x0, y1, x1, y0
+    else:
+        ax, ay, bx, by = x0, y0, x1, y1
+    lo, width = _subtended(ax - ox, ay - oy, bx - ox, by - oy, heading)
+    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+    for q in range(l0 - f0 + l1 - f1):
+        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+        if ranges[j] * ranges[j] > nearest2:
+            return False
+    return True
+
+
+@njit(cache=True, fastmath=False)
+def beam_directions(
+    heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
+    cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
+    dir_y: NDArray[np.float64],
+) -> tuple:
+    """``(sorted_angles, order, step, dir_x, dir_y)`` as :func:`cast_sensor` and the sweeps
+    take a sensor's beams (see :func:`lidar_env.sensors.lidar_config.beam_geometry`), ``dir_x`` and
+    ``dir_y`` filled with their world-frame unit directions for a sensor ``heading`` [rad]."""
+    ch, sh = math.cos(heading), math.sin(heading)
+    for j in range(cos_beam.shape[0]):
+        dir_x[j] = ch * cos_beam[j] - sh * sin_beam[j]
+        dir_y[j] = sh * cos_beam[j] + ch * sin_beam[j]
+    return sorted_angles, order, step, dir_x, dir_y
+
+
+@njit(cache=True, fastmath=False)
+def cast_sensor(
+    ranges: NDArray[np.float64],
+    pose: tuple[float, float, float],
+    circles: NDArray[np.float64],
+    segments: NDArray[np.float64],
+    first_polygon_edge: int,
+    grid: tuple,
+    seen: tuple,
+    stamp: int,
+    own: tuple,
+    max_range: float,
+    facing: NDArray[np.int64],
+) -> None:
+    """Fill ``ranges`` (n,) with the exact ranges of one sensor at world ``pose``.
+
+    ``grid`` is a :class:`~lidar_env.world.primitive_grid.PrimitiveGrid` or a plain tuple of its
+    fields; ``own`` the sensor's beams from :func:`beam_directions` for ``pose``; ``seen``
+    ``(circle_seen, segment_seen)``, int64 arrays as long as ``circles`` and ``segments``
+    holding no value >= ``stamp`` (>= 1) and none <= ``-stamp``, so each sensor meets every
+    primitive once without clearing them; ``facing``
+    :func:`lidar_env.sensors.edge_facing.edge_facing`'s codes for the segments, or empty (then no
+    edge is skipped as facing away).
+    """
+    ox, oy, heading = pose
+    if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
+        raise ConfigError("sensor_poses: expected finite (K, 3) poses, got NaN or inf")
+    circle_seen, segment_seen = seen
+    if first_polygon_edge < segments.shape[0] and odd_crossings(
+            ox, oy, segments, first_polygon_edge, grid, segment_seen, -stamp):
+        ranges.fill(0.0)
+        return
+    ranges.fill(max_range)
+    heading = heading % _TWO_PI
+    sorted_angles, order, step, dir_x, dir_y = own
+    wedge = beam_wedge(sorted_angles, order, dir_x, dir_y)
+    cull = wedge[0] < _TWO_PI - _MIN_CULLED_ANGLE
+    culls_faces = facing.shape[0] > 0
+    x0, y0, size, nx, ny, circle_start, circle_ids, segment_start, segment_ids = grid
+    c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
+                                        0.0, 1.0, 0.0), grid[:5])
+    pad = 1e-9 * size
+    for ring in range(max(sx - c0, c1 - sx, sy - r0, r1 - sy) + 1):
+        for iy in range(max(r0, sy - ring), min(r1, sy + ring) + 1):
+            edge_row = iy == sy - ring or iy == sy + ring
+            ix = max(c0, sx - ring) if edge_row else sx - ring
+            while ix <= min(c1, sx + ring):
+                column = ix
+                ix += 1 if edge_row else 2 * ring
+                c = iy * nx + column
+                listed = (circle_start[c + 1] - circle_start[c]
+                          + segment_start[c + 1] - segment_start[c])
+                if column < c0 or listed == 0:
+                    continue
+                if ring > 0 and listed > 2:  # the tests cost about what two primitives do
+                    bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
+                    bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
+                    if (cull and box_outside_wedge(wedge, bx0, by0, bx1, by1)) or _cell_hidden(
+                            ranges, ox, oy, heading, bx0 + ox, by0 + oy, bx1 + ox, by1 + oy,
+                            sorted_angles, order, step, max_range):
+                        continue
+                for p in range(circle_start[c], circle_start[c + 1]):
+                    i = circle_ids[p]
+                    if circle_seen[i] == stamp:
+                        continue
+                    circle_seen[i] = stamp
+                    cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+                    if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
+                            cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
+                        continue
+                    fx, fy = cx - ox, cy - oy  # the circle's sweep (see sweep_circle)
+                    d = math.sqrt(fx * fx + fy * fy)
+                    if d - r >= max_range:
+                        continue
+                    if d <= r:
+                        ranges.fill(0.0)
+                        return
+                    lo, width = _circle_window(fx, fy, d, r, heading)
+                    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+                    for q in range(l0 - f0 + l1 - f1):
+                        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+                for p in range(segment_start[c], segment_start[c + 1]):
+                    i = segment_ids[p]
+                    if segment_seen[i] == stamp:
+                        continue
+                    segment_seen[i] = stamp
+                    # the segment's sweep (see sweep_circle), on scalars: a row view costs
+                    x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+                    v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
+                    ex, ey = x2 - x1, y2 - y1
+                    if culls_faces and facing[i] != 0 and facing[i] * (ex * -v1y + ey * v1x) < (
+                            -BACK_FACE_TOLERANCE * (abs(ex) + abs(ey))):
+                        continue  # the sensor is on its filled side: it faces away
+                    if cull and outside_wedge(wedge, v1x, v1y, v2x, v2y, 0.0):
+                        continue
+                    gap = max(min(v1x, v2x), -max(v1x, v2x), min(v1y, v2y), -max(v1y, v2y))
+                    if gap >= max_range:
+                        continue
+                    # Its distance only matters when the sensor may touch it or it may lie out
+                    # of range: both are ruled out cheaply for most segments.
+                    if gap <= _NEAR or min(v1x * v1x + v1y * v1y, v2x * v2x + v2y * v2y) >= (
+                            max_range * max_range * _IN_RANGE):
+                        d2 = point_segment_distance2(ox, oy, x1, y1, x2, y2)
+                        if d2 >= max_range * max_range:
+                            continue
+                        if d2 == 0.0:
+                            ranges.fill(0.0)
+                            return
+                    a1 = _bearing(v1y, v1x)
+                    a2 = _bearing(v2y, v2x)
+                    if v1x * v2y - v1y * v2x >= 0.0:
+                        lo, width = a1, _wrap_positive(a2 - a1)
+                    else:
+                        lo, width = a2, _wrap_positive(a1 - a2)
+                    if width > math.pi:
+                        width = math.pi if width < 1.5 * math.pi else 0.0
+                    lo = _wrap_positive(lo - heading)
+                    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+                    n0 = max(l0 - f0, 0)
+                    along = v1x * ey - v1y * ex  # t * denom
+                    for q in range(n0 + l1 - f1):
+                        j = order[f0 + q] if q < n0 else order[f1 + q - n0]
+                        denom = dir_x[j] * ey - dir_y[j] * ex
+                        if denom == 0.0:
+                            continue
+                        reach = ranges[j] * denom * _SURELY_FARTHER
+                        if along >= reach if denom > 0.0 else along <= reach:
+                            continue  # t > ranges[j] for sure: skip the division
+                        t = along / denom
+                        if t < 0.0 or t >= ranges[j]:
+                            continue
+                        u = (v1x * dir_y[j] - v1y * dir_x[j]) / denom
+                        if -_ENDPOINT_TOLERANCE <= u <= 1.0 + _ENDPOINT_TOLERANCE:
+                            ranges[j] = t
