@@ -1,4 +1,4 @@
-"""Extrinsic self-calibration accuracy on simulated drives with turns (issue 20).
+"""Extrinsic self-calibration accuracy on simulated drives with turns.
 
 For every world and trace, the scripted driver records a drive at 1 cm range noise; the
 calibration sees only the scans and starts from a guess 0.3 m and 20 degrees off the true pose

@@ -13,7 +13,7 @@ Prints, in one run on this machine:
   the info dict, a whole step, and a step plus its action sample (what ``benchmark_step``
   times).
 
-Target (issue 2): >= 20,000 env steps/s on one core without rendering.
+Target: >= 20,000 env steps/s on one core without rendering.
 
 Run: ``python benchmarks/bench_env.py [--seconds 2]``
 """

@@ -1,5 +1,5 @@
 """Scans far apart: ``lidar_odometry`` on simulated drives at 1 Hz and 2 Hz scan rates and on
-the keyframes of the Radish ``*-corrected`` logs (issue 20, "Scans far apart").
+the keyframes of the Radish ``*-corrected`` logs ("Scans far apart").
 
 Simulation: ``DualLidar-v0`` (both 360-degree Lidars, 1 cm range noise) driven by the scripted
 pure-pursuit driver at 1.0 and 1.5 m/s in every built-in world (its paper trace and ``loop``)
@@ -15,7 +15,7 @@ Real logs: the keyframe scans of ``aces-corrected.log.gz`` and ``intel-corrected
 clock, scored step by step against the logs' own poses: another SLAM system's output, i.e.
 PSEUDO ground truth; nothing here is tuned to it.
 
-Targets (issue 20): <= 1 % of steps over 0.2 m and eq.-11 accuracy >= 97 % on the simulated
+Targets: <= 1 % of steps over 0.2 m and eq.-11 accuracy >= 97 % on the simulated
 1 Hz / 2 Hz drives; <= 20 ms per scan for the global search.
 
     python benchmarks/bench_far_scans.py                 # everything (~3 min on one core)

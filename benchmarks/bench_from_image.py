@@ -2,7 +2,7 @@
 
 Times 5 % random speckle at 250 x 250 (the reference, measured in the same run) and 1000 x
 1000 px (16x the pixels) and prints the CPU-time ratio: about 16 for a linear tracer
-(pymunk's ``march_hard``, used before issue 18, gave ~150 s at 1000 x 1000).
+(pymunk's ``march_hard`` gives ~150 s at 1000 x 1000).
 
     .venv/bin/python benchmarks/bench_from_image.py
 """

@@ -12,7 +12,7 @@ for one that cannot). Layouts:
 * ``four``: four 90-degree Lidars (91 beams, 10 m), one per corner, each facing outward;
 * ``paper``: the default two 360-degree Lidars 0.5 m apart (the reference).
 
-Targets (issue 15): ``lidar_odometry`` >= 99 % and drift <= 0.3 % on ``corners``, >= 98.5 % and
+Targets: ``lidar_odometry`` >= 99 % and drift <= 0.3 % on ``corners``, >= 98.5 % and
 <= 0.5 % on ``front``, in every group; ``four`` reported.
 
 Measured (the README's layouts table has every number): all four layouts meet them, ``front``

@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/bench_lidar.py [--poses 300] [--seed 0]`` (about 15 s).
 
-Then other layouts (issue 15): 1, 2 and 4 Lidars of 360 degrees, and 1 x 180, 2 x 270 and
+Then other layouts: 1, 2 and 4 Lidars of 360 degrees, and 1 x 180, 2 x 270 and
 4 x 90 degrees, every scan of a car in one :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`
 call (the env's whole sensor model, float32 readings), against pymunk per beam. Target: >= 80x.
 
@@ -32,7 +32,7 @@ from lidar_env.sensors.lidar_layout import LidarLayout
 from lidar_env.world.world import World
 
 MOUNTS = np.array([[0.25, 0.0, 0.0], [-0.25, 0.0, 0.0]])
-#: Other layouts (issue 15): K Lidars of their own fov, cast in one call by LidarLayout.scan.
+#: Other layouts: K Lidars of their own fov, cast in one call by LidarLayout.scan.
 LAYOUTS: dict[str, list[LidarConfig]] = {
     **{f"{k} x 360 deg": [LidarConfig((0.25 - 0.5 * j / max(k - 1, 1), 0.0, 0.0))
                           for j in range(k)] for k in (1, 2, 4)},

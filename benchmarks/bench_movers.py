@@ -1,4 +1,4 @@
-"""Speed of the Lidar scan among 20 moving obstacles against per-beam pymunk ray queries (issue 16).
+"""Speed of the Lidar scan among 20 moving obstacles against per-beam pymunk ray queries.
 
 Run: ``python benchmarks/bench_movers.py [--poses 200] [--movers 20] [--seed 0]`` (about 30 s).
 

@@ -1,4 +1,4 @@
-"""Estimators, maps and trackers among moving obstacles (issue 16), against the same drive
+"""Estimators, maps and trackers among moving obstacles, against the same drive
 without them.
 
     python benchmarks/bench_movers_estimators.py               # the three paper groups, seed 0

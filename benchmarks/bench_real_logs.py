@@ -47,7 +47,7 @@ REFERENCE = "icp"
 PUBLISHED_ACES = (
     "Kümmerle 2009 scan matching 0.173 m; graph mapping 0.044 m; "
     "Cartographer (Hess 2016) 0.0375 m / 0.373 deg (all relations, with loop closure); "
-    "PL-ICP given wheel odometry 0.036 m / 0.32 deg (local, issue 7)"
+    "PL-ICP given wheel odometry 0.036 m / 0.32 deg (local)"
 )
 #: Intel pseudo ground-truth poses come from SLAM with a few cm of error of their own.
 INTEL_WINDOWS: tuple[float | None, ...] = (None, 1.0, 5.0)

@@ -2,7 +2,7 @@
 2000 x 2000 px map (5 cm: 100 m x 100 m of rooms, walls, pillars, unknown border), then the
 exact Lidar against pymunk's ``segment_query_first`` on the world it gives.
 
-Targets (issue 15): load <= 5 s; scans agree with pymunk to <= 1e-6 m. The load time is split
+Targets: load <= 5 s; scans agree with pymunk to <= 1e-6 m. The load time is split
 into reading the PGM/YAML and tracing the outlines (``World.from_image``), CPU time.
 
     python benchmarks/bench_ros_map.py [--pixels 2000] [--poses 20] [--seed 0]

@@ -10,7 +10,7 @@ number), ATE [m], heading RMSE [deg], end-point drift [% of distance], wall and 
 step [ms], and the real-time factor at 10 Hz from the CPU time (the machine is shared, so wall
 time over-states the cost). The reference for the ratios is the paper's ``pc`` in the same run.
 
-Targets (issue 7): best estimator >= 99 % accuracy on every case, drift <= 0.5 %, <= 5 ms per
+Targets: best estimator >= 99 % accuracy on every case, drift <= 0.5 %, <= 5 ms per
 step for both Lidars (>= 20x real time at 10 Hz).
 
     python benchmarks/bench_synthetic.py [--estimators pc pc_rot_icp ...] [--seed 0]

@@ -22,7 +22,7 @@ Prints, in one run on this machine:
 difference is the crowd's cost (the movers' step, the car's collision checks among them, their
 circles in the scans).
 
-Targets (issue 21): >= 200,000 env steps/s at N = 256 on this 2-core machine, and >= 5x
+Targets: >= 200,000 env steps/s at N = 256 on this 2-core machine, and >= 5x
 ``SyncVectorEnv``.
 
 Run: ``python benchmarks/bench_vector_env.py [--seconds 2] [--sizes 1 16 64 256]

@@ -68,7 +68,7 @@ class EnvConfig:
         * ``mover_model`` "yielding": movers keep clear of the car's box where it stands, like
           real pedestrians (they never walk into it; a car that drives on can still hit them);
           "waypoints" movers ignore the car and walk into it even where it stands still, the
-          harder crowd (the one every mover result before session 8 was made with).
+          harder crowd.
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)

@@ -40,7 +40,7 @@ DEFAULT_GROUPS: tuple[Group, ...] = (
 
 
 #: The paper's groups with pedestrians walking through them (``--moving-obstacles``): 10 in the
-#: open area, 5 in the closed ones (issue 16), of the env's default "yielding" crowd. Their
+#: open area, 5 in the closed ones, of the env's default "yielding" crowd. Their
 #: traces also get the moving-obstacle tracker's scores
 #: (:func:`estimators.leaderboard.recording.score_movers`). The mover model is named in the
 #: config, so a scenario stored under the old default ("waypoints", unnamed) keeps its identity.

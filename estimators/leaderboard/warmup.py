@@ -44,8 +44,7 @@ WARMUP_SCENARIOS = (
 )
 #: Down a corridor and back (25 s, 251 steps): the estimators' kernels that a few steps do not
 #: reach run on it too, loop closure's search and solver and the moving-point filter's
-#: "moved on" test; left to the workers, each compiled them inside its first such scenario
-#: (2026-12-06: a cold run's ms/step of `slam` 11.4 against 5.1 warm).
+#: "moved on" test; left to the workers, each would compile them inside its first such scenario.
 WARMUP_REVISIT = Scenario("hallway", "out_and_back", 0, config={"max_episode_time": 25.0})
 
 

@@ -14,10 +14,9 @@ that a circle or a polygon's edge reaches into, so every return of a noiseless b
 true cell. The evaluated ones are the *visible* ones (:func:`visible_cells`): the true cells that
 a beam of the run hit, i.e. that hold the noiseless return of one of the Lidars' beams cast
 exactly against the world geometry (:func:`lidar_env.sensors.lidar.cast_rays`) from the true sensor
-poses. A cell that no beam reached cannot be mapped by any mapper, whatever its quality: rays
-cast in every direction from the same positions (the previous definition) counted 7 % more
-true cells in ``open_cylinders`` at 5 cm (1642 vs 1537), parts of the cylinders' faces that
-fall between the 1-degree beams, and capped the mapper's recall there at 0.94.
+poses. A cell that no beam reached cannot be mapped by any mapper, whatever its quality:
+rays cast in every direction from the same positions would count parts of the cylinders'
+faces that fall between the 1-degree beams, and cap any mapper's recall below 1.
 
 Cylinders (:func:`score_cylinders`): detected circles are matched one-to-one to the true
 ``world.circles`` (Hungarian assignment on centre distance, pairs farther than

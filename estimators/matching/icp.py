@@ -51,8 +51,7 @@ class ICPParams:
     full weight while clutter and new surfaces fade out. ``trim_ratio`` < 1 drops that share
     of the largest residuals each iteration (Chetverikov's trimmed ICP); it is off by default
     because in a corridor the few points on the far wall are the only ones that fix the motion
-    along it, and they are the ones a fixed-share trim throws away (measured on ACES: local
-    relation error 0.14 m with 0.9 vs 0.07 m without).
+    along it, and they are the ones a fixed-share trim throws away.
     """
 
     max_iterations: int = 30
@@ -257,14 +256,9 @@ class ICPEstimator(Estimator):
     Each match starts from the last increment (a constant-velocity guess, as KISS-ICP and
     rf2o seed theirs) rather than from the identity: ICP's nearest-point pairs pull towards
     its starting pose, most where a corridor leaves its axis to a few points, and from the
-    identity it needed 11.4 iterations a scan, not 6.6 (hallway zigzag). Measured identity
-    -> last increment: ACES local relations 0.0510 -> 0.0428 m (failures 3.1 -> 1.2 %), all
-    2.10 -> 1.32 m; Intel 5 s relations 0.0719 -> 0.0710 m; simulated ATE (``bench_synthetic.py``)
-    hallway zigzag 1.33 -> 1.04 m, closed-to-open 1.36 -> 0.74 m, straight 3.97 -> 2.17 m,
-    open cylinders 0.19 -> 0.22 m, but out-and-back 0.86 -> 3.75 m: in the U-turn at the
-    corridor's end, where the scan leaves a direction nearly free, a wrong sideways step of
-    a few cm is carried into the next guesses and kept for several scans rather than reset
-    (4.9 m lost in the turn against 0.85 m from the identity).
+    identity it needs about twice the iterations. The price: in a U-turn at a corridor's end,
+    where the scan leaves a direction nearly free, a wrong sideways step of a few cm is carried
+    into the next guesses and kept for several scans rather than reset.
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """

@@ -23,9 +23,8 @@ on the likelihood field of the local map (Olson 2009):
 * **Fallback** (:func:`fallback_match`), when a match explains too few points: a correlative
   search in a small window around the guess, then over every heading, then over the
   far-apart window. A turn faster than the motion model, or one spanning a gap in the scans,
-  lies outside any small window around the guess (ACES, 613 s: ~80 deg between two scans
-  3 s apart was reported as +3 deg with a 0.9 m sideways step; all relations 1.77 m ->
-  0.17 m).
+  lies outside any small window around the guess (an 80-degree turn between two scans 3 s
+  apart looks like a few degrees and a sideways step from there).
 
 A match that still explains less than ``min_quality`` of the scan (no overlap with the map:
 the car was carried off, a scan of a new room through a door) is kept as the best there is
@@ -140,8 +139,8 @@ def far_match(
     The result explaining the larger share of the points wins (a tie: the search's). Keeping
     the guess's result unless the search's explained more by the count's own noise (one
     standard error of the share), on the grounds that along a corridor's axis every pose
-    scores about the same, was worse: the guess is as lost as the search there once one step
-    went wrong (ACES keyframes: 4.1 % vs 0.9 % of steps over 0.2 m)."""
+    scores about the same, is worse: the guess is as lost as the search there once one step
+    went wrong."""
     from_guess = register(reference, points, guess, params, guess, prior_information)
     found = search.search(points, guess, window)
     if not found.found:

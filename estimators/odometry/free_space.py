@@ -19,15 +19,12 @@ at or beyond ``max_range`` (no return) count as free up to ``max_range``; readin
 ``min_range`` say nothing.
 
 Where it helps and where not: in simulation a reading of ``max_range`` means exactly "nothing
-there", and with pedestrians the filter keeps the odometry's static accuracy (README, "Moving
-obstacles: odometry, maps and tracking"). The odometry judges the points at the pose it matched
-(then matches again without the moving ones): judged at the predicted pose, a fast turn's error
-made static points look seen through, and on the whole ACES log ``lidar_odometry`` went from
-0.034 to 0.059 m per local relation. Judged at the matched pose it still cost Intel 20 % of
-its accuracy, until the new scan judged earlier points only where its beams lie close enough
-to hit a thin object (``MovingPointFilter``'s ``stale_resolution``). Taking no-return
-beams as saying nothing instead keeps Intel level too but gives back most of the simulated
-gain: in the open, space behind a walker is seen free only by beams that return nothing.
+there", and with pedestrians the filter keeps the odometry's static accuracy. The odometry
+judges the points at the pose it matched (then matches again without the moving ones): judged
+at the predicted pose, a fast turn's error makes static points look seen through. The new scan
+judges earlier points only where its beams lie close enough to hit a thin object
+(``MovingPointFilter``'s ``stale_resolution``). No-return beams count as seeing free space:
+in the open, space behind a walker is seen free only by beams that return nothing.
 
 Units: metres, radians; points and sensor poses in one common frame (the world, or the car's).
 """

@@ -95,12 +95,7 @@ class FusionEstimator(Estimator):
     a prior held about the car's centre with
     :func:`estimators.odometry.motion_prior.prediction_information`.
     It resolves the rotation's pi ambiguity, damps the steps' noise where few returns pin the
-    translation down, and is the answer along featureless corridors. Measured on the Table I
-    scenarios (4 cases x seeds 0 and 1, ``benchmarks/bench_synthetic.py``): eq.-11 accuracy
-    99.02-99.24 % (mean 99.13 %), ATE 0.007-0.021 m, drift <= 0.14 %, 3.6-4.4 ms CPU per
-    step on a loaded 2-core x86_64; with the previous one-step prediction about each sensor
-    98.63-99.05 %, ATE 0.006-0.079 m, 4.0-5.1 ms in the same session. ACES (one Lidar) local
-    relations 0.0387 m / 0.335 deg / 1.2 % failures (was 0.0434 m / 0.335 deg / 2.2 %).
+    translation down, and is the answer along featureless corridors.
     """
 
     window: int = 2

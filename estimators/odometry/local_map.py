@@ -12,26 +12,16 @@ reading that happened to land first in a voxel averages the map's own noise too.
 The initial guess and a weak prior come from a constant-velocity model of the estimator's own
 recent increments (never odometry; :mod:`estimators.odometry.velocity_model`): the translation
 averaged over the last few, the rotation from the last one. By default the model counts scans,
-not seconds: logged timestamps cannot be trusted (``intel.clf`` has 631 stamps out of order and
-bursts of nearly equal ones; a per-second model fed those diverges: 0.52 m vs 0.029 m per
-relation on its first 3000 scans). ``use_timestamps=True`` scales the increment by the time step
+not seconds, because logged timestamps cannot be trusted (real logs hold stamps out of order and
+bursts of nearly equal ones); ``use_timestamps=True`` scales the increment by the time step
 instead (for sources with clean clocks and dropped scans), with steps outside [0.5, 2] x the
-running median clipped and non-positive ones replaced by the median (ACES: 0.0339 m / 0.311 deg
-per local relation vs 0.0338 m / 0.324 deg per scan; Intel's first 3000 scans: 0.0288 m vs
-0.0289 m per keyframe pair). Where the scan constrains the pose the data dominate; down a bare
-corridor the prior holds the motion, so two things decide the error there: the corridor's axis
-must be recognised as free (wall normals fitted through 9 neighbours rather than 5: the noise of
-5-point normals passed for ~25 points' worth of information along a 14 m wide hall's axis, and
-the map dragged the car: +0.7 m over 3.5 m of the hallway), and the speed carried into it must
-be the average of several increments, not the last one (one increment is off by 1-2 % of a
-step). The prior's strength follows the scan clock: a steady 10 Hz clock vouches for the
-constant-velocity guess to ~5 mm, which damps the step noise of every scan; a jittery one
-(Intel's) leaves it weak.
-
-Measured before -> after each of these choices: ``benchmarks/bench_synthetic.py`` (sim eq.-11
-accuracy 95.8-98.5 % -> 99.1-99.3 %, hallway ATE 0.50-0.85 m -> 0.02-0.04 m) and
-``benchmarks/bench_real_logs.py`` (ACES local relations 0.0372 -> 0.0338 m); the README's
-odometry section has the table, with 2-3 cm range noise (``max_normal_neighbours``) too.
+running median clipped and non-positive ones replaced by the median. Where the scan constrains
+the pose the data dominate; down a bare corridor the prior holds the motion, so two things decide
+the error there: the corridor's axis must be recognised as free (wall normals are fitted through
+9 neighbours rather than 5, whose noise passes for information along the axis), and the speed
+carried into it is the average of several increments, not the last one. The prior's strength
+follows the scan clock: a steady clock vouches for the constant-velocity guess, which damps the
+step noise of every scan; a jittery one leaves it weak.
 
 A start down a bare corridor hides the start speed: measured later, the start is matched again
 (:mod:`estimators.odometry.unknown_start`).
@@ -46,9 +36,12 @@ Moving things (``reject_dynamic``, on by default,
 :mod:`estimators.odometry.moving_rejection`): points in space recent scans saw as free, or next
 to points the new scan sees through, neither pull the registration nor enter the map, and map
 points the new scan sees through leave it (from
-:data:`~estimators.odometry.moving_rejection.MIN_MOVING_POINTS` on). Judged at the matched pose,
-then matched again without them, twice (once: Intel 0.0425 -> 0.0449 m per keyframe pair);
-judged at the guess, a fast turn condemned static points (ACES 0.034 -> 0.059 m).
+:data:`~estimators.odometry.moving_rejection.MIN_MOVING_POINTS` on). They are judged at the
+matched pose (judged at the guess, a fast turn condemns static points), then the scan is matched
+again without them, twice.
+
+What each of these choices is worth, with the commands that measure it, is in the
+documentation's design page (``docs/design-choices.md``).
 """
 
 from __future__ import annotations
@@ -95,12 +88,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             across it; ``max_normal_neighbours`` is what keeps such a band a line. Keeping
             one reading per cell weighs every occupied cell alike, so a wall whose noise band
             straddles a cell boundary unevenly moves by up to a few mm (worst at voxels 3-5x
-            the range noise: 4-8 mm at 5 cm and 1 cm noise, ~0.5 mm at 2 cm). 0.02 m
-            removes that and halves the front end's ATE on the simulated drives at 1 cm noise
-            (``bench_slam.py --parts sim``, 32 runs: geometric mean 8.5 -> 4.7 mm; random
-            worlds 13 -> 3 mm) and is level on ACES and Intel, but it costs 1.7x the CPU on
-            ACES (2.5-3x in simulation) and at 3 cm noise 72 neighbours then span too little
-            wall (hallway out-and-back 29-38 -> 73-118 mm), so it is not the default.
+            the range noise: 4-8 mm at 5 cm and 1 cm noise, ~0.5 mm at 2 cm). 0.02 m removes that
+            on clean simulated drives but costs about twice the CPU, and at 2-3 cm noise 72
+            neighbours then span too little wall, so it is not the default.
         scan_voxel_size: thinning of each scan (0.02 m, about the range noise: only
             near-duplicate returns of dense 360-beam scans of near walls merge).
         loss, loss_scale: robust loss and its scale (Cauchy, 0.1 m: a few range-noise sigmas).
@@ -127,8 +117,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         min_quality: share of points explained below which the correlative search runs (0.5).
         search_linear_window, search_angular_window: its window around the guess (0.5 m,
             30 deg: a sharp change of turn rate); when the match found there is still poor,
-            the heading window widens to all headings (rare: 2 of 7374 ACES scans, ~0.6 s each),
-            then to the far-apart window.
+            the heading window widens to all headings (rare, and ~0.6 s each), then to the
+            far-apart window.
         max_speed, max_turn_rate: [m/s], [rad/s] how fast the car can go (1.5, 1.5: a brisk
             indoor robot, the simulated car's limits): scans far apart are searched over every
             pose within these times the scan interval (:mod:`estimators.odometry.far_scans`).
@@ -145,25 +135,19 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             more than twice the map's median (the noise of a wall, not a corner's shape), the
             fit is repeated through 18, 36, then 72 (up to 0.5 m away: at 5 cm voxels a band
             3-4 voxels thick needs ~70 points to span 1 m of wall). At 2-3 cm range noise
-            9 neighbours of a wall look like a blob (only 28 % passed in the simulated
-            hallway at 3 cm), their two-nearest-point lines point anywhere in the band, and
-            that noise passed for information along the corridor's axis: hallway, straight
-            run, seeds 0/1, ATE 0.50/0.55 m -> 0.05/0.09 m at 3 cm (0.50/0.45 -> 0.01/0.06 m
-            at 2 cm); at 1 cm nothing changes (the walls' 9-point fits already pass).
-            A 5 m wide featureless corridor at 2-3 cm still drifts ~1 m over 5 m
-            (``tests/test_local_map.py``'s 15 m drive, seeds 0-3: 0.73-1.43 m at 3 cm,
-            0.63-1.36 m at 2 cm, always lagging): the remaining two-nearest-point pairs,
-            often two points of the wall's noise band lying across it, carry ~28 points'
-            worth of information along the axis (the fitted lines alone ~1) and outvote
-            the prior. Dropping them, discounting them by any fixed weight, weighing each
-            line by its expected error, or letting only the fitted lines decide the pinned
-            directions fixes or halves it, but costs ACES or Intel (up to 0.043 / 0.049 m).
+            9 neighbours of a wall look like a blob, their two-nearest-point lines point anywhere
+            in the band, and that noise passes for information along a corridor's axis; at
+            1 cm the walls' 9-point fits already pass. A 5 m wide featureless corridor at
+            2-3 cm range noise still drifts about 1 m over 5 m: the remaining
+            two-nearest-point pairs, often two points of a wall's noise band lying across it,
+            carry more information along the axis than the fitted lines and outvote the
+            prior (a known limit; see the design page).
         denoise_map: pair on each map point moved onto the parabola through its neighbours
             rather than on the raw point (True; a parabola rather than a line, so a 0.3 m
             cylinder's points are not pulled ~3 cm inwards).
         reject_dynamic, dynamic_margin: drop points on moving things (module docstring) lying
-            this far inside space seen free (0.2 m). On: walkers drag the plain odometry up to
-            0.8 m; ACES and Intel level, at ~1.5x the CPU (README, "Moving obstacles: ...").
+            this far inside space seen free (0.2 m). On by default: walkers drag the plain
+            odometry by up to metres, at ~1.5x the CPU.
         moving_filter: the filter's other settings by name, over its defaults (None: all
             defaults): ``radius`` [m], ``history`` [scans], ``stale_resolution`` [m],
             ``anchor_time`` [s], ``max_anchor_scans``, ``anchor_spacing`` [m],

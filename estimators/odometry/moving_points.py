@@ -93,21 +93,18 @@ class MovingPointFilter:
     the new scan sees through are *stale*. Nothing is propagated further, so a misjudged point
     cannot spread a label along a wall.
 
-    The new scan judges map points only where its beams lie at most ``stale_resolution``
-    apart: farther out, its beams can all pass an object thinner than their spacing (a door
-    frame, a table leg at 8 m between 1-degree beams, 14 cm apart) that an earlier scan hit,
-    and wrongly clearing it off the map is cumulative: on Intel, the map lost the far end of a
-    corridor that way, the odometry stalled in it (1.9 m short over 70 scans, 36 correlative
-    fallbacks) and ``lidar_odometry`` lost 20 % of its accuracy (0.0435 -> 0.0522 m per
-    keyframe pair). A wrong "moved in" or "moved on" flag costs one scan's point, so those
-    tests keep the full range: a walker far down a corridor is what pins (or drags) its axis,
-    and one walking away at 0.5 m/s has left ``margin`` behind only after half a second. Only
-    while the motion is steady, though: a pose that landed more than ``anchor_break`` from the
-    motion model's guess in the last ``history`` scans may be off, and from a pose off by more
-    than ``margin`` the new scan sees through its predecessors' far points; flagging the
-    points next to them would lock the error in (a car that braked hard in a corridor stayed
-    0.8 m off). Until the jumps have passed, the recent scans' points are judged like the
-    map's, over the last ``history`` scans only.
+    The new scan judges map points only where its beams lie at most ``stale_resolution`` apart:
+    farther out, its beams can all pass an object thinner than their spacing (a door frame, a table
+    leg at 8 m between 1-degree beams, 14 cm apart) that an earlier scan hit, and wrongly clearing
+    it off the map is cumulative: the map loses the far end of a corridor that way, and the odometry
+    stalls in it. A wrong "moved in" or "moved on" flag costs one scan's point, so those tests keep
+    the full range: a walker far down a corridor is what pins (or drags) its axis, and one walking
+    away at 0.5 m/s has left ``margin`` behind only after half a second. Only while the motion is
+    steady, though: a pose that landed more than ``anchor_break`` from the motion model's guess in
+    the last ``history`` scans may be off, and from a pose off by more than ``margin`` the new scan
+    sees through its predecessors' far points; flagging the points next to them would lock the error
+    in. Until the jumps have passed, the recent scans' points are judged like the map's, over the
+    last ``history`` scans only.
 
     Args:
         setup: the sensors' mounts, beams and ranges

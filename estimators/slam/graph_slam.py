@@ -82,11 +82,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             submap in range the same way). They tie each stretch of keyframes together over
             more than one step, so the front end's error stops adding up along it; 2.5 m is
             beyond a scan-to-map front end's own window (``lidar_odometry`` matches the last
-            ~2.5 m). Measured (``bench_slam.py --parts sim --seeds 0 1 2 3 4``, 40 runs, with
-            loop ICP's ``loss_scale`` 0.1 -> 0.03): slam's ATE gain over its front end
-            1.55x -> 2.31x geometric mean (up to 14x where the front end drifts most), but
-            still below it in 7 runs (worst 0.46x, a front end at 3.6 mm ATE); ACES all
-            relations 0.0350 -> 0.0347 m, Intel consecutive 0.0432 -> 0.0429 m. Equal to
+            ~2.5 m). Equal to
             ``min_loop_separation``: revisits only.
         max_candidates: verify at most 4 candidates per keyframe, revisits first, then best
             descriptor first.
@@ -110,8 +106,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             descriptors (closer than 0.3), over all headings (2 deg steps, half the cost of
             1 deg; ICP refines) and +-2 m (true revisits pass within a keyframe spacing plus
             a corridor's width of the old path). Every 6th keyframe (3 m), as many as a
-            query spans (``global_submap_keyframes``), so the queries tile the path (every 4th
-            cost 20 % of the back end on ACES, adding no edge there or on Intel); 0: off.
+            query spans (``global_submap_keyframes``), so the queries tile the path; 0: off.
         global_submap_keyframes, global_min_quality, global_ambiguity_ratio: a global match
             compares the last 6 keyframes (~3 m of path) with 6 on each side of the old one,
             and must explain 75 % of the points with no other match within 80 % of its score
@@ -128,14 +123,12 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         check_steps: check each odometry step against the two keyframes' scans (True): if it
             leaves less than ``loop_params.min_quality`` of the new keyframe's points within
             ``inlier_distance`` of the previous one's walls, match the two over all headings
-            and keep the match if it is unambiguous and explains more points. Measured on
-            ACES: 25 of 730 steps checked; the front end's lost 78-degree corner turn at
-            540 s, which the loop edges had spread over ~40 m of corridor as an arc (issue
-            8), is found; ATE against ``aces-corrected`` 0.85 -> 0.37 m.
+            and keep the match if it is unambiguous and explains more points: a corner turn
+            the front end lost is found here, before loop edges spread it along a corridor.
         place_tolerance, max_places: an old place's map (likelihood field and lines) is kept
             across optimisations while none of its points moved by more than 1 mm (2 % of a
             field cell, a tenth of 1 cm range noise and of a loop edge's ~1 cm sigma; 0: rebuilt
-            whenever a pose changed, as before), the 32 used last.
+            whenever a pose changed), the 32 used last.
         loop_params: settings of the loop verification (:class:`LoopClosureParams`); its
             ``normal_neighbours`` and ``denoise_reference`` also shape the previous keyframe's
             lines in the step check and the odometry edges' match information.

@@ -230,8 +230,8 @@ class KeyframeMatching:
         """The front end's step (3,) between two keyframes, or, if it leaves fewer than
         ``min_quality`` of the new keyframe's points on the previous one's walls, the step
         found by matching the two keyframes over all headings (when that match is accepted
-        and explains more). A front end can lose a fast turn (on ACES at 540 s it missed 78
-        deg of a corner in 1.5 s); left in the edge, the loop closures cannot localise the
+        and explains more). A front end can lose a fast turn (tens of degrees of a corner in a
+        second or two); left in the edge, the loop closures cannot localise the
         error and spread it over tens of metres of corridor, bending them into arcs."""
         world = transform_points(step, points)
         share = len(reference.correspond(world, self.loop_params.inlier_distance).index)

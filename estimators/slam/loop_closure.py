@@ -105,28 +105,20 @@ class LoopClosureParams:
             (:meth:`~estimators.matching.icp.PointToLineReference.with_estimated_normals`, as the
             ``lidar_odometry`` front end's map): a line through one raw reading and its 5
             neighbours carries that reading's range noise into the loop edge, and its normal
-            tilts by the noise of a few points. Measured (``bench_slam.py --parts sim --seeds
-            0 1 2 3 4``, 40 runs, with the final front end): slam's ATE above its front
-            end's in 9 -> 8 runs, geometric-mean gain 1.46x -> 1.55x, worst 0.45x -> 0.70x;
-            ACES unchanged (all relations 0.0342 -> 0.0340 m);
-            +1 ms CPU per place map of 1,800 points.
+            tilts by the noise of a few points (about 1 ms CPU per place map of 1,800
+            points).
         max_normal_neighbours: where 9 neighbours fail the line test, their fit is repeated
             through up to 72 (as in the ``lidar_odometry`` front end's map, whose docstring
             explains it: at 2-3 cm range noise 9 points of a wall look like a blob, and lines
-            through two of them point anywhere). Measured at 3 cm (``bench_slam.py --parts sim
-            --seeds 0 1 2 3 4 --noise 0.03``, 40 runs): slam's gain over its front end 1.36x ->
-            1.72x geometric mean, worst 0.32x -> 0.72x; at 1 cm nothing changes; ACES
-            unchanged, Intel consecutive keyframes 0.0429 -> 0.0432 m (pseudo ground truth).
+            through two of them point anywhere).
         loss_scale: Cauchy scale of the refining ICP (0.03 m, about the range noise: views
             metres apart see different sides of objects, and walls behind them; those points
-            pair with the wrong line, and at 0.1 m they pull the match by millimetres:
-            matches of simulated keyframes 6 m apart at true poses erred 7.6 -> 3.9 mm in
-            open_cylinders, 4.1 -> 2.2 mm in a random world; ACES unchanged).
+            pair with the wrong line, and with a wider kernel they pull the match by
+            millimetres).
         search_levels: the branch and bound's pyramid has at most 5 levels (its coarsest
             nodes 16 x 16 cells; exact at any depth): a search's query has a few hundred
             points, so the 36 first nodes per heading of a +-2 m window cost less than two
-            more pooled levels of the place (measured on ACES: 7 -> 5 levels cut pooling and
-            search by a quarter, the same poses).
+            more pooled levels of the place).
         point_sigma, effective_points: the ICP Hessian becomes the edge's information
             matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
             made it (0.05 m, 20: neighbouring residuals are strongly correlated, so hundreds

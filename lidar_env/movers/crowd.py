@@ -17,13 +17,11 @@ counts like a standing mover, as real pedestrians keep clear of a vehicle: the l
 0.3 m from it, and no step ever brings a mover closer to it than 2 cm (nor, nearer already, any
 closer), so a standing car is never walked into. They do not read the driver's intent (the
 car's motion is not extrapolated): a car that drives on into a crossing pedestrian still hits
-it, so giving way stays the driver's job. (Movers that also dodged the car's commanded motion
-were tried: then pure pursuit, blind to the scans, finished about 95 % of its runs among them,
-and there was nothing left for a seeing driver to show.) "yielding" is the default: a
+it, so giving way stays the driver's job (movers that also dodged the car's commanded motion
+would leave a driver that sees nothing to show). "yielding" is the default: a
 pedestrian does not walk into a standing car, and a crowd that does scores a driver for
 crashes it did not cause. "waypoints" stays as the harder
-crowd (standing still is no escape from it; every mover result before session 8 was made
-with it).
+crowd (standing still is no escape from it).
 
 Random numbers, all from the generator passed in, in a fixed order so that the same seed gives
 the same crowd bit for bit: at :meth:`Crowd.spawn`, ``(SPAWN_TRIES * M, 2)`` uniforms for the

@@ -1,4 +1,4 @@
-"""Estimators under clock faults and sparse scans (issue 18, items 2, 3 and 11).
+"""Estimators under clock faults and sparse scans.
 
 The user relies on three things: a time that is not a finite, increasing number of seconds is
 an ``EstimatorInputError`` naming ``t`` (and the previous time); a long clock gap never makes

@@ -1,4 +1,4 @@
-"""Hostile CARMEN logs (issue 18, item 7): corrupt or truncated compression, bad PARAM values,
+"""Hostile CARMEN logs: corrupt or truncated compression, bad PARAM values,
 too few beams and negative ranges are a ``LogFormatError`` naming the file and the line."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A damaged experiment database is named, never silently read (issue 18, item 9): a file
+"""A damaged experiment database is named, never silently read: a file
 that claims our schema version but lacks a table or column is refused at open, and a changed
 value inside a stored sensor dataset or trace fails its checksum on read, naming the rows."""
 

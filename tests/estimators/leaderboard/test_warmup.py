@@ -66,7 +66,7 @@ def test_the_warm_up_reaches_the_moved_on_test(monkeypatch: pytest.MonkeyPatch) 
 
 def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyPatch) -> None:
     """The kernels the leaderboard's map scoring needs in variants a few steps of a plain drive
-    do not reach: each compiled inside the workers' first such scenario until 2026-12-06.
+    do not reach: each compiled inside the workers' first such scenario.
     numba compiles once per argument type, so the calls are checked for those types."""
     from estimators.mapping import obstacles
     from estimators.matching import correlative

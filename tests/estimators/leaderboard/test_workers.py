@@ -1,4 +1,4 @@
-"""The leaderboard's processes under faults (issue 18, item 10): workers die with a killed
+"""The leaderboard's processes under faults: workers die with a killed
 parent, Ctrl-C prints one line and exits 130 with the finished scenarios kept, and a bad
 ``--seeds`` is refused before anything runs."""
 

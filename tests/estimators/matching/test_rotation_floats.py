@@ -1,5 +1,5 @@
 """The heading search's and the refinement starts' float paths, and the centred spectrum's
-bare reductions, against the numpy forms they replaced, bit for bit (issue 21: numpy's
+bare reductions, against the numpy forms they replaced, bit for bit (numpy's
 per-call cost on a few numbers was most of their time)."""
 
 from __future__ import annotations

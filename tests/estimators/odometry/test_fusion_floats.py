@@ -1,6 +1,6 @@
 """The pose algebra on Python floats (``pc_fusion``'s) against :mod:`lidar_env.core.se2`'s batches,
 bit for bit
-(issue 21: a step composes some thirty poses, whose array conversions cost more than the
+(a step composes some thirty poses, whose array conversions cost more than the
 arithmetic)."""
 
 from __future__ import annotations

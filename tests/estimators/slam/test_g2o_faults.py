@@ -1,4 +1,4 @@
-"""Hostile g2o files (issue 18, item 8): a named ``LogFormatError`` with file and line, never a
+"""Hostile g2o files: a named ``LogFormatError`` with file and line, never a
 bare decoding error, an overflow at write time, or a "converged" optimisation that did nothing."""
 
 from __future__ import annotations

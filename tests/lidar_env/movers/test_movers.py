@@ -1,4 +1,4 @@
-"""Moving obstacles (issue 16): the crowd never overlaps anything, is seeded, seen exactly by
+"""Moving obstacles: the crowd never overlaps anything, is seeded, seen exactly by
 the Lidars (pymunk oracle) and ends the episode on contact."""
 
 import inspect

@@ -1,4 +1,4 @@
-"""Range noise and dropout belong to each Lidar (issue 15): the old top-level keys are refused
+"""Range noise and dropout belong to each Lidar: the old top-level keys are refused
 with a pointer to ``config["lidars"]``, ``lidars_with_noise`` sets them on a whole layout, and
 each Lidar's own values are the ones its scans carry."""
 

@@ -1,4 +1,4 @@
-"""The car never tunnels through a wall, whatever the speed and control step (issue 18, item 1)."""
+"""The car never tunnels through a wall, whatever the speed and control step."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""World geometry under hostile input (issue 18, items 5, 6, 11): named ``MapError``s for
+"""World geometry under hostile input: named ``MapError``s for
 self-intersecting polygons, oversized, complex or mistyped images and arguments, usable
 bounds for a flat world, and image tracing that keeps every pixel."""
 
