@@ -15,9 +15,9 @@ box lies further than its k-th best candidate or the pairing distance. ICP asks 
 same query points after each small step: :func:`search_near` keeps each query's three nearest
 points and answers from them while the triangle inequality says no other point can have come
 nearer, and seeds the search with them where it cannot (the same answer, bit for bit; hallway
-scans: half the queries after the first iteration need no search). (A hashed uniform grid
-was tried first: on sparse scans, where the second-nearest point of a 1-degree scan of a
-wall 5 m away is 10-20 cm off, its many empty-cell look-ups cost more than scipy's tree.)
+scans: half the queries after the first iteration need no search). A k-d tree rather than a
+hashed uniform grid: on sparse scans, where the second-nearest point of a 1-degree scan of a
+wall 5 m away is 10-20 cm off, a grid's many empty-cell look-ups cost more than the tree.
 """
 
 from __future__ import annotations
