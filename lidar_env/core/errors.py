@@ -12,11 +12,47 @@ line, and say what was expected::
     except ConfigError as error:
         print(error)  # max_speed: expected a finite value > 0 [m/s], got -1
 
-This module imports nothing, so every package (``lidar_env``, ``estimators``, ``agents``) can
-use it.
+Messages quote a value the user gave through :func:`quoted`, which bounds the quote (and
+the work of making it) whatever the value holds: a nested YAML alias or a huge array never
+turns an error message into gigabytes.
+
+This module imports only the standard library, so every package (``lidar_env``,
+``estimators``, ``agents``) can use it.
 """
 
 from __future__ import annotations
+
+import reprlib
+
+#: [characters] longest quote of a user's value in an error message (see :func:`quoted`).
+QUOTE_LIMIT = 80
+
+
+def _quoter() -> reprlib.Repr:
+    quoter = reprlib.Repr()
+    quoter.maxlevel, quoter.maxlist, quoter.maxtuple, quoter.maxdict = 3, 6, 6, 4
+    quoter.maxset = quoter.maxfrozenset = quoter.maxdeque = quoter.maxarray = 6
+    quoter.maxstring = quoter.maxlong = quoter.maxother = QUOTE_LIMIT
+    return quoter
+
+
+_QUOTER = _quoter()
+
+
+def quoted(value: object, limit: int = QUOTE_LIMIT) -> str:
+    """``repr(value)`` for an error message, at most ``limit`` characters (cut with ``...``).
+
+    Nested containers are shown to a bounded depth and width (``reprlib``), so quoting costs
+    little whatever ``value`` holds; an object whose ``repr`` fails (an int too long to print)
+    is named by its type.
+    """
+    try:
+        text = " ".join(_QUOTER.repr(value).split())
+    except Exception:  # noqa: BLE001 - any repr may fail; the message must not
+        text = f"<{type(value).__name__}>"
+        if isinstance(value, int):
+            text = f"<int of {int(value.bit_length() * 0.30103) + 1} digits>"
+    return text if len(text) <= limit else text[: max(limit - 3, 0)] + "..."
 
 
 class DualLidarError(ValueError):

@@ -16,29 +16,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.core.errors import MapError
+from lidar_env.world.grey_image import MAX_IMAGE_PIXELS, read_grey_image
 from lidar_env.world.polygons import signed_area
-
-#: Largest occupancy image :func:`read_occupancy` accepts [pixels]: 2000 x 2000, the size
-#: ``World.from_image`` documents (beyond it tracing needs minutes and gigabytes).
-MAX_IMAGE_PIXELS = 4_000_000
 
 
 def read_occupancy(image: ArrayLike | str | os.PathLike) -> NDArray[np.bool_]:
-    """``(H, W)`` bool occupancy (True = obstacle) of an image array or file, validated."""
+    """``(H, W)`` bool occupancy (True = obstacle) of an image array or file, validated; a
+    file is read by :func:`~lidar_env.world.grey_image.read_grey_image` (16-bit and PGM
+    ``maxval`` scaled, a lying or truncated header a :class:`MapError` naming the file)."""
     if isinstance(image, (str, os.PathLike)):
-        try:
-            from PIL import Image, UnidentifiedImageError
-        except ImportError as error:  # pragma: no cover - pillow ships with matplotlib
-            raise ImportError("World.from_image(path) needs pillow: pip install pillow") from error
-        try:
-            with Image.open(image) as handle:
-                array = np.asarray(handle.convert("L"))
-        except (UnidentifiedImageError, OSError, SyntaxError) as error:
-            if isinstance(error, FileNotFoundError):
-                raise
-            raise MapError(
-                f"image: expected a readable image file, got {image!s}: {error}"
-            ) from error
+        array = read_grey_image(image)
     else:
         array = np.asarray(image)
     if array.ndim != 2:

@@ -99,8 +99,9 @@ def _cross(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64
 
 
 def signed_area(polygon: NDArray[np.float64]) -> float:
-    """Shoelace area [m^2] of a ``(k, 2)`` polygon, positive when counter-clockwise."""
-    x, y = polygon[:, 0], polygon[:, 1]
+    """Shoelace area [m^2] of a ``(k, 2)`` polygon, positive when counter-clockwise; taken
+    about the first vertex, so a small polygon far from the origin keeps its area."""
+    x, y = (polygon - polygon[0]).T
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 

@@ -10,6 +10,13 @@ between are obstacles when ``p >= 0.5``, as the scaled value would then say "occ
 Unknown cells are obstacles by default (``unknown_is_obstacle``), so the car never drives into
 unmapped space; :meth:`lidar_env.world.world.World.from_ros_map` builds the world. The writer
 stores 0 = occupied, 254 = free, 205 = unknown, as map_saver does.
+
+Numbers may also be given as strings that read as finite floats: YAML 1.1 (which map_server
+and PyYAML speak) reads ``5e-2`` or ``1e-05`` as a string, as it needs a dot to see a float;
+the writer therefore writes ``1.0e-05``. Images are read by
+:func:`~lidar_env.world.grey_image.read_grey_image` (16-bit PGM and PNG scaled by their
+``maxval``). A map YAML is plain UTF-8 text of at most :data:`MAX_YAML_BYTES`; YAML aliases
+(``*name``) are refused, since nested ones expand a few hundred bytes into gigabytes.
 """
 
 from __future__ import annotations
@@ -23,8 +30,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.core.errors import MapError
+from lidar_env.core.errors import MapError, quoted
+from lidar_env.world.grey_image import read_grey_image
 
+#: Largest map YAML read [bytes] (a map_server YAML is a few hundred).
+MAX_YAML_BYTES = 1 << 20
 #: map_server's modes this reader understands.
 ROS_MAP_MODES: tuple[str, ...] = ("trinary", "scale")
 #: Pixel values map_saver writes.
@@ -50,13 +60,13 @@ def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
     for key in ("image", "resolution"):
         if key not in meta:
             raise MapError(f"{path}: expected a {key!r} key (map_server YAML), got keys "
-                           f"{', '.join(map(str, meta)) or 'none'}")
+                           f"{quoted(list(meta)) if meta else 'none'}")
     resolution = _number(meta["resolution"], path, "resolution")
     if resolution <= 0:
         raise MapError(f"{path}: resolution: expected a positive pixel size [m], got {resolution}")
     origin = meta.get("origin", [0.0, 0.0, 0.0])
     if not isinstance(origin, (list, tuple)) or len(origin) != 3:
-        raise MapError(f"{path}: origin: expected [x, y, yaw], got {origin!r}")
+        raise MapError(f"{path}: origin: expected [x, y, yaw], got {quoted(origin)}")
     origin = tuple(_number(v, path, "origin") for v in origin)
     occupied_thresh = _number(meta.get("occupied_thresh", 0.65), path, "occupied_thresh")
     free_thresh = _number(meta.get("free_thresh", 0.196), path, "free_thresh")
@@ -68,11 +78,12 @@ def read_ros_map(yaml_path: str | os.PathLike) -> RosMap:
                        f"{occupied_thresh}")
     negate = meta.get("negate", 0)
     if negate not in (0, 1, True, False):
-        raise MapError(f"{path}: negate: expected 0 or 1, got {negate!r}")
+        raise MapError(f"{path}: negate: expected 0 or 1, got {quoted(negate)}")
     mode = meta.get("mode", "trinary")
     if mode not in ROS_MAP_MODES:
-        raise MapError(f"{path}: mode: expected one of {', '.join(ROS_MAP_MODES)}, got {mode!r}")
-    values = _read_image(path.parent / str(meta["image"]), path)
+        raise MapError(f"{path}: mode: expected one of {', '.join(ROS_MAP_MODES)}, got "
+                       f"{quoted(mode)}")
+    values = _read_image(meta["image"], path)
     p = values / 255.0 if negate else (255.0 - values) / 255.0
     cells = np.full(values.shape, -1, dtype=np.int8)
     cells[p > occupied_thresh] = 100
@@ -96,6 +107,8 @@ def save_ros_map(
 
     ``probabilities`` (H, W) in [0, 1], row 0 at the top (max y), NaN = unknown; cells above
     ``occupied_thresh`` are written occupied, below ``free_thresh`` free, the rest unknown.
+    ``resolution`` [m/px] and ``origin`` (x [m], y [m], yaw [rad]) are written so that
+    :func:`read_ros_map` reads back the same floats.
     """
     from PIL import Image
 
@@ -105,20 +118,51 @@ def save_ros_map(
     known = np.isfinite(grid)
     if np.any((grid[known] < 0) | (grid[known] > 1)):
         raise MapError("probabilities: expected values in [0, 1] (NaN = unknown)")
-    if not (math.isfinite(resolution) and resolution > 0):
+    resolution = _number(resolution, None, "resolution")
+    if resolution <= 0:
         raise MapError(f"resolution: expected a positive pixel size [m], got {resolution}")
+    if not isinstance(origin, (list, tuple, np.ndarray)) or len(origin) != 3:
+        raise MapError(f"origin: expected (x, y, yaw), got {quoted(origin)}")
+    x, y, yaw = (_number(v, None, "origin") for v in origin)
+    for key, value in (("occupied_thresh", occupied_thresh), ("free_thresh", free_thresh)):
+        if not 0.0 <= _number(value, None, key) <= 1.0:
+            raise MapError(f"{key}: expected a probability in [0, 1], got {value}")
     pixels = np.full(grid.shape, UNKNOWN_PIXEL, dtype=np.uint8)
     pixels[known & (grid > occupied_thresh)] = OCCUPIED_PIXEL
     pixels[known & (grid < free_thresh)] = FREE_PIXEL
     yaml_path = Path(yaml_path)
     image_path = yaml_path.with_suffix(".pgm")
     Image.fromarray(pixels).save(image_path)
-    x, y, yaw = (float(v) for v in origin)
     yaml_path.write_text(
-        f"image: {image_path.name}\nmode: trinary\nresolution: {float(resolution)!r}\n"
-        f"origin: [{x!r}, {y!r}, {yaw!r}]\nnegate: 0\noccupied_thresh: {occupied_thresh!r}\n"
-        f"free_thresh: {free_thresh!r}\n")
+        f"image: {image_path.name}\nmode: trinary\nresolution: {_yaml_float(resolution)}\n"
+        f"origin: [{_yaml_float(x)}, {_yaml_float(y)}, {_yaml_float(yaw)}]\nnegate: 0\n"
+        f"occupied_thresh: {_yaml_float(occupied_thresh)}\n"
+        f"free_thresh: {_yaml_float(free_thresh)}\n")
     return yaml_path, image_path
+
+
+def _yaml_float(value: float) -> str:
+    """``value`` as a YAML 1.1 float: a mantissa with a dot (``1.0e-05``, not ``1e-05``)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition("e")
+    return f"{mantissa}.0e{exponent}" if e and "." not in mantissa else text
+
+
+def _alias_free_loader() -> type:
+    import yaml
+
+    class AliasFreeLoader(yaml.SafeLoader):
+        """PyYAML's safe loader, refusing aliases (``*name``) before they are expanded."""
+
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            if self.check_event(yaml.AliasEvent):
+                event = self.peek_event()
+                raise yaml.composer.ComposerError(
+                    None, None, f"expected plain values, got the alias *{quoted(event.anchor)} "
+                    "(map files take no YAML aliases)", event.start_mark)
+            return super().compose_node(parent, index)
+
+    return AliasFreeLoader
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
@@ -127,30 +171,59 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     except ImportError as error:  # pragma: no cover - pyyaml ships with the dev/agents extras
         raise ImportError("reading a ROS map needs pyyaml: pip install pyyaml") from error
     try:
-        meta = yaml.safe_load(path.read_text())
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_YAML_BYTES + 1)
     except FileNotFoundError as error:
         raise MapError(f"{path}: no such map YAML file") from error
-    except yaml.YAMLError as error:
-        raise MapError(f"{path}: expected map_server YAML, got a parse error: {error}") from error
+    except OSError as error:
+        raise MapError(f"{path}: cannot read the map YAML ({error.strerror})") from error
+    if len(data) > MAX_YAML_BYTES:
+        raise MapError(f"{path}: expected a map_server YAML of at most {MAX_YAML_BYTES} bytes, "
+                       "got a larger file")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise MapError(f"{path}: expected UTF-8 text, got byte 0x{data[error.start]:02x} at "
+                       f"offset {error.start}") from error
+    try:
+        meta = yaml.load(text, Loader=_alias_free_loader())  # noqa: S506 - a SafeLoader
+    except (yaml.YAMLError, ValueError) as error:  # ValueError: an int too long to convert
+        raise MapError(f"{path}: expected map_server YAML, got a parse error: "
+                       f"{str(error)[:300]}") from error
     if not isinstance(meta, dict):
         raise MapError(f"{path}: expected a mapping of map_server keys, got {type(meta).__name__}")
     return meta
 
 
-def _read_image(image: Path, yaml_path: Path) -> NDArray[np.float64]:
-    from PIL import Image, UnidentifiedImageError
-
+def _read_image(image: Any, yaml_path: Path) -> NDArray[np.float64]:
+    if not isinstance(image, str) or not image or "\0" in image:
+        raise MapError(f"{yaml_path}: image: expected a file name (text without NUL bytes), "
+                       f"got {quoted(image)}")
+    path = yaml_path.parent / image
     try:
-        with Image.open(image) as handle:
-            return np.asarray(handle.convert("L"), dtype=np.float64)
+        return read_grey_image(path)
     except FileNotFoundError as error:
-        raise MapError(f"{yaml_path}: image: no such file {image}") from error
-    except (UnidentifiedImageError, OSError) as error:
-        raise MapError(f"{yaml_path}: image: expected a readable image, got {image}: "
-                       f"{error}") from error
+        raise MapError(f"{yaml_path}: image: no such file {path}") from error
+    except OSError as error:
+        raise MapError(f"{yaml_path}: image: cannot read {path} ({error.strerror})") from error
 
 
-def _number(value: Any, path: Path, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise MapError(f"{path}: {key}: expected a finite number, got {value!r}")
-    return float(value)
+def _number(value: Any, path: Path | None, key: str) -> float:
+    """``value`` as a finite float: a number, or a string that reads as one (YAML 1.1 reads
+    ``5e-2`` as a string); a :class:`MapError` naming ``path`` and ``key`` otherwise."""
+    where = f"{path}: {key}" if path is not None else key
+    number = None
+    if isinstance(value, str) and len(value) <= 64:
+        try:
+            number = float(value.strip())
+        except ValueError:
+            number = None
+    elif isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+            value, (bool, np.bool_)):
+        try:
+            number = float(value)
+        except OverflowError:
+            number = None
+    if number is None or not math.isfinite(number):
+        raise MapError(f"{where}: expected a finite number, got {quoted(value)}")
+    return number

@@ -22,7 +22,7 @@ import numpy as np
 import pymunk
 from numpy.typing import ArrayLike, NDArray
 
-from lidar_env.core.errors import MapError
+from lidar_env.core.errors import MapError, quoted
 from lidar_env.world.occupancy_image import PixelGrid, read_occupancy, trace_outlines
 from lidar_env.world.polygons import (
     as_polygon,
@@ -36,15 +36,26 @@ from lidar_env.world.ros_map import RosMap, read_ros_map
 
 #: [m] margin either side of a flat default bounding box (a world of one straight wall).
 FLAT_BOUNDS_MARGIN = 0.5
+#: [m] largest coordinate of a world's bounds (either sign): a continent, far beyond any map a
+#: planar Lidar drives in, while float64 still holds positions to a nanometre there (larger
+#: worlds overflow areas and grid sizes to inf).
+MAX_WORLD_EXTENT = 1e7
 
 
-def _check_resolution(resolution: object) -> None:
-    """A pixel size must be a real number (a string such as ``"0.05"`` is named, not mangled)."""
-    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
-        raise MapError(
-            f"resolution: expected a positive pixel size [m], got {type(resolution).__name__} "
-            f"{resolution!r}"
-        )
+def _check_resolution(resolution: object) -> float:
+    """A pixel size [m]: a positive finite real number (a string such as ``"0.05"`` is named,
+    not mangled)."""
+    value = None
+    if isinstance(resolution, numbers.Real) and not isinstance(resolution, (bool, np.bool_)):
+        try:
+            value = float(resolution)
+        except OverflowError:  # an int beyond float's range
+            value = None
+    if value is None or not (math.isfinite(value) and value > 0):
+        raise MapError(f"resolution: expected a positive pixel size [m], got "
+                       f"{type(resolution).__name__} {quoted(resolution)}")
+    return value
+
 
 #: ``collision_type`` of every static obstacle shape added by :meth:`World.build_space`.
 OBSTACLE_COLLISION_TYPE: int = 1
@@ -60,6 +71,7 @@ class World:
             filled with the even-odd rule (see the module docstring).
         name: label for plots and logs.
         bounds: ``(xmin, ymin, xmax, ymax)`` of the map; default: the bounding box of the geometry.
+            Either way within :data:`MAX_WORLD_EXTENT` (1e7 m) of the origin.
 
     Attributes:
         circles: ``(N, 3)`` float64.
@@ -139,13 +151,25 @@ class World:
             # flat axis a margin so the box can be drawn and rasterised
             flat = hi - lo <= 0
             lo, hi = lo - flat * FLAT_BOUNDS_MARGIN, hi + flat * FLAT_BOUNDS_MARGIN
-            return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-        box = np.asarray(bounds, dtype=np.float64)
-        ordered = box.shape == (4,) and box[0] < box[2] and box[1] < box[3]
-        if not (ordered and np.all(np.isfinite(box))):
+            box = np.array([lo[0], lo[1], hi[0], hi[1]])
+            what = "the geometry's bounding box"
+        else:
+            try:
+                box = np.asarray(bounds, dtype=np.float64)
+            except (TypeError, ValueError, OverflowError) as error:
+                raise MapError(f"bounds: expected four numbers (xmin, ymin, xmax, ymax), got "
+                               f"{quoted(bounds)}") from error
+            ordered = box.shape == (4,) and box[0] < box[2] and box[1] < box[3]
+            if not (ordered and np.all(np.isfinite(box))):
+                raise MapError(
+                    f"bounds: expected finite (xmin, ymin, xmax, ymax) with xmin < xmax and "
+                    f"ymin < ymax, got {quoted(bounds)}"
+                )
+            what = "bounds"
+        if not np.all(np.abs(box) <= MAX_WORLD_EXTENT):
             raise MapError(
-                f"bounds: expected finite (xmin, ymin, xmax, ymax) with xmin < xmax and "
-                f"ymin < ymax, got {bounds}"
+                f"{what}: expected a world within +-{MAX_WORLD_EXTENT:.0e} m, got ({box[0]:.3g}, "
+                f"{box[1]:.3g}, {box[2]:.3g}, {box[3]:.3g}) m"
             )
         return (float(box[0]), float(box[1]), float(box[2]), float(box[3]))
 
@@ -199,16 +223,21 @@ class World:
         if name is None:
             name = Path(image).stem if isinstance(image, (str, os.PathLike)) else "image"
         pixels = read_occupancy(image)
-        _check_resolution(resolution)
-        if not (np.isfinite(resolution) and resolution > 0):
-            raise MapError(f"resolution: expected a positive pixel size [m], got {resolution}")
+        resolution = _check_resolution(resolution)
         ox, oy = as_rows(origin, 2, "origin")[0]
         if not 0.0 <= tolerance <= 0.5:
             raise MapError(f"tolerance: expected a value in [0, 0.5] pixels, got {tolerance}")
         height, width = pixels.shape
+        bounds = (ox, oy, ox + width * resolution, oy + height * resolution)
+        if not np.all(np.abs(bounds) <= MAX_WORLD_EXTENT):
+            raise MapError(
+                f"resolution: {resolution:.3g} m/px at origin ({ox:.3g}, {oy:.3g}) m spans the "
+                f"{height} x {width} px image over ({bounds[0]:.3g}, {bounds[1]:.3g}, "
+                f"{bounds[2]:.3g}, {bounds[3]:.3g}) m; expected a world within "
+                f"+-{MAX_WORLD_EXTENT:.0e} m"
+            )
         loops = trace_outlines(pixels, tolerance)
         polygons = [np.asarray(loop) * resolution + (ox, oy) for loop in loops]
-        bounds = (ox, oy, ox + width * resolution, oy + height * resolution)
         return cls(polygons=polygons, name=name, bounds=bounds)
 
     @classmethod
@@ -262,9 +291,7 @@ class World:
         occupied when its centre is inside a circle or polygon (even-odd) or it holds a circle
         centre, or a wall passes through it (walls are drawn at least one pixel wide).
         """
-        _check_resolution(resolution)
-        if not (np.isfinite(resolution) and resolution > 0):
-            raise MapError(f"resolution: expected a positive pixel size [m], got {resolution}")
+        resolution = _check_resolution(resolution)
         xmin, ymin, xmax, ymax = self._check_bounds(self.bounds if bounds is None else bounds)
         width = max(1, int(np.ceil((xmax - xmin) / resolution - 1e-9)))
         height = max(1, int(np.ceil((ymax - ymin) / resolution - 1e-9)))

@@ -374,7 +374,7 @@ def test_from_image_reads_png_and_pgm(tmp_path) -> None:
     np.testing.assert_array_equal(deep_world.to_image(0.1), expected)
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(b"\x89PNG not really an image")
-    with pytest.raises(ValueError, match="image: expected a readable image file"):
+    with pytest.raises(ValueError, match="corrupt.png: expected a readable image file"):
         World.from_image(corrupt, 0.1)
 
 
