@@ -15,7 +15,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.config import EnvConfig
-from lidar_env.core.errors import ConfigError
+from lidar_env.core.errors import ConfigError, ResetNeededError, quoted
 from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
@@ -33,6 +33,15 @@ INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_po
 INFO_MASK_KEYS: tuple[str, ...] = tuple(f"_{key}" for key in INFO_KEYS)
 
 Observation = dict[str, NDArray[np.float32]]
+
+#: Most sub-envs one batched env holds: its arrays are allocated up front (at 1,440 beams,
+#: 65,536 sub-envs hold 0.4 GB of scans).
+MAX_NUM_ENVS = 65_536
+
+
+class VectorResetNeededError(ResetNeededError, gym.error.ResetNeeded):
+    """``step()`` before every sub-env was reset: our :class:`ResetNeededError` and
+    Gymnasium's ``ResetNeeded`` alike, so either ``except`` clause catches it."""
 
 
 def not_batched(config: EnvConfig) -> str | None:
@@ -58,10 +67,12 @@ class DualLidarVectorEnv(VectorEnv):
     Autoreset (``metadata["autoreset_mode"]``) is Gymnasium's ``NEXT_STEP``: the step after a
     sub-env terminates or truncates resets it (its action is ignored) and returns its reset
     observation and info with reward 0 and no termination or truncation.
-    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (or ``seed=[s_0, ...]``);
+    ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (or ``seed=[s_0, ...]``; seeds >= 0);
     ``options`` (world, trace, start, as for the single env) apply to every sub-env reset,
     and ``options["reset_mask"]`` (bool ``(num_envs,)``) resets only those sub-envs (so each
-    can start with its own options); ``step()`` needs every sub-env reset once.
+    can start with its own options); ``step()`` needs every sub-env reset once (else a
+    :class:`VectorResetNeededError`, which is both our ``ResetNeededError`` and Gymnasium's
+    ``ResetNeeded``). At most :data:`MAX_NUM_ENVS` sub-envs.
 
     Differences from ``SyncVectorEnv``: a bad action (wrong shape, NaN or inf in the action of
     a sub-env that steps) raises a ``ConfigError`` before any sub-env moves, where
@@ -85,8 +96,9 @@ class DualLidarVectorEnv(VectorEnv):
         render_mode: str | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
-                or num_envs < 1:
-            raise ConfigError(f"num_envs: expected an integer >= 1, got {num_envs!r}")
+                or not 1 <= num_envs <= MAX_NUM_ENVS:
+            raise ConfigError(f"num_envs: expected an integer in 1 .. {MAX_NUM_ENVS}, got "
+                              f"{quoted(num_envs)}")
         if render_mode is not None:
             raise ConfigError(f"render_mode: the batched env does not render (not batched "
                               f"yet); expected None, got {render_mode!r}; render a single "
@@ -187,14 +199,22 @@ class DualLidarVectorEnv(VectorEnv):
         if seed is None:
             return [None] * self.num_envs
         if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if seed < 0:
+                raise ConfigError(f"seed: expected an integer >= 0 (sub-env i gets seed + i), "
+                                  f"got {quoted(seed)}")
             return [int(seed) + i for i in range(self.num_envs)]
         if isinstance(seed, Sequence) and not isinstance(seed, str):
             if len(seed) != self.num_envs:
                 raise ConfigError(f"seed: expected {self.num_envs} seeds (one per sub-env), got "
                                   f"{len(seed)}")
-            return list(seed)
+            for i, value in enumerate(seed):
+                if value is not None and (isinstance(value, bool) or not isinstance(
+                        value, (int, np.integer)) or value < 0):
+                    raise ConfigError(f"seed[{i}]: expected an integer >= 0 or None, got "
+                                      f"{quoted(value)}")
+            return [None if value is None else int(value) for value in seed]
         raise ConfigError(f"seed: expected an int, a list of {self.num_envs} or None, got "
-                          f"{seed!r}")
+                          f"{quoted(seed)}")
 
     def _reset_mask(self, mask: Any) -> NDArray[np.bool_]:
         if mask is None:
@@ -247,9 +267,10 @@ class DualLidarVectorEnv(VectorEnv):
     ) -> tuple[Observation, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_],
                dict[str, Any]]:
         if not self._ready.all():
-            raise gym.error.ResetNeeded(
-                f"Cannot call step() before every sub-env was reset; sub-envs "
-                f"{np.flatnonzero(~self._ready).tolist()} never were")
+            never = np.flatnonzero(~self._ready)
+            raise VectorResetNeededError(
+                f"call reset() before step(): every sub-env must be reset once; sub-envs "
+                f"{quoted(never.tolist())} never were ({len(never)} of {self.num_envs})")
         resetting = self._autoreset_envs.copy()
         stepping = np.flatnonzero(~resetting) if resetting.any() else self._every_env
         speed, yaw_rate, checks = self._motion(actions, stepping)

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
-from lidar_env.core.errors import ConfigError
+from lidar_env.core.errors import ConfigError, ResetNeededError
 from lidar_env.vector import DualLidarVectorEnv
+from lidar_env.vector.env import MAX_NUM_ENVS
 
 
 def batched(num_envs: int = 2, **kwargs) -> gym.vector.VectorEnv:
@@ -17,10 +18,27 @@ def batched(num_envs: int = 2, **kwargs) -> gym.vector.VectorEnv:
                         **kwargs)
 
 
-@pytest.mark.parametrize("num_envs", [0, -3, 2.5, True])
-def test_num_envs_below_one_or_not_an_integer_is_refused(num_envs) -> None:
-    with pytest.raises(ConfigError, match="num_envs"):
+@pytest.mark.parametrize("num_envs", [0, -3, 2.5, True, 10**20, MAX_NUM_ENVS + 1, 10**400])
+def test_num_envs_below_one_too_large_or_not_an_integer_is_refused(num_envs) -> None:
+    with pytest.raises(ConfigError, match=f"num_envs: expected an integer in 1 .. {MAX_NUM_ENVS}"):
         DualLidarVectorEnv(num_envs=num_envs)
+
+
+def test_step_before_reset_is_ours_and_gymnasiums() -> None:
+    env = batched()
+    with pytest.raises(ResetNeededError, match=r"call reset\(\) before step\(\)"):
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("seed", [-1, -(2**70), [0, -1], [0, "1"], [0, 1.5], "7"])
+def test_negative_or_non_integer_seeds_are_config_errors(seed) -> None:
+    env = batched()
+    with pytest.raises(ConfigError, match=r"seed(\[1\])?: expected an (integer >= 0|int)"):
+        env.reset(seed=seed)
+    env.reset(seed=[3, None])  # None: a fresh seed for that sub-env
+    env.reset(seed=np.int64(2**40))
 
 
 def test_config_errors_are_the_single_envs() -> None:
