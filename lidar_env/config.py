@@ -1,7 +1,9 @@
 """One typed, validated configuration for ``DualLidar-v0``.
 
 Units are in the field comments. ``EnvConfig.from_dict`` and ``EnvConfig.replace`` reject
-unknown keys by name, so a typo never silently falls back to a default. Each Lidar carries its
+unknown keys by name, so a typo never silently falls back to a default. Their key ``robot``
+starts from a robot preset (:mod:`lidar_env.vehicle.presets`: the paper's car, TurtleBot3
+Burger and Waffle Pi, an F1TENTH-class car), the other keys applied over it. Each Lidar carries its
 own range noise and dropout; :func:`lidars_with_noise` gives a layout (the default one or a
 config's) with the same noise on every Lidar.
 """
@@ -19,6 +21,7 @@ import numpy as np
 from lidar_env.core.errors import ConfigError
 from lidar_env.movers import MOVER_MODELS
 from lidar_env.sensors.lidar_config import LidarConfig, check_lidars
+from lidar_env.vehicle.presets import ROBOT_NAMES, robot_preset
 
 #: Valid values of :attr:`EnvConfig.scan_frame`.
 SCAN_FRAMES: tuple[str, ...] = ("sensor", "world")
@@ -34,6 +37,12 @@ MAX_MOVER_SPEED = 10.0
 MOVED_TO_LIDARS: tuple[str, ...] = ("lidar_mounts", "n_beams", "max_range")
 #: Keys of earlier versions that set every Lidar's noise, now set per Lidar too.
 NOISE_KEYS: tuple[str, ...] = ("range_noise_std", "dropout_prob")
+#: The key of :meth:`EnvConfig.from_dict` and :meth:`EnvConfig.replace` that applies a preset.
+ROBOT_KEY = "robot"
+#: [m] half-diagonal of the paper's 0.8 x 0.5 m car: the body scale 1.
+PAPER_HALF_DIAGONAL = 0.5 * math.hypot(0.8, 0.5)
+#: [m] free space kept beyond the half-diagonal along a trace, at body scale 1.
+TRACE_MARGIN = 0.3
 
 
 def _default_lidars() -> tuple[LidarConfig, ...]:
@@ -69,6 +78,14 @@ class EnvConfig:
           real pedestrians (they never walk into it; a car that drives on can still hit them);
           "waypoints" movers ignore the car and walk into it even where it stands still, the
           harder crowd.
+        * ``trace_margin`` None: 0.3 m x :attr:`body_scale`, so a smaller robot keeps a
+          proportionally smaller margin (0.3 m on the paper's car, 0.07 m on a TurtleBot3
+          Burger). Start clearance, corner radii of waypoint routes and the default trace's
+          length in a user world scale with the body the same way.
+
+    ``from_dict({"robot": name, ...})`` and ``replace(robot=name, ...)`` take a robot
+    preset's body, speed limits, control period and Lidars first
+    (:data:`lidar_env.vehicle.presets.ROBOTS`), then the other keys.
     """
 
     control_dt: float = 0.1  # [s] time between two actions (and two scans)
@@ -84,7 +101,7 @@ class EnvConfig:
     collision_penalty: float = 10.0  # [-] subtracted from the reward on the colliding step
     cross_track_penalty: float = 0.1  # [1/s] reward -= this * |cross-track error [m]| * dt
     goal_tolerance: float = 0.3  # [m] the trace is done within this arc length of its end
-    trace_margin: float = 0.3  # [m] free space kept beyond the car's half-diagonal along a trace
+    trace_margin: float | None = None  # [m] beyond the half-diagonal along a trace (None: scaled)
     map_resolution: float = 0.05  # [m/px] pixel size of a world given as an array or image
     moving_obstacles: int = 0  # [-] pedestrians walking through the world (0 to MAX_MOVERS)
     mover_radius: float = 0.25  # [m] radius of each moving circle
@@ -110,7 +127,7 @@ class EnvConfig:
         non_negative = {
             "collision_penalty": self.collision_penalty,
             "cross_track_penalty": self.cross_track_penalty,
-            "trace_margin": self.trace_margin,
+            "trace_margin": 0.0 if self.trace_margin is None else self.trace_margin,
             "mover_clearance": self.mover_clearance,
         }
         for name, value in non_negative.items():
@@ -131,6 +148,10 @@ class EnvConfig:
         if not isinstance(self.mover_model, str) or self.mover_model not in MOVER_MODELS:
             raise ConfigError(f"mover_model: expected one of {', '.join(MOVER_MODELS)}, got "
                               f"{self.mover_model!r}")
+        derived = self.trace_margin is None
+        object.__setattr__(self, "_margin_derived", derived)
+        if derived:
+            object.__setattr__(self, "trace_margin", TRACE_MARGIN * self.body_scale)
         object.__setattr__(self, "mover_speed_range", _speed_range(self.mover_speed_range))
         object.__setattr__(self, "lidars", check_lidars(self.lidars, self.car_half_diagonal))
         object.__setattr__(self, "physics_substeps", int(self.physics_substeps))
@@ -143,11 +164,15 @@ class EnvConfig:
 
     @classmethod
     def from_dict(cls, mapping: Mapping[str, Any] | None) -> EnvConfig:
-        """Build a config from ``mapping`` (missing keys take their defaults)."""
+        """Build a config from ``mapping`` (missing keys take their defaults, or the preset's
+        with a ``robot`` key)."""
         return cls().replace(**dict(mapping or {}))
 
     def replace(self, **changes: Any) -> EnvConfig:
-        """A copy with ``changes`` applied; an unknown key raises ``ConfigError`` naming them."""
+        """A copy with ``changes`` applied; an unknown key raises ``ConfigError`` naming them.
+
+        ``robot=name`` applies that preset's values first; a ``trace_margin`` that was derived
+        from the body is derived again from the new one."""
         moved = sorted(set(changes) & set(MOVED_TO_LIDARS))
         if moved:
             raise ConfigError(
@@ -163,12 +188,16 @@ class EnvConfig:
                 f"{per_lidar} per Lidar, or the same on every Lidar with config={{'lidars': "
                 f"lidar_env.lidars_with_noise(config, {keywords})}} (config: the rest of yours, "
                 "or None for the default two Lidars)")
-        unknown = sorted(set(changes) - set(self.keys()))
+        unknown = sorted(set(changes) - set(self.keys()) - {ROBOT_KEY})
         if unknown:
             raise ConfigError(
                 f"unknown config key(s) {', '.join(map(repr, unknown))}: expected some of "
-                f"{', '.join(self.keys())}"
+                f"{ROBOT_KEY} ({', '.join(ROBOT_NAMES)}), {', '.join(self.keys())}"
             )
+        if ROBOT_KEY in changes:
+            changes = {**robot_preset(changes.pop(ROBOT_KEY)).changes(), **changes}
+        if getattr(self, "_margin_derived", False) and "trace_margin" not in changes:
+            changes["trace_margin"] = None
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
@@ -207,6 +236,12 @@ class EnvConfig:
             raise ConfigError(f"config.{name}: the Lidars differ ({sorted(values)}); "
                               f"expected per-Lidar access, config.lidars[k].{name}")
         return values.pop()
+
+    @property
+    def body_scale(self) -> float:
+        """[-] the car's half-diagonal over the paper car's (1 for the default car): what
+        margins, corner radii and trace lengths are scaled by."""
+        return self.car_half_diagonal / PAPER_HALF_DIAGONAL
 
     @property
     def car_half_diagonal(self) -> float:

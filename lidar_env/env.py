@@ -82,7 +82,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     270-degree Lidar's beam 0 points at -135 degrees and its last beam at +135 degrees. Each
     value is the range [m] from that sensor's centre to the first obstacle along the beam, in
     [0, max_range]. A beam that hits nothing within ``max_range`` (or drops out, probability
-    the Lidar's ``dropout_prob``, 0 by default) reads exactly ``max_range``. Hits carry
+    the Lidar's ``dropout_prob``, 0 by default, or reads below its ``min_range``, 0 by default:
+    an invalid reading) reads exactly ``max_range``. Hits carry
     Gaussian noise of std the Lidar's ``range_noise_std`` (0.01 m by default;
     :func:`lidar_env.lidars_with_noise` sets both on every Lidar), clipped to [0, max_range).
     (*) With ``scan_frame="world"`` the beam angles are measured from world +x instead (the
@@ -152,7 +153,10 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     |             |                  | checked for clearance and rounded                        |
     |             |                  | (:mod:`lidar_env.routes.user_traces`)                    |
     | config      | None             | an :class:`EnvConfig` or a dict of its fields; each      |
-    |             |                  | Lidar's noise is set in ``config["lidars"]``             |
+    |             |                  | Lidar's noise is set in ``config["lidars"]``; key        |
+    |             |                  | "robot" starts from a preset ("paper_car",               |
+    |             |                  | "turtlebot3_burger", "turtlebot3_waffle_pi", "f1tenth";  |
+    |             |                  | :mod:`lidar_env.vehicle.presets`, docs/robots.md)        |
     | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
 
     ``reset(seed=..., options={"world": ..., "trace": ..., "start": (x, y, heading)})``

@@ -15,7 +15,7 @@ import numpy as np
 from lidar_env.core.errors import ConfigError
 from lidar_env.routes.trace_geometry import Trace
 from lidar_env.routes.traces import check_trace_name
-from lidar_env.routes.user_traces import check_waypoints, user_trace
+from lidar_env.routes.user_traces import CORNER_RADIUS, check_waypoints, user_trace
 from lidar_env.vehicle.car import Car
 from lidar_env.world.built_in import PAPER_TRACES, Scene, built_in_layout, make_scene
 from lidar_env.world.user_worlds import resolve_world, user_scene
@@ -129,7 +129,8 @@ class SceneCache:
             trace_name = check_trace_name(USER_WORLD_TRACE if trace_name is None else trace_name)
             if start is not None:
                 start = check_user_start(start, world, config.car_length, config.car_width)
-            return self.get_user(world, trace_name, start, config.trace_clearance)
+            return self.get_user(world, trace_name, start, config.trace_clearance,
+                                 config.body_scale)
         trace_name = check_trace_name(PAPER_TRACES[world] if trace_name is None else trace_name)
         if start is not None:
             start = check_start_pose(start, world, config.car_length, config.car_width)
@@ -149,7 +150,8 @@ class SceneCache:
         route_key = route if isinstance(route, Trace) else check_waypoints(route).tobytes()
 
         def fit() -> Scene:
-            trace = user_trace(route, world, config.trace_clearance)
+            trace = user_trace(route, world, config.trace_clearance,
+                               CORNER_RADIUS * config.body_scale)
             check_user_start(trace.start_pose, world, config.car_length, config.car_width)
             return Scene(world, trace)
 
@@ -171,10 +173,12 @@ class SceneCache:
         trace_name: str,
         start: tuple[float, float, float] | None,
         clearance: float,
+        scale: float = 1.0,
     ) -> Scene:
-        """The scene of a user :class:`~lidar_env.world.world.World`, cached per world object."""
+        """The scene of a user :class:`~lidar_env.world.world.World`, cached per world object;
+        ``scale`` is the car's body scale."""
         return self._cached((("world", id(world)), trace_name, start), world,
-                            lambda: user_scene(world, trace_name, start, clearance))
+                            lambda: user_scene(world, trace_name, start, clearance, scale))
 
     def get(
         self,

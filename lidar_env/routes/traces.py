@@ -180,6 +180,7 @@ def make_trace(
     length: float,
     world: Any = None,
     clearance: float = 0.77,
+    scale: float = 1.0,
 ) -> Trace:
     """Build seed ``seed`` from ``start_pose`` and fit it to ``world``.
 
@@ -190,6 +191,8 @@ def make_trace(
         world: anything with ``clearance(points (N, 2)) -> (N,)`` [m] and ``bounds``
             (xmin, ymin, xmax, ymax) [m]; ``None`` skips fitting.
         clearance: [m] free distance every waypoint must keep (car half-diagonal + margin).
+        scale: [-] the car's body scale (``EnvConfig.body_scale``): the seed's bends and the
+            shortest accepted length are scaled by it, so a small robot gets tighter turns.
 
     Returns the first trace, trying bend scales :data:`BEND_SCALES` within length scales
     :data:`LENGTH_SCALES`, whose waypoints all stay inside the bounds with ``clearance``.
@@ -200,11 +203,12 @@ def make_trace(
     if world is None:
         return build_trace(seed, start_pose, length)
     worst: tuple[float, NDArray[np.float64]] | None = None
+    shortest = MIN_TRACE_LENGTH * scale
     for length_scale in LENGTH_SCALES:
-        if length * length_scale < MIN_TRACE_LENGTH:
+        if length * length_scale < shortest:
             break
         for bend_scale in BEND_SCALES:
-            trace = build_trace(seed, start_pose, length * length_scale, bend_scale)
+            trace = build_trace(seed, start_pose, length * length_scale, bend_scale * scale)
             margin = free_margin(world, trace.waypoints) - clearance
             if np.all(margin >= 0):
                 return trace
@@ -218,7 +222,7 @@ def make_trace(
         f"fit in world {getattr(world, 'name', '?')!r}: expected every waypoint {clearance:.2f} m "
         f"clear of obstacles and bounds, but at full size the point ({where[0]:.2f}, "
         f"{where[1]:.2f}) is {free:.2f} m clear, and no shrunken version down to "
-        f"{max(MIN_TRACE_LENGTH, length * LENGTH_SCALES[-1]):.1f} m fits"
+        f"{max(shortest, length * LENGTH_SCALES[-1]):.1f} m fits"
     )
 
 

@@ -3,9 +3,12 @@
 :func:`waypoint_trace` checks the polyline through the waypoints for clearance like the trace
 seeds (every point of every segment at least ``clearance`` [m] from obstacles and the map's
 edge; the error names the first blocked segment and where), then rounds each corner with a
-circular arc (radius :data:`CORNER_RADIUS`, smaller where the legs are short) so that the car
-can drive it, and lays it down as a dense :class:`Trace` whose heading follows the path. World
-frame, metres and radians.
+circular arc (radius :data:`CORNER_RADIUS` x the car's body scale, ``EnvConfig.body_scale``;
+smaller where the legs are short) so that the car can drive it, and lays it down as a dense
+:class:`Trace` whose heading follows the path. A waypoint where the route turns by more than
+:data:`MAX_TURN` is refused: rounding it would cut the route far short of the waypoint (a
+U-turn would reverse onto itself); a U-turn is drawn as two or more turns. World frame, metres
+and radians.
 """
 
 from __future__ import annotations
@@ -20,8 +23,13 @@ from lidar_env.core.errors import ConfigError
 from lidar_env.routes.trace_geometry import WAYPOINT_SPACING, Trace
 from lidar_env.routes.traces import TraceFitError, free_margin
 
-#: [m] radius of the arc that rounds each corner (the scripted driver follows down to 0.67 m).
+#: [m] radius of the arc that rounds each corner at body scale 1 (the paper's car; the scripted
+#: driver follows it down to 0.67 m).
 CORNER_RADIUS = 1.0
+#: [rad] sharpest turn accepted at a waypoint: 150 degrees.
+MAX_TURN = math.radians(150.0)
+#: [m] largest waypoint coordinate accepted (a route beyond it lies in no map).
+MAX_COORDINATE = 1e6
 #: [m] points closer than this to the previous waypoint are dropped as repeats.
 REPEAT_TOLERANCE = 1e-6
 
@@ -34,10 +42,13 @@ def check_waypoints(value: Any) -> NDArray[np.float64]:
         raise ConfigError(f"trace: expected (N, 2) waypoints [m], got {value!r}") from error
     if points.ndim != 2 or points.shape[1] != 2:
         raise ConfigError(f"trace: expected (N, 2) waypoints [m], got shape {points.shape}")
-    if not np.all(np.isfinite(points)):
-        bad = int(np.argmin(np.all(np.isfinite(points), axis=1)))
+    if len(points) < 2:
+        raise ConfigError(f"trace: expected at least 2 distinct waypoints, got {len(points)}")
+    usable = np.all(np.isfinite(points) & (np.abs(points) <= MAX_COORDINATE), axis=1)
+    if not np.all(usable):
+        bad = int(np.argmin(usable))
         raise ConfigError(f"trace: waypoint {bad} is {points[bad].tolist()}: expected finite "
-                          "coordinates [m]")
+                          f"coordinates [m] within +-{MAX_COORDINATE:g}")
     keep = np.concatenate([[True], np.hypot(*np.diff(points, axis=0).T) > REPEAT_TOLERANCE])
     points = points[keep]
     if len(points) < 2:
@@ -67,6 +78,23 @@ def check_clearance(world: Any, points: NDArray[np.float64], clearance: float,
                 f"({points[k + 1][0]:.2f}, {points[k + 1][1]:.2f}) is blocked in world "
                 f"{getattr(world, 'name', '?')!r}: at ({where[0]:.2f}, {where[1]:.2f}) it is "
                 f"{free:.2f} m clear, expected >= {clearance:.2f} m (car half-diagonal + margin)")
+
+
+def check_turns(points: NDArray[np.float64]) -> None:
+    """A ``ConfigError`` naming the first waypoint where the route turns by more than
+    :data:`MAX_TURN`."""
+    steps = np.diff(points, axis=0)
+    headings = np.arctan2(steps[:, 1], steps[:, 0])
+    turns = np.abs((np.diff(headings) + math.pi) % (2 * math.pi) - math.pi)
+    sharp = np.flatnonzero(turns > MAX_TURN)
+    if len(sharp):
+        k = int(sharp[0]) + 1
+        raise ConfigError(
+            f"trace: the route turns by {math.degrees(turns[k - 1]):.1f} degrees at waypoint {k} "
+            f"({points[k][0]:g}, {points[k][1]:g}): expected at most "
+            f"{math.degrees(MAX_TURN):.0f} degrees (a sharper corner is cut far short of its "
+            "waypoint, a U-turn reverses onto itself); make a U-turn of two or more turns by "
+            "adding a waypoint beside it")
 
 
 def rounded_path(points: NDArray[np.float64], radius: float = CORNER_RADIUS) -> NDArray[np.float64]:
@@ -103,21 +131,26 @@ def _densify(points: NDArray[np.float64]) -> NDArray[np.float64]:
     return dense[keep]
 
 
-def waypoint_trace(value: Any, world: Any, clearance: float) -> Trace:
+def waypoint_trace(value: Any, world: Any, clearance: float,
+                   radius: float = CORNER_RADIUS) -> Trace:
     """A drivable :class:`Trace` through the user's waypoints ``value`` (N, 2) [m] in
-    ``world``, or a :class:`TraceFitError` naming the first blocked segment."""
+    ``world``, corners rounded with ``radius`` [m], or a :class:`TraceFitError` naming the
+    first blocked segment."""
     points = check_waypoints(value)
+    check_turns(points)
     check_clearance(world, points, clearance)
-    path = rounded_path(points)
+    path = rounded_path(points, radius)
     check_clearance(world, path, clearance, what="rounded piece")
     steps = np.diff(path, axis=0)
     headings = np.unwrap(np.arctan2(steps[:, 1], steps[:, 0]))
     return Trace("waypoints", path, np.concatenate([headings, headings[-1:]]))
 
 
-def user_trace(value: Any, world: Any, clearance: float) -> Trace:
-    """``value`` (waypoints or a :class:`Trace`) as a checked trace in ``world``."""
+def user_trace(value: Any, world: Any, clearance: float,
+               radius: float = CORNER_RADIUS) -> Trace:
+    """``value`` (waypoints or a :class:`Trace`) as a checked trace in ``world``; waypoint
+    corners are rounded with ``radius`` [m]."""
     if isinstance(value, Trace):
         check_clearance(world, value.waypoints, clearance, what="piece")
         return value
-    return waypoint_trace(value, world, clearance)
+    return waypoint_trace(value, world, clearance, radius)

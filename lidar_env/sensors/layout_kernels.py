@@ -35,6 +35,7 @@ from lidar_env.sensors.lidar_config import (
     FIRST,
     HOUSING,
     MAX_RANGE,
+    MIN_RANGE,
     NOISE,
     OFFSET,
     STEP,
@@ -168,8 +169,8 @@ def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
              out: NDArray[np.float32]) -> NDArray[np.float32]:
     """``out`` filled with the float32 readings of packed exact ranges: a hit gets
     ``noise_std * gaussians[j]`` (when drawn and the sensor is noisy) and is clipped to
-    ``[0, below_max]``; then a beam with ``uniforms[j] < dropout_prob`` (when drawn) reads
-    ``max_range``.
+    ``[0, below_max]``; a reading below the sensor's ``min_range`` (when > 0) is invalid and
+    reads ``max_range``, as does a beam with ``uniforms[j] < dropout_prob`` (when drawn).
 
     Each sensor's beams are taken as slices from 0 with the noise and dropout choices made
     once per sensor, so the loops over beams have no bounds to wrap and no branch but the
@@ -194,6 +195,11 @@ def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
                 if r < max_range:
                     r = min(max(r, 0.0), below_max)
                 sensor_out[j] = r
+        min_range = params[k, MIN_RANGE]
+        if min_range > 0.0:
+            for j in range(ranges.shape[0]):
+                if sensor_out[j] < min_range:
+                    sensor_out[j] = max_range
         if dropping:
             draws = uniforms[first:end]
             for j in range(ranges.shape[0]):

@@ -50,7 +50,7 @@ def _identical_sensors(angle_bytes: bytes, count: int, max_range: float, noise_s
                        dropout_prob: float) -> tuple[tuple, NDArray[np.float64]]:
     """The kernel's ``(beams, params)`` for ``count`` sensors with the same beams (cached)."""
     angles = np.frombuffer(angle_bytes, dtype=np.float64)
-    return pack_sensors([angles] * count, [(0.0, max_range, noise_std, dropout_prob, -1.0)]
+    return pack_sensors([angles] * count, [(0.0, max_range, noise_std, dropout_prob, -1.0, 0.0)]
                         * count)
 
 

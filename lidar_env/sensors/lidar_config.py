@@ -15,6 +15,11 @@ through the body); a beam meeting the outline farther out reads the distance to 
 default 0.1 m housing sees 210 degrees, its beams that graze along the two sides reading the
 car; a 360-degree one at body level in the car's middle reads only the car.
 
+Valid range: a reading below ``min_range`` is invalid on a real Lidar (ROS: "values < range_min
+should be discarded"); the env reports it as ``max_range``, the value of "no return", so a
+consumer that drops ``>= max_range`` drops it too, and a bag written from it carries
+``range_min`` for ROS tools. ``min_range`` 0 (the default) never triggers.
+
 For the compiled kernel (:mod:`lidar_env.sensors.lidar_layout`), :func:`beam_geometry` sorts a beam
 set and :func:`pack_sensors` packs K sensors' beams and parameters end to end.
 """
@@ -39,6 +44,11 @@ _TWO_PI = 2.0 * math.pi
 MAX_LIDARS = 8
 #: [rad] a ``fov`` this close to 2 pi is a full turn.
 _FULL_TURN_TOLERANCE = 1e-9
+#: Most beams one Lidar may cast per scan (real planar Lidars cast up to a few thousand).
+MAX_BEAMS = 100_000
+#: [m] least and largest ``max_range`` accepted: a float32 reading must resolve it, and no
+#: planar Lidar reaches a kilometre.
+MIN_MAX_RANGE, MAX_MAX_RANGE = 0.01, 1000.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +67,7 @@ class LidarConfig:
     dropout_prob: float = 0.0  # [-] probability that a beam reads max_range regardless
     self_occlusion: bool = False  # mounted at body level: the car's own outline blocks beams
     housing_radius: float = 0.1  # [m] the outline within this of the mount does not (window)
+    min_range: float = 0.0  # [m] a reading below it is invalid and reads max_range (no return)
     where: str = dataclasses.field(default="lidars[0]", compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -66,14 +77,18 @@ class LidarConfig:
             raise ConfigError(f"{w}.mount: expected 3 finite numbers (x [m], y [m], heading "
                               f"[rad]) in the car frame, got {self.mount!r}")
         n = self.n_beams
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 3:
-            raise ConfigError(f"{w}.n_beams: expected an integer >= 3, got {n!r}")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 3 <= n <= MAX_BEAMS:
+            raise ConfigError(f"{w}.n_beams: expected an integer in [3, {MAX_BEAMS}], "
+                              f"got {_short(n)}")
         if not _finite(self.fov) or not 0 < self.fov <= 2 * math.pi + _FULL_TURN_TOLERANCE:
             raise ConfigError(f"{w}.fov: expected a field of view in (0, 2 pi] [rad], "
                               f"got {self.fov!r}")
-        if not _finite(self.max_range) or self.max_range <= 0:
-            raise ConfigError(f"{w}.max_range: expected a positive finite number [m], "
-                              f"got {self.max_range!r}")
+        if not _finite(self.max_range) or not MIN_MAX_RANGE <= self.max_range <= MAX_MAX_RANGE:
+            raise ConfigError(f"{w}.max_range: expected a number in [{MIN_MAX_RANGE:g}, "
+                              f"{MAX_MAX_RANGE:g}] [m], got {_short(self.max_range)}")
+        if not _finite(self.min_range) or not 0 <= self.min_range < self.max_range:
+            raise ConfigError(f"{w}.min_range: expected a number in [0, max_range) = [0, "
+                              f"{float(self.max_range):g}) [m], got {_short(self.min_range)}")
         noise = self.range_noise_std
         if not _finite(noise) or noise < 0:
             raise ConfigError(f"{w}.range_noise_std: expected a finite number >= 0 [m], "
@@ -93,6 +108,7 @@ class LidarConfig:
         object.__setattr__(self, "n_beams", int(n))
         object.__setattr__(self, "fov", float(self.fov))
         object.__setattr__(self, "max_range", float(self.max_range))
+        object.__setattr__(self, "min_range", float(self.min_range))
         object.__setattr__(self, "range_noise_std", float(noise))
         object.__setattr__(self, "dropout_prob", float(drop))
 
@@ -173,8 +189,10 @@ def check_lidars(value: Any, reach: float) -> tuple[LidarConfig, ...]:
 #: Columns of the ``params`` rows of :func:`pack_sensors`: packed beam positions ``[first,
 #: end)``, uniform step [rad] (0: not uniform), angle of beam 0 from forward [rad], max range
 #: [m], the largest float32 below it, noise std [m], dropout probability, housing radius [m]
-#: (negative: no self-occlusion).
-FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING = range(9)
+#: (negative: no self-occlusion), min range [m].
+FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING, MIN_RANGE = range(10)
+#: Number of those columns.
+PARAM_COLUMNS = 10
 
 
 @njit(cache=True, fastmath=False)
@@ -216,7 +234,8 @@ def pack_sensors(
     """The kernel's ``(beams, params)`` for K sensors.
 
     ``sweep_angles[k]`` are sensor ``k``'s beam directions [rad] from its beam 0, ``rows[k]``
-    its ``(offset, max_range, noise_std, dropout_prob, housing_radius)`` (see :data:`OFFSET`).
+    its ``(offset, max_range, noise_std, dropout_prob, housing_radius, min_range)`` (see
+    :data:`OFFSET`).
     ``beams`` is ``(table (6, total): sorted wrapped angles, cos, sin, then three rows of
     work space (exact ranges, beam directions x and y); order (total,))``.
     """
@@ -229,20 +248,32 @@ def pack_sensors(
     order = np.concatenate([p[1] for p in parts]).astype(np.int64)
     params = np.array([
         (end - size, end, part[2], offset, max_range,
-         float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing)
-        for part, size, end, (offset, max_range, noise, drop, housing)
+         float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing,
+         min_range)
+        for part, size, end, (offset, max_range, noise, drop, housing, min_range)
         in zip(parts, sizes, ends, rows, strict=True)], dtype=np.float64)
     return (table, order), params
 
 
 def _finite(value: Any) -> bool:
-    return (not isinstance(value, bool) and isinstance(value, (int, float, np.number))
-            and math.isfinite(value))
+    """A real number (not a bool) that is finite as a float (an int past 1e308 is not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _short(value: Any) -> str:
+    """``repr(value)`` cut to 40 characters, so a huge number does not flood a message."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
 
 
 def _is_numeric(value: Any) -> bool:
     try:
         np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return False
     return True

@@ -40,7 +40,7 @@ from lidar_env.sensors.layout_kernels import (
     scan_layout_body_kernel,
     scan_layout_kernel,
 )
-from lidar_env.sensors.lidar_config import LidarConfig, pack_sensors
+from lidar_env.sensors.lidar_config import PARAM_COLUMNS, LidarConfig, pack_sensors
 from lidar_env.world.primitive_grid import STAMP, pack_scan_world, unpack_scan_world
 from lidar_env.world.world import World
 
@@ -101,7 +101,8 @@ def scan_packed_kernel(floats: NDArray[np.float64], ints: NDArray[np.int64],
     total, k = out.shape[0], sensor_poses.shape[0]
     order_at = tail[ORDER_AT]
     table = floats[tail[TABLE_AT]:tail[TABLE_AT] + 6 * total].reshape((6, total))
-    params = floats[tail[PARAMS_AT]:tail[PARAMS_AT] + 9 * k].reshape((k, 9))
+    params = floats[tail[PARAMS_AT]:tail[PARAMS_AT] + PARAM_COLUMNS * k].reshape(
+        (k, PARAM_COLUMNS))
     gaussians = floats[tail[GAUSSIANS_AT]:tail[GAUSSIANS_AT] + total * (tail[DRAWN] & 1)]
     uniforms = floats[tail[UNIFORMS_AT]:tail[UNIFORMS_AT] + total * (tail[DRAWN] >> 1)]
     exact = cast_packed(circles, segments, first_polygon_edge, grid, sensor_poses,
@@ -167,7 +168,7 @@ class LidarLayout:
         return pack_sensors(
             [lidar.sweep_angles for lidar in self.lidars],
             [(lidar.beam_offset, lidar.max_range, noise, drop,
-              lidar.housing_radius if lidar.self_occlusion else -1.0)
+              lidar.housing_radius if lidar.self_occlusion else -1.0, lidar.min_range)
              for lidar, noise, drop in zip(self.lidars, self.noise_std, self.dropout_prob,
                                            strict=True)])
 
@@ -184,8 +185,9 @@ class LidarLayout:
         of ``floats`` that :meth:`scan` fills with the draws and the car's pose and half sizes.
 
         ``floats``: the world's floats (:func:`lidar_env.world.primitive_grid.pack_scan_world`), the
-        beam table (6, n) and params (K, 9) of :func:`lidar_env.sensors.lidar_config.pack_sensors`,
-        the car (5 or none), the Gaussians and the uniforms (n each, or none). ``ints``: the
+        beam table (6, n) and params (K, ``PARAM_COLUMNS``) of
+        :func:`lidar_env.sensors.lidar_config.pack_sensors`, the car (5 or none), the Gaussians and
+        the uniforms (n each, or none). ``ints``: the
         world's ints, the segments' free sides (:func:`lidar_env.sensors.edge_facing.edge_facing`),
         the beam order (n) and the tail (see :data:`TABLE_AT`)."""
         if self._world_of[0] is not world:  # a tuple of arrays becomes a new World each time

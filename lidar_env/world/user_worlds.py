@@ -80,10 +80,13 @@ def user_scene(
     trace: str,
     start: tuple[float, float, float] | None,
     clearance: float,
+    scale: float = 1.0,
 ) -> Scene:
-    """Trace seed ``trace`` fitted into ``world`` from ``start`` or a seeded free start."""
+    """Trace seed ``trace`` fitted into ``world`` from ``start`` or a seeded free start; its
+    length and bends are scaled by the car's body ``scale`` (``EnvConfig.body_scale``)."""
+    length = USER_TRACE_LENGTH * scale
     if start is not None:
-        return Scene(world, make_trace(trace, start, USER_TRACE_LENGTH, world, clearance))
+        return Scene(world, make_trace(trace, start, length, world, clearance, scale))
     candidates = start_candidates(world, clearance)
     if len(candidates) == 0:
         raise TraceFitError(f"world {world.name!r} has no point {clearance:.2f} m clear of "
@@ -92,7 +95,7 @@ def user_scene(
     fitted, last = [], None
     for heading in START_HEADINGS:
         try:
-            fitted.append(make_trace(trace, (x, y, heading), USER_TRACE_LENGTH, world, clearance))
+            fitted.append(make_trace(trace, (x, y, heading), length, world, clearance, scale))
         except TraceFitError as error:
             last = error
     if not fitted:
