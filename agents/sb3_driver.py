@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.observation import TraceFollowingObservation
+from agents.policy_file import load_policy
 from lidar_env.core import ConfigError, ResetNeededError
 
 #: The policy shipped with the package (trained by ``python -m agents.imitate``: it imitates
@@ -25,11 +26,17 @@ class SB3Driver:
     observation and ``info`` are turned into the policy's input by the same
     :class:`~agents.observation.TraceFollowingObservation` logic used in training, with sector
     deltas when the model's input has room for them (models trained before them have not).
+
+    The model is read weights-only (:func:`agents.policy_file.load_policy`): nothing in the
+    file is unpickled, so a crafted zip cannot run code. ``trust_model=True`` loads it with
+    ``PPO.load`` instead (unpickling its settings), for a model with a custom policy class
+    that you made yourself.
     """
 
-    def __init__(self, model_path: str | Path = SHIPPED_MODEL, deterministic: bool = True) -> None:
+    def __init__(self, model_path: str | Path = SHIPPED_MODEL, deterministic: bool = True,
+                 trust_model: bool = False) -> None:
         try:
-            from stable_baselines3 import PPO
+            import stable_baselines3  # noqa: F401
         except ImportError as error:  # pragma: no cover - depends on the install
             raise gym.error.DependencyNotInstalled(
                 'the SB3 driver needs stable-baselines3 and torch: pip install torch==2.13.0 '
@@ -40,7 +47,7 @@ class SB3Driver:
             raise FileNotFoundError(
                 f"no trained model at {path}: train one with python -m agents.train"
             )
-        self.model = PPO.load(path, device="cpu")
+        self.model = load_policy(path, trust_model=bool(trust_model))
         self.deterministic = deterministic
         self.model_path = path
         self._view: TraceFollowingObservation | None = None
