@@ -32,7 +32,8 @@ class Recording:
         topics: the file's topic behind each key, in key order.
         frames: the sensor frame (``header.frame_id``) behind each key.
         truth: ``(N, 3)`` ground-truth base poses (x [m], y [m], heading [rad]) at ``times``
-            when the file holds them, else ``None``; never for estimators.
+            when the file holds them, else ``None``; a row of NaN where no truth pose lies near
+            the scan (truth at keyframes only); never for estimators.
         dropped: scans of ``lidar_1`` left out because another Lidar had no scan near them.
     """
 

@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import MAX_LIDARS, Sensor, SensorSetup, default_beam_angles
 from estimators.datasets.recording import Recording, check_monotonic, synchronise
+from estimators.datasets.truth import match_truth
 from lidar_env.core import LogFormatError
 from lidar_env.core.se2 import compose, wrap_angle
 
@@ -212,6 +213,7 @@ def load_bag(
     base_frame: str | None = None,
     truth_topic: str | None = None,
     sync_tolerance: float | None = None,
+    truth_tolerance: float | None = None,
 ) -> Recording:
     """Read the LaserScan topics of a ROS 1 or ROS 2 bag as one :class:`Recording`.
 
@@ -223,9 +225,12 @@ def load_bag(
             reads them from ``tf_static`` (a single Lidar without tf sits at the origin).
         base_frame: the frame the mounts are given in; ``None`` takes the root of the tf tree.
         truth_topic: an ``nav_msgs/Odometry`` or ``geometry_msgs/PoseStamped`` topic of true
-            base poses, matched to the scan times (see :attr:`Recording.truth`).
+            base poses, each matched to the nearest scan (see :attr:`Recording.truth`); it may
+            cover only some scans (keyframes, a motion-capture rate of its own).
         sync_tolerance: largest stamp gap [s] between the scans of one observation (see
             :func:`estimators.datasets.recording.synchronise`).
+        truth_tolerance: largest stamp gap [s] between a truth pose and its scan; ``None``
+            takes half the median scan period (:func:`estimators.datasets.truth.match_truth`).
     """
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.typesys import Stores, get_typestore
@@ -255,7 +260,8 @@ def load_bag(
         if len(chosen) != len(streams):
             raise LogFormatError(
                 f"mounts: expected {len(streams)} rows (one per topic), got {len(chosen)}")
-    return _assemble(source, streams, _setup(streams, chosen, source), truth, sync_tolerance)
+    return _assemble(source, streams, _setup(streams, chosen, source), truth, sync_tolerance,
+                     truth_tolerance)
 
 
 def _storage_errors() -> tuple[type[Exception], ...]:
@@ -268,6 +274,24 @@ def _storage_errors() -> tuple[type[Exception], ...]:
 
     return (Reader1Error, Reader2Error, sqlite3.DatabaseError, struct.error, EOFError,
             UnicodeDecodeError, IsADirectoryError, ValueError, KeyError, IndexError)
+
+
+def read_truth_topic(path: str | Path, topic: str) -> tuple[NDArray, NDArray]:
+    """``stamps`` (T,) [s] and planar ``poses`` (T, 3) of a bag's ``nav_msgs/Odometry`` or
+    ``geometry_msgs/PoseStamped`` topic, as they are (not matched to any scan)."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"ROS bag not found: expected a file or directory at {path}")
+    try:
+        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+            return _truth_stream(reader, topic, str(path))
+    except LogFormatError:
+        raise
+    except (AnyReaderError, *_storage_errors()) as error:
+        raise LogFormatError(f"{path}: not a readable ROS bag ({error!r})") from None
 
 
 def _truth_stream(reader: Any, topic: str, source: str) -> tuple[NDArray, NDArray]:
@@ -285,7 +309,8 @@ def _truth_stream(reader: Any, topic: str, source: str) -> tuple[NDArray, NDArra
 
 
 def _assemble(source: str, streams: list[ScanTopic], setup: SensorSetup,
-              truth: tuple[NDArray, NDArray] | None, tolerance: float | None) -> Recording:
+              truth: tuple[NDArray, NDArray] | None, tolerance: float | None,
+              truth_tolerance: float | None = None) -> Recording:
     kept, partners = synchronise([s.stamps for s in streams], tolerance)
     if len(kept) == 0:
         raise LogFormatError(f"{source}: no scan of {streams[0].topic} has a partner within the "
@@ -295,10 +320,10 @@ def _assemble(source: str, streams: list[ScanTopic], setup: SensorSetup,
     times = streams[0].stamps[kept]
     poses = None
     if truth is not None:
-        with_truth, rows = synchronise([times, truth[0]], tolerance)
-        if len(with_truth) != len(times):
-            raise LogFormatError(f"{source}: the truth topic has no pose near "
-                                 f"{len(times) - len(with_truth)} of {len(times)} scan times")
-        poses = truth[1][rows[1]]
+        matched = match_truth(times, truth[0], truth[1], truth_tolerance)
+        if matched.matched == 0:
+            raise LogFormatError(f"{source}: none of the truth topic's {matched.given} poses "
+                                 f"lies within {matched.tolerance:.3g} s of a scan")
+        poses = matched.on_scans(len(times))
     return Recording(source, setup, times, scans, tuple(s.topic for s in streams),
                      tuple(s.frame for s in streams), poses, len(streams[0].stamps) - len(kept))

@@ -101,8 +101,9 @@ class RealLog:
         if self.relations_path is not None:
             return load_relations(self.relations_path)
         recording = self.load()  # with a truth_topic, load_bag gives truth or raises
-        parts = [relations_from_trajectory(recording.times, recording.truth, window)
-                 for window in (None, TRUTH_WINDOW)]
+        known = np.all(np.isfinite(recording.truth), axis=1)  # scans with a truth pose
+        parts = [relations_from_trajectory(recording.times[known], recording.truth[known],
+                                           window) for window in (None, TRUTH_WINDOW)]
         return Relations(*(np.concatenate([getattr(p, key) for p in parts])
                            for key in ("t1", "t2", "poses")))
 
