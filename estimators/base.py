@@ -22,6 +22,9 @@ LIDAR_KEYS: tuple[str, ...] = tuple(f"lidar_{k}" for k in range(1, 9))
 
 #: Most Lidars a :class:`SensorSetup` (and the env) carries.
 MAX_LIDARS: int = len(LIDAR_KEYS)
+#: Relative gap of ``n * angle_increment`` to 2 pi below which a LaserScan's beams make one full
+#: turn (float32 keeps about 7 digits).
+FULL_TURN_TOLERANCE = 1e-6
 
 
 def default_beam_angles(n_beams: int) -> NDArray[np.float64]:
@@ -31,19 +34,26 @@ def default_beam_angles(n_beams: int) -> NDArray[np.float64]:
 
 @dataclass(frozen=True, eq=False)
 class Sensor:
-    """One planar Lidar as an estimator knows it.
+    """One planar Lidar as an estimator knows it, and as a ROS ``sensor_msgs/LaserScan``
+    describes it (:attr:`angle_min`, :attr:`angle_increment`, :attr:`range_min`,
+    :attr:`range_max`, :attr:`frame`).
 
     Attributes:
         mount: ``(3,)`` pose in the car frame (x [m] forward, y [m] left, heading [rad]).
         beam_angles: ``(n,)`` beam directions [rad] in the sensor frame, CCW from forward.
         max_range: [m]; readings ``>= max_range`` (or non-finite) are "no return".
         index: position in the setup (0 for ``lidar_1``), used to name it in errors.
+        range_min: [m] readings below it are invalid (the env and the bag reader report them
+            as ``max_range``), in ``[0, max_range)``.
+        frame: the sensor's frame name (``header.frame_id``); empty: ``lidar_<index + 1>``.
     """
 
     mount: NDArray[np.float64]
     beam_angles: NDArray[np.float64]
     max_range: float
     index: int = 0
+    range_min: float = 0.0
+    frame: str = ""
 
     def __post_init__(self) -> None:
         name = f"sensor {self.index} ({LIDAR_KEYS[self.index]})" if (
@@ -67,9 +77,55 @@ class Sensor:
                 not np.isfinite(max_range) or max_range <= 0):
             raise EstimatorInputError(
                 f"max_range of {name}: expected a positive finite number [m], got {max_range!r}")
+        low = self.range_min
+        if isinstance(low, bool) or not isinstance(low, (int, float, np.number)) or (
+                not np.isfinite(low) or not 0 <= low < max_range):
+            raise EstimatorInputError(
+                f"range_min of {name}: expected a number in [0, max_range) = [0, {max_range:g}) "
+                f"[m], got {low!r}")
+        if not isinstance(self.frame, str):
+            raise EstimatorInputError(f"frame of {name}: expected a frame name, got "
+                                      f"{type(self.frame).__name__}")
         object.__setattr__(self, "mount", mount)
         object.__setattr__(self, "beam_angles", angles)
         object.__setattr__(self, "max_range", float(max_range))
+        object.__setattr__(self, "range_min", float(low))
+        object.__setattr__(self, "frame", self.frame or f"lidar_{self.index + 1}")
+
+    @classmethod
+    def from_laser_scan(cls, mount: ArrayLike, angle_min: float, angle_increment: float,
+                        n_beams: int, range_min: float, range_max: float, frame: str = "",
+                        index: int = 0) -> Sensor:
+        """The sensor of a ``sensor_msgs/LaserScan`` header: beam ``i`` at ``angle_min + i
+        angle_increment`` [rad] (one full turn of beams gets the exact ``2 pi i / n`` steps),
+        ``range_min`` .. ``range_max`` [m], ``frame`` its ``frame_id``, at ``mount``."""
+        for what, value in (("angle_min", angle_min), ("angle_increment", angle_increment)):
+            if not np.isfinite(value):
+                raise EstimatorInputError(f"{what}: expected a finite angle [rad], got {value}")
+        if angle_increment == 0 or n_beams < 3:
+            raise EstimatorInputError(f"LaserScan: expected >= 3 beams a non-zero "
+                                      f"angle_increment apart, got {n_beams} beams of "
+                                      f"{angle_increment}")
+        if abs(n_beams * angle_increment - 2 * np.pi) <= FULL_TURN_TOLERANCE * 2 * np.pi:
+            angles = float(angle_min) + default_beam_angles(n_beams)
+        else:
+            angles = float(angle_min) + float(angle_increment) * np.arange(n_beams)
+        return cls(mount, angles, range_max, index, range_min, frame)
+
+    @property
+    def angle_min(self) -> float:
+        """[rad] direction of beam 0 (the LaserScan's ``angle_min``)."""
+        return float(self.beam_angles[0])
+
+    @property
+    def angle_increment(self) -> float:
+        """[rad] mean step between beams (the LaserScan's ``angle_increment``)."""
+        return float((self.beam_angles[-1] - self.beam_angles[0]) / (self.n_beams - 1))
+
+    @property
+    def range_max(self) -> float:
+        """[m] the LaserScan's ``range_max``: :attr:`max_range`."""
+        return self.max_range
 
     @property
     def n_beams(self) -> int:
@@ -119,8 +175,9 @@ class SensorSetup:
             if not isinstance(sensor, Sensor):
                 raise EstimatorInputError(
                     f"sensors[{k}]: expected a Sensor, got {type(sensor).__name__}")
-            checked.append(sensor if sensor.index == k else
-                           Sensor(sensor.mount, sensor.beam_angles, sensor.max_range, k))
+            checked.append(sensor if sensor.index == k else Sensor(
+                sensor.mount, sensor.beam_angles, sensor.max_range, k, sensor.range_min,
+                sensor.frame if sensor.frame != f"lidar_{sensor.index + 1}" else ""))
         object.__setattr__(self, "sensors", tuple(checked))
         object.__setattr__(self, "world_aligned", bool(world_aligned))
         object.__setattr__(self, "_mounts", np.stack([s.mount for s in checked]))
@@ -168,7 +225,7 @@ class SensorSetup:
     def from_env(cls, env: Any) -> SensorSetup:
         """Read the sensor geometry of a ``DualLidar-v0`` env (wrapped or not)."""
         config = env.unwrapped.config
-        sensors = [Sensor(lidar.mount, lidar.beam_angles, lidar.max_range, k)
+        sensors = [Sensor(lidar.mount, lidar.beam_angles, lidar.max_range, k, lidar.min_range)
                    for k, lidar in enumerate(config.lidars)]
         return cls(sensors=sensors, world_aligned=config.scan_frame == "world")
 

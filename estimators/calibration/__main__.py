@@ -36,9 +36,10 @@ from lidar_env.core import DualLidarError
 from lidar_env.core.se2 import compose, relative
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m estimators.calibration",
-                                     description="Estimate Lidars 2..K's mounts from a drive.")
+def _parser(prog: str = "python -m estimators.calibration") -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description="Estimate Lidars 2..K's mounts from "
+                                     "a drive.",
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--bag", help="ROS 1 .bag, ROS 2 .db3/.mcap file or bag directory")
     source.add_argument("--carmen", nargs="+", metavar="LOG",
@@ -102,8 +103,11 @@ def _recording(args: argparse.Namespace, guess: np.ndarray | None):
     return record(Scenario(args.world, args.trace, args.seed, config=json.loads(args.config)))
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def main(argv: Sequence[str] | None = None,
+         prog: str = "python -m estimators.calibration") -> int:
+    """Calibrate and print the mounts; ``prog`` names the command in usage lines (``duallidar
+    calibrate``). Returns the exit status (2 for bad input)."""
+    args = _parser(prog).parse_args(argv)
     try:
         guess = _guess(args.guess)
         recording = _recording(args, guess)

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
-from lidar_env.core import LogFormatError
+from lidar_env.core import ConfigError, LogFormatError
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,10 @@ def synchronise(
         ``partners`` (K, M) the index of the partner scan in each stream (row 0 = ``kept``).
     """
     first = stamps[0]
+    if tolerance is not None and (isinstance(tolerance, bool) or not isinstance(
+            tolerance, (int, float, np.number)) or np.isnan(tolerance) or tolerance < 0):
+        raise ConfigError(f"sync_tolerance: expected a number of seconds >= 0 or None, got "
+                          f"{tolerance!r:.60}")
     if tolerance is None:
         tolerance = 0.5 * float(np.median(np.diff(first))) if len(first) > 1 else np.inf
     partners = [np.arange(len(first))]

@@ -80,6 +80,12 @@ def beam_angles(angle_min: float, angle_increment: float, n: int) -> NDArray[np.
 def _decode_scan(message: Any, source: str, topic: str, index: int) -> tuple[Any, ...]:
     ranges = np.asarray(message.ranges, dtype=np.float64)
     n = len(ranges)
+    where = f"{source}, topic {topic}, message {index}"
+    angles = {key: float(getattr(message, key))
+              for key in ("angle_min", "angle_max", "angle_increment")}
+    bad = [f"{key} {value}" for key, value in angles.items() if not np.isfinite(value)]
+    if bad:
+        raise LogFormatError(f"{where}: expected finite angles [rad], got {', '.join(bad)}")
     expected = round((message.angle_max - message.angle_min) / message.angle_increment) + 1 \
         if message.angle_increment != 0 else -1
     if n < 3 or abs(expected - n) > 1:
@@ -93,6 +99,9 @@ def _decode_scan(message: Any, source: str, topic: str, index: int) -> tuple[Any
             f"{source}, topic {topic}, message {index}: range_max: expected a positive finite "
             f"number [m], got {high}"
         )
+    if not (np.isfinite(low) and 0 <= low < high):
+        raise LogFormatError(f"{where}: range_min: expected a number in [0, range_max) = [0, "
+                             f"{high:g}) [m], got {low}")
     valid = np.isfinite(ranges) & (ranges >= low) & (ranges <= high)
     geometry = (float(message.angle_min), float(message.angle_increment), n, low, high)
     return np.where(valid, ranges, np.inf), geometry
@@ -105,6 +114,11 @@ def _scan_topic(reader: Any, connections: list[Any], source: str, topic: str) ->
         ranges, this = _decode_scan(message, source, topic, index)
         if geometry is None:
             geometry, frame = this, str(message.header.frame_id)
+        elif str(message.header.frame_id) != frame:
+            raise LogFormatError(
+                f"{source}, topic {topic}, message {index}: header.frame_id "
+                f"{str(message.header.frame_id)!r:.60} differs from the topic's first, "
+                f"{frame!r:.60}; expected one laser frame per topic")
         elif this != geometry:
             raise LogFormatError(
                 f"{source}, topic {topic}, message {index}: beam geometry changes within the "
@@ -201,8 +215,10 @@ def _setup(streams: list[ScanTopic], mounts: NDArray[np.float64], source: str) -
         raise LogFormatError(
             f"{source}: {len(streams)} LaserScan topics; a SensorSetup carries at most "
             f"{MAX_LIDARS} Lidars: pass topics= to choose")
-    return SensorSetup(sensors=[Sensor(mount, s.angles, s.range_max)
-                                for mount, s in zip(mounts, streams, strict=True)])
+    return SensorSetup(sensors=[Sensor(mount, s.angles, s.range_max, k, s.range_min,
+                                       s.frame.lstrip("/"))
+                                for k, (mount, s) in enumerate(zip(mounts, streams,
+                                                                   strict=True))])
 
 
 def load_bag(
@@ -248,6 +264,10 @@ def load_bag(
             truth = _truth_stream(reader, truth_topic, source) if truth_topic else None
     except LogFormatError:
         raise
+    except FileNotFoundError as error:  # a ROS 2 bag directory without its metadata.yaml
+        raise LogFormatError(f"{source}: not a readable ROS bag: expected a .bag, .db3 or .mcap "
+                             f"file or a ROS 2 bag directory with its metadata.yaml ({error})"
+                             ) from None
     except (AnyReaderError, *_storage_errors()) as error:
         raise LogFormatError(f"{source}: not a readable ROS bag ({error!r})") from None
     if mounts is None:
@@ -256,10 +276,16 @@ def load_bag(
         else:
             chosen = _mounts(streams, tree, base_frame, source)
     else:
-        chosen = np.asarray(mounts, dtype=np.float64).reshape(-1, 3)
-        if len(chosen) != len(streams):
+        try:
+            chosen = np.asarray(mounts, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            chosen = np.empty(0)
+        if chosen.size == 3 * len(streams):
+            chosen = chosen.reshape(-1, 3)
+        if chosen.shape != (len(streams), 3) or not np.all(np.isfinite(chosen)):
             raise LogFormatError(
-                f"mounts: expected {len(streams)} rows (one per topic), got {len(chosen)}")
+                f"mounts: expected ({len(streams)}, 3) finite poses (x [m], y [m], heading "
+                f"[rad]), one per topic, got {str(mounts)[:60]}")
     return _assemble(source, streams, _setup(streams, chosen, source), truth, sync_tolerance,
                      truth_tolerance)
 

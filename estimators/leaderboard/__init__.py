@@ -1,8 +1,9 @@
 """The leaderboard pipeline, the top layer: recording scenarios and replaying them through
 estimators (``recording``), the SQLite experiment database (``database``), the scenario runner
-over any executor (``runner``) and the command line (``cli``: ``duallidar-leaderboard``,
-``python -m estimators.leaderboard``). It may import every other part of ``estimators``;
-nothing imports it.
+over any executor (``runner``) and the command line (``cli``: ``duallidar leaderboard``,
+``duallidar-leaderboard``, ``python -m estimators.leaderboard``), and ``duallidar run``: any
+estimator over one recording, scored on its truth (``run_cli``, ``run_sources``, ``single_run``,
+``run_outputs``). It may import every other part of ``estimators``; nothing imports it.
 """
 
 from estimators.leaderboard.cli import main

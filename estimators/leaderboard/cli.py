@@ -1,6 +1,7 @@
 """The leaderboard: every registered estimator on the paper's scenarios, Table I and Fig. 8.
 
-``duallidar-leaderboard`` (or ``python -m estimators.leaderboard``) records each scenario of
+``duallidar leaderboard`` (also ``duallidar-leaderboard`` or ``python -m estimators.leaderboard``)
+records each scenario of
 the matrix once into the experiment database (:mod:`estimators.leaderboard.database`), replays
 it through every estimator (:mod:`estimators.leaderboard.runner`), scores it
 (:mod:`estimators.evaluation.metrics`) and writes
@@ -56,6 +57,7 @@ from typing import Any
 
 from agents.driver import DRIVERS
 from estimators.leaderboard.database import ExperimentDatabase
+from estimators.leaderboard.file_names import safe_file_name
 from estimators.leaderboard.headline import annotate_rows, board_markdown
 from estimators.leaderboard.matrix import (
     DEFAULT_NOISE,
@@ -105,9 +107,9 @@ class OutputDirectoryError(OSError):
     """The output directory cannot be created or written."""
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(prog: str = "duallidar leaderboard") -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="duallidar-leaderboard",
+        prog=prog,
         description="Rank every registered estimator on recorded DualLidar-v0 scenarios, "
                     "reproduce the paper's Table I and draw its Fig. 8.",
     )
@@ -180,10 +182,11 @@ def _executor(args: argparse.Namespace) -> Any:
 def export_tum_files(db: ExperimentDatabase, records: dict[tuple[Scenario, str], TraceRecord],
                      directory: Path) -> Path:
     """``<scenario>_<estimator>.tum`` per trace and ``<scenario>_truth.tum`` per simulated
-    scenario in ``directory``; returns it."""
+    scenario in ``directory``, named by :func:`safe_file_name` (no ``?``, ``&``, ``=`` or
+    ``/``); returns it."""
     directory.mkdir(exist_ok=True)
     for (scenario, estimator), record in records.items():
-        stem = scenario.label.replace("/", "_")
+        stem = safe_file_name(scenario.label)
         db.export_tum(record.trace_id, directory / f"{stem}_{estimator}.tum")
         if scenario.kind == "sim" and not (directory / f"{stem}_truth.tum").exists():
             db.export_truth_tum(scenario, directory / f"{stem}_truth.tum")
@@ -196,12 +199,13 @@ def _progress(total: int, label: str, enabled: bool) -> Any:
     return tqdm(total=total, desc=label, unit="scenario", disable=not enabled, leave=False)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the leaderboard; returns the exit status (2 for bad input)."""
+def main(argv: Sequence[str] | None = None, prog: str = "duallidar leaderboard") -> int:
+    """Run the leaderboard; returns the exit status (2 for bad input). ``prog`` names the
+    command in usage lines (``duallidar-leaderboard`` is the same command)."""
     from lidar_env.routes import TRACE_NAMES
     from lidar_env.world import WORLD_NAMES
 
-    parser = _parser()
+    parser = _parser(prog)
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # the report's command line
     _check_names(parser, "world", args.worlds or [], WORLD_NAMES)
@@ -242,6 +246,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(error if isinstance(error, RunCancelled) else "interrupted; re-run to resume",
               file=sys.stderr)
         return 130
+    except DatabaseError as error:  # damaged, edited, locked or full: one line, no traceback
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:  # an output file (disk full, quota, removed directory)
+        print(f"error: could not write {error.filename or args.out} ({error.strerror or error}); "
+              "everything stored in the database is intact: free space or choose another "
+              "--out and re-run (stored work is not redone)", file=sys.stderr)
+        return 2
 
 
 def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: list[Scenario],
