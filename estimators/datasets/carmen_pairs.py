@@ -42,7 +42,8 @@ def carmen_recording(paths: Sequence[str | Path], clock: str = "ipc",
     Args:
         paths: one or two CARMEN logs (plain, ``.gz``, ``.bz2``).
         clock: ``"ipc"`` or ``"logger"``: the stamps the scans are paired and timed on.
-        sync_tolerance: largest time gap [s] in a pair; ``None``: half Lidar 1's median period.
+        sync_tolerance: largest time gap [s] in a pair, >= 0 (NaN is a ``ConfigError``);
+            ``None``: half Lidar 1's median period.
 
     Raises:
         LogFormatError: a log without the laser it is read for, stamps that do not increase, or

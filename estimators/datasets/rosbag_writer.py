@@ -5,9 +5,11 @@ Layout of the bag (ROS 2 ``sqlite3`` or ``mcap``, or ROS 1 ``.bag``):
 ======================  ==========================  ==========================================
 topic                   type                        content
 ======================  ==========================  ==========================================
-``/lidar_k/scan``       ``sensor_msgs/LaserScan``   one per Lidar and step, frame ``lidar_k``;
-                                                    no return is ``+inf`` (REP 117)
-``/tf_static``          ``tf2_msgs/TFMessage``      ``base_link -> lidar_k`` mounts, once
+``/lidar_k/scan``       ``sensor_msgs/LaserScan``   one per Lidar and step, in the sensor's
+                                                    ``frame`` (``lidar_k`` unless named), with
+                                                    its ``range_min`` and ``range_max``; no
+                                                    return is ``+inf`` (REP 117)
+``/tf_static``          ``tf2_msgs/TFMessage``      ``base_link -> frame`` mounts, once
 ``/tf``                 ``tf2_msgs/TFMessage``      ``map -> base_link`` true pose per step
 ``/ground_truth``       ``nav_msgs/Odometry``       the same true pose, frame ``map``
 ======================  ==========================  ==========================================
@@ -92,7 +94,7 @@ def laser_scan(types: Mapping[str, Any], stamped: Any, ranges: NDArray, geometry
     values = np.where(values >= sensor.max_range, np.float32(np.inf), values)
     return types["sensor_msgs/msg/LaserScan"](
         header=stamped, angle_min=angle_min, angle_max=angle_min + step * (len(values) - 1),
-        angle_increment=step, time_increment=0.0, scan_time=0.0, range_min=0.0,
+        angle_increment=step, time_increment=0.0, scan_time=0.0, range_min=sensor.range_min,
         range_max=sensor.max_range, ranges=values, intensities=np.zeros(0, dtype=np.float32))
 
 
@@ -193,12 +195,12 @@ def write_bag(
     with BagSink(path, storage) as sink:
         types = sink.typestore.types
         ros1 = sink.ros1
-        mounts = [_transform(types, header(types, times[0], BASE_FRAME, 0, ros1), key, mount)
-                  for key, mount in zip(setup.keys, setup.mounts, strict=True)]
+        mounts = [_transform(types, header(types, times[0], BASE_FRAME, 0, ros1), sensor.frame,
+                             sensor.mount) for sensor in setup.sensors]
         sink.write("/tf_static", types["tf2_msgs/msg/TFMessage"](transforms=mounts), times[0])
         for step, t in enumerate(times):
             for key, sensor, beams in zip(setup.keys, setup.sensors, geometry, strict=True):
-                stamp = header(types, t, key, step, ros1)
+                stamp = header(types, t, sensor.frame, step, ros1)
                 sink.write(scan_topic(key),
                            laser_scan(types, stamp, arrays[key][step], beams, sensor), t)
             if poses is not None:
