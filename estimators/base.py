@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.health import Health, Observations, ScanScreen, moved
 from lidar_env.core import EstimatorInputError, ResetNeededError, check_time
 
 #: Observation keys ``lidar_1 .. lidar_8``; sensor ``k`` of a setup reads ``LIDAR_KEYS[k]``.
@@ -281,6 +282,16 @@ class Estimator(ABC):
     ``trajectory[k]`` is the estimated car pose (x [m], y [m], heading [rad]) at the k-th
     observation; the first observation gets ``initial_pose``. Subclasses implement
     :meth:`_start` (first scans) and :meth:`_step` (every later scans, returning the new pose).
+
+    Every later observation passes a screen first (:mod:`estimators.health`): a sensor whose
+    scan repeats its last one exactly (frozen) reads "no return", and an observation left with
+    too few returns on the sensors the estimator reads (:meth:`_used_sensors`) is skipped:
+    :meth:`_step` never sees it, and its pose is the constant-velocity prediction from the
+    last used ones (the last used increment per observation, scaled by the time step over the
+    median one, at most twice). ``health`` counts what the screen met (skipped and frozen
+    scans, clock jumps, blind stretches). Inside :meth:`_step`, ``pose``, ``_poses`` and
+    ``_times`` are those of the observations the estimator used, and ``skipped_before`` the
+    number skipped since the last of them.
     """
 
     #: Lidars the estimator needs; a pipeline skips it (no failure) on a setup with fewer.
@@ -288,6 +299,7 @@ class Estimator(ABC):
     setup: SensorSetup | None = field(default=None, init=False, repr=False)
     _poses: list[NDArray[np.float64]] = field(default_factory=list, init=False, repr=False)
     _times: list[float] = field(default_factory=list, init=False, repr=False)
+    health: Health = field(default_factory=Health, init=False, repr=False)
 
     def reset(
         self, setup: SensorSetup | ArrayLike, initial_pose: ArrayLike = (0.0, 0.0, 0.0)
@@ -304,37 +316,65 @@ class Estimator(ABC):
         self._poses = []
         self._times = []
         self._initial_pose = pose.copy()
+        self._observations = Observations()
+        self._screen = ScanScreen([sensor.max_range for sensor in setup.sensors],
+                                  self._used_sensors(setup))
+        self.health = self._screen.health
+        self.skipped_before = 0
+        self._stepping = False
         self._reset_state()
 
     def update(self, observation: Mapping[str, Any], t: float) -> NDArray[np.float64]:
         """Feed the scans taken at time ``t`` [s]; return the car pose estimate (3,)."""
         if self.setup is None:
             raise ResetNeededError("call reset(setup, initial_pose) before update()")
-        t = check_time(t, self._times[-1] if self._times else None)
+        last = self._observations.last_time
+        t = check_time(t, last)
         scans = self.setup.check_observation(observation)
-        if not self._poses:
-            self._start(scans, t)
-            pose = self._initial_pose.copy()
-        else:
-            pose = np.asarray(self._step(scans, t), dtype=np.float64)
+        index = len(self._observations)
+        if last is not None:
+            self._screen.watch_clock(index, t - last)
+        screened, usable = self._screen.screen([scans[key] for key in self.setup.keys],
+                                               moved(self._poses))
+        if self._poses and not usable:
+            self._screen.skip(index)
+            return self._observations.skip(self._poses, t)
+        scans = dict(zip(self.setup.keys, screened, strict=True))
+        self.skipped_before = self._screen.used_one()
+        self._stepping = True
+        try:
+            if not self._poses:
+                self._start(scans, t)
+                pose = self._initial_pose.copy()
+            else:
+                pose = np.asarray(self._step(scans, t), dtype=np.float64)
+        finally:
+            self._stepping = False
         self._poses.append(pose)
         self._times.append(float(t))
+        self._observations.use(len(self._poses) - 1, t)
         return pose.copy()
+
+    def _used_sensors(self, setup: SensorSetup) -> list[int]:
+        """Indices of the sensors this estimator reads (all; one for a single-Lidar method)."""
+        return list(range(setup.n_lidars))
 
     @property
     def trajectory(self) -> NDArray[np.float64]:
         """``(N, 3)`` estimated car poses, one per observation so far."""
-        return np.array(self._poses, dtype=np.float64).reshape(-1, 3)
+        return self._observations.all_poses(np.array(self._poses, dtype=np.float64).reshape(-1, 3))
 
     @property
     def times(self) -> NDArray[np.float64]:
         """``(N,)`` observation times [s]."""
-        return np.array(self._times, dtype=np.float64)
+        return self._observations.times
 
     @property
     def pose(self) -> NDArray[np.float64]:
-        """The latest pose estimate (3,)."""
-        return self._poses[-1].copy() if self._poses else self._initial_pose.copy()
+        """The latest pose estimate (3,) (inside :meth:`_step`: the last used one's)."""
+        if not self._poses:
+            return self._initial_pose.copy()
+        return self._poses[-1].copy() if self._stepping else self._observations.latest(self._poses)
 
     def _reset_state(self) -> None:  # noqa: B027 - optional hook, empty by design
         """Clear per-trajectory state (override when there is some)."""

@@ -116,7 +116,7 @@ def test_every_module_is_small_and_documented(module: str) -> None:
 
 #: lidar_env's subpackages from the bottom up: each may import only those before it. The top
 #: modules (``config``, ``scenes``, ``env_views``, ``env``) may import every subpackage, and
-#: ``vector`` (the batched env) the top modules too.
+#: ``vector`` (the batched env) and ``faults`` (wrappers over the env) the top modules too.
 ENV_LAYERS = ("core", "routes", "world", "sensors", "vehicle", "movers", "rendering")
 ENV_TOP = {"lidar_env.config", "lidar_env.scenes", "lidar_env.env_views", "lidar_env.env",
            "lidar_env.moved_modules"}
@@ -130,7 +130,7 @@ def _env_layer(module: str) -> int | None:
         return ENV_LAYERS.index(parts[1])
     if module in ENV_TOP:
         return len(ENV_LAYERS)
-    return len(ENV_LAYERS) + 1 if parts[1] == "vector" else None
+    return len(ENV_LAYERS) + 1 if parts[1] in ("vector", "faults") else None
 
 
 def test_env_subpackages_import_only_downwards() -> None:
@@ -139,7 +139,7 @@ def test_env_subpackages_import_only_downwards() -> None:
               for target in targets
               if (other := _env_layer(target)) is not None and other > layer]
     assert not upward, ("imports against the layer order " + " < ".join(ENV_LAYERS)
-                        + " < top modules < vector:\n" + "\n".join(upward))
+                        + " < top modules < vector, faults:\n" + "\n".join(upward))
 
 
 def test_the_base_layer_imports_nothing_of_the_project() -> None:
@@ -152,7 +152,8 @@ def test_the_base_layer_imports_nothing_of_the_project() -> None:
 def _faces() -> set[str]:
     """What estimators and agents may import from lidar_env: the package, its subpackages'
     ``__init__`` (their faces), the top modules and every module of the base layer."""
-    faces = {"lidar_env", "lidar_env.config", "lidar_env.env", "lidar_env.vector"}
+    faces = {"lidar_env", "lidar_env.config", "lidar_env.env", "lidar_env.vector",
+             "lidar_env.faults"}
     faces.update(f"lidar_env.{layer}" for layer in ENV_LAYERS)
     faces.update(name for name in MODULES if name.startswith("lidar_env.core."))
     return faces

@@ -296,7 +296,11 @@ class ICPEstimator(Estimator):
         if len(current) < MIN_MATCH_RETURNS:
             return compose(self.pose, increment)
         if self._previous is not None and len(self._previous) >= MIN_MATCH_RETURNS:
-            increment = match_scans(self._previous, current, self._increment, self.params).pose
-            self._increment = increment
+            # the guess and the kept increment per observation: skipped ones count
+            # (Estimator.update)
+            observations = 1 + self.skipped_before
+            increment = match_scans(self._previous, current, self._increment * observations,
+                                    self.params).pose
+            self._increment = increment / observations
         self._previous = current
         return compose(self.pose, increment)

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator, SensorSetup
+from estimators.health import evident_time_step
 from estimators.matching.curve_refinement import (
     PRIOR_INFORMATION,
     PRIOR_SIGMA,
@@ -345,6 +346,10 @@ class RotationPhaseCorrelation(Estimator):
     @property
     def min_lidars(self) -> int:  # type: ignore[override]  # the offset Lidar needs both
         return self.lidar + 1
+
+    def _used_sensors(self, setup: SensorSetup) -> list[int]:
+        valid = not isinstance(self.lidar, bool) and self.lidar in range(setup.n_lidars)
+        return [self.lidar] if valid else list(range(setup.n_lidars))
     _last_dt: float = field(default=0.0, init=False, repr=False)
 
     def _reset_state(self) -> None:
@@ -384,6 +389,10 @@ class RotationPhaseCorrelation(Estimator):
             prior = constant_velocity(self._last_motion, self._last_dt, dt)
         match = self._matcher.match(self._previous, current, prior)
         self._previous = current
-        self._last_motion, self._last_dt = match.pose, dt
+        speed = (0.0 if self._last_motion is None or not self._last_dt > 0
+                 else float(np.hypot(*self._last_motion[:2])) / self._last_dt)
+        self._last_motion = match.pose
+        self._last_dt = evident_time_step(float(np.hypot(*match.pose[:2])), speed, dt,
+                                          self._last_dt)
         mount = self.setup.mounts[self.lidar]
         return compose(self.pose, motion_from_sensor_match(mount, match.pose))

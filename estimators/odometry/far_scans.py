@@ -115,7 +115,14 @@ class GlobalSearch:
         """Exact best pose of ``points`` (M, 2, car frame) within ``window`` of ``guess``."""
         thinned = voxel_downsample(points, SEARCH_VOXEL)
         thinned = thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
-        reach = window.linear + float(np.hypot(thinned[:, 0], thinned[:, 1]).max()) + 0.5
+        scan_reach = float(np.hypot(thinned[:, 0], thinned[:, 1]).max())
+        # no shift beyond where the scan still touches the map counts: a clock gap of minutes
+        # must not size the search (memory and time) by max_speed x the gap
+        corners = np.array([self.map_points.min(axis=0), self.map_points.max(axis=0)])
+        farthest = float(np.hypot(np.abs(corners[:, 0] - guess[0]).max(),
+                                  np.abs(corners[:, 1] - guess[1]).max()))
+        window = SearchWindow(min(window.linear, farthest + scan_reach), window.angular)
+        reach = window.linear + scan_reach + 0.5
         low = np.maximum(self.map_points.min(axis=0), guess[:2] - reach) - 0.5
         high = np.minimum(self.map_points.max(axis=0), guess[:2] + reach) + 0.5
         shape = tuple(np.maximum(np.ceil((high - low) / self.resolution).astype(int), 1))

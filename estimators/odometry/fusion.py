@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
+from estimators.health import evident_time_step
 from estimators.matching.curve_refinement import PRIOR_INFORMATION, PRIOR_SIGMA
 from estimators.matching.rotation_pc import (
     PreparedScan,
@@ -289,7 +290,11 @@ class FusionEstimator(Estimator):
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
             pose = self._insert_keyframe(current, pose, edges)
-        self._update_velocity(list(compose_floats(inverse_floats(previous), pose.tolist())), dt)
+        motion = list(compose_floats(inverse_floats(previous), pose.tolist()))
+        speed = math.hypot(self._velocity[0], self._velocity[1])
+        typical_step = self._clock.typical_step if self._clock.steps else 0.0
+        self._update_velocity(motion, evident_time_step(math.hypot(motion[0], motion[1]), speed,
+                                                        dt, typical_step))
         return pose
 
     def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:

@@ -283,6 +283,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                        t: float) -> NDArray[np.float64]:
         interval = t - self._last_time
         dt = self._time_step(t)
+        if not self.use_timestamps:  # scans skipped as unusable count (Estimator.update)
+            dt += self.skipped_before
         predicted = constant_velocity_increment(self._velocity, dt)
         guess = compose(self.pose, predicted)
         points = seen = self._points(scans)

@@ -25,7 +25,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.base import Estimator
+from estimators.base import Estimator, SensorSetup
 from estimators.paper.phase_correlation import ImageSpectrum, image_spectrum, phase_correlate
 from estimators.paper.pose_graph_correlation import pose_graph_correlation
 from estimators.paper.scan_image import (
@@ -165,6 +165,9 @@ class PhaseCorrelationOdometry(_ImageCorrelationEstimator):
 
     def _used_lidars(self) -> tuple[int, ...]:
         return (self.lidar,)
+
+    def _used_sensors(self, setup: SensorSetup) -> list[int]:
+        return [self.lidar] if self.lidar < setup.n_lidars else list(range(setup.n_lidars))
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -354,12 +354,12 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     @property
     def trajectory(self) -> NDArray[np.float64]:
         """``(N, 3)`` smoothed car poses, one per observation: every scan re-anchored on its
-        keyframes' optimised poses (:meth:`anchored_trajectory`)."""
+        keyframes' optimised poses (:meth:`anchored_trajectory`), a skipped one predicted."""
         if not self._scan_keyframe:
             return np.zeros((0, 3))
         if self._dirty:
             self.optimize()
-        return self.anchored_trajectory(self.graph.poses)
+        return self._observations.all_poses(self.anchored_trajectory(self.graph.poses))
 
     @property
     def keyframe_scans(self) -> NDArray[np.int64]:

@@ -30,7 +30,7 @@ def test_trajectory_has_one_row_per_observation_starting_at_initial_pose() -> No
     est = ConstantStep()
     est.reset(setup(), initial_pose=(1.0, 2.0, 0.5))
     for k in range(4):
-        est.update(observation(), t=0.1 * k)
+        est.update(observation(1.0 + k), t=0.1 * k)
     np.testing.assert_allclose(est.trajectory[:, 0], [1, 2, 3, 4])
     np.testing.assert_allclose(est.times, [0.0, 0.1, 0.2, 0.3])
     est.reset(setup())
