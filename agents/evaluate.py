@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +37,10 @@ import numpy as np
 
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.driver import DRIVERS, Driver, make_driver
+from estimators.arguments import MAX_SEED, non_negative_int, positive_int, seed
 from lidar_env.movers import MOVER_MODELS
+from lidar_env.routes import TRACE_NAMES
+from lidar_env.world import WORLD_NAMES
 
 BUILT_IN_WORLDS = ("open_cylinders", "hallway", "closed_to_open")
 TRACE_SEEDS = ("straight", "right_turn", "zigzag")
@@ -122,14 +126,15 @@ def evaluate(
 
 
 def build_driver(name: str, pose_source: str = "true", sb3_model: Path | None = None,
-                 pose_params: Mapping[str, Any] | None = None) -> Driver:
+                 pose_params: Mapping[str, Any] | None = None,
+                 trust_model: bool = False) -> Driver:
     """``make_driver(name, pose_source, pose_params)``, or for ``sb3`` with ``sb3_model`` that
-    model."""
+    model (unpickled only with ``trust_model``: :class:`agents.sb3_driver.SB3Driver`)."""
     if name != "sb3" or sb3_model is None:
         return make_driver(name, pose_source=pose_source, pose_params=pose_params)
     from agents.sb3_driver import SB3Driver
 
-    driver: Driver = SB3Driver(sb3_model)
+    driver: Driver = SB3Driver(sb3_model, trust_model=trust_model)
     if pose_source == "true":
         return driver
     from agents.pose_source import EstimatedPoseDriver, check_pose_source
@@ -150,27 +155,66 @@ def pose_params_by_source(text: str) -> dict[str, dict[str, Any]]:
     return value
 
 
-def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--drivers", nargs="+", default=list(DRIVERS), choices=list(DRIVERS))
-    parser.add_argument("--pose-sources", nargs="+", default=["true"],
-                        help="true (the env's pose) and/or estimator names to steer by")
-    parser.add_argument("--worlds", nargs="+", default=[*BUILT_IN_WORLDS, "random"])
-    parser.add_argument("--traces", nargs="+", default=list(TRACE_SEEDS))
+def build_parser(prog: str = "python -m agents.evaluate") -> argparse.ArgumentParser:
+    """The command line's parser (``duallidar drive`` is the same command)."""
+    from estimators.registry import names
+
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--drivers", nargs="+", default=list(DRIVERS), choices=list(DRIVERS),
+                        metavar="DRIVER", help=f"drivers to score, of: {', '.join(DRIVERS)}")
+    parser.add_argument("--pose-sources", nargs="+", default=["true"], metavar="SOURCE",
+                        help="where the drivers take the car's pose from: true (the env's "
+                             f"pose) and/or estimators, of: {', '.join(names())}")
+    parser.add_argument("--worlds", nargs="+", default=[*BUILT_IN_WORLDS, "random"],
+                        metavar="WORLD", help=f"worlds, of: {', '.join(WORLD_NAMES)}")
+    parser.add_argument("--traces", nargs="+", default=list(TRACE_SEEDS), metavar="TRACE",
+                        help=f"trace seeds, of: {', '.join(TRACE_NAMES)}")
     parser.add_argument("--paper-groups", action="store_true",
                         help="drive only the paper groups G1-G3 instead of worlds x traces")
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--base-seed", type=int, default=1_000_000)
-    parser.add_argument("--moving-obstacles", type=int, default=0,
-                        help="pedestrians per episode (config moving_obstacles; default 0)")
+    parser.add_argument("--episodes", type=positive_int, default=50,
+                        help="episodes per driver, pose source, world and trace")
+    parser.add_argument("--base-seed", type=seed, default=1_000_000,
+                        help="reset seed of the first episode; episode k uses base seed + k")
+    parser.add_argument("--moving-obstacles", type=non_negative_int, default=0,
+                        help="pedestrians per episode (config moving_obstacles)")
     parser.add_argument("--mover-model", choices=MOVER_MODELS, default="yielding",
-                        help="how the pedestrians walk (config mover_model; default %(default)s)")
+                        help="how the pedestrians walk (config mover_model)")
     parser.add_argument("--sb3-model", type=Path, default=None,
-                        help="the sb3 driver's model .zip (default: the shipped one)")
+                        help="the sb3 driver's model .zip; None: the shipped one")
+    parser.add_argument("--trust-model", action="store_true",
+                        help="load --sb3-model with PPO.load, unpickling its settings (only "
+                             "for a model you made; without it the weights alone are read)")
     parser.add_argument("--pose-params", type=pose_params_by_source, default={},
                         help="JSON: pose source -> its estimator's parameters, e.g. "
                              '\'{"lidar_odometry": {"sideslip_sigma": 6e-4}}\'')
+    return parser
+
+
+def check_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse, naming the option, what the parser's types cannot see alone."""
+    from estimators.registry import names
+
+    for option, given, valid in (("--worlds", args.worlds, WORLD_NAMES),
+                                 ("--traces", args.traces, TRACE_NAMES),
+                                 ("--pose-sources", args.pose_sources, ("true", *names()))):
+        for name in given:
+            if name.partition("?")[0] not in valid:
+                parser.error(f"{option}: unknown name {name!r}: expected one of "
+                             f"{', '.join(valid)}")
+    if args.base_seed + args.episodes - 1 > MAX_SEED:
+        parser.error(f"--base-seed: expected base seed + episodes - 1 <= {MAX_SEED}, got "
+                     f"{args.base_seed} + {args.episodes} - 1")
+    if args.sb3_model is not None and not args.sb3_model.is_file():
+        parser.error(f"--sb3-model: no such file {args.sb3_model}")
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "python -m agents.evaluate") -> int:
+    """Score the drivers and print one table row per combination; returns the exit status
+    (2 for bad input)."""
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
+    check_arguments(parser, args)
     unknown = sorted(set(args.pose_params) - (set(args.pose_sources) - {"true"}))
     if unknown:
         parser.error(f"--pose-params: {', '.join(unknown)} is not an estimator "
@@ -185,7 +229,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     for name in args.drivers:
         for source in args.pose_sources:
             driver = build_driver(name, source, args.sb3_model,
-                                  args.pose_params.get(source))
+                                  args.pose_params.get(source), args.trust_model)
             for world, trace in pairs:
                 s = evaluate(driver, world, trace, args.episodes, args.base_seed,
                              args.moving_obstacles, args.mover_model)
@@ -196,7 +240,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                     f"{s.closest_mover:.2f} |",
                     flush=True,
                 )
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

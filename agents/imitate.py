@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -44,6 +45,7 @@ from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
 from agents.scan_aware import ScanAwareDriver
 from agents.train import TrainingExistsError, new_model_path
+from estimators.arguments import positive_int, seed
 from lidar_env.core import ConfigError
 
 DEFAULT_OUT = Path("runs/imitation_driver.zip")
@@ -249,29 +251,42 @@ def imitate(
     return out
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--iterations", type=int, default=10, help="DAgger iterations")
-    parser.add_argument("--steps", type=int, default=30_000, help="env steps per iteration")
-    parser.add_argument("--epochs", type=int, default=4, help="passes over all labels per fit")
-    parser.add_argument("--net-arch", type=int, nargs="+", default=[64, 64],
-                        help="hidden layers of the policy (default: %(default)s)")
+def build_parser(prog: str = "python -m agents.imitate") -> argparse.ArgumentParser:
+    """The command line's parser (``duallidar imitate`` is the same command)."""
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--seed", type=seed, default=0,
+                        help="seed of every draw (scenes, worlds, torch)")
+    parser.add_argument("--iterations", type=positive_int, default=10, help="DAgger iterations")
+    parser.add_argument("--steps", type=positive_int, default=30_000,
+                        help="env steps per iteration")
+    parser.add_argument("--epochs", type=positive_int, default=4,
+                        help="passes over all labels per fit")
+    parser.add_argument("--net-arch", type=positive_int, nargs="+", default=[64, 64],
+                        metavar="UNITS", help="hidden layers of the policy")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                        help=f"model .zip (default: %(default)s; shipped: {SHIPPED_MODEL})")
+                        help=f"model .zip (the shipped one is {SHIPPED_MODEL})")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     parser.add_argument("--sector-deltas", action="store_true",
                         help="add each sector's change since the last frame to the input")
     parser.add_argument("--expert", choices=sorted(EXPERTS), default="braking",
-                        help="the expert's settings (default: %(default)s, the shipped model's)")
+                        help="the expert's settings (braking: the shipped model's)")
+    return parser
+
+
+def main(argv: list[str] | None = None, prog: str = "python -m agents.imitate") -> int:
+    """Imitate from the command line; returns the exit status (2 for bad input)."""
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:
-        imitate(args.seed, args.out, args.iterations, args.steps, args.epochs,
-                net_arch=tuple(args.net_arch), overwrite=args.overwrite,
-                sector_deltas=args.sector_deltas, expert=args.expert)
+        new_model_path(args.out, args.overwrite)
     except TrainingExistsError as error:
-        parser.error(str(error))
+        parser.error(f"--out: {error}")
+    imitate(args.seed, args.out, args.iterations, args.steps, args.epochs,
+            net_arch=tuple(args.net_arch), overwrite=args.overwrite,
+            sector_deltas=args.sector_deltas, expert=args.expert)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -1,6 +1,7 @@
 """Train a PPO trace-following driver from scratch (reinforcement learning).
 
     python -m agents.train --seed 0                  # -> runs/ppo_driver.zip
+    duallidar train --seed 0                         # the same
 
 The shipped model (``agents/models/ppo_driver.zip``) no longer comes from here: it is imitated
 from the scan-aware driver by :mod:`agents.imitate` and gives way to pedestrians, which PPO from
@@ -25,6 +26,7 @@ simulate yet (a self-occluded Lidar); see the README for the wall times of both.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -35,6 +37,7 @@ import yaml
 import lidar_env  # noqa: F401 - registers DualLidar-v0
 from agents.observation import TraceFollowingObservation
 from agents.sb3_driver import SHIPPED_MODEL
+from estimators.arguments import positive_int, seed
 from lidar_env.core import ConfigError
 
 HYPERPARAMETERS = Path(__file__).with_name("ppo_driver.yaml")
@@ -62,10 +65,18 @@ def new_model_path(out: str | Path, overwrite: bool) -> Path:
 
 
 def load_hyperparameters(path: Path = HYPERPARAMETERS) -> dict[str, Any]:
-    """The ``DualLidar-v0`` entry of an rl-zoo3-style YAML file."""
+    """The ``DualLidar-v0`` entry of an rl-zoo3-style YAML file; :class:`ConfigError` for a
+    file that is not YAML or holds no such mapping."""
     with open(path) as handle:
-        entry = dict(yaml.safe_load(handle)["DualLidar-v0"])
-    return entry
+        try:
+            document = yaml.safe_load(handle)
+        except yaml.YAMLError as error:
+            raise ConfigError(f"{path}: not valid YAML ({str(error).splitlines()[0]})") from None
+    entry = document.get("DualLidar-v0") if isinstance(document, dict) else None
+    if not isinstance(entry, dict):
+        raise ConfigError(f"{path}: expected a mapping with a 'DualLidar-v0' entry of "
+                          "hyperparameters (rl-zoo3 layout)")
+    return dict(entry)
 
 
 def make_training_env(
@@ -128,6 +139,9 @@ def train(
     Raises :class:`TrainingExistsError` before any training when ``out`` exists and
     ``overwrite`` is False, so a run never replaces the shipped model by accident.
     """
+    for name, value in (("timesteps", timesteps), ("n_envs", n_envs)):
+        if value is not None and value < 1:
+            raise ConfigError(f"{name}: expected an integer >= 1 or None, got {value}")
     out = new_model_path(out, overwrite)
     import torch
     from stable_baselines3 import PPO
@@ -207,29 +221,49 @@ def _progress_callback(total: int) -> Any:
     return ProgressBar()
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--timesteps", type=int, default=None, help="override n_timesteps")
-    parser.add_argument("--n-envs", type=int, default=None, help="override n_envs")
-    parser.add_argument("--seed", type=int, default=0)
+def build_parser(prog: str = "python -m agents.train") -> argparse.ArgumentParser:
+    """The command line's parser (``duallidar train`` is the same command)."""
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--timesteps", type=positive_int, default=None,
+                        help="env steps to train; None: n_timesteps of --hyperparameters")
+    parser.add_argument("--n-envs", type=positive_int, default=None,
+                        help="envs stepped together; None: n_envs of --hyperparameters")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the envs and PPO")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                        help=f"model .zip (default: %(default)s; shipped: {SHIPPED_MODEL})")
+                        help=f"model .zip (the shipped one is {SHIPPED_MODEL})")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--vectorization", choices=VECTORIZATIONS, default="auto",
-                        help="step the training envs batched or one by one (default: %(default)s,"
-                             " batched when the env config allows)")
-    parser.add_argument("--tensorboard", type=Path, default=None, help="TensorBoard log dir")
+                        help="step the training envs batched or one by one (auto: batched "
+                             "when the env config allows)")
+    parser.add_argument("--tensorboard", type=Path, default=None,
+                        help="TensorBoard log dir; None: no log")
     parser.add_argument("--hyperparameters", type=Path, default=HYPERPARAMETERS,
-                        help="rl-zoo3-style YAML (default: %(default)s)")
+                        help="rl-zoo3-style YAML with a DualLidar-v0 entry")
+    return parser
+
+
+def main(argv: list[str] | None = None, prog: str = "python -m agents.train") -> int:
+    """Train from the command line; returns the exit status (2 for bad input)."""
+    parser = build_parser(prog)
     args = parser.parse_args(argv)
     try:
-        train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
-              hyperparameters=args.hyperparameters, overwrite=args.overwrite,
-              progress=not args.no_progress, vectorization=args.vectorization)
+        new_model_path(args.out, args.overwrite)
+        params = load_hyperparameters(args.hyperparameters)
+        for key in ("n_timesteps", "n_envs", "policy"):
+            if key not in params:
+                raise ConfigError(f"{args.hyperparameters}: expected the DualLidar-v0 entry to "
+                                  f"hold {key!r}")
     except TrainingExistsError as error:
-        parser.error(str(error))
+        parser.error(f"--out: {error}")
+    except (ConfigError, OSError) as error:
+        parser.error(f"--hyperparameters: {error}")
+    train(args.timesteps, args.seed, args.out, args.n_envs, args.tensorboard,
+          hyperparameters=args.hyperparameters, overwrite=args.overwrite,
+          progress=not args.no_progress, vectorization=args.vectorization)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -9,6 +9,10 @@ Examples::
     python -m estimators.calibration --world hallway --trace loop --mount-error 0.03 0.04 3 \
         --compare pc_fusion lidar_odometry
 
+``--tf-out mounts.yaml`` writes the mounts (Lidar 1 as configured, the others as calibrated)
+as ``base_link -> lidar_k`` transforms and prints a ``static_transform_publisher`` command per
+Lidar (:mod:`estimators.calibration.tf_output`).
+
 A simulated drive (``--world``/``--trace``/``--seed``, ``--config`` JSON env overrides) is
 recorded with the scripted driver; a ROS bag (``--bag``, ``--topics``) is read with
 :func:`estimators.datasets.load_bag`; CARMEN logs (``--carmen``: one log's front and rear
@@ -60,6 +64,9 @@ def _parser(prog: str = "python -m estimators.calibration") -> argparse.Argument
     parser.add_argument("--mount-error", nargs=3, type=float, default=(0.03, 0.04, 3.0),
                         metavar=("DX", "DY", "DEG"),
                         help="error of Lidar 2's configured mount for --compare [m m deg]")
+    parser.add_argument("--tf-out", metavar="YAML",
+                        help="write the mounts as base_link -> lidar_k transforms (YAML) and "
+                             "print static_transform_publisher commands")
     return parser
 
 
@@ -100,7 +107,36 @@ def _recording(args: argparse.Namespace, guess: np.ndarray | None):
     from estimators.leaderboard.recording import record
     from estimators.leaderboard.records import Scenario
 
-    return record(Scenario(args.world, args.trace, args.seed, config=json.loads(args.config)))
+    if args.seed < 0:
+        raise DualLidarError(f"--seed: expected an integer >= 0, got {args.seed}")
+    try:
+        config = json.loads(args.config)
+    except json.JSONDecodeError as error:
+        raise DualLidarError(f"--config: expected env config overrides as a JSON object, "
+                             f"got {args.config!r:.60} ({error.msg})") from None
+    if not isinstance(config, dict):
+        raise DualLidarError(f"--config: expected a JSON object of env config keys, got a "
+                             f"{type(config).__name__}")
+    return record(Scenario(args.world, args.trace, args.seed, config=config))
+
+
+def _write_tf(path: str, recording, calibration) -> None:
+    """Write the mounts (Lidar 1 as configured, the others as calibrated where observable) as
+    a tf YAML and print the static_transform_publisher commands."""
+    from estimators.calibration.tf_output import static_transform_commands, tf_yaml
+
+    setup = recording.setup
+    mounts, sources = [setup.mounts[0]], ["configured"]
+    for estimate, configured in zip(calibration.mounts, setup.mounts[1:], strict=True):
+        calibrated = not estimate.unobservable
+        mounts.append(compose(setup.mounts[0], estimate.value) if calibrated else configured)
+        sources.append("calibrated" if calibrated else "configured (unobservable)")
+    frames = [sensor.frame for sensor in setup.sensors]
+    with open(path, "w") as file:
+        file.write(tf_yaml(mounts, frames, sources))
+    print(f"tf: wrote {path}")
+    for command in static_transform_commands(mounts, frames):
+        print(f"  {command}")
 
 
 def main(argv: Sequence[str] | None = None,
@@ -136,6 +172,8 @@ def main(argv: Sequence[str] | None = None,
             car = compose(setup.mounts[0], estimate.value)
             print(f"  in the car frame (lidar_1 as configured): x {car[0]:+.4f} m, y "
                   f"{car[1]:+.4f} m, heading {np.degrees(car[2]):+.4f} deg")
+    if args.tf_out:
+        _write_tf(args.tf_out, recording, calibration)
     return 0
 
 
