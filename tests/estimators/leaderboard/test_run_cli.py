@@ -190,3 +190,23 @@ def test_intel_scored_on_its_corrected_keyframes_agrees_with_evo_ape(
     assert abs(printed_ate(printed, "lidar_odometry") - ate) <= 1e-5
     row = json.loads((out / "metrics.json").read_text())["estimators"][0]
     assert row["truth_poses"] == matched and row["ate_rmse_m"] < 0.5
+
+
+def test_a_recorded_simulated_drive_is_scored_on_its_true_poses(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from estimators.leaderboard.database import ExperimentDatabase
+
+    scenario = Scenario("hallway", "straight", 0, config={"max_episode_time": 4.0})
+    database = tmp_path / "experiments.sqlite"
+    with ExperimentDatabase(database) as db:
+        db.save_sensor_dataset(scenario, record(scenario))
+    out = tmp_path / "out"
+    assert run_cli.main([str(database), "--estimators", "icp", "--out", str(out),
+                         "--no-figures"]) == 0
+    printed = capsys.readouterr().out
+    assert "truth: the simulation's true poses" in printed
+    row = json.loads((out / "metrics.json").read_text())["estimators"][0]
+    assert row["truth_poses"] == row["scans"] and row["ate_rmse_m"] < 0.05
+    with pytest.raises(SystemExit):
+        run_cli.main([str(database), "--scenario", "hallway/zigzag/s9", "--out", str(out)])
+    assert "--scenario: unknown drive 'hallway/zigzag/s9'" in capsys.readouterr().err
