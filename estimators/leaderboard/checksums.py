@@ -1,16 +1,23 @@
-"""A SHA-256 checksum per stored sensor dataset and per trace, so a damaged row of the
-experiment database is named on read instead of silently changing a result.
+"""A SHA-256 checksum per stored sensor dataset and per trace, so a damaged or edited row of
+the experiment database is named on read instead of silently changing a result.
 
 SQLite's own ``quick_check`` finds a broken page structure, not a changed value inside a row
 (of 40 random 64-byte overwrites of data pages, 32 went unnoticed). The checksum covers every
-column of the dataset's rows (header row and all steps; a trace's row, poses and metrics) as
-SQLite returns them, so it is computed by the same query when a dataset is stored and when it
-is read. Rows stored before checksums existed (no entry in ``checksums``) read unverified.
+column of the dataset's rows as SQLite returns them: the scenario's row (kind, world, trace,
+seed, driver, config, so swapping two scenarios' seeds is a mismatch), then the header row and
+all steps of a sensor dataset, or a trace's row, poses and metrics. It is computed by the same
+queries when a dataset is stored and when it is read. Stored checksums carry their version
+(``v2:<hex>``); a bare hex checksum (version 1, written before the scenario row was covered)
+is checked against the rows without it. A dataset with no checksum at all (deleted, or
+written before checksums existed) cannot be verified and is refused on read.
+
+A checksum detects damage and edits made without recomputing it; it is not a signature
+against someone who rewrites the file with this module.
 
 Table (created on open if absent; it is not part of the schema-version-1 check, so files
 written before it existed still open)::
 
-    checksums (kind 'sensor_dataset' | 'trace', key scenario_id | trace_id, sha256 hex,
+    checksums (kind 'sensor_dataset' | 'trace', key scenario_id | trace_id, sha256 text,
                PRIMARY KEY (kind, key))
 """
 
@@ -31,8 +38,8 @@ CREATE_CHECKSUMS = (
 
 Kind = Literal["sensor_dataset", "trace"]
 
-#: The rows each kind's checksum covers, in a fixed order (``?`` is the key).
-_QUERIES: dict[str, tuple[str, ...]] = {
+#: The rows each kind's version-1 checksum covers, in a fixed order (``?`` is the key).
+_QUERIES_V1: dict[str, tuple[str, ...]] = {
     "sensor_dataset": (
         "SELECT n_steps, n_beams, max_range, world_aligned, mounts, beam_angles, env_config, "
         "world, package_version, recorded_at FROM sensor_datasets WHERE scenario_id = ?",
@@ -47,11 +54,21 @@ _QUERIES: dict[str, tuple[str, ...]] = {
     ),
 }
 
+#: Version 2 adds the scenario's row in front (what the dataset is labelled with).
+_SCENARIO_ROW = "SELECT kind, world, trace, seed, driver, config FROM scenarios WHERE id = {}"
+_QUERIES: dict[str, tuple[str, ...]] = {
+    "sensor_dataset": (_SCENARIO_ROW.format("?"), *_QUERIES_V1["sensor_dataset"]),
+    "trace": (_SCENARIO_ROW.format("(SELECT scenario_id FROM traces WHERE id = ?)"),
+              *_QUERIES_V1["trace"]),
+}
+#: Prefix of a version-2 checksum in the ``sha256`` column.
+VERSION_2 = "v2:"
 
-def digest(conn: sqlite3.Connection, kind: Kind, key: int) -> str:
+
+def digest(conn: sqlite3.Connection, kind: Kind, key: int, version: int = 2) -> str:
     """SHA-256 (hex) of every row of dataset ``kind`` ``key`` (see the module docstring)."""
     sha = hashlib.sha256()
-    for query in _QUERIES[kind]:
+    for query in (_QUERIES if version == 2 else _QUERIES_V1)[kind]:
         for row in conn.execute(query, (key,)):
             for value in row:
                 data = value if isinstance(value, bytes) else repr(value).encode()
@@ -64,7 +81,7 @@ def store_checksum(conn: sqlite3.Connection, kind: Kind, key: int) -> None:
     """Record the checksum of dataset ``kind`` ``key`` (inside the transaction that wrote it)."""
     conn.execute(
         "INSERT OR REPLACE INTO checksums (kind, key, sha256) VALUES (?, ?, ?)",
-        (kind, key, digest(conn, kind, key)),
+        (kind, key, VERSION_2 + digest(conn, kind, key)),
     )
 
 
@@ -78,15 +95,23 @@ def verify_checksum(conn: sqlite3.Connection, path: Path, kind: Kind, key: int, 
             "SELECT sha256 FROM checksums WHERE kind = ? AND key = ?", (kind, key)
         ).fetchone()
         if stored is None:
-            return  # written before checksums existed
-        actual = digest(conn, kind, key)
+            raise CorruptDatabaseError(
+                f"{path}: the {rows} {key} ({label}) have no checksum (it was deleted, or they "
+                "were written before checksums existed), so their values cannot be verified; "
+                "delete them (or the database) and re-run to record them again"
+            )
+        expected = str(stored[0])
+        if expected.startswith(VERSION_2):
+            expected, actual = expected[len(VERSION_2):], digest(conn, kind, key)
+        else:
+            actual = digest(conn, kind, key, version=1)
     except sqlite3.DatabaseError as error:
         raise CorruptDatabaseError(
             f"{path}: the {rows} {key} ({label}) cannot be read ({error}); restore a backup "
             "or delete them and re-run"
         ) from error
-    if actual != stored[0]:
+    if actual != expected:
         raise CorruptDatabaseError(
-            f"{path}: the {rows} {key} ({label}) were changed after they were stored (checksum "
-            "mismatch); restore a backup or delete them and re-run"
+            f"{path}: the {rows} {key} ({label}) or their scenario's row were changed after "
+            "they were stored (checksum mismatch); restore a backup or delete them and re-run"
         )

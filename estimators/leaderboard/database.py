@@ -46,8 +46,8 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Mapping, Sequence
+from contextlib import AbstractContextManager
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -73,6 +73,7 @@ from estimators.leaderboard.schema import (
     check_header,
     check_writable,
     inspect_existing,
+    write_transaction,
 )
 from lidar_env.core import UnknownNameError
 
@@ -117,16 +118,9 @@ class ExperimentDatabase:
         except sqlite3.OperationalError as error:
             raise DatabaseLocationError(f"cannot open {self.path} for writing: {error}") from error
 
-    @contextmanager
-    def _transaction(self) -> Iterator[sqlite3.Connection]:
-        """One write transaction: everything inside commits together or not at all."""
-        self._conn.execute("BEGIN IMMEDIATE")
-        try:
-            yield self._conn
-        except BaseException:
-            self._conn.execute("ROLLBACK")
-            raise
-        self._conn.execute("COMMIT")
+    def _transaction(self) -> AbstractContextManager[sqlite3.Connection]:
+        """One write transaction (a failed write is a DatabaseWriteError, rolled back)."""
+        return write_transaction(self._conn, self.path)
 
     def close(self) -> None:
         self._conn.close()
@@ -325,7 +319,8 @@ class ExperimentDatabase:
         """Stored traces (all, or those of one scenario) with their metrics, by insertion.
 
         ``poses=False`` reads the metrics only (the trace's times, poses and step_ms are then
-        empty), which is what a summary over many scenarios needs.
+        empty), which is what a summary over many scenarios needs. Every trace is checked
+        against its checksum either way.
         """
         query = (
             "SELECT traces.id, kind, world, trace, seed, driver, config, estimator, params, "
@@ -343,9 +338,9 @@ class ExperimentDatabase:
             trace_id, kind, world, trace_name, seed, driver, config = row[:7]
             estimator, params, version = row[7:]
             table = np.empty((0, 5))
+            verify_checksum(self._conn, self.path, "trace", trace_id,
+                            f"{estimator} on {world}/{trace_name}/seed {seed}")
             if poses:
-                verify_checksum(self._conn, self.path, "trace", trace_id,
-                                f"{estimator} on {world}/{trace_name}/seed {seed}")
                 table = np.array(self._conn.execute(
                     "SELECT time, x, y, heading, ms FROM trace_poses WHERE trace_id = ? "
                     "ORDER BY step", (trace_id,),

@@ -34,7 +34,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from estimators.leaderboard.database import ExperimentDatabase
@@ -114,12 +114,33 @@ def _pending_task(db: ExperimentDatabase, scenario: Scenario,
     return ScenarioTask(scenario, missing, dataset, score_maps)
 
 
+def _still_pending(db: ExperimentDatabase,
+                   task: ScenarioTask | RealLogTask) -> ScenarioTask | RealLogTask | None:
+    """``task`` as it stands now: another process on the same database may have stored part
+    or all of it since the run was planned (``None``: all of it)."""
+    if isinstance(task, RealLogTask):
+        spec, scenario = task.estimator, task.log.scenario
+        stored = db.has_trace(scenario, spec.name, spec.resolved_params, package_version())
+        return None if stored else task
+    version = package_version()
+    missing = tuple(spec for spec in task.estimators
+                    if not db.has_trace(task.scenario, spec.name, spec.resolved_params, version))
+    if task.dataset is None and db.has_sensor_dataset(task.scenario):
+        return _pending_task(db, task.scenario, missing, task.score_maps)  # gets the stored one
+    if task.dataset is not None and not missing:
+        return None
+    return replace(task, estimators=missing)
+
+
 def _commit(db: ExperimentDatabase, outcome: ScenarioOutcome, summary: RunSummary) -> None:
-    if outcome.dataset is not None and db.save_sensor_dataset(outcome.scenario, outcome.dataset):
-        summary.recorded += 1
-    if outcome.traces:  # one transaction for all the scenario's traces
-        new = db.save_traces(outcome.scenario, outcome.traces)
-        summary.traces += sum(trace_id is not None for trace_id in new)
+    recorded = outcome.dataset is not None and db.save_sensor_dataset(outcome.scenario,
+                                                                        outcome.dataset)
+    new = db.save_traces(outcome.scenario, outcome.traces) if outcome.traces else []
+    summary.recorded += int(recorded)
+    summary.traces += sum(trace_id is not None for trace_id in new)
+    if (outcome.dataset is not None or new) and not recorded and not any(
+            trace_id is not None for trace_id in new):
+        summary.skipped += 1  # another process stored all of it while this one worked
     for stage, error in outcome.failures.items():
         summary.failures[f"{outcome.scenario.label}: {stage}"] = error
     for stage, seconds in outcome.seconds.items():
@@ -244,6 +265,17 @@ def run_matrix(
     return _execute(db, todo, executor, summary, max_in_flight, on_done)
 
 
+def _refresh(db: ExperimentDatabase, task: ScenarioTask | RealLogTask, summary: RunSummary,
+             on_done: Callable[[Scenario], None] | None) -> ScenarioTask | RealLogTask | None:
+    """:func:`_still_pending`, counting a task another process finished as already stored."""
+    current = _still_pending(db, task)
+    if current is None:
+        summary.skipped += 1
+        if on_done is not None:
+            on_done(task.log.scenario if isinstance(task, RealLogTask) else task.scenario)
+    return current
+
+
 def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
              executor: ExecutorLike | None, summary: RunSummary, max_in_flight: int,
              on_done: Callable[[Scenario], None] | None) -> RunSummary:
@@ -253,7 +285,10 @@ def _execute(db: ExperimentDatabase, todo: Sequence[ScenarioTask | RealLogTask],
     start = time.perf_counter()
     try:
         if executor is None:
-            for task in todo:
+            for planned in todo:
+                task = _refresh(db, planned, summary, on_done)
+                if task is None:
+                    continue
                 outcome = run_task(task)
                 _commit(db, outcome, summary)
                 if on_done is not None:
@@ -279,8 +314,9 @@ def _run_on(executor: ExecutorLike, todo: Sequence[ScenarioTask | RealLogTask],
         # the tasks catch their own errors: whatever is raised here is the executor's
         try:
             while queue and len(pending) < max_in_flight:
-                pending.add(executor.submit(run_task, queue[-1]))
-                queue.pop()
+                task = _refresh(db, queue.pop(), summary, on_done)
+                if task is not None:
+                    pending.add(executor.submit(run_task, task))
             done = _first_done(pending)
         except Exception as error:
             failure, done = error, set()

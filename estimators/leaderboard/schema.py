@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import sqlite3
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
 
@@ -110,6 +112,36 @@ class SchemaMismatchError(DatabaseError):
 
 class DatabaseLocationError(DatabaseError):
     """The database file cannot be created or written where it was asked for."""
+
+
+class DatabaseWriteError(DatabaseError):
+    """A write to the database failed (the disk is full, another writer held the lock too
+    long, the file became read-only); the transaction was rolled back, so nothing stored
+    before is lost."""
+
+
+@contextmanager
+def write_transaction(conn: sqlite3.Connection, path: Path) -> Iterator[sqlite3.Connection]:
+    """One write transaction on ``conn``: everything inside commits together or not at all.
+    A write SQLite refuses (``sqlite3.OperationalError``) is rolled back and raised as a
+    :class:`DatabaseWriteError` naming ``path``."""
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield conn
+        except BaseException:
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
+            raise
+        conn.execute("COMMIT")
+    except sqlite3.OperationalError as error:
+        if conn.in_transaction:
+            conn.execute("ROLLBACK")
+        raise DatabaseWriteError(
+            f"could not write to the database {path} ({error}); the write was rolled back, so "
+            "everything stored before is intact: free space on its disk (or wait for the other "
+            "writer) and re-run to resume"
+        ) from error
 
 
 def check_header(path: Path) -> None:
