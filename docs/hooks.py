@@ -24,6 +24,7 @@ import importlib
 import inspect
 import io
 import json
+import math
 import re
 import tokenize
 from pathlib import Path
@@ -64,7 +65,7 @@ def _default(field: dataclasses.Field[Any]) -> str:
     if field.default is not dataclasses.MISSING:
         value = field.default
         if isinstance(value, float):
-            return f"`{value:g}`"
+            return "2π" if math.isclose(value, 2 * math.pi) else f"`{value:g}`"
         return f"`{value!r}`"
     if field.default_factory is not dataclasses.MISSING:
         doc = inspect.getdoc(field.default_factory)
@@ -75,9 +76,9 @@ def _default(field: dataclasses.Field[Any]) -> str:
     return "required"
 
 
-def _type_name(cls: type, field: dataclasses.Field[Any]) -> str:
-    annotation = field.type if isinstance(field.type, str) else inspect.formatannotation(field.type)
-    return f"`{annotation}`"
+def _type_name(field: dataclasses.Field[Any]) -> str:
+    """The annotation as plain text (a code span would show the table's escaped ``|``)."""
+    return field.type if isinstance(field.type, str) else inspect.formatannotation(field.type)
 
 
 def dataclass_table(path: str) -> str:
@@ -93,7 +94,7 @@ def dataclass_table(path: str) -> str:
         match = _UNIT.match(comment)
         unit, meaning = (match[1], match[2]) if match else ("", comment)
         unit = "" if unit == "-" else unit
-        rows.append(f"| `{field.name}` | {_cell(_type_name(cls, field))} | "
+        rows.append(f"| `{field.name}` | {_cell(_type_name(field))} | "
                     f"{_cell(_default(field))} | {_cell(unit)} | {_cell(meaning)} |")
     return "\n".join(rows)
 

@@ -126,6 +126,49 @@ def test_the_env_config_reference_lists_every_field_with_its_unit() -> None:
     assert "| m |" in rows["car_length"] and "| m/s |" in rows["max_speed"]
 
 
+def _api_directives() -> dict[str, bool]:
+    """``::: name`` directives of the API pages -> whether they render every submodule too."""
+    found: dict[str, bool] = {}
+    for page in sorted((ROOT / "docs" / "api").glob("*.md")):
+        lines = page.read_text().splitlines()
+        for i, line in enumerate(lines):
+            if line.startswith("::: "):
+                options = "\n".join(lines[i + 1:i + 4])
+                found[line[4:].strip()] = "show_submodules: true" in options
+    return found
+
+
+def _source_files() -> list[Path]:
+    """The packages' modules as committed (git's index), else as on disk; relative to ROOT."""
+    packages = ("lidar_env", "estimators", "agents")
+    listed = subprocess.run(["git", "ls-files", "--", *packages], cwd=ROOT, capture_output=True,
+                            text=True)
+    if listed.returncode == 0 and listed.stdout.strip():
+        return sorted(Path(line) for line in listed.stdout.splitlines() if line.endswith(".py"))
+    return sorted(path.relative_to(ROOT)
+                  for package in packages for path in (ROOT / package).rglob("*.py"))
+
+
+def test_every_public_module_is_in_the_api_reference() -> None:
+    """A new module or subpackage needs its face or itself on an API page (docs/api/)."""
+    directives = _api_directives()
+    missing = []
+    for path in _source_files():
+        parts = path.with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        if any(part.startswith("_") for part in parts):
+            continue
+        name = ".".join(parts)
+        ancestors = [".".join(parts[:k]) for k in range(1, len(parts))]
+        if name not in directives and not any(directives.get(a) for a in ancestors):
+            missing.append(name)
+    assert not missing, (
+        f"not in the API reference: {', '.join(missing)}; add '::: <package face>' with "
+        "'show_submodules: true' (or '::: <module>') to a page in docs/api/ and to mkdocs.yml's "
+        "nav")
+
+
 def test_the_site_builds_strictly(tmp_path: Path) -> None:
     """A broken link, a missing page or API target, or a bad docstring reference fails it."""
     pytest.importorskip("mkdocs")
