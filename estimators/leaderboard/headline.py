@@ -1,8 +1,10 @@
 """The leaderboard as a reader sees it: the ranked rows of
 :func:`estimators.leaderboard.tables.rank_table` with their spread over seeds and tie marks
-(:func:`annotate_rows`), and the Markdown of the headline table (rank, estimator, accuracy,
-ATE, heading error, drift, ms/step, real-log error), the per-group tables and the map-score
-table after it (:func:`board_markdown`). Every simulated figure is mean ± std over seeds.
+(:func:`annotate_rows`), and the Markdown of the board (:func:`board_markdown`): the answer in
+one paragraph (:func:`estimators.leaderboard.summary.lead_paragraph`), the headline table
+(rank, estimator, accuracy, ATE, heading error, drift, ms/step, real-log error) with its notes,
+then the per-group tables, each ranked by the group's own result, and the map-score table.
+Every simulated figure is mean ± std over seeds.
 """
 
 from __future__ import annotations
@@ -22,7 +24,14 @@ from estimators.leaderboard.ranking import (
     tied_ranks,
 )
 from estimators.leaderboard.records import Scenario, TraceRecord
-from estimators.leaderboard.tables import METRIC_COLUMNS, REAL_METRIC, format_number, markdown_table
+from estimators.leaderboard.summary import lead_paragraph, lower_is_better
+from estimators.leaderboard.tables import (
+    METRIC_COLUMNS,
+    RANK_KEYS,
+    REAL_METRIC,
+    format_number,
+    markdown_table,
+)
 
 #: The headline's simulated metrics: (metric, column title, decimals).
 HEADLINE_METRICS: tuple[tuple[str, str, int], ...] = (
@@ -44,8 +53,9 @@ def annotate_rows(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
                   records: Mapping[tuple[Scenario, str], TraceRecord],
                   rank_key: str) -> list[dict[str, Any]]:
     """Copies of ``rows`` (best first) with, per metric, ``<metric>_std`` over seeds (and per
-    group ``<group> <metric>`` and ``_std``), ``seeds``, ``rank`` (``"=k"`` for a tie with the
-    row above) and ``tie_p`` (the neighbour test's p-value, NaN for the first row)."""
+    group ``<group> <metric>`` and ``_std`` for :data:`GROUP_METRICS` and ``rank_key``),
+    ``seeds``, ``rank`` (``"=k"`` for a tie with the row above) and ``tie_p`` (the neighbour
+    test's p-value, NaN for the first row)."""
     every = [s for group in groups for s in scenarios[group.name]]
     names = [row["estimator"] for row in rows]
     values = per_scenario_values(every, names, rank_key, records)
@@ -58,7 +68,7 @@ def annotate_rows(rows: Sequence[dict[str, Any]], groups: Sequence[Group],
             new[f"{key}_std"] = spread.std
             new["seeds"] = max(new.get("seeds", 0), spread.seeds)
         for group in groups:
-            for key, _, _ in GROUP_METRICS:
+            for key in dict.fromkeys([*(k for k, _, _ in GROUP_METRICS), rank_key]):
                 spread = seed_spread(scenarios[group.name], row["estimator"], key, records)
                 new[f"{group.name} {key}"] = spread.mean
                 new[f"{group.name} {key}_std"] = spread.std
@@ -101,13 +111,29 @@ def headline_markdown(rows: Sequence[Mapping[str, Any]], real_name: str | None) 
     return markdown_table(header, body)
 
 
-def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group) -> str:
-    """One group's table: the headline's order and ranks (``overall #``), the group's
-    accuracy, ATE, heading and drift."""
-    header = ["overall #", "estimator", *(title for _, title, _ in GROUP_METRICS), "runs"]
-    body = [[row["rank"], str(row["estimator"]),
+def group_order(rows: Sequence[Mapping[str, Any]], group: Group,
+                rank_key: str) -> list[Mapping[str, Any]]:
+    """``rows`` ordered by the group's own ``rank_key`` mean, best first (NaN last; equal
+    values keep the overall order)."""
+    sign = 1.0 if lower_is_better(rank_key) else -1.0
+
+    def key(row: Mapping[str, Any]) -> tuple[bool, float]:
+        value = row.get(f"{group.name} {rank_key}", math.nan)
+        finite = value is not None and math.isfinite(value)
+        return (not finite, sign * value if finite else 0.0)
+
+    return sorted(rows, key=key)
+
+
+def group_markdown(rows: Sequence[Mapping[str, Any]], group: Group,
+                   rank_key: str = "ate_rmse_m") -> str:
+    """One group's table, ranked by the group's own ``rank_key`` (``#``; the headline's rank
+    in ``overall #``): the group's accuracy, ATE, heading and drift, and the runs behind them."""
+    header = ["#", "estimator", *(title for _, title, _ in GROUP_METRICS), "runs", "overall #"]
+    body = [[str(place), str(row["estimator"]),
              *(_cell(row, key, digits, f"{group.name} ") for key, _, digits in GROUP_METRICS),
-             str(row.get(f"{group.name} runs", 0))] for row in rows]
+             str(row.get(f"{group.name} runs", 0)), str(row["rank"])]
+            for place, row in enumerate(group_order(rows, group, rank_key), start=1)]
     return markdown_table(header, body)
 
 
@@ -125,16 +151,22 @@ def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def board_markdown(rows: Sequence[Mapping[str, Any]], groups: Sequence[Group],
                    real_name: str | None, rank_by: str) -> str:
-    """The headline table with its notes, then one table per group and the map table."""
+    """The board: the lead paragraph, the headline table and its notes, then (under ``##``
+    headings) one table per group, ranked by the group's own ``rank_by`` (a key of
+    :data:`~estimators.leaderboard.tables.RANK_KEYS`), and the map table."""
+    rank_key = RANK_KEYS[rank_by]
     runs = max((row["scenarios_run"] for row in rows), default=0)
     seeds = max((row.get("seeds", 0) for row in rows), default=0)
-    lines = [f"Simulated figures: mean ± std over {seeds} seed(s) of each seed's mean over "
+    metric = next(title for key, title, _ in METRIC_COLUMNS if key == rank_key)
+    lines = [lead_paragraph(rows, groups, real_name, rank_key), "",
+             headline_markdown(rows, real_name),
+             f"Simulated figures: mean ± std over {seeds} seed(s) of each seed's mean over "
              f"{len(groups)} group(s) ({runs} simulated runs per estimator); ranked by "
              f"{rank_by}." + (f" {real_name}: one run of the real log, mean relation "
                               "translation error." if real_name else ""), "",
-             headline_markdown(rows, real_name),
              TEST_NOTE.format(metric=rank_by, n=runs, alpha=ALPHA), ""]
     for group in groups:
-        lines += [f"### {group.name} (mean ± std over seeds)", "", group_markdown(rows, group)]
-    lines += ["### Maps at the estimated poses (mean ± std over seeds)", "", map_markdown(rows)]
+        lines += [f"## {group.name}: ranked by the group's own {metric} (mean ± std over seeds)",
+                  "", group_markdown(rows, group, rank_key)]
+    lines += ["## Maps at the estimated poses (mean ± std over seeds)", "", map_markdown(rows)]
     return "\n".join(lines)

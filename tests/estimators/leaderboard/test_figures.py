@@ -101,3 +101,32 @@ def test_segment_errors_against_a_closed_form_drift() -> None:
         assert np.allclose(moved, 10.0 * np.ceil(length / 0.1 - 1e-9) * 0.1 / length, rtol=0.02)
     short = segment_errors(truth[:50], truth[:50])  # 4.9 m: no 5 m segment fits
     assert sorted(short) == [1.0, 2.0]
+
+
+def test_the_lidar_image_is_cropped_to_the_scans_extent_and_the_sensor() -> None:
+    from estimators.leaderboard.figures import scan_extent
+    from estimators.paper.scan_image import scan_to_image
+
+    angles = np.linspace(-np.pi / 4, np.pi / 4, 91)  # a wall 3 m ahead, seen over +-45 deg
+    ranges = 3.0 / np.cos(angles)
+    image = scan_to_image(ranges, angles, 10.0)
+    xmin, xmax, ymin, ymax = scan_extent(image, 0.05, margin=0.5)
+    assert xmin == pytest.approx(-0.5) and xmax == pytest.approx(3.05 + 0.5, abs=0.06)
+    assert ymin == pytest.approx(-3.5, abs=0.06) and ymax == pytest.approx(3.5, abs=0.06)
+    assert xmax - xmin < 5 and ymax - ymin < 8  # not the image's 20 m x 20 m
+    assert scan_extent(np.zeros((400, 400)), 0.05) == (-10.0, 10.0, -10.0, 10.0)
+
+
+def test_the_lead_figure_zooms_on_the_drive_at_the_panels_shape() -> None:
+    from estimators.leaderboard.figures import drive_extent, with_aspect
+
+    truth = np.array([[10.0, 20.0, 0.0], [30.0, 22.0, 0.0]])
+    lost = np.array([[10.0, 20.0, 0.0], [80.0, 22.0, 0.0]])  # leaves the 40 m world
+    box = drive_extent(truth, [lost, np.full((2, 3), np.nan)], (0.0, 0.0, 40.0, 40.0))
+    assert box == pytest.approx((7.0, 17.0, 43.0, 25.0))  # cut at x = 40, 3 m margin
+    xmin, ymin, xmax, ymax = with_aspect(box, 0.5)
+    assert (ymax - ymin) / (xmax - xmin) == pytest.approx(0.5)
+    assert (xmin, xmax) == pytest.approx((7.0, 43.0))  # only the short side grows
+    assert (ymin + ymax) / 2 == pytest.approx(21.0)
+    tall = with_aspect((0.0, 0.0, 1.0, 4.0), 0.5)
+    assert tall == pytest.approx((-3.5, 0.0, 4.5, 4.0))
