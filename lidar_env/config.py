@@ -108,6 +108,7 @@ class EnvConfig:
     mover_speed_range: tuple[float, float] = (0.5, 1.5)  # [m/s] (min, max) of a mover's speed
     mover_clearance: float = 1.0  # [m] least gap between a mover and the car's box at reset
     mover_model: str = "yielding"  # "yielding": movers avoid the car; "waypoints": they ignore it
+    render_size: int = 800  # [px] longest side of a rendered frame (16 to 8192)
 
     def __post_init__(self) -> None:
         positive = {
@@ -136,6 +137,11 @@ class EnvConfig:
         for name, value, low in (("physics_substeps", self.physics_substeps, 1),):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise ConfigError(f"{name}: expected an integer >= {low}, got {value!r}")
+        size = self.render_size
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) \
+                or not 16 <= size <= 8192:
+            raise ConfigError(f"render_size: expected an integer in [16, 8192] pixels, got "
+                              f"{size!r:.40}")
         if self.scan_frame not in SCAN_FRAMES:
             raise ConfigError(
                 f"scan_frame: expected one of {', '.join(SCAN_FRAMES)}, got {self.scan_frame!r}"

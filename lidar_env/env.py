@@ -157,7 +157,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
     |             |                  | "robot" starts from a preset ("paper_car",               |
     |             |                  | "turtlebot3_burger", "turtlebot3_waffle_pi", "f1tenth";  |
     |             |                  | :mod:`lidar_env.vehicle.presets`, docs/robots.md)        |
-    | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame)        |
+    | render_mode | None             | "rgb_array" (no window) or "human" (needs pygame): frames |
+    |             |                  | config ``render_size`` (800) px on the long side         |
 
     ``reset(seed=..., options={"world": ..., "trace": ..., "start": (x, y, heading)})``
     changes the world, trace or start pose for that episode only. A ``random`` world is drawn
@@ -200,6 +201,7 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         self.render_mode = render_mode
         cfg = self.config
         self._world_arg = resolve_world(world, cfg.map_resolution)
+        self._world_source = world  # a ROS map's path: its unknown cells are drawn apart
         self.world_name = (self._world_arg if isinstance(self._world_arg, str)
                            else self._world_arg.name)
         self.lidar_keys = tuple(f"lidar_{k + 1}" for k in range(cfg.n_lidars))

@@ -42,6 +42,8 @@ class EnvViews:
     _last_scans: Any
     _sensor_poses: NDArray[np.float64]
     _world_aligned: bool
+    _world_arg: Any
+    _world_source: Any
 
     @property
     def space(self) -> Any:
@@ -134,8 +136,13 @@ class EnvViews:
         from lidar_env.rendering.renderer import Renderer, show_in_window
 
         if self._renderer is None or self._renderer.world is not self.world:
+            from lidar_env.rendering.overlays import UnknownCells
+
             window = self._renderer.window if self._renderer is not None else None
-            self._renderer = Renderer(self.world)
+            source = getattr(self, "_world_source", None)
+            unknown = UnknownCells.of(source) if self.world is self._world_arg else None
+            self._renderer = Renderer(self.world, self.config.render_size, unknown,
+                                      f"DualLidar-v0: {self.world.name}")
             self._renderer.window = window
         frame = self._renderer.draw(
             car_pose=self.car.pose,

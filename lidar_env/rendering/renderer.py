@@ -1,7 +1,11 @@
 """Top-down pictures of a ``DualLidar-v0`` episode, drawn with numpy (PNG files by Pillow).
 
 ``rgb_array`` frames need no window and no pygame; the ``human`` window imports pygame only
-when first shown. Pixel convention (exactly :meth:`lidar_env.world.world.World.to_image`'s and
+when first shown, is titled, and closes when the user closes it. A frame covers the world's
+bounds, or a ROS map's known area (its unknown cells drawn apart from obstacles,
+:mod:`lidar_env.rendering.overlays`), with a scale bar and a legend.
+
+Pixel convention (exactly :meth:`lidar_env.world.world.World.to_image`'s and
 ``estimators.mapping.occupancy.OccupancyGrid``'s): ``H, W = ceil(extent / resolution)`` pixels
 anchored at ``(xmin, ymin)``; pixel ``(row, col)`` covers ``x`` in ``xmin + [col, col + 1) * res``
 and ``y`` in ``ymin + [H - 1 - row, H - row) * res``, so row 0 is the top (its upper edge may
@@ -25,12 +29,15 @@ from numpy.typing import ArrayLike, NDArray
 from PIL import Image
 
 from lidar_env.core.errors import ConfigError
+from lidar_env.rendering.overlays import UNKNOWN, UnknownCells, legend, paste, scale_bar
 from lidar_env.world.world import World
 
 Bounds = tuple[float, float, float, float]
 
-#: Longest image side [pixels] by default: sharp enough to see 0.1 m on a 40 m world.
-DEFAULT_MAX_SIZE = 640
+#: Longest image side [pixels] by default: sharp enough to see 0.05 m on a 40 m world.
+DEFAULT_MAX_SIZE = 800
+#: Margin [-] around a ROS map's known area in a cropped frame, as a fraction of its extent.
+CROP_MARGIN = 0.03
 
 FREE = np.array([250, 250, 250], dtype=np.uint8)
 OBSTACLE = np.array([40, 40, 40], dtype=np.uint8)
@@ -110,18 +117,61 @@ class Renderer:
     Args:
         world: the world; its obstacle raster is computed once.
         max_size: longest image side [pixels]; sets the scale ``resolution`` [m/pixel].
+        unknown: a ROS map's unknown cells: frames are cropped to its known area and unknown
+            cells drawn in :data:`~lidar_env.rendering.overlays.UNKNOWN`, not as obstacles.
+        title: the ``human`` window's title.
+        overlays: draw the scale bar (bottom left) and the legend (top right).
     """
 
-    def __init__(self, world: World, max_size: int = DEFAULT_MAX_SIZE) -> None:
-        if max_size < 16:
-            raise ConfigError(f"max_size: expected at least 16 pixels, got {max_size}")
+    def __init__(self, world: World, max_size: int = DEFAULT_MAX_SIZE,
+                 unknown: UnknownCells | None = None, title: str = "DualLidar-v0",
+                 overlays: bool = True) -> None:
+        if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) \
+                or not 16 <= max_size <= 8192:
+            raise ConfigError(f"render_size: expected an integer in [16, 8192] pixels, got "
+                              f"{max_size!r:.40}")
         self.world = world
-        xmin, ymin, xmax, ymax = world.bounds
+        self.bounds = self._view(world.bounds, unknown)
+        xmin, ymin, xmax, ymax = self.bounds
         self.resolution = max(xmax - xmin, ymax - ymin) / max_size
-        occupied = world.to_image(self.resolution) > 0
+        occupied = world.to_image(self.resolution, self.bounds) > 0
         self.background = np.where(occupied[..., None], OBSTACLE, FREE)
+        if unknown is not None:
+            hidden = unknown.mask(self.bounds, self.resolution, occupied.shape)
+            self.background[hidden] = UNKNOWN
+        self.title = title
+        self.overlays = overlays
+        self.dot = max(3, round(max_size / 266))
+        self._legends: dict[tuple[int, bool], NDArray[np.uint8]] = {}
+        self._scale = scale_bar(self.resolution, self.shape[1]) if overlays else None
         self.window: Any = None
+        self.closed = False
         self._clock: Any = None
+
+    @staticmethod
+    def _view(bounds: Bounds, unknown: UnknownCells | None) -> Bounds:
+        """The world's ``bounds``, or the known area of ``unknown`` with a margin, within them."""
+        known = None if unknown is None else unknown.known_bounds()
+        if known is None:
+            return tuple(float(v) for v in bounds)  # type: ignore[return-value]
+        margin = CROP_MARGIN * max(known[2] - known[0], known[3] - known[1])
+        return (max(bounds[0], known[0] - margin), max(bounds[1], known[1] - margin),
+                min(bounds[2], known[2] + margin), min(bounds[3], known[3] + margin))
+
+    def _legend(self, n_lidars: int, movers: bool) -> NDArray[np.uint8]:
+        """The legend patch for ``n_lidars`` Lidars, with or without movers (built once)."""
+        key = (n_lidars, movers)
+        if key not in self._legends:
+            entries = [("car", CAR_COLOUR), ("trace", TRACE_COLOUR)]
+            entries += [(f"lidar_{k + 1} hits", LIDAR_COLOURS[k % len(LIDAR_COLOURS)])
+                        for k in range(n_lidars)]
+            if movers:
+                entries.append(("movers", MOVER_COLOUR))
+            if (UNKNOWN == self.background).all(axis=-1).any():
+                entries.append(("unknown", UNKNOWN))
+            entries.append(("obstacle", OBSTACLE))
+            self._legends[key] = legend(entries, self.shape[1])
+        return self._legends[key]
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -131,7 +181,7 @@ class Renderer:
     def to_pixels(self, points: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """(rows, cols) of world points (N, 2) [m]; may fall outside the image."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        xmin, ymin, _, _ = self.world.bounds
+        xmin, ymin, _, _ = self.bounds
         cols = np.floor((p[:, 0] - xmin) / self.resolution).astype(np.int64)
         rows = np.floor(self.shape[0] - (p[:, 1] - ymin) / self.resolution).astype(np.int64)
         return rows, cols
@@ -139,7 +189,7 @@ class Renderer:
     def pixel_centres(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:
         """World ``(x, y)`` [m] of the centres of pixels ``rows``, ``cols`` (same shapes),
         stacked on a last axis: the inverse of :meth:`to_pixels`."""
-        xmin, ymin, _, _ = self.world.bounds
+        xmin, ymin, _, _ = self.bounds
         x = xmin + (np.asarray(cols, dtype=np.float64) + 0.5) * self.resolution
         y = ymin + (self.shape[0] - np.asarray(rows, dtype=np.float64) - 0.5) * self.resolution
         return np.stack(np.broadcast_arrays(x, y), axis=-1)
@@ -150,7 +200,7 @@ class Renderer:
         observed (probability 0.5, grey 128) leave the frame as it is."""
         # same bounds and pixel size as World.to_image: the picture has the frame's shape
         picture = occupancy_to_rgb(
-            grid.probabilities(), grid.bounds, grid.resolution, self.world.bounds, self.resolution
+            grid.probabilities(), grid.bounds, grid.resolution, self.bounds, self.resolution
         )
         observed = picture[..., 0] != 128
         blended = (1.0 - MAP_ALPHA) * frame[observed] + MAP_ALPHA * picture[observed]
@@ -274,12 +324,18 @@ class Renderer:
             points = pose[:2] + ranges[k][hit, None] * np.stack(
                 [np.cos(direction), np.sin(direction)], axis=1
             )
-            self._paint(frame, points, LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 2)
+            self._paint(frame, points, LIDAR_COLOURS[k % len(LIDAR_COLOURS)], self.dot)
         if movers is not None and len(movers) > 0:
             self._movers(frame, movers)
         self._car(frame, np.asarray(car_pose, dtype=np.float64), car_size)
         for k, pose in enumerate(poses):
-            self._paint(frame, pose[None, :2], LIDAR_COLOURS[k % len(LIDAR_COLOURS)], 3)
+            self._paint(frame, pose[None, :2], LIDAR_COLOURS[k % len(LIDAR_COLOURS)],
+                        self.dot + 1)
+        if self.overlays:
+            assert self._scale is not None
+            paste(frame, self._scale, "bottom left")
+            paste(frame, self._legend(len(poses), movers is not None and len(movers) > 0),
+                  "top right")
         return frame
 
     def close(self) -> None:
@@ -292,7 +348,8 @@ class Renderer:
 
 
 def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> None:
-    """Show ``frame`` in a pygame window (opened on first use), at most ``fps`` frames per s."""
+    """Show ``frame`` in a pygame window titled ``renderer.title`` (opened on first use), at most
+    ``fps`` frames per s; once the user closes the window, nothing more is shown."""
     try:
         import pygame
     except ImportError as error:
@@ -300,13 +357,19 @@ def show_in_window(renderer: Renderer, frame: NDArray[np.uint8], fps: float) -> 
             'pygame is not installed: run `pip install "duallidar[human]"` for render_mode="human"'
         ) from error
     height, width = frame.shape[:2]
+    if renderer.closed:  # the user closed the window: the episode runs on without it
+        return
     if renderer.window is None:
         pygame.display.init()  # the display only: no audio device needed
         renderer.window = pygame.display.set_mode((width, height))
+        pygame.display.set_caption(renderer.title)
         renderer._clock = pygame.time.Clock()
+    if any(event.type == pygame.QUIT for event in pygame.event.get()):
+        renderer.close()
+        renderer.closed = True
+        return
     surface = pygame.surfarray.make_surface(np.transpose(frame, (1, 0, 2)))
     renderer.window.blit(surface, (0, 0))
-    pygame.event.pump()
     pygame.display.flip()
     renderer._clock.tick(fps)
 

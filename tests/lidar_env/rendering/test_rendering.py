@@ -38,7 +38,7 @@ def test_rgb_array_draws_world_trace_car_hits_and_trajectories(no_pygame):
         *_, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
     before = env.render()
     assert before.dtype == np.uint8 and before.ndim == 3 and before.shape[2] == 3
-    assert max(before.shape[:2]) == 640
+    assert max(before.shape[:2]) == 800  # config render_size
     assert _count(before, OBSTACLE) > 1000
     assert _count(before, TRACE_COLOUR) > 100
     assert _count(before, CAR_COLOUR) > 10
