@@ -115,6 +115,14 @@ def _hooks():
     return module
 
 
+def test_the_docs_pages_hold_their_results_tables_as_the_results_files_say() -> None:
+    """The tables below ``<!-- results-table: ... -->`` read on GitHub as they do on the site."""
+    hooks = _hooks()
+    stale = [str(page.relative_to(ROOT)) for page in sorted((ROOT / "docs").rglob("*.md"))
+             if hooks.with_results_tables(page.read_text()) != page.read_text()]
+    assert not stale, f"stale results tables in {', '.join(stale)}: run python docs/hooks.py"
+
+
 def test_the_env_config_reference_lists_every_field_with_its_unit() -> None:
     import dataclasses
 
