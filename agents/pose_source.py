@@ -47,8 +47,7 @@ class EstimatedPoseDriver:
             :class:`~estimators.base.Estimator` instance (reset at every episode).
         params: the named estimator's parameters over its defaults (``estimators.make``), e.g.
             ``{"sideslip_sigma": 6e-4}`` for ``lidar_odometry`` on a car whose frame is the
-            wheels' no-slip point, as the simulated car's is (README, "Driving on estimated
-            poses").
+            wheels' no-slip point, as the simulated car's is.
 
     ``last_estimate`` is the pose (x [m], y [m], heading [rad], world frame) given to the
     driver at the latest step.

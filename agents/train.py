@@ -3,10 +3,10 @@
     python -m agents.train --seed 0                  # -> runs/ppo_driver.zip
     duallidar train --seed 0                         # the same
 
-The shipped model (``agents/models/ppo_driver.zip``) no longer comes from here: it is imitated
-from the scan-aware driver by :mod:`agents.imitate` and gives way to pedestrians, which PPO from
-scratch did not learn (see the README). This script trained the earlier shipped trace follower
-(no movers) and is kept for reinforcement-learning experiments.
+The shipped model (``agents/models/ppo_driver.zip``) does not come from here: it is imitated
+from the scan-aware driver by :mod:`agents.imitate` and gives way to pedestrians, which PPO
+from scratch does not learn within this budget. This script trains a trace follower (no
+movers) for reinforcement-learning experiments.
 
 The default output is ``runs/ppo_driver.zip``, never the shipped model; an existing file is
 only replaced with ``--overwrite``. A progress bar (steps, steps/s, time left) is printed to
@@ -20,7 +20,7 @@ The training envs are stepped batched (``--vectorization batched``: the batched
 (``single``: SB3's ``DummyVecEnv`` over wrapped single envs); both give the same observations
 and rewards, so the same seed trains the same model. The default, ``auto``, steps them batched
 (moving obstacles included) unless the env config holds something the batched env does not
-simulate yet (a self-occluded Lidar); see the README for the wall times of both.
+simulate yet (a self-occluded Lidar).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 are what every subpackage builds on; the subpackages, one per concern, import only those below
 them: ``paper`` and ``matching`` at the bottom, then ``odometry``, ``slam``, ``mapping``,
 ``evaluation``, ``datasets``, and ``leaderboard`` at the top. ``estimators.metrics`` is
-``estimators.evaluation.metrics``, kept reachable for the README's example.
+``estimators.evaluation.metrics``.
 """
 
 from estimators import evaluation

@@ -146,13 +146,13 @@ def missed_sigma(sigma: float, misses: Iterable[float], max_sigma: float) -> flo
     last scans' matches landed from its constant-velocity guess): ``sigma`` while none exceeds
     ``MISS_RATIO * sigma``, else the largest miss, at most ``max_sigma``.
 
-    A fixed ``acceleration * dt^2`` holds for smooth driving; a car that brakes or starts from
-    one scan to the next (an emergency stop for a pedestrian) misses it by its whole change of
-    speed times ``dt``, and where the scan leaves a direction nearly free, the over-confident
-    guess then drags the estimate along that direction scan after scan (steering by
-    ``lidar_odometry`` through ``closed_to_open``: up to 0.4 m off at the end; README, "Driving
-    on estimated poses"). Widening the prior after a large miss, as adaptive Kalman filters
-    widen their process noise on large innovations, lets the scan correct it.
+    A fixed ``acceleration * dt^2`` holds for smooth driving; a car that brakes or starts from one
+    scan to the next (an emergency stop for a pedestrian) misses it by its whole change of speed
+    times ``dt``, and where the scan leaves a direction nearly free, the over-confident guess then
+    drags the estimate along that direction scan after scan (steering by ``lidar_odometry`` through
+    ``closed_to_open``: up to 0.4 m off at the end). Widening the prior after a large miss, as
+    adaptive Kalman filters widen their process noise on large innovations, lets the scan correct
+    it.
     """
     worst = max(misses, default=0.0)
     return min(max(worst, sigma), max_sigma) if worst > MISS_RATIO * sigma else sigma

@@ -4,7 +4,7 @@
 which points lie in space a scan saw as free: the new scan's points that earlier scans saw
 through moved in, those next to earlier points the new scan sees through moved on, and map
 points the new scan sees through are stale. :mod:`estimators.odometry.local_map` leaves them
-out of the match and the map (README, "Moving obstacles: odometry, maps and tracking").
+out of the match and the map.
 
 Units: metres, radians, seconds; points in the world frame unless said otherwise.
 """
@@ -239,7 +239,7 @@ class MovingPointFilter:
         moving one, unless one of ``map_points`` lies within ``map_support`` (a wall the map
         knows, beside a walker). The few points of a walker the filter misses lie next to
         those it caught; in a keyframe they stay while the walker walks on, and drag the
-        estimate where little else pins it (README, "Moving obstacles: odometry, ...")."""
+        estimate where little else pins it."""
         keep = ~moving
         if not np.any(moving) or self.map_clearance <= 0:
             return keep

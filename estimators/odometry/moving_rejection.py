@@ -3,9 +3,9 @@
 (``dynamic_margin``, ``moving_filter``) and what the filter's verdicts do to the scan and to
 the local map.
 
-Why the points are judged at the matched pose and matched again without them, with the
-measurements: the module docstring of :mod:`estimators.odometry.local_map` and the README's
-"Moving obstacles: odometry, maps and tracking". Distances [m]; points (n, 2).
+Why the points are judged at the matched pose and matched again without them: the module
+docstring of :mod:`estimators.odometry.local_map`; the measurements behind it are in the
+documentation's design page. Distances [m]; points (n, 2).
 """
 
 from __future__ import annotations
