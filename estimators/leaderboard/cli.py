@@ -70,7 +70,7 @@ from estimators.leaderboard.matrix import (
     side_scenarios,
     table_one_scenarios,
 )
-from estimators.leaderboard.publish import draw_all, publish_report
+from estimators.leaderboard.publish import draw_all, publish_report, terminal_summary
 from estimators.leaderboard.real_logs import RealLog, add_real_log_arguments, real_logs_from
 from estimators.leaderboard.records import Scenario, TraceRecord, package_version
 from estimators.leaderboard.runner import (
@@ -285,7 +285,7 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
                   scenarios: dict[str, list[Scenario]], specs: list[EstimatorSpec],
                   records: dict[tuple[Scenario, str], TraceRecord], logs: list[RealLog],
                   table_i_runs: dict[str, Any]) -> tuple[list[Path], list[dict[str, Any]]]:
-    """Write and print the leaderboard (.md, .csv), results.csv and Table I (.md, .csv);
+    """Write the leaderboard (.md, .csv), results.csv and Table I (.md, .csv);
     returns the files written and the ranked rows."""
     real = logs[0].scenario if logs else None
     not_applicable = {spec.name: reason for spec in specs
@@ -308,7 +308,6 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
          "scan_frame": scenario.config.get("scan_frame", "sensor"), **record.metrics}
         for (scenario, name), record in records.items()
     ])
-    print(table)
     if table_i_runs["sensor"]:
         table_i = table_one_markdown(case_rows)
         (out / "table1.md").write_text(
@@ -317,7 +316,6 @@ def _write_tables(args: argparse.Namespace, groups: list[Group],
             f"{PAPER_DRIVER})\n\n{table_i}")
         write_csv(out / "table1.csv", case_rows)
         written += [out / "table1.md", out / "table1.csv"]
-        print("Table I (accuracy = 100% - eq. 11):\n" + table_i)
     else:
         print("note: Table I skipped: the run holds none of the paper's world/trace pairs")
     return written, rows
@@ -355,6 +353,7 @@ def _run(args: argparse.Namespace, db: ExperimentDatabase, groups: list[Group],
     written.append(publish_report(out, written, vars(args), args.argv))
     if args.tum:
         written.append(export_tum_files(db, records, out / "tum"))
+    print(terminal_summary(out, written))
     failures = summary.failures
     if failures:
         (out / "failures.txt").write_text(
