@@ -13,13 +13,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.config import EnvConfig
 from lidar_env.core.errors import ArgumentTypeError, ConfigError, ResetNeededError
+from lidar_env.core.kernel_cache import announce_first_compile
 from lidar_env.env_views import EnvViews
 from lidar_env.movers.crowd import Crowd, car_circles
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.routes.traces import check_trace_name
 from lidar_env.routes.user_traces import check_waypoints
 from lidar_env.scenes import SceneCache, check_reset_options
-from lidar_env.sensors.lidar_layout import LidarLayout
+from lidar_env.sensors.lidar_layout import LidarLayout, scan_packed_kernel
 from lidar_env.vehicle.actions import checked_action
 from lidar_env.vehicle.car import Car, mount_poses
 from lidar_env.world.user_worlds import resolve_world
@@ -211,6 +212,8 @@ class DualLidarEnv(EnvViews, gym.Env[dict[str, NDArray[np.float32]], NDArray[np.
         })
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.lidar = LidarLayout(cfg.lidars, (cfg.car_length, cfg.car_width))
+        announce_first_compile("DualLidar-v0's first reset",
+                               (scan_packed_kernel, mount_poses, project_onto_polyline))
         self._mounts = cfg.mounts_array
         self._sensor_poses = np.zeros((cfg.n_lidars, 3))
         self._world_aligned = cfg.scan_frame == "world"

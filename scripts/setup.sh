@@ -24,25 +24,32 @@ stamp=.venv/.setup-stamp
 wanted="$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)"
 if [ -x .venv/bin/python ] && [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ]; then
     echo "set-up: .venv matches requirements.lock (delete .venv/.setup-stamp to reinstall)"
-    exit 0
+else
+    started=$SECONDS
+    stale=1
+    [ -x .venv/bin/python ] || { "$PYTHON" -m venv .venv; stale=0; }
+    rm -f "$stamp"
+    # pip warns about every package missing from this machine's local file indexes: noise, not news.
+    # --no-compile: byte-compiling torch's and scipy's thousands of modules up front was most of the
+    # set-up time; Python compiles each module once, on its first import, instead.
+    quiet() { "$@" 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }; }
+    pip=(.venv/bin/python -m pip -q)
+    quiet "${pip[@]}" install --no-compile --no-deps "torch==2.13.0"
+    quiet "${pip[@]}" install --no-compile --no-deps -r requirements.lock
+    # An older .venv may hold packages the lock no longer names: pip-sync removes them.
+    [ "$stale" = 0 ] || quiet .venv/bin/pip-sync -q --pip-args "--no-compile --no-deps" requirements.lock
+    # setuptools warns that a flat layout's editable install sees same-named folders in the working
+    # directory; that is how this project is meant to run, so the warning is filtered.
+    PYTHONWARNINGS="ignore:Editable installation" \
+        quiet "${pip[@]}" install --no-compile --no-deps --no-build-isolation -e .
+    .venv/bin/python scripts/check_lock.py
+    echo "$wanted" > "$stamp"
+    echo "set-up: .venv holds requirements.lock ($((SECONDS - started)) s)"
 fi
-started=$SECONDS
-stale=1
-[ -x .venv/bin/python ] || { "$PYTHON" -m venv .venv; stale=0; }
-rm -f "$stamp"
-# pip warns about every package missing from this machine's local file indexes: noise, not news.
-# --no-compile: byte-compiling torch's and scipy's thousands of modules up front was most of the
-# set-up time; Python compiles each module once, on its first import, instead.
-quiet() { "$@" 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }; }
-pip=(.venv/bin/python -m pip -q)
-quiet "${pip[@]}" install --no-compile --no-deps "torch==2.13.0"
-quiet "${pip[@]}" install --no-compile --no-deps -r requirements.lock
-# An older .venv may hold packages the lock no longer names: pip-sync removes them.
-[ "$stale" = 0 ] || quiet .venv/bin/pip-sync -q --pip-args "--no-compile --no-deps" requirements.lock
-# setuptools warns that a flat layout's editable install sees same-named folders in the working
-# directory; that is how this project is meant to run, so the warning is filtered.
-PYTHONWARNINGS="ignore:Editable installation" \
-    quiet "${pip[@]}" install --no-compile --no-deps --no-build-isolation -e .
-.venv/bin/python scripts/check_lock.py
-echo "$wanted" > "$stamp"
-echo "set-up: .venv holds requirements.lock ($((SECONDS - started)) s)"
+# numba compiles each kernel on its first call and caches the machine code in __pycache__: done
+# here once per source (two processes; instant when this source's marker exists), so that no
+# run, the first env step and the leaderboard's first run included, waits for a compiler.
+# With bytecode written (as leaderboard.sh and test.sh do), so the modules it imports load
+# from .pyc in the processes after it.
+env -u PYTHONDONTWRITEBYTECODE .venv/bin/python scripts/compile_kernels.py \
+    || echo "set-up: a kernel did not compile (see above); runs compile what they use"

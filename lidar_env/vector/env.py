@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lidar_env.config import EnvConfig
 from lidar_env.core.errors import ConfigError, ResetNeededError, quoted
+from lidar_env.core.kernel_cache import announce_first_compile
 from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
@@ -120,6 +121,8 @@ class DualLidarVectorEnv(VectorEnv):
         self._world_arg, self._trace_arg = single._world_arg, single.trace_name
         self._scenes = SceneCache()
         self._slots = SceneSlots(self.num_envs)
+        announce_first_compile("the batched DualLidar-v0's first reset",
+                               (observe_envs, step_envs, plan_motion))
         self._car = Car(cfg.car_length, cfg.car_width, np.empty((0, 3)), np.empty((0, 4)))
         layout = single.lidar
         beams, params = layout._packed

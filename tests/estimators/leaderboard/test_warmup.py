@@ -1,7 +1,9 @@
-"""The compile warm-up runs once per source: two tasks on the pool, then a marker skips it."""
+"""The compile warm-up runs once per source: announced tasks on the pool, then a marker."""
 
 from __future__ import annotations
 
+import importlib.util
+import io
 from concurrent.futures import Future
 
 import pytest
@@ -27,19 +29,77 @@ class RecordingPool:
 
 
 @pytest.fixture
-def marker(tmp_path, monkeypatch):
+def dropped(monkeypatch) -> list[bool]:
+    """Records the warm-up's dropping of the numba caches (never the checkout's own)."""
+    calls: list[bool] = []
+    monkeypatch.setattr(warmup, "drop_numba_caches", lambda: calls.append(True) or 0)
+    return calls
+
+
+@pytest.fixture
+def marker(tmp_path, monkeypatch, dropped):
     path = tmp_path / "__pycache__" / "warm-abc"
     monkeypatch.setattr(warmup, "marker_path", lambda: path)
     return path
 
 
-def test_a_cold_source_is_warmed_by_two_parallel_tasks_then_marked(marker) -> None:
+def test_a_cold_source_is_warmed_by_parallel_tasks_then_marked(marker, dropped) -> None:
     pool = RecordingPool()
-    warmup.warm_up(pool, ("icp",))
-    assert pool.submitted == [warmup.warm_env_and_mapping, warmup.warm_estimators]
-    assert marker.exists()
+    warmup.warm_up(pool, ("icp", "pc"), progress=False, stream=io.StringIO())
+    assert pool.submitted == [warmup.warm_env_and_mapping, warmup.warm_estimators,
+                              warmup.warm_estimators]
+    assert marker.exists() and dropped == [True]
     again = RecordingPool()
     assert warmup.warm_up(again, ("icp",)) == 0.0 and again.submitted == []
+
+
+def test_one_line_says_what_compiles_before_it_starts_and_then_how_long_it_took(
+        marker) -> None:
+    stream = io.StringIO()
+
+    class Watching(RecordingPool):
+        def submit(self, fn, *args):
+            self.said = stream.getvalue()
+            return super().submit(fn, *args)
+
+    pool = Watching()
+    warmup.warm_up(pool, ("icp",), progress=False, stream=stream)
+    assert pool.said.count("\n") == 1 and "compiling the numba kernels once" in pool.said
+    assert "2-core machine" in pool.said  # no compile timed here yet: the stated range
+    assert warmup.last_seconds() is not None
+    marker.unlink()
+    stream = io.StringIO()
+    warmup.warm_up(RecordingPool(), ("icp",), progress=True, stream=stream)
+    assert "as the last time on this machine" in stream.getvalue()
+    assert "compiling" in stream.getvalue().splitlines()[-1]  # the bar, after the line
+
+
+def test_a_warm_source_says_nothing(marker, dropped) -> None:
+    marker.parent.mkdir(parents=True)
+    marker.touch()
+    stream = io.StringIO()
+    warmup.warm_up(RecordingPool(), ("icp",), stream=stream)
+    assert stream.getvalue() == "" and dropped == []
+
+
+def test_the_estimators_split_into_families_that_share_no_kernels() -> None:
+    names = ("icp", "lidar_odometry", "pc", "pc_fusion", "slam", "zero")
+    assert warmup.estimator_families(names) == [
+        ("icp", "lidar_odometry", "slam", "zero"), ("pc", "pc_fusion")]
+    assert warmup.estimator_families(("pc",)) == [("pc",)]
+    assert [task for task, _ in warmup.tasks(())] == [warmup.warm_env_and_mapping]
+
+
+def test_only_the_packages_numba_cache_files_are_dropped(tmp_path) -> None:
+    kept = [tmp_path / "lidar_env" / "__pycache__" / "world.cpython-311.pyc",
+            tmp_path / "lidar_env" / "world.nbi", tmp_path / "docs" / "__pycache__" / "a.nbi"]
+    dropped = [tmp_path / "lidar_env" / "world" / "__pycache__" / "grid.cast-1.py311.nbi",
+               tmp_path / "estimators" / "__pycache__" / "icp.solve-4.py311.1.nbc"]
+    for path in kept + dropped:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.touch()
+    assert warmup.drop_numba_caches(tmp_path) == 2
+    assert all(path.exists() for path in kept) and not any(p.exists() for p in dropped)
 
 
 def test_a_failed_warm_up_leaves_no_marker(marker) -> None:
@@ -47,8 +107,15 @@ def test_a_failed_warm_up_leaves_no_marker(marker) -> None:
     assert not marker.exists()
 
 
-def test_the_marker_follows_the_source_digest() -> None:
-    assert warmup.marker_path().name == f"warm-{warmup.source_digest(warmup.PROJECT_ROOT)}"
+def test_the_marker_follows_the_kernel_packages_digest_which_the_set_up_computes_alike(
+) -> None:
+    digest = warmup.source_digest(warmup.PROJECT_ROOT, warmup.KERNEL_PACKAGES)
+    assert warmup.marker_path().name == f"warm-{digest}"
+    spec = importlib.util.spec_from_file_location(
+        "compile_kernels", warmup.PROJECT_ROOT / "scripts" / "compile_kernels.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.source_digest() == digest
 
 
 def test_the_warm_up_reaches_the_moved_on_test(monkeypatch: pytest.MonkeyPatch) -> None:
