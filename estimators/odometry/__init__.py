@@ -1,7 +1,8 @@
 """Odometry front ends, which chain scan matches into car poses.
 
 - scan-to-local-map odometry (``local_map``: ``lidar_odometry``), built from mixins:
-  ``velocity_model`` (its constant-velocity guess), ``far_scans`` (scans far apart),
+  ``velocity_model`` (its constant-velocity guess), ``far_scans`` (scans far apart; each
+  match checked against the previous scan by ``scan_check``),
   ``unknown_start`` (an unknown start speed) and ``moving_rejection`` (points on moving
   things left out, by ``moving_points``' filter, which asks ``free_space`` what the beams saw
   free and keeps its recent points in ``thinned_scans``);

@@ -28,7 +28,10 @@ on the likelihood field of the local map (Olson 2009):
 
 A match that still explains less than ``min_quality`` of the scan (no overlap with the map:
 the car was carried off, a scan of a new room through a door) is kept as the best there is
-and *flagged*: the scan's index goes to the estimator's ``poor_matches``.
+and *flagged*: the scan's index goes to the estimator's ``poor_matches``. Whichever search
+placed it, the match is then checked against the scan's match to the previous scan
+(:mod:`estimators.odometry.scan_check`): the widest windows are where a wrong pose explains a
+few points more than the right one.
 """
 
 from __future__ import annotations
@@ -53,6 +56,7 @@ from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from estimators.odometry.motion_prior import ScanClock
+from estimators.odometry.scan_check import check_against_scan
 from lidar_env.core.se2 import relative
 
 FloatArray = NDArray[np.float64]
@@ -211,7 +215,25 @@ class FarScanMatching:
     _prediction_information: Callable[[], FloatArray]
     fallbacks: int
     far_searches: int
+    scan_corrections: int
+    _previous_scan: tuple[int, FloatArray] | None  # the last matched scan: (index, points)
     poor_matches: list[int]
+
+    def _checked_against_scan(self, result: MatchResult, points: FloatArray, guess: FloatArray,
+                              predicted: FloatArray) -> MatchResult:
+        """``result`` checked against the match of ``points`` to the previous scan's
+        (:mod:`estimators.odometry.scan_check`); counted in ``scan_corrections`` when the
+        check replaced it. Keeps ``points`` as the next scan's previous one."""
+        assert self._reference is not None
+        index = len(self._poses)
+        previous = self._previous_scan
+        previous_points = previous[1] if previous is not None and previous[0] == index - 1 else None
+        self._previous_scan = (index, points)
+        checked = check_against_scan(
+            result, self._reference, points, previous_points, self._poses[-1], predicted,
+            self.params, guess, self._prediction_information(), self.min_quality)
+        self.scan_corrections += checked.replaced
+        return checked.result
 
     def _global_search(self) -> GlobalSearch:
         assert self._reference is not None
@@ -272,6 +294,7 @@ class FarScanMatching:
                                        near, window if window.linear > near.linear else None,
                                        self.params, self.min_quality)
                 result = retry if retry.quality > result.quality else result
+        result = self._checked_against_scan(result, points, guess, predicted)
         if result.quality < self.min_quality:
             self.poor_matches.append(len(self._poses))
         step = relative(self._poses[-1], result.pose)

@@ -28,7 +28,11 @@ A start down a bare corridor hides the start speed: measured later, the start is
 
 Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
 the car can have reached; a poor match gets correlative searches in ever wider windows, and
-one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). All
+one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). Every
+match is checked against the scan's match to the previous scan: a poorly explained map match
+that turns the car away from what the two scans show is matched again from their increment
+(:mod:`estimators.odometry.scan_check`; a 180-degree Lidar down a corridor fits the walls
+about as well turned round). All
 Lidars are merged in the car frame (:func:`estimators.matching.scan_matching.scans_to_car_points`).
 
 Moving things (``reject_dynamic``, on by default,
@@ -170,7 +174,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             matched again with it.
 
     After a run, ``fallbacks`` counts the correlative searches that were needed, ``far_searches``
-    the far-apart ones, and ``poor_matches`` lists the scans still matched poorly (flagged).
+    the far-apart ones, ``scan_corrections`` the map matches the scan-to-scan check replaced
+    (:mod:`estimators.odometry.scan_check`), and ``poor_matches`` lists the scans still matched
+    poorly (flagged).
     """
 
     keyframe_distance: float = 0.25
@@ -245,7 +251,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self._reset_motion_model()
         self._car_points = CarPoints(self.setup, self.min_range)
         self._reset_moving_filter()
-        self.fallbacks = self.far_searches = 0
+        self.fallbacks = self.far_searches = self.scan_corrections = 0
+        self._previous_scan: tuple[int, NDArray[np.float64]] | None = None  # (index, points)
         self._far_steps: deque[tuple[float, float]] = deque(maxlen=self.velocity_window)
         self.poor_matches: list[int] = []
 
