@@ -2,13 +2,16 @@
 seed, reset seed, driver, env config), the :class:`SensorDataset` recorded along it, an
 estimator's :class:`TraceDataset` and a stored :class:`TraceRecord` with its metrics; and the
 version every stored item carries (:func:`package_version`: the package version plus a digest
-of the source, so that a changed estimator never reuses an old trace).
+of the code, so that a changed estimator never reuses an old trace).
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import io
 import json
+import tokenize
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -38,7 +41,7 @@ def package_version() -> str:
         version = metadata.version("duallidar")
     except metadata.PackageNotFoundError:
         version = "0+unknown"
-    return f"{version}+src.{source_digest(PROJECT_ROOT)}"
+    return f"{version}+src.{code_digest(PROJECT_ROOT)}"
 
 
 @lru_cache(maxsize=4)
@@ -52,6 +55,43 @@ def source_digest(root: Path, packages: tuple[str, ...] = SOURCE_PACKAGES) -> st
             digest.update(path.relative_to(root).as_posix().encode())
             digest.update(path.read_bytes())
     return digest.hexdigest()[:12]
+
+
+@lru_cache(maxsize=4)
+def code_digest(root: Path, packages: tuple[str, ...] = SOURCE_PACKAGES) -> str:
+    """SHA-256 (first 12 hex digits) of the code of the ``*.py`` files of ``packages`` under
+    ``root``: their paths and tokens, without comments, docstrings or blank lines, so a change
+    of wording changes no version and forces no re-run, while any change of code does."""
+    digest = hashlib.sha256()
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode())
+            for token in _code_tokens(path.read_text()):
+                digest.update(token.encode() + b"\0")
+    return digest.hexdigest()[:12]
+
+
+def _code_tokens(source: str) -> list[str]:
+    """The tokens of ``source`` that are code (statement ends and indentation by their type):
+    no comments, blank lines, continuation breaks or docstrings."""
+    docstrings = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            first = node.body[0] if node.body else None
+            if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
+                    and isinstance(first.value.value, str)):
+                docstrings.add((first.lineno, first.col_offset))
+    structure = {tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT}
+    tokens, after_docstring = [], False
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type == tokenize.STRING and token.start in docstrings:
+            after_docstring = True  # its statement's end goes with it
+        elif token.type == tokenize.NEWLINE and after_docstring:
+            after_docstring = False
+        elif token.type not in (tokenize.COMMENT, tokenize.NL):
+            tokens.append(tokenize.tok_name[token.type] if token.type in structure
+                          else token.string)
+    return tokens
 
 
 def canonical_json(value: Any) -> str:
