@@ -8,8 +8,9 @@ scan is skipped and the constant-velocity prediction carries the pose
 (:meth:`estimators.base.Estimator.update`). A sensor whose scan repeats its previous one
 exactly while another sensor's scan changed, or while the estimate is moving, is frozen (a
 real Lidar's range noise never repeats a scan bit for bit; every sensor of a car standing
-still in a noise-free simulation does, and that is no fault): its scan reads "no return"
-for that observation. A time
+still in a noise-free simulation does, and that is no fault): its scan reads 0 m for that
+observation (below every estimator's ``min_range``: no return, and unlike ``max_range`` it
+clears no space the sensor did not see). A time
 step over :data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or
 scans lost); it is counted, and estimators that scale their prediction by time guard it.
 """
@@ -44,7 +45,7 @@ class Health:
         skipped_scans: observations it could not use (too few returns, or every sensor it
             reads frozen); the constant-velocity prediction carried the pose.
         frozen_scans: sensor scans that repeated that sensor's previous scan exactly (read as
-            "no return").
+            no return).
         clock_jumps: time steps over ``CLOCK_JUMP_FACTOR`` x the median period (a clock jump,
             or scans lost).
         blind_stretches: runs of at least ``BLIND_STRETCH`` skipped observations in a row.
@@ -60,6 +61,12 @@ class Health:
     skipped: list[int] = field(default_factory=list)
     stretches: list[tuple[int, int]] = field(default_factory=list)
     jumps: list[int] = field(default_factory=list)
+
+    def note_unusable(self, index: int) -> None:
+        """Count observation ``index`` as skipped where the estimator found it unusable
+        itself (a match no point backs); the prediction carried the pose."""
+        self.skipped_scans += 1
+        self.skipped.append(index)
 
     @property
     def ok(self) -> bool:
@@ -113,7 +120,7 @@ class ScanScreen:
         for k, scan in enumerate(scans):
             if frozen[k]:
                 self.health.frozen_scans += 1
-                scan = np.full_like(scan, self.max_ranges[k])
+                scan = np.zeros_like(scan)  # below any min_range: says nothing, clears nothing
             screened.append(scan)
         returns = sum(int(np.count_nonzero((screened[k] > 0) & (screened[k] < self.max_ranges[k])))
                       for k in self.used)

@@ -299,8 +299,13 @@ class ICPEstimator(Estimator):
             # the guess and the kept increment per observation: skipped ones count
             # (Estimator.update)
             observations = 1 + self.skipped_before
-            increment = match_scans(self._previous, current, self._increment * observations,
-                                    self.params).pose
+            guess = self._increment * observations
+            increment = match_scans(self._previous, current, guess, self.params).pose
+            if np.hypot(*(increment[:2] - guess[:2])) > self.params.max_correspondence_distance:
+                # no pair is accepted beyond this distance, so no solution this far from the
+                # guess is backed by the points (a few sparse returns slid away): the guess
+                self.health.note_unusable(len(self._observations))
+                return compose(self.pose, guess)
             self._increment = increment / observations
         self._previous = current
         return compose(self.pose, increment)

@@ -235,7 +235,11 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._step(scans, t)
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
+        poor = len(getattr(self._frontend, "poor_matches", ()))
         odometry = np.asarray(self._frontend.update(scans, t), dtype=np.float64)
+        # a scan the front end could not match (not even by its searches) seeds no loop
+        # closure and no keyframe check: on noise those searches cost seconds and find nothing
+        self._poor_scan = len(getattr(self._frontend, "poor_matches", ())) > poor
         if self._start_points is None:
             step = self._keyframe_step(odometry)
             if step is not None and not self._is_keyframe(step):
@@ -299,7 +303,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
                 previous.points, self.loop_params.normal_neighbours,
                 self.loop_params.denoise_reference)
                 if len(previous.points) >= 3 and len(points) >= 3 else None)
-            if reference is not None and self.check_steps:
+            if reference is not None and self.check_steps and not getattr(self, "_poor_scan",
+                                                                          False):
                 step = self._checked_step(reference, previous.points, points, step)
             index = self.graph.add_node(compose(self.graph.pose(-1), step))
             information = self._odometry_information(step)
@@ -311,9 +316,10 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._table.append(keyframe, covariance)
         self._since_optimized += 1
         index = len(self.keyframes) - 1
-        if self._close_loops(index):
+        poor = getattr(self, "_poor_scan", False)  # set by _step (add_scan: never)
+        if not poor and self._close_loops(index):
             self._last_loop = index
-        elif (self.global_every and index % self.global_every == 0
+        elif (not poor and self.global_every and index % self.global_every == 0
               and index - self._last_loop > self.global_confirmation):
             self._close_global_loops(index)
         if self._dirty and self._since_optimized >= self.optimize_every:

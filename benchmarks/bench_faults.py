@@ -1,0 +1,183 @@
+"""Fault matrix: every sensor fault of :mod:`lidar_env.faults` x estimator x drive, each run
+against the same drive without the fault.
+
+    python benchmarks/bench_faults.py                       # default matrix (~5 min)
+    python benchmarks/bench_faults.py --estimators lidar_odometry --groups hallway/zigzag
+    python benchmarks/bench_faults.py --aces-scans 0 --json faults.json
+
+Drives: the three paper groups (open_cylinders/right_turn, hallway/zigzag,
+closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and the first
+``--aces-scans`` scans of ACES (``../shared/data/radish``; skipped when absent), whose
+reference is each estimator's own clean run (no per-scan truth). Each drive is recorded once
+and the faults are applied to the recording (``estimators.datasets.faults.with_faults``), so
+a faulted run sees the same world as its clean run.
+
+Per run: ``jump`` [m] the worst step error (an estimated step's translation against the true
+one, over the observations that arrive), ``final`` [m] the end-point error; ``jump+`` the
+worst step error beyond the clean run's. Targets (issue 43): ``jump+ <= 0.3 m`` and
+``final <= 2 x clean final + 0.1 m``. The long blind stretch (``blind_100``) is shown against
+the same targets. ``health`` is the estimator's own report (skipped, frozen, clock jumps,
+blind stretches). CPU seconds per run are measured with ``time.process_time``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import estimators
+import lidar_env  # noqa: F401  (registers DualLidar-v0)
+from agents import PurePursuitDriver
+from estimators import SensorSetup
+from estimators.datasets.faults import recording_from_log, with_faults
+from estimators.datasets.recording import Recording
+from estimators.paths import SHARED_DATA
+from lidar_env.faults import BeamDropout, Blind, ClockJump, Fault, FrozenLidar, ScanLoss
+
+GROUPS = ("open_cylinders/right_turn", "hallway/zigzag", "closed_to_open/zigzag")
+ESTIMATORS = ("lidar_odometry", "slam", "pc_fusion", "icp")
+ACES = SHARED_DATA / "radish" / "aces.clf.bz2"
+JUMP_MARGIN = 0.3  # [m]
+FINAL_FACTOR, FINAL_MARGIN = 2.0, 0.1  # final <= 2 x clean + 0.1 m
+
+
+def faults_for(period: float, n_lidars: int) -> dict[str, Callable[[], list[Fault]]]:
+    """The matrix's faults for a drive with scans every ``period`` [s] and ``n_lidars``."""
+    three_seconds = max(1, round(3.0 / period))
+    frozen = (FrozenLidar(keys=("lidar_2",)) if n_lidars > 1
+              else FrozenLidar(keys=("lidar_1",), after=40, duration=three_seconds))
+    return {
+        "blind_every_other": lambda: [Blind(every=2)],
+        "dropout_half": lambda: [BeamDropout(fraction=0.5, burst=1)],
+        "frozen": lambda: [frozen],
+        "clock_jump_3s": lambda: [ClockJump(jump=3.0, every=50, offset=20)],
+        "gaps": lambda: [ScanLoss(probability=0.0, every=60, offset=30, stretch=10)],
+        "blind_3s": lambda: [Blind(every=3 * three_seconds, stretch=three_seconds, offset=30)],
+        "blind_100": lambda: [Blind(every=10_000, stretch=100, offset=60)],
+    }
+
+
+def record_drive(group: str, seed: int = 0) -> Recording:
+    """A pure-pursuit drive of ``world/trace`` as a recording with ground truth."""
+    world, trace = group.split("/")
+    env = gym.make("DualLidar-v0", world=world, trace=trace)
+    observation, info = env.reset(seed=seed)
+    driver = PurePursuitDriver()
+    driver.reset(env)
+    setup = SensorSetup.from_env(env)
+    rows = [(observation, info["time"], info["pose"])]
+    done = False
+    while not done:
+        observation, _, terminated, truncated, info = env.step(driver.act(observation, info))
+        rows.append((observation, info["time"], info["pose"]))
+        done = terminated or truncated
+    env.close()
+    scans = {key: np.stack([np.asarray(o[key], dtype=np.float64) for o, _, _ in rows])
+             for key in setup.keys}
+    return Recording(source=group, setup=setup, times=np.array([t for _, t, _ in rows]),
+                     scans=scans, topics=setup.keys, frames=setup.keys,
+                     truth=np.stack([p for _, _, p in rows]))
+
+
+def run(name: str, recording: Recording, initial_pose: np.ndarray) -> tuple[np.ndarray, dict,
+                                                                             float]:
+    """Trajectory, health counts and CPU seconds of ``name`` over ``recording``."""
+    estimator = estimators.make(name)
+    start = time.process_time()
+    estimator.reset(recording.setup, initial_pose)
+    for observation, t in zip(recording.observations(), recording.times, strict=True):
+        estimator.update(observation, float(t))
+    seconds = time.process_time() - start
+    health = getattr(estimator, "health", None)
+    return estimator.trajectory, ({} if health is None else health.counts()), seconds
+
+
+def step_errors(poses: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """[m] per step, the estimated step's translation against the true one (world frame)."""
+    return np.linalg.norm(np.diff(poses[:, :2], axis=0) - np.diff(truth[:, :2], axis=0), axis=1)
+
+
+def score(poses: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    jumps = step_errors(poses, truth)
+    return (float(jumps.max()) if len(jumps) else 0.0,
+            float(np.linalg.norm(poses[-1, :2] - truth[-1, :2])))
+
+
+def steps_of(recording: Recording, faulted: Recording) -> np.ndarray:
+    """Indices into ``recording`` of ``faulted``'s observations (lost ones left out)."""
+    if faulted.truth is not None and recording.truth is not None:
+        rows = {tuple(p): i for i, p in enumerate(recording.truth)}
+        return np.array([rows[tuple(p)] for p in faulted.truth])
+    return np.arange(len(faulted))
+
+
+def matrix(drives: dict[str, Recording], names: list[str], selected: list[str] | None,
+           results: list[dict]) -> None:
+    for group, recording in drives.items():
+        period = float(np.median(np.diff(recording.times)))
+        faults = faults_for(period, recording.setup.n_lidars)
+        for name in names:
+            truth = recording.truth
+            clean, health, seconds = run(name, recording, truth[0] if truth is not None
+                                         else np.zeros(3))
+            reference = clean if truth is None else truth
+            clean_jump, clean_final = score(clean, reference)
+            print(f"{group:28s} {name:15s} {'clean':18s} jump {clean_jump:6.3f} final "
+                  f"{clean_final:6.3f}  {seconds:6.1f} s  {health}", flush=True)
+            for fault_name, build in faults.items():
+                if selected and fault_name not in selected:
+                    continue
+                faulted = with_faults(recording, build(), seed=0)
+                poses, health, seconds = run(name, faulted, reference[0])
+                jump, final = score(poses, reference[steps_of(recording, faulted)])
+                ok = (jump - clean_jump <= JUMP_MARGIN
+                      and final <= FINAL_FACTOR * clean_final + FINAL_MARGIN)
+                results.append({"drive": group, "estimator": name, "fault": fault_name,
+                                "jump": jump, "clean_jump": clean_jump, "final": final,
+                                "clean_final": clean_final, "pass": bool(ok),
+                                "cpu_s": seconds, "health": health})
+                print(f"{group:28s} {name:15s} {fault_name:18s} jump+ {jump - clean_jump:6.3f} "
+                      f"final {final:6.3f} (clean {clean_final:6.3f})  "
+                      f"{'pass' if ok else 'FAIL'}  {seconds:6.1f} s  {health}", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--estimators", nargs="+", default=list(ESTIMATORS),
+                        choices=estimators.names())
+    parser.add_argument("--groups", nargs="+", default=list(GROUPS), choices=GROUPS)
+    parser.add_argument("--faults", nargs="+", default=None,
+                        help="only these faults (default: all)")
+    parser.add_argument("--aces-scans", type=int, default=600,
+                        help="ACES scans (0: no ACES)")
+    parser.add_argument("--json", type=Path, default=None, help="write the results here")
+    args = parser.parse_args(argv)
+    print(f"machine: {platform.processor() or platform.machine()}, "
+          f"Python {platform.python_version()}")
+    drives = {group: record_drive(group) for group in args.groups}
+    if args.aces_scans > 0:
+        if ACES.exists():
+            log = estimators.datasets.load_log(ACES)
+            drives["aces"] = recording_from_log(log, limit=args.aces_scans)
+        else:
+            print(f"ACES skipped: {ACES} is absent")
+    results: list[dict] = []
+    matrix(drives, args.estimators, args.faults, results)
+    failed = [r for r in results if not r["pass"]]
+    print(f"{len(results) - len(failed)} of {len(results)} runs meet the targets")
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=1))
+    return 0 if not failed else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
