@@ -151,8 +151,8 @@ def map_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
 
 def board_markdown(rows: Sequence[Mapping[str, Any]], groups: Sequence[Group],
                    real_name: str | None, rank_by: str) -> str:
-    """The board: the lead paragraph, the headline table and its notes, then (under ``##``
-    headings) one table per group, ranked by the group's own ``rank_by`` (a key of
+    """The board: the lead paragraph, the headline table and its notes, then (after the first
+    ``##`` heading) one table per group, ranked by the group's own ``rank_by`` (a key of
     :data:`~estimators.leaderboard.tables.RANK_KEYS`), and the map table."""
     rank_key = RANK_KEYS[rank_by]
     runs = max((row["scenarios_run"] for row in rows), default=0)
@@ -165,8 +165,10 @@ def board_markdown(rows: Sequence[Mapping[str, Any]], groups: Sequence[Group],
              f"{rank_by}." + (f" {real_name}: one run of the real log, mean relation "
                               "translation error." if real_name else ""), "",
              TEST_NOTE.format(metric=rank_by, n=runs, alpha=ALPHA), ""]
+    lines += [f"## Per group: each table ranked by the group's own {metric}", "",
+              "`#` is the place in the group, `overall #` the headline's rank.", ""]
     for group in groups:
-        lines += [f"## {group.name}: ranked by the group's own {metric} (mean ± std over seeds)",
-                  "", group_markdown(rows, group, rank_key)]
+        lines += [f"### {group.name} (mean ± std over seeds)", "",
+                  group_markdown(rows, group, rank_key)]
     lines += ["## Maps at the estimated poses (mean ± std over seeds)", "", map_markdown(rows)]
     return "\n".join(lines)

@@ -197,7 +197,7 @@ def write_report(path: Path, *, title: str, board: str, table_one: str | None,
            '<a href="#table-one">Table I</a> · <a href="#figures">figures</a> · '
            '<a href="#configuration">configuration and versions</a></nav>']
     sections = [*top,
-                '<h2 id="groups">Per group and maps</h2>', markdown_to_html(parts.rest),
+                '<h2 id="groups">Per-group and map tables</h2>', markdown_to_html(parts.rest),
                 '<h2 id="table-one">Table I: the paper\'s accuracy beside ours</h2>',
                 markdown_to_html(table_one) if table_one else
                 "<p>Not in this run: it holds none of the paper's world/trace pairs.</p>",

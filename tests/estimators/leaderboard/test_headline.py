@@ -76,5 +76,6 @@ def test_the_board_leads_with_the_answer_then_the_headline_then_the_groups() -> 
     assert "slam ranks first" in parts.lead
     assert [r[1] for r in table_rows(parts.table)] == ["slam", "lidar_odometry", "zero"]
     assert "Simulated figures" in parts.notes and "Wilcoxon" in parts.notes
-    assert parts.rest.startswith("## G1 open+right_turn: ranked by the group's own ATE [m]")
+    assert parts.rest.startswith("## Per group: each table ranked by the group's own ATE [m]")
+    assert "### G1 open+right_turn (mean ± std over seeds)\n\n| # | estimator |" in parts.rest
     assert "## Maps at the estimated poses" in parts.rest

@@ -25,7 +25,9 @@ Simulated figures: mean ± std over 2 seeds.
 
 Ties (`=k`): the paired Wilcoxon test.
 
-## G1 open+right_turn: ranked by the group's own ATE [m] (mean ± std over seeds)
+## Per group: each table ranked by the group's own ATE [m]
+
+### G1 open+right_turn (mean ± std over seeds)
 
 | # | estimator | ATE [m] | runs | overall # |
 |---|---|---|---|---|
@@ -73,8 +75,8 @@ def test_markdown_tables_become_sortable_html_tables() -> None:
     page = markdown_to_html(BOARD)
     assert page.count('<table class="sortable">') == 2
     assert "<th>ATE [m]</th>" in page and "<td>=1</td><td>lidar_odometry</td>" in page
-    assert "<h3>G1 open+right_turn: ranked by the group&#x27;s own ATE [m] (mean ± std over " \
-           "seeds)</h3>" in page
+    assert "<h3>Per group: each table ranked by the group&#x27;s own ATE [m]</h3>" in page
+    assert "<h4>G1 open+right_turn (mean ± std over seeds)</h4>" in page
     assert "---" not in page  # the separator row is no data row
     assert "<code>x</code>" in markdown_to_html("a `x` b") and "&lt;b&gt;" in markdown_to_html(
         "<b>")
@@ -88,7 +90,7 @@ def test_the_board_is_cut_into_lead_headline_notes_and_the_rest() -> None:
     assert parts.table.splitlines()[-1] == "| 3 | zero | 16.706 ± 0.100 |"
     assert parts.notes.split() == "Simulated figures: mean ± std over 2 seeds. Ties (`=k`): " \
                                   "the paired Wilcoxon test.".split()
-    assert parts.rest.startswith("## G1") and parts.rest.endswith("| 2 | 1 |")
+    assert parts.rest.startswith("## Per group") and parts.rest.endswith("| 2 | 1 |")
 
 
 def test_the_report_is_one_file_with_everything_inside(tmp_path: Path) -> None:
@@ -105,7 +107,7 @@ def test_the_report_is_one_file_with_everything_inside(tmp_path: Path) -> None:
         assert text in page, text
     # the answer comes first: lead paragraph, headline table and lead figure before the rest
     order = [page.index(text) for text in ('<p class="lead">slam ranks first', "<td>=1</td>",
-                                           "one group&#x27;s traces", "<h3>G1", "Table I:",
+                                           "one group&#x27;s traces", "<h4>G1", "Table I:",
                                            "a test figure", "<td>--seeds</td>")]
     assert order == sorted(order)
     # figures at print size, read as written at the leaderboard's DPI: 96 css px per inch
