@@ -213,8 +213,24 @@ class Observations:
         return poses[index].copy() if offset is None else compose(poses[index], offset)
 
     def all_poses(self, used: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``(N, 3)`` poses of every observation from ``used`` (one per used observation)."""
+        """``(N, 3)`` poses of every observation from ``used`` (one per used observation).
+        A skipped observation between two used ones lies on the way between them, by its
+        share of the observations between (the motion the scans showed once they came back,
+        spread over the stretch rather than one step); after the last used one, at its
+        prediction."""
         if len(used) == len(self.rows):
             return used
-        return np.array([used[k] if offset is None else compose(used[k], offset)
-                         for k, offset, _ in self.rows]).reshape(-1, 3)
+        poses = np.empty((len(self.rows), 3))
+        after: list[int | None] = [None] * len(self.rows)  # the next used observation
+        for n in range(len(self.rows) - 2, -1, -1):
+            after[n] = n + 1 if self.rows[n + 1][1] is None else after[n + 1]
+        before = 0  # the used observation before
+        for n, (k, offset, _) in enumerate(self.rows):
+            if offset is None:
+                poses[n], before = used[k], n
+            elif after[n] is None:
+                poses[n] = compose(used[k], offset)
+            else:
+                share = (n - before) / (after[n] - before)
+                poses[n] = compose(used[k], share * relative(used[k], used[k + 1]))
+        return poses

@@ -139,6 +139,9 @@ def test_a_long_blind_stretch_is_flagged(drive):
                    faulted(setup, rows, [Blind(every=100, stretch=15, offset=20)]))
     assert odometry.health.blind_stretches == 1
     assert odometry.health.stretches == [(20, 34)]
+    # after the fact the stretch lies on the way between the used poses around it
+    steps = np.hypot(*np.diff(odometry.trajectory[19:36, :2], axis=0).T)
+    np.testing.assert_allclose(steps, steps[0], rtol=1e-3)
 
 
 def test_the_screen_tells_frozen_from_standing_still():
