@@ -264,7 +264,8 @@ def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: li
     executor = _executor(args)
     try:
         if isinstance(executor, ProcessPoolExecutor) and (
-            seconds := warm_up(executor, tuple(spec.name for spec in specs))
+            seconds := warm_up(executor, tuple(spec.name for spec in specs),
+                               progress=not args.no_progress)
         ):
             print(f"compiled the numba kernels in {seconds:.0f} s (cached: later runs skip it)")
         tasks = len(every) + len(world_aligned.scenarios) + len(logs) * len(specs)
