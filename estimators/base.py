@@ -284,14 +284,14 @@ class Estimator(ABC):
     :meth:`_start` (first scans) and :meth:`_step` (every later scans, returning the new pose).
 
     Every later observation passes a screen first (:mod:`estimators.health`): a sensor whose
-    scan repeats its last one exactly (frozen) reads no return (0 m), and an observation left
-    with too few returns on the sensors the estimator reads (:meth:`_used_sensors`) is skipped:
-    :meth:`_step` never sees it, and its pose is the constant-velocity prediction from the
-    last used ones (the last used increment per observation, scaled by the time step over the
-    median one, at most twice). ``health`` counts what the screen met (skipped and frozen
-    scans, clock jumps, blind stretches). Inside :meth:`_step`, ``pose``, ``_poses`` and
-    ``_times`` are those of the observations the estimator used, and ``skipped_before`` the
-    number skipped since the last of them.
+    scan repeats its last one exactly while another's changed (frozen) reads no return (0 m),
+    and an observation left with too few returns on the sensors the estimator reads
+    (:meth:`_used_sensors`) is skipped: :meth:`_step` never sees it, and its pose is the
+    constant-velocity prediction from the last used ones (the last used increment per
+    observation, scaled by the time step over the median one, at most twice). ``health``
+    counts what the screen met (skipped and frozen scans, clock jumps, blind stretches).
+    Inside :meth:`_step`, ``pose``, ``_poses`` and ``_times`` are those of the observations
+    the estimator used, and ``skipped_before`` the number skipped since the last of them.
     """
 
     #: Lidars the estimator needs; a pipeline skips it (no failure) on a setup with fewer.

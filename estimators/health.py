@@ -6,11 +6,12 @@ A scan is usable when the sensors the estimator reads hold at least :data:`MIN_R
 returns between them: below that a fit of a handful of points can land metres away, so the
 scan is skipped and the constant-velocity prediction carries the pose
 (:meth:`estimators.base.Estimator.update`). A sensor whose scan repeats its previous one
-exactly while another sensor's scan changed, or while the estimate is moving, is frozen (a
-real Lidar's range noise never repeats a scan bit for bit; every sensor of a car standing
-still in a noise-free simulation does, and that is no fault): its scan reads 0 m for that
-observation (below every estimator's ``min_range``: no return, and unlike ``max_range`` it
-clears no space the sensor did not see). A time
+exactly while another sensor's scan changed is frozen (a real Lidar's range noise never
+repeats a scan bit for bit): its scan reads 0 m for that observation (below every
+estimator's ``min_range``: no return, and unlike ``max_range`` it clears no space the sensor
+did not see). Where every sensor repeats while the estimate was moving, the repeat is counted
+as frozen but the scans are used (a car stopping dead in a noise-free simulation repeats its
+scans too, and matching them says it stands). A time
 step over :data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or
 scans lost); it is counted, and estimators that scale their prediction by time guard it.
 """
@@ -44,8 +45,8 @@ class Health:
     Attributes:
         skipped_scans: observations it could not use (too few returns, or every sensor it
             reads frozen); the constant-velocity prediction carried the pose.
-        frozen_scans: sensor scans that repeated that sensor's previous scan exactly (read as
-            no return).
+        frozen_scans: sensor scans that repeated that sensor's previous scan exactly while
+            another sensor's changed (read as no return) or the estimate moved.
         clock_jumps: time steps over ``CLOCK_JUMP_FACTOR`` x the median period (a clock jump,
             or scans lost).
         blind_stretches: runs of at least ``BLIND_STRETCH`` skipped observations in a row.
@@ -115,11 +116,12 @@ class ScanScreen:
                     for previous, scan, limit in zip(self._previous, scans, self.max_ranges,
                                                      strict=True)]
         self._previous = list(scans)
-        frozen = repeated if moving or not all(repeated) else [False] * len(scans)
+        others_changed = not all(repeated)
         screened = []
         for k, scan in enumerate(scans):
-            if frozen[k]:
+            if repeated[k] and (others_changed or moving):
                 self.health.frozen_scans += 1
+            if repeated[k] and others_changed:
                 scan = np.zeros_like(scan)  # below any min_range: says nothing, clears nothing
             screened.append(scan)
         returns = sum(int(np.count_nonzero((screened[k] > 0) & (screened[k] < self.max_ranges[k])))
@@ -218,7 +220,7 @@ class Observations:
         share of the observations between (the motion the scans showed once they came back,
         spread over the stretch rather than one step); after the last used one, at its
         prediction."""
-        if len(used) == len(self.rows):
+        if len(used) == len(self.rows) or not self.rows:  # none skipped, or fed otherwise
             return used
         poses = np.empty((len(self.rows), 3))
         after: list[int | None] = [None] * len(self.rows)  # the next used observation

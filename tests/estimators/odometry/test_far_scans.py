@@ -92,7 +92,8 @@ def test_a_scan_with_no_overlap_or_no_returns_is_flagged() -> None:
                               strict=True):
         pose = estimator.update(observation, float(t))
         assert np.all(np.isfinite(pose))
-    assert estimator.poor_matches == [3, 4]
+    assert estimator.poor_matches == [3]
+    assert estimator.health.skipped == [4]  # no returns: skipped before matching, counted
 
 
 def test_the_search_window_covers_the_reach_of_the_car() -> None:
