@@ -98,7 +98,8 @@ class ScanScreen:
 
     def watch_clock(self, index: int, dt: float) -> bool:
         """Take the time step ``dt`` [s] before observation ``index``; whether it is a jump."""
-        jump = len(self._steps) >= 3 and dt > CLOCK_JUMP_FACTOR * float(np.median(self._steps))
+        jump = (len(self._steps) >= 3 and dt > CLOCK_JUMP_FACTOR * min(self._steps)  # cheap first
+                and dt > CLOCK_JUMP_FACTOR * float(np.median(self._steps)))
         if jump:
             self.health.clock_jumps += 1
             self.health.jumps.append(index)
