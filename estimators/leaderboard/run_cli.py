@@ -6,9 +6,10 @@
 
 Reads the recording and its truth (:mod:`estimators.leaderboard.run_sources`), runs each
 estimator over every scan and scores it (:mod:`estimators.leaderboard.single_run`), writes the
-TUM trajectories, relation errors, ROS maps, figures and metrics
+TUM trajectories, relation errors, ROS maps, figures, metrics and each estimator's input health
 (:mod:`estimators.leaderboard.run_outputs`) and prints one table: the SE(2)-aligned ATE beside
-the local relation errors, so an estimator that drifts shows at once.
+the local relation errors, so an estimator that drifts shows at once, and the skipped and
+frozen scans and clock jumps it met, so a faulty sensor shows too.
 """
 
 from __future__ import annotations
@@ -124,6 +125,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "duallidar run") -> int:
 def _run_all(args: argparse.Namespace, run_input: RunInput, start: float) -> int:
     from estimators.leaderboard.run_outputs import (
         ATE_NOTE,
+        health_summary,
         metrics_row,
         summary_table,
         write_estimator_files,
@@ -145,7 +147,7 @@ def _run_all(args: argparse.Namespace, run_input: RunInput, start: float) -> int
         print(f"[{index}/{len(args.estimators)}] {name}: running over {len(recording)} scans "
               "...", flush=True)
         try:
-            run = run_estimator(name, run_input)
+            run, health = run_estimator(name, run_input)
             scores = score_run(run_input, run, args.windows)
         except Exception as error:  # one estimator's failure does not stop the others
             failed.append(name)
@@ -153,10 +155,12 @@ def _run_all(args: argparse.Namespace, run_input: RunInput, start: float) -> int
                                                       f"{error}"})
             continue
         files = write_estimator_files(args.out, name, run_input, run, scores,
-                                      args.map_resolution, figure=not args.no_figures)
+                                      args.map_resolution, figure=not args.no_figures,
+                                      health=health)
         no_figures |= not args.no_figures and "figure" not in files
-        rows.append(metrics_row(name, run_input, run, scores))
-        print(f"    {1e3 * run.seconds_per_scan:.2f} ms/scan; files in {files['estimate'].parent}")
+        rows.append(metrics_row(name, run_input, run, scores, health=health))
+        print(f"    {1e3 * run.seconds_per_scan:.2f} ms/scan; health: "
+              f"{health_summary(rows[-1])}; files in {files['estimate'].parent}")
     json_path, _ = write_metrics(args.out, run_input, rows)
     scored = run_input.truth is not None or run_input.relations is not None
     windows = [f"{w:g} s" for w in args.windows] if run_input.truth is not None else []

@@ -12,10 +12,16 @@ Per estimator, in ``OUT/<estimator>/`` (names from
   as a ROS ``map_server`` map (:func:`estimators.mapping.ros_map_export.save_grid_as_ros_map`),
   over the extent of the returns;
 * ``trajectory.png``: that map with the estimated trajectory and the truth (moved into the
-  estimate's frame by the ATE's alignment) on top (needs matplotlib, the ``plots`` extra).
+  estimate's frame by the ATE's alignment) on top (needs matplotlib, the ``plots`` extra);
+* ``health.json``: what the estimator met in its input (:class:`estimators.health.Health`):
+  the counts of skipped scans, frozen scans, clock jumps and blind stretches, and where they
+  were, as scan indices from 0 (the rows of ``estimate.tum``): ``skipped``, ``jumps`` and
+  ``stretches`` (``[first, last]``).
 
 In ``OUT/``: ``metrics.json`` (the recording, its truth, and one entry per estimator) and
-``metrics.csv`` (one row per estimator).
+``metrics.csv`` (one row per estimator, the four health counts among its columns). The
+terminal table ends in a ``health`` column: ``ok``, or the faults met (``12 skipped,
+1 frozen, 2 clock jumps``).
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from numpy.typing import NDArray
 
 from estimators.datasets.real_log import LogRun
 from estimators.evaluation.tum import write_tum
+from estimators.health import Health
 from estimators.leaderboard.file_names import safe_file_name
 from estimators.leaderboard.run_sources import RunInput
 from estimators.leaderboard.single_run import RunScores
@@ -41,6 +48,11 @@ from lidar_env.core.se2 import compose, inverse
 
 #: Border [m] around the returns of the written maps.
 MAP_MARGIN = 1.0
+#: The health counts of a metrics row, each with its words in the terminal table.
+HEALTH_WORDS: dict[str, tuple[str, str]] = {
+    "skipped_scans": ("skipped", "skipped"), "frozen_scans": ("frozen", "frozen"),
+    "clock_jumps": ("clock jump", "clock jumps"),
+    "blind_stretches": ("blind stretch", "blind stretches")}
 ATE_NOTE = ("ATE: RMSE of the position error over the scans with a truth pose, after the "
             "least-squares rigid SE(2) alignment (rotation + translation, no scale; Umeyama), "
             "as evo_ape -a; relation errors: local = between consecutive truth poses")
@@ -70,14 +82,17 @@ def build_map(run: LogRun, run_input: RunInput, resolution: float) -> OccupancyG
 
 
 def write_estimator_files(out: Path, name: str, run_input: RunInput, run: LogRun,
-                          scores: RunScores, resolution: float, figure: bool = True
-                          ) -> dict[str, Path]:
+                          scores: RunScores, resolution: float, figure: bool = True,
+                          health: Health | None = None) -> dict[str, Path]:
     """Write the files listed in the module docstring for one estimator; return them by
-    kind. ``figure=False`` (or no matplotlib) skips the PNG."""
+    kind. ``figure=False`` (or no matplotlib) skips the PNG; ``health=None`` skips
+    ``health.json``."""
     directory = out / safe_file_name(name)
     directory.mkdir(parents=True, exist_ok=True)
     written = {"estimate": directory / "estimate.tum"}
     write_tum(written["estimate"], run.times, run.poses)
+    if health is not None:
+        written["health"] = write_health(directory / "health.json", name, health)
     truth = run_input.truth
     if truth is not None:
         written["truth"] = directory / "truth.tum"
@@ -103,6 +118,25 @@ def write_estimator_files(out: Path, name: str, run_input: RunInput, run: LogRun
     return written
 
 
+def write_health(path: Path, name: str, health: Health) -> Path:
+    """``health.json`` at ``path``: ``name``'s fault counts and their scan indices."""
+    document = {"estimator": name, "ok": health.ok, **health.counts(),
+                "skipped": list(health.skipped), "jumps": list(health.jumps),
+                "stretches": [list(stretch) for stretch in health.stretches]}
+    path.write_text(json.dumps(document, indent=1, default=_plain) + "\n")
+    return path
+
+
+def health_summary(row: dict[str, Any]) -> str:
+    """``ok``, or the faults a metrics row counts (``12 skipped, 1 frozen, 2 clock jumps``);
+    ``-`` for a row without health counts."""
+    if not all(key in row for key in HEALTH_WORDS):
+        return "-"
+    parts = [f"{row[key]} {word if row[key] == 1 else plural}"
+             for key, (word, plural) in HEALTH_WORDS.items() if row[key]]
+    return ", ".join(parts) if parts else "ok"
+
+
 def _figure(path: Path, name: str, run_input: RunInput, run: LogRun, scores: RunScores,
             grid: OccupancyGrid) -> Path:
     from estimators.mapping.map_figure import save_map_figure
@@ -118,9 +152,9 @@ def _figure(path: Path, name: str, run_input: RunInput, run: LogRun, scores: Run
 
 
 def metrics_row(name: str, run_input: RunInput, run: LogRun, scores: RunScores,
-                status: str = "ok") -> dict[str, Any]:
+                status: str = "ok", health: Health | None = None) -> dict[str, Any]:
     """One estimator's metrics as a flat mapping (units in the keys; ``None`` = not
-    measured)."""
+    measured), ending in ``health``'s four counts when given."""
     row: dict[str, Any] = {
         "estimator": name, "status": status, "scans": len(run.times),
         "truth_poses": None if run_input.truth is None else run_input.truth.matched,
@@ -135,6 +169,8 @@ def metrics_row(name: str, run_input: RunInput, run: LogRun, scores: RunScores,
         row[f"{key}_rotation_deg"] = summary.rotation_mean
     row["ms_per_scan_cpu"] = 1e3 * run.seconds_per_scan
     row["realtime_factor"] = run.realtime_factor
+    if health is not None:
+        row.update(health.counts())
     return row
 
 
@@ -172,9 +208,10 @@ def _cell(value: Any, digits: int) -> str:
 
 
 def summary_table(rows: Sequence[dict[str, Any]], windows: Sequence[str]) -> str:
-    """The terminal table: ATE beside the local and windowed relation errors, then cost."""
+    """The terminal table: ATE beside the local and windowed relation errors, then cost and
+    the input's health (:func:`health_summary`)."""
     heads = ["estimator", "ATE [m]", "local [m]", "local [deg]",
-             *(f"{w} [m]" for w in windows), "ms/scan", "x real time"]
+             *(f"{w} [m]" for w in windows), "ms/scan", "x real time", "health"]
     body = []
     for row in rows:
         if row["status"] != "ok":
@@ -186,7 +223,8 @@ def summary_table(rows: Sequence[dict[str, Any]], windows: Sequence[str]) -> str
                      _cell(row.get("local_translation_m"), 4),
                      _cell(row.get("local_rotation_deg"), 3),
                      *(_cell(row.get(f"{key}_translation_m"), 4) for key in relation_keys[1:]),
-                     _cell(row["ms_per_scan_cpu"], 2), _cell(row["realtime_factor"], 1)])
+                     _cell(row["ms_per_scan_cpu"], 2), _cell(row["realtime_factor"], 1),
+                     health_summary(row)])
     if any("all_translation_m" in row for row in rows):
         heads[4:4 + len(windows)] = ["all [m]"]
     full = [heads, *(line for line in body if len(line) == len(heads))]

@@ -3,7 +3,10 @@
 :func:`run_estimator` feeds every scan of a :class:`~estimators.leaderboard.run_sources.RunInput`
 to a registered estimator (:func:`estimators.datasets.real_log.run_on_log`) and times it in CPU
 seconds (``time.process_time``, so a busy machine does not slow the figure down); the
-real-time factor is the recording's median scan period over that time per scan.
+real-time factor is the recording's median scan period over that time per scan. It returns the
+estimator's :class:`~estimators.health.Health` beside the trajectory: the scans it skipped,
+the frozen scans and clock jumps it met and its blind stretches, so a faulty sensor is
+reported rather than absorbed.
 
 :func:`score_run` scores the trajectory on the truth:
 
@@ -40,6 +43,7 @@ from estimators.evaluation.relations import (
     relation_errors,
     relations_from_trajectory,
 )
+from estimators.health import Health
 from estimators.leaderboard.alignment import Alignment, align_to_reference
 from estimators.leaderboard.run_sources import RunInput
 from estimators.registry import make
@@ -87,13 +91,15 @@ class RunScores:
 
 
 def run_estimator(name: str, run_input: RunInput, params: dict[str, Any] | None = None
-                  ) -> LogRun:
-    """``name`` over every scan of ``run_input``, its ``seconds_per_scan`` in CPU time."""
+                  ) -> tuple[LogRun, Health]:
+    """``name`` over every scan of ``run_input``: its run (``seconds_per_scan`` in CPU time)
+    and the :class:`~estimators.health.Health` of its input (observation indices count the
+    recording's scans from 0)."""
     estimator = make(name, **(params or {}))
     start = time.process_time()
     run = run_on_log(estimator, run_input.recording)
     cpu = (time.process_time() - start) / max(len(run.times), 1)
-    return dataclasses.replace(run, seconds_per_scan=cpu)
+    return dataclasses.replace(run, seconds_per_scan=cpu), estimator.health
 
 
 def not_applicable(name: str, run_input: RunInput) -> str | None:
