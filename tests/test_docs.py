@@ -189,3 +189,20 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert (tmp_path / "site" / "api" / "lidar_env.core" / "index.html").is_file()
+
+
+def test_no_results_file_is_older_than_the_code_that_makes_it() -> None:
+    """Each results file names the code version it came from (the package version plus
+    :func:`estimators.leaderboard.records.code_digest`, blind to comments and docstrings):
+    a change of code that can change a figure makes the published figure stale."""
+    from estimators.leaderboard.records import package_version
+
+    now = package_version().rpartition("+src.")[2]
+    stale = []
+    for path in sorted(RESULTS.glob("*.json")):
+        made_by = json.loads(path.read_text()).get("source_version", "")
+        if made_by.rpartition("+src.")[2] != now:
+            stale.append(f"{path.name} (code {made_by or 'unknown'}, now {now})")
+    assert not stale, ("results older than the code: " + ", ".join(stale) + "; re-run "
+                       "`bash scripts/leaderboard.sh` and `python docs/hooks.py --leaderboard "
+                       "leaderboard`, and each benchmark's own command in its results file")
