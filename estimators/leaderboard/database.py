@@ -104,19 +104,23 @@ class ExperimentDatabase:
         try:
             self._conn = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
             self._conn.execute("PRAGMA foreign_keys = ON")
-            has_schema = self._conn.execute(
-                "SELECT 1 FROM sqlite_master WHERE name = 'schema_version'"
-            ).fetchone()
-            if not has_schema:
+            if not self._has_schema():
+                # Checked again inside the write lock: another process opening the same new
+                # file at the same moment may have written the schema in between.
                 with self._transaction():
-                    for statement in filter(str.strip, SCHEMA.split(";")):
-                        self._conn.execute(statement)
-                    self._conn.execute(
-                        "INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,)
-                    )
+                    if not self._has_schema():
+                        for statement in filter(str.strip, SCHEMA.split(";")):
+                            self._conn.execute(statement)
+                        self._conn.execute(
+                            "INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,)
+                        )
             self._conn.execute(CREATE_CHECKSUMS)
         except sqlite3.OperationalError as error:
             raise DatabaseLocationError(f"cannot open {self.path} for writing: {error}") from error
+
+    def _has_schema(self) -> bool:
+        return self._conn.execute(
+            "SELECT 1 FROM sqlite_master WHERE name = 'schema_version'").fetchone() is not None
 
     def _transaction(self) -> AbstractContextManager[sqlite3.Connection]:
         """One write transaction (a failed write is a DatabaseWriteError, rolled back)."""

@@ -295,3 +295,17 @@ def test_the_recorded_version_follows_the_source_code(tmp_path: Path) -> None:
     assert digest('"""A module."""\n\ndef f():\n    return 2\n') != before  # new code
     assert digest('"""A module."""\n\ndef f():\n    return "1"\n') != before  # a string
     assert digest('"""A module."""\n\ndef f():\n    pass\nreturn_ = 1\n') != before
+
+
+def test_two_processes_creating_one_new_database_at_once_both_open_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The schema is written under the write lock only if it is still missing there: a second
+    process that saw an empty file before the first wrote its schema opens it as it is."""
+    path = tmp_path / "shared.sqlite"
+    ExperimentDatabase(path).close()  # the first process wrote the schema
+    answers = [False]  # what the second saw just before: no schema yet
+    original = ExperimentDatabase._has_schema
+    monkeypatch.setattr(ExperimentDatabase, "_has_schema",
+                        lambda self: answers.pop() if answers else original(self))
+    with ExperimentDatabase(path) as db:
+        assert db.counts()["sensor_datasets"] == 0

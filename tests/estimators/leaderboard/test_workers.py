@@ -88,8 +88,10 @@ def test_ctrl_c_prints_one_line_exits_130_and_keeps_finished_scenarios(tmp_path,
     assert len(lines) == 1 and lines[0].startswith("interrupted; ")
     assert lines[0].endswith(" scenarios stored; re-run to resume")
     stored = int(lines[0].split()[1])
+    # the message never counts more than the database keeps; a scenario committed in the
+    # instant before Ctrl-C may be kept but not yet counted
     with ExperimentDatabase(db_path) as db:
-        assert db.counts()["sensor_datasets"] >= stored >= 1
+        assert db.counts()["sensor_datasets"] >= max(stored, 1)
 
 
 @pytest.mark.parametrize("seeds", [["-1"], ["0", "4294967296"]])
