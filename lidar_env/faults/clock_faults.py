@@ -15,7 +15,7 @@ import numpy as np
 
 from lidar_env.core import ConfigError
 from lidar_env.faults.frames import Fault, Frame
-from lidar_env.faults.scan_faults import check_count, check_share, in_stretch
+from lidar_env.faults.scan_faults import check_schedule, in_stretch
 
 #: [s] the least step between two faulted stamps (1 us).
 MIN_STEP: float = 1e-6
@@ -71,11 +71,7 @@ class ClockStall(ClockFault):
     _left: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.every is not None:
-            check_count("every", self.every, 1)
-        check_count("stretch", self.stretch, 1)
-        check_count("offset", self.offset, 0)
-        check_share("probability", self.probability)
+        check_schedule(self.every, self.stretch, self.offset, self.probability)
 
     def reset(self, rng: np.random.Generator, max_ranges: Mapping[str, float]) -> None:
         super().reset(rng, max_ranges)
@@ -113,10 +109,7 @@ class ClockJump(ClockFault):
     def __post_init__(self) -> None:
         if not (np.isfinite(self.jump) and self.jump > 0):
             raise ConfigError(f"jump: expected a positive time [s], got {self.jump!r}")
-        if self.every is not None:
-            check_count("every", self.every, 1)
-        check_count("offset", self.offset, 0)
-        check_share("probability", self.probability)
+        check_schedule(self.every, 1, self.offset, self.probability)
 
     def reset(self, rng: np.random.Generator, max_ranges: Mapping[str, float]) -> None:
         super().reset(rng, max_ranges)
@@ -149,11 +142,7 @@ class ScanLoss(Fault):
     _left: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        check_share("probability", self.probability)
-        check_count("stretch", self.stretch, 1)
-        if self.every is not None:
-            check_count("every", self.every, 1)
-        check_count("offset", self.offset, 0)
+        check_schedule(self.every, self.stretch, self.offset, self.probability)
 
     def reset(self, rng: np.random.Generator, max_ranges: Mapping[str, float]) -> None:
         super().reset(rng, max_ranges)

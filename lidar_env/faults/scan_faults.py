@@ -36,6 +36,17 @@ def in_stretch(step: int, every: int | None, stretch: int, offset: int) -> bool:
     return every is not None and step >= offset and (step - offset) % every < stretch
 
 
+def check_schedule(every: int | None, stretch: int, offset: int, probability: float) -> None:
+    """Raise a ConfigError naming the first bad setting of a fault's schedule (as read by
+    :func:`in_stretch`): ``every`` an integer >= 1 or None, ``stretch`` >= 1, ``offset`` >= 0
+    and ``probability`` (of a random start per scan) in [0, 1]."""
+    if every is not None:
+        check_count("every", every, 1)
+    check_count("stretch", stretch, 1)
+    check_count("offset", offset, 0)
+    check_share("probability", probability)
+
+
 def sector_mask(n_beams: int, centre: float, width: float) -> NDArray[np.bool_]:
     """``(n_beams,)`` the beams (beam ``i`` at ``2 pi i / n``) within ``width / 2`` [rad] of
     ``centre`` [rad]; all of them for a width of 2 pi or more."""
@@ -82,11 +93,7 @@ class Blind(Fault):
     _centre: float = field(default=0.0, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.every is not None:
-            check_count("every", self.every, 1)
-        check_count("stretch", self.stretch, 1)
-        check_count("offset", self.offset, 0)
-        check_share("probability", self.probability)
+        check_schedule(self.every, self.stretch, self.offset, self.probability)
         if not self.width > 0:
             raise ConfigError(f"width: expected a positive angle [rad], got {self.width!r}")
         if self.fill not in FILLS:

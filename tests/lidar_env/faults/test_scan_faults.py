@@ -5,7 +5,16 @@ import numpy as np
 import pytest
 
 from lidar_env.core import ConfigError
-from lidar_env.faults import BeamDropout, Blind, FrozenLidar, RangeOutliers, apply_faults
+from lidar_env.faults import (
+    BeamDropout,
+    Blind,
+    ClockJump,
+    ClockStall,
+    FrozenLidar,
+    RangeOutliers,
+    ScanLoss,
+    apply_faults,
+)
 from lidar_env.faults.frames import Frame
 
 MAX = {"lidar_1": 10.0, "lidar_2": 10.0}
@@ -100,3 +109,23 @@ def test_bad_settings_are_config_errors(build):
 def test_an_unknown_key_is_named():
     with pytest.raises(ConfigError, match="lidar_3"):
         run([Blind(keys=("lidar_3",))])
+
+
+SCHEDULED = [Blind, ClockStall, ClockJump, ScanLoss]
+BAD_SCHEDULES = [("every", 0, "integer >= 1"), ("every", True, "integer >= 1"),
+                 ("stretch", 0, "integer >= 1"), ("offset", -1, "integer >= 0"),
+                 ("offset", 1.5, "integer >= 0"), ("probability", 1.5, r"share in \[0, 1\]"),
+                 ("probability", float("nan"), r"share in \[0, 1\]")]
+
+
+@pytest.mark.parametrize(("fault", "name", "value", "expected"), [
+    (fault, *case) for fault in SCHEDULED for case in BAD_SCHEDULES
+    if case[0] in fault.__dataclass_fields__])
+def test_every_scheduled_fault_names_a_bad_schedule_setting(fault, name, value, expected):
+    with pytest.raises(ConfigError, match=f"^{name}: expected an? {expected}, got "):
+        fault(**{name: value})
+
+
+@pytest.mark.parametrize("fault", SCHEDULED, ids=lambda fault: fault.__name__)
+def test_a_scheduled_fault_takes_no_schedule(fault):
+    assert fault(every=None, probability=0.0).every is None
