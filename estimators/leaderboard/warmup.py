@@ -14,9 +14,11 @@ another file changed would load stale code: a compile for a new source first del
 packages' numba cache files, so every kernel is rebuilt from the current source.
 
 Before compiling, one line says so and how long it took the last time on this machine (or the
-range it takes on a 2-core machine), and a bar of elapsed against expected seconds moves while
-it runs. The leaderboard calls :func:`warm_up` on its own pool (a Dask cluster, whose workers
-cache elsewhere, or one worker skip it); after the first run nothing is said.
+range it takes on a 2-core machine); on a terminal a bar of elapsed against expected seconds
+moves while it runs, while a log that is not a terminal (CI) gets no bar frames, only that line
+and the caller's line saying how long it took. The leaderboard calls :func:`warm_up` on its
+own pool (a Dask cluster, whose workers cache elsewhere, or one worker skip it); after the
+first run nothing is said.
 """
 
 from __future__ import annotations
@@ -215,9 +217,10 @@ def warm_up(executor: Executor, estimators: tuple[str, ...], *,
             progress: bool = True, stream: Any = None) -> float:
     """Compile the kernels on two of ``executor``'s workers unless the marker says they are
     cached; returns the wall time spent [s] (0 when cached). Before it starts, one line on
-    ``stream`` (stderr) says what runs and how long it takes; with ``progress`` a bar of
-    elapsed seconds moves until it ends. A failure here is left to the real tasks, which
-    report it per scenario and estimator (and the marker is not written)."""
+    ``stream`` (stderr) says what runs and how long it takes; with ``progress``, and
+    ``stream`` a terminal, a bar of elapsed seconds moves until it ends. A failure here is
+    left to the real tasks, which report it per scenario and estimator (and the marker is not
+    written)."""
     marker = marker_path()
     if marker.exists():
         return 0.0
@@ -240,11 +243,14 @@ def warm_up(executor: Executor, estimators: tuple[str, ...], *,
 def _wait(jobs: list[Future], expected: float, progress: bool, stream: Any,
           started: float) -> bool:
     """Wait for ``jobs``, moving a bar of elapsed against ``expected`` seconds every
-    :data:`TICK_SECONDS` when ``progress``; True if every job succeeded."""
+    :data:`TICK_SECONDS` when ``progress`` and ``stream`` is a terminal; True if every job
+    succeeded."""
     from tqdm import tqdm
 
     pending = set(jobs)
-    with tqdm(total=round(expected), unit="s", file=stream, disable=not progress,
+    # disable=None: tqdm draws nothing on a stream that is not a terminal, where each frame
+    # would be one more carriage-return line in the log
+    with tqdm(total=round(expected), unit="s", file=stream, disable=None if progress else True,
               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s{postfix}",
               desc="compiling") as bar:
         while pending:

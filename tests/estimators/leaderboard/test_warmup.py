@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import io
+import re
 from concurrent.futures import Future
 
 import pytest
@@ -26,6 +28,13 @@ class RecordingPool:
         else:
             future.set_result(None)
         return future
+
+
+class Terminal(io.StringIO):
+    """A stream that says it is a terminal, as stderr in a shell."""
+
+    def isatty(self) -> bool:
+        return True
 
 
 @pytest.fixture
@@ -68,10 +77,23 @@ def test_one_line_says_what_compiles_before_it_starts_and_then_how_long_it_took(
     assert "2-core machine" in pool.said  # no compile timed here yet: the stated range
     assert warmup.last_seconds() is not None
     marker.unlink()
-    stream = io.StringIO()
+    stream = Terminal()
     warmup.warm_up(RecordingPool(), ("icp",), progress=True, stream=stream)
     assert "as the last time on this machine" in stream.getvalue()
-    assert "compiling" in stream.getvalue().splitlines()[-1]  # the bar, after the line
+    assert "\r" in stream.getvalue()  # on a terminal, the bar's frames after the line
+    assert "compiling" in stream.getvalue().splitlines()[-1]
+
+
+def test_a_log_that_is_not_a_terminal_gets_a_line_before_and_after_and_no_bar_frames(
+        marker, monkeypatch, capsys) -> None:
+    monkeypatch.setattr(warmup, "ProcessPoolExecutor",
+                        lambda max_workers: contextlib.nullcontext(RecordingPool()))
+    assert warmup.main() == 0 and marker.exists()
+    said = capsys.readouterr().err
+    assert "\r" not in said
+    first, last = said.splitlines()
+    assert first.startswith("compiling the numba kernels once") and "2-core machine" in first
+    assert re.fullmatch(r"compiled the numba kernels in \d+ s", last)
 
 
 def test_a_warm_source_says_nothing(marker, dropped) -> None:
