@@ -76,6 +76,8 @@ class CrowdSlots:
         """``(N, M, 5)`` x, y [m], vx, vy [m/s], radius [m] of every env's movers (the single
         env's ``info["moving_obstacles"]``), zeros for the envs outside ``mask``."""
         out = np.empty((*self.positions.shape[:2], 5))
+        if not self.count:
+            return out
         out[:, :, :2] = self.positions
         out[:, :, 2:4] = self.velocities
         out[:, :, 4] = self.radius

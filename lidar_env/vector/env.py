@@ -21,7 +21,7 @@ from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.vector.crowds import CrowdSlots
-from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_envs
+from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_batch
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.vehicle.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.world.world import World
@@ -122,7 +122,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._scenes = SceneCache()
         self._slots = SceneSlots(self.num_envs)
         announce_first_compile("the batched DualLidar-v0's first reset",
-                               (observe_envs, step_envs, plan_motion))
+                               (observe_envs, step_batch, plan_motion))
         self._car = Car(cfg.car_length, cfg.car_width, np.empty((0, 3)), np.empty((0, 4)))
         layout = single.lidar
         beams, params = layout._packed
@@ -143,16 +143,24 @@ class DualLidarVectorEnv(VectorEnv):
         self._cross_track = np.zeros(n)
         self._collision = np.zeros(n, dtype=np.bool_)
         self._scans = np.zeros((n, int(ends[-1])), dtype=np.float32)
+        self._scan_views = self._views()
         self._cast_from = np.zeros((k, 3))  # the scans' scratch: sensor poses [m, rad], draws
         self._draws = np.zeros(2 * int(ends[-1]))
         self._rewards = np.zeros(n)
         self._terminations = np.zeros(n, dtype=np.bool_)
         self._truncations = np.zeros(n, dtype=np.bool_)
         self._autoreset_envs = np.zeros(n, dtype=np.bool_)
+        self._resetting = 0  # how many are True
         self._ready = np.zeros(n, dtype=np.bool_)  # reset at least once
+        self._all_ready = False
         self._every_env = np.arange(n, dtype=np.int64)
-        self._observe_envs, self._step_envs = EntryPoint(observe_envs), EntryPoint(step_envs)
+        self._observe_envs, self._step_batch = EntryPoint(observe_envs), EntryPoint(step_batch)
         self._plan_motion = EntryPoint(plan_motion)
+        self._args: tuple | None = None  # step_batch's arguments after the actions and envs
+        #: each info key and its mask's key, in the single env's order
+        self._info_keys = tuple(zip(INFO_KEYS, INFO_MASK_KEYS, strict=True)) + (
+            (("moving_obstacles", "_moving_obstacles"),) if self._mover_info else ())
+        self._all_present = np.ones((len(self._info_keys), n), dtype=np.bool_)
         car = self._car  # the limits of Car.substeps_for, computed as it computes them
         self._limits = np.array([
             cfg.max_speed, cfg.max_yaw_rate, cfg.control_dt,
@@ -161,6 +169,19 @@ class DualLidarVectorEnv(VectorEnv):
         self._speed, self._yaw_rate = np.zeros(n), np.zeros(n)
         self._checks = np.ones(n, dtype=np.int64)
         self._crowds = CrowdSlots(n, cfg, self._car.half_length, self._car.half_width)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the kernel's arguments hold numba typed lists, and the scan views must stay views
+        return {**self.__dict__, "_args": None, "_scan_views": None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._scan_views = self._views()
+
+    def _views(self) -> tuple[tuple[str, NDArray[np.float32]], ...]:
+        """Each Lidar's key and its columns of ``_scans`` (a view)."""
+        return tuple((key, self._scans[:, a:b])
+                     for key, (a, b) in zip(self.lidar_keys, self._beam_slices, strict=True))
 
     @property
     def worlds(self) -> list[World | None]:
@@ -195,7 +216,9 @@ class DualLidarVectorEnv(VectorEnv):
         self._terminations[mask] = False
         self._truncations[mask] = False
         self._autoreset_envs[mask] = False
+        self._resetting = int(np.count_nonzero(self._autoreset_envs))
         self._ready |= mask
+        self._all_ready = bool(self._ready.all())
         return self._observation(), self._infos(mask)
 
     def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
@@ -232,6 +255,7 @@ class DualLidarVectorEnv(VectorEnv):
         """Sub-env ``i``'s reset (``DualLidarEnv.reset`` up to its scans, which
         :meth:`_observe` takes for all reset sub-envs at once)."""
         slots = self._slots
+        self._args = None  # a new scene may bring new scratch arrays
         if seed is not None or slots.generators[i] is None:
             slots.set_generator(i, seeding.np_random(seed)[0])
         rng = slots.generators[i]
@@ -269,37 +293,47 @@ class DualLidarVectorEnv(VectorEnv):
         self, actions: ArrayLike
     ) -> tuple[Observation, NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_],
                dict[str, Any]]:
-        if not self._ready.all():
+        if not self._all_ready:
             never = np.flatnonzero(~self._ready)
             raise VectorResetNeededError(
                 f"call reset() before step(): every sub-env must be reset once; sub-envs "
                 f"{quoted(never.tolist())} never were ({len(never)} of {self.num_envs})")
-        resetting = self._autoreset_envs.copy()
-        stepping = np.flatnonzero(~resetting) if resetting.any() else self._every_env
-        speed, yaw_rate, checks = self._motion(actions, stepping)
-        if len(stepping) < self.num_envs:
-            for i in np.flatnonzero(resetting):
+        a = self._actions(actions)
+        stepping = self._every_env
+        if self._resetting:
+            resetting = self._autoreset_envs.copy()
+            stepping = np.flatnonzero(~resetting)
+            args = self._args or self._arguments()
+            self._refuse(a, self._plan_motion(a, stepping, *args[:4], *args[4]))
+            envs = np.flatnonzero(resetting)
+            for i in envs:
                 self._reset_env(int(i), None, {})
-            self._observe(np.flatnonzero(resetting))
+            self._observe(envs)
             self._rewards[resetting] = 0.0
             self._terminations[resetting] = False
             self._truncations[resetting] = False
-        if len(stepping):
-            state = (self._pose, self._sensor_poses, self._time, self._arc, self._cross_track,
-                     self._collision, self._scans)
-            outcome = (self._rewards, self._terminations, self._truncations)
-            self._step_envs(stepping, speed, yaw_rate, checks, state, outcome, self._slots.scene,
-                            self._slots.rngs, self._sensors, self._work(), self._constants,
-                            self._crowds.kernel)
-        self._autoreset_envs = self._terminations | self._truncations
+        code, ended = self._step_batch(a, stepping, *(self._args or self._arguments()))
+        self._refuse(a, code)
+        if ended or self._resetting:
+            np.logical_or(self._terminations, self._truncations, out=self._autoreset_envs)
+            self._resetting = ended
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), self._infos(None))
 
-    def _motion(
-        self, actions: ArrayLike, stepping: NDArray[np.int64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
-        """Speed [m/s], yaw rate [rad/s] and collision checks per sub-env, or a ConfigError
-        naming a bad action (only the rows of ``stepping`` sub-envs are used)."""
+    def _arguments(self) -> tuple:
+        """:func:`~lidar_env.vector.kernel.step_batch`'s arguments after the actions and envs,
+        kept until a sub-env's reset."""
+        state = (self._pose, self._sensor_poses, self._time, self._arc, self._cross_track,
+                 self._collision, self._scans)
+        self._args = (self._limits, self.config.physics_substeps, MAX_SUBSTEPS,
+                      self._crowds.max_speed, (self._speed, self._yaw_rate, self._checks), state,
+                      (self._rewards, self._terminations, self._truncations), self._slots.scene,
+                      self._slots.rngs, self._sensors, self._work(), self._constants,
+                      self._crowds.kernel)
+        return self._args
+
+    def _actions(self, actions: ArrayLike) -> NDArray[np.float64]:
+        """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array, or a ConfigError."""
         expected = f"actions: expected shape ({self.num_envs}, 2) (speed, yaw rate per sub-env)"
         try:
             a = np.ascontiguousarray(actions, dtype=np.float64)
@@ -307,41 +341,44 @@ class DualLidarVectorEnv(VectorEnv):
             raise ConfigError(f"{expected} of numbers in [-1, 1], got {actions!r:.60}") from error
         if a.shape != (self.num_envs, 2):
             raise ConfigError(f"{expected}, got shape {a.shape}")
-        cfg = self.config
-        other = self._crowds.max_speed
-        code = self._plan_motion(a, stepping, self._limits, cfg.physics_substeps, MAX_SUBSTEPS,
-                                 other, self._speed, self._yaw_rate, self._checks)
+        return a
+
+    def _refuse(self, a: NDArray[np.float64], code: int) -> None:
+        """The ConfigError naming the bad action behind :func:`~lidar_env.vector.kernel.
+        plan_motion`'s ``code`` (nothing for -1)."""
         if code <= -2:
             row = -2 - code
             raise ConfigError(f"actions[{row}]: expected finite values in [-1, 1], got "
                               f"{a[row].tolist()}")
         if code >= 0:  # the single car's own check words the error
+            cfg = self.config
             speed = min(max(float(a[code, 0]), -1.0), 1.0) * cfg.max_speed
             yaw_rate = min(max(float(a[code, 1]), -1.0), 1.0) * cfg.max_yaw_rate
             self._car.substeps_for(speed, yaw_rate, cfg.control_dt, cfg.physics_substeps,
-                                   float(other[code]))
-        return self._speed, self._yaw_rate, self._checks
+                                   float(self._crowds.max_speed[code]))
 
     # ------------------------------------------------------------------ outputs
     def _observation(self) -> Observation:
-        return {key: self._scans[:, a:b].copy()
-                for key, (a, b) in zip(self.lidar_keys, self._beam_slices, strict=True)}
+        return {key: view.copy() for key, view in self._scan_views}
 
     def _infos(self, mask: NDArray[np.bool_] | None) -> dict[str, Any]:
         """The infos of every sub-env (``mask`` None) or of the ``mask`` ones, batched like
-        ``SyncVectorEnv`` does (zeros and a False ``_key`` where a sub-env has none)."""
-        values = (self._pose.copy(), self._sensor_poses.copy(), self._time.copy(),
+        ``SyncVectorEnv`` does (zeros and a False ``_key`` where a sub-env has none): new
+        arrays, each key with its own mask, in the single env's key order."""
+        values = [self._pose.copy(), self._sensor_poses.copy(), self._time.copy(),
                   self._arc / self._slots.length, self._arc.copy(), self._cross_track.copy(),
-                  self._collision.copy())
-        present = np.ones(self.num_envs, np.bool_) if mask is None else mask.copy()
-        if mask is not None:
+                  self._collision.copy()]
+        if self._mover_info:  # x, y, vx, vy, radius of each mover
+            values.append(self._crowds.state(mask))
+        if mask is None:
+            present = self._all_present.copy()
+        else:
+            present = np.repeat(mask[None], len(values), axis=0)
             absent = ~mask
-            for array in values:
+            for array in values[:len(INFO_KEYS)]:
                 array[absent] = 0
         infos: dict[str, Any] = {}
-        for key, mask_key, array in zip(INFO_KEYS, INFO_MASK_KEYS, values, strict=True):
-            infos[key], infos[mask_key] = array, present.copy()  # a mask per key, as Sync's
-        if self._mover_info:  # x, y, vx, vy, radius of each mover
-            infos["moving_obstacles"] = self._crowds.state(mask)
-            infos["_moving_obstacles"] = present
+        for (key, mask_key), array, mask_array in zip(self._info_keys, values, present,
+                                                      strict=True):
+            infos[key], infos[mask_key] = array, mask_array
         return infos

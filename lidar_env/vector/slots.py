@@ -1,11 +1,12 @@
 """Each env's scene and random generator, laid out for the compiled step of
 :mod:`lidar_env.vector.kernel`.
 
-Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid`, its trace and
-its generator are item ``i`` of numba typed lists; the scalars (first polygon edge, closed trace,
-trace length [m]) are ``(N,)`` arrays. Items are views of the World's and Trace's own arrays
-(made read-only, so every item has one numba type), never copies: N envs in one built-in world
-hold one copy of it.
+Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid` and its trace
+are one tuple, item ``i`` of a numba typed list, and its generator item ``i`` of another (numba
+unboxes a typed list argument at every call, ~0.7 us, so the scene is one list); the scalars
+(first polygon edge, closed trace, trace length [m]) are ``(N,)`` arrays. Items are views of the
+World's and Trace's own arrays (made read-only, so every item has one numba type), never copies:
+N envs in one built-in world hold one copy of it.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ class SceneSlots:
         self.closed = np.zeros(n, dtype=np.bool_)
         self.length = np.ones(n, dtype=np.float64)  # [m]
         # which world and trace each env holds (their ids: unique among the live ones), so a
-        # kernel takes an item from the typed lists (~50 us a thousand) only when it changes
+        # kernel takes an item from the typed list (~50 us a thousand) only when it changes
         self.world_key = np.zeros(n, dtype=np.int64)
         self.trace_key = np.zeros(n, dtype=np.int64)
         #: seen marks for the casts (lidar_env.sensors.ray_casting.cast_sensor), as long as the
@@ -77,23 +78,22 @@ class SceneSlots:
         self.segment_seen = np.zeros(0, dtype=np.int64)
         self.near_circles, self.near_segments = np.zeros((0, 3)), np.zeros((0, 4))
         self.stamp = np.ones(1, dtype=np.int64)
-        self._lists: tuple[Any, ...] | None = None
+        self._items: Any = None
         self._rngs: Any = None
 
     def set(self, i: int, world: World, trace: Trace) -> None:
         """Env ``i`` now drives ``trace`` in ``world``."""
         if self.worlds[i] is world and self.traces[i] is trace:
             return
-        items = (_read_only(world.circles, np.float64, 3),
-                 _read_only(world.segments, np.float64, 4),
-                 _kernel_grid(world.grid),
-                 _read_only(trace.waypoints, np.float64, 2),
-                 _read_only(trace.arc, np.float64))
-        if self._lists is None:
-            self._lists = tuple(_filled_list(item, self.n) for item in items)
+        item = (_read_only(world.circles, np.float64, 3),
+                _read_only(world.segments, np.float64, 4),
+                _kernel_grid(world.grid),
+                _read_only(trace.waypoints, np.float64, 2),
+                _read_only(trace.arc, np.float64))
+        if self._items is None:
+            self._items = _filled_list(item, self.n)
         else:
-            for values, item in zip(self._lists, items, strict=True):
-                _set_item(values, i, item)
+            _set_item(self._items, i, item)
         self.worlds[i], self.traces[i] = world, trace
         if len(world.circles) > len(self.circle_seen):
             self.circle_seen = np.zeros(len(world.circles), dtype=np.int64)
@@ -109,7 +109,7 @@ class SceneSlots:
     def __getstate__(self) -> dict[str, Any]:
         # numba's typed lists do not pickle: they are rebuilt from the worlds, traces and
         # generators (which pickle with their states, shared items staying shared)
-        return {**self.__dict__, "_lists": None, "_rngs": None}
+        return {**self.__dict__, "_items": None, "_rngs": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -131,13 +131,12 @@ class SceneSlots:
 
     @property
     def scene(self) -> tuple:
-        """``(circles, segments, first_polygon_edge, grids, waypoints, arc, closed, length,
-        world_key, trace_key)``: typed lists and (N,) arrays; envs of equal ``world_key``
-        (``trace_key``) hold the same world (trace) items."""
-        assert self._lists is not None, "set every env's scene first"
-        circles, segments, grids, waypoints, arc = self._lists
-        return (circles, segments, self.first_edge, grids, waypoints, arc, self.closed,
-                self.length, self.world_key, self.trace_key)
+        """``(items, first_polygon_edge, closed, length, world_key, trace_key)``: a typed list
+        of ``(circles, segments, grid, waypoints, arc)`` per env and (N,) arrays; envs of equal
+        ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
+        assert self._items is not None, "set every env's scene first"
+        return (self._items, self.first_edge, self.closed, self.length, self.world_key,
+                self.trace_key)
 
     @property
     def rngs(self) -> Any:
