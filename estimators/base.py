@@ -291,7 +291,9 @@ class Estimator(ABC):
     observation, scaled by the time step over the median one, at most twice). ``health``
     counts what the screen met (skipped and frozen scans, clock jumps, blind stretches).
     Inside :meth:`_step`, ``pose``, ``_poses`` and ``_times`` are those of the observations
-    the estimator used, and ``skipped_before`` the number skipped since the last of them.
+    the estimator used, ``skipped_before`` the number skipped since the last of them and
+    ``clock_jumped`` whether the time step before this observation is a clock jump (or scans
+    lost on the way).
     """
 
     #: Lidars the estimator needs; a pipeline skips it (no failure) on a setup with fewer.
@@ -321,6 +323,7 @@ class Estimator(ABC):
                                   self._used_sensors(setup))
         self.health = self._screen.health
         self.skipped_before = 0
+        self.clock_jumped = False
         self._stepping = False
         self._reset_state()
 
@@ -332,8 +335,7 @@ class Estimator(ABC):
         t = check_time(t, last)
         scans = self.setup.check_observation(observation)
         index = len(self._observations)
-        if last is not None:
-            self._screen.watch_clock(index, t - last)
+        self.clock_jumped = last is not None and self._screen.watch_clock(index, t - last)
         screened, usable = self._screen.screen([scans[key] for key in self.setup.keys],
                                                moved(self._poses))
         if self._poses and not usable:

@@ -57,7 +57,7 @@ from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
 from estimators.odometry.motion_prior import ScanClock
 from estimators.odometry.scan_check import check_against_scan
-from lidar_env.core.se2 import relative
+from lidar_env.core.se2 import relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -151,13 +151,28 @@ def far_match(
     the guess's result unless the search's explained more by the count's own noise (one
     standard error of the share), on the grounds that along a corridor's axis every pose
     scores about the same, is worse: the guess is as lost as the search there once one step
-    went wrong."""
+    went wrong.
+
+    Where the search's pose turns the car into the far half of the heading window, the near
+    half is searched too, and its match is kept when it explains as many points within the
+    share's standard error: a stretch of corridor seen turned round (or any place symmetric
+    under a half turn) fits the scan as well, and of two such poses the one the car reaches
+    by the smaller turn from the guess is the likelier (after 3 s of blind scans the window
+    holds every heading)."""
     from_guess = register(reference, points, guess, params, guess, prior_information)
     found = search.search(points, guess, window)
     if not found.found:
         return from_guess
     from_search = register(reference, points, found.pose, params, guess, prior_information)
-    return from_search if from_search.quality >= from_guess.quality else from_guess
+    best = from_search if from_search.quality >= from_guess.quality else from_guess
+    if abs(wrap_angle(found.pose[2] - guess[2])) <= 0.5 * window.angular:
+        return best
+    near = search.search(points, guess, SearchWindow(window.linear, 0.5 * window.angular))
+    if not near.found:
+        return best
+    from_near = register(reference, points, near.pose, params, guess, prior_information)
+    tie = max(np.sqrt(best.quality * (1.0 - best.quality) / len(points)), 1.0 / len(points))
+    return from_near if from_near.quality >= best.quality - tie else best
 
 
 def fallback_match(
@@ -218,6 +233,9 @@ class FarScanMatching:
     scan_corrections: int
     _previous_scan: tuple[int, FloatArray] | None  # the last matched scan: (index, points)
     poor_matches: list[int]
+    skipped_before: int
+    clock_jumped: bool
+    match_information: FloatArray
 
     def _checked_against_scan(self, result: MatchResult, points: FloatArray, guess: FloatArray,
                               predicted: FloatArray) -> MatchResult:
@@ -231,7 +249,7 @@ class FarScanMatching:
         self._previous_scan = (index, points)
         checked = check_against_scan(
             result, self._reference, points, previous_points, self._poses[-1], predicted,
-            self.params, guess, self._prediction_information(), self.min_quality)
+            self.params, guess, self.match_information, self.min_quality)
         self.scan_corrections += checked.replaced
         return checked.result
 
@@ -258,35 +276,54 @@ class FarScanMatching:
         clock = self._clock.median if self._clock.settled else typical
         return self.prediction_acceleration * clock**2 > self.prior_sigma_translation
 
+    def _intervals_since_used(self, interval: float, typical: float) -> float:
+        """How many scan intervals the car may have moved since the last scan used: one,
+        plus the scans skipped as unusable since (each one interval), or, where the clock
+        jumped (scans lost on the way, or only the stamp jumped), the ``interval`` over the
+        ``typical`` one [s]. The far-apart window grows with it: after 3 s of blind scans
+        the car can be metres and a full turn from where the last few steps point."""
+        intervals = 1.0 + self.skipped_before
+        if self.clock_jumped and typical > 0:
+            intervals = max(intervals, interval / typical)
+        return intervals
+
     def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,
                interval: float) -> MatchResult:
         """The registration of ``points`` (M, 2, car frame) near ``guess`` (3,), the car
-        having moved ``predicted`` (3,) over the scan ``interval`` [s] if its velocity held."""
+        having moved ``predicted`` (3,) over the scan ``interval`` [s] if its velocity held.
+        ``match_information`` is left at the motion prior the match was held by (the weak
+        far-apart one where the scans came far apart), for any later registration of the
+        scan to use."""
         assert self._reference is not None
         typical = self._clock.typical_step if self._clock.steps else interval
         window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
+        intervals = self._intervals_since_used(interval, typical)
         if self._far_steps:  # a stalled clock does not mean the car drove or turned further
             longest = max(length for length, _ in self._far_steps)
             sharpest = max(turn for _, turn in self._far_steps)
             window = SearchWindow(
-                min(window.linear, 2.0 * longest + self.params.max_correspondence_distance),
-                min(window.angular, 2.0 * sharpest + self.search_angular_window))
+                min(window.linear,
+                    2.0 * longest * intervals + self.params.max_correspondence_distance),
+                min(window.angular, 2.0 * sharpest * intervals + self.search_angular_window))
         # A guess worse than the weakest prior the ordinary path allows (slow scans: 4 Hz and
-        # below) or a predicted step of a keyframe spacing: scans far apart.
-        if self._slow_clock(typical) or far_apart(predicted, self.keyframe_distance,
-                                                  self.search_angular_window):
+        # below), a predicted step of a keyframe spacing, or scans skipped or lost since the
+        # last one used: scans far apart.
+        if intervals > 1 or self._slow_clock(typical) or far_apart(
+                predicted, self.keyframe_distance, self.search_angular_window):
             self.far_searches += 1
+            self.match_information = self._far_prior(window)
             result = far_match(self._global_search(), self._reference, points, guess, window,
-                               self.params, self._far_prior(window))
+                               self.params, self.match_information)
             if result.quality < self.min_quality and window.angular < np.pi:
                 self.fallbacks += 1
                 retry = far_match(self._global_search(), self._reference, points, guess,
                                   SearchWindow(window.linear, np.pi), self.params,
-                                  self._far_prior(window))
+                                  self.match_information)
                 result = retry if retry.quality > result.quality else result
         else:
+            self.match_information = self._prediction_information()
             result = register(self._reference, points, guess, self.params, guess,
-                              self._prediction_information())
+                              self.match_information)
             if result.quality < self.min_quality:
                 self.fallbacks += 1
                 near = SearchWindow(self.search_linear_window, self.search_angular_window)

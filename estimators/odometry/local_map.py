@@ -312,7 +312,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                 break
             points = static
             result = register(self._reference, points, result.pose, self.params, guess,
-                              self._prediction_information())
+                              self.match_information)
         pose = result.pose
         miss = relative(guess, pose)
         self._misses.append(float(np.hypot(miss[0], miss[1])))
