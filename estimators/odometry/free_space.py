@@ -24,7 +24,11 @@ judges the points at the pose it matched (then matches again without the moving 
 at the predicted pose, a fast turn's error makes static points look seen through. The new scan
 judges earlier points only where its beams lie close enough to hit a thin object
 (``MovingPointFilter``'s ``stale_resolution``). No-return beams count as seeing free space:
-in the open, space behind a walker is seen free only by beams that return nothing.
+in the open, space behind a walker is seen free only by beams that return nothing. But a
+no-return beam among returns (within :data:`DROPOUT_WINDOW` of one) is a dropped return,
+not a look into the open: it counts as free only as far as the farther of the nearest
+returns on either side (a Lidar dropping half its beams otherwise sees through the walls it
+measures, and the odometry loses them from its map).
 
 Units: metres, radians; points and sensor poses in one common frame (the world, or the car's).
 """
@@ -41,6 +45,11 @@ from numpy.typing import ArrayLike, NDArray
 from lidar_env.core import ConfigError, EstimatorInputError
 
 _TWO_PI = 2.0 * math.pi
+#: [rad] a no-return beam with a return this close on either side was dropped (a dark or
+#: glancing surface, a blinded beam) rather than cast into open space: 3 degrees, three
+#: beams of a 1-degree Lidar, over which half the beams dropped at random leave a return
+#: on one side of all but 1 in 64 dropped beams.
+DROPOUT_WINDOW = math.radians(3.0)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -162,6 +171,38 @@ def _seen_through_kernel(
 
 
 @numba.njit(cache=True)
+def _bounded_no_returns(ranges: NDArray[np.float64], starts: NDArray[np.int64],
+                        order: NDArray[np.int64], sensor_params: NDArray[np.float64],
+                        windows: NDArray[np.int64], min_range: float) -> NDArray[np.float64]:
+    """``ranges`` with each no-return reading (at or beyond the max range) that has a return
+    within ``windows[k]`` beams on either side (angular order) replaced by the farther of the
+    nearest such returns on each side: a beam dropped among returns saw free space only as
+    far as its neighbours did."""
+    out = ranges.copy()
+    for k in range(len(starts) - 1):
+        a, n = starts[k], starts[k + 1] - starts[k]
+        max_range, full_turn, w = sensor_params[k, 1], sensor_params[k, 3] > 0.5, windows[k]
+        for j in range(n):
+            if not ranges[a + order[a + j]] >= max_range:
+                continue
+            bound = -1.0
+            for side in (-1, 1):
+                for d in range(1, w + 1):
+                    m = j + side * d
+                    if full_turn:
+                        m = (m + n) % n
+                    elif m < 0 or m >= n:
+                        break
+                    reading = ranges[a + order[a + m]]
+                    if min_range <= reading < max_range:
+                        bound = max(bound, reading)
+                        break
+            if bound >= 0.0:
+                out[a + order[a + j]] = bound
+    return out
+
+
+@numba.njit(cache=True)
 def _free_ranges(ranges: NDArray[np.float64], starts: NDArray[np.int64],
                  order: NDArray[np.int64], sensor_params: NDArray[np.float64],
                  min_range: float) -> NDArray[np.float64]:
@@ -279,6 +320,10 @@ class BeamGeometry:
             order.append(sort)
             params.append((angles[0], float(max_range), step if uniform else 0.0,
                            float(full_turn)))
+        spacings = [max(r[-1] / (len(r) - 1), 1e-9) if len(r) > 1 else _TWO_PI
+                    for r in relative]
+        self.windows = np.array([max(1, round(DROPOUT_WINDOW / spacing))
+                                 for spacing in spacings], dtype=np.int64)
         self.sizes = [len(r) for r in relative]
         self.starts = np.concatenate([[0], np.cumsum(self.sizes)]).astype(np.int64)
         self.relative_angles = np.concatenate(relative)
@@ -300,15 +345,20 @@ class BeamGeometry:
         if not (math.isfinite(margin) and margin >= 0):
             raise ConfigError(f"margin: expected a distance >= 0 [m], got {margin!r}")
         return self.judge(np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2), poses,
-                          self.pack(scans), float(margin), float(min_range), float(resolution))
+                          self.pack(scans, min_range), float(margin), float(min_range),
+                          float(resolution))
 
-    def pack(self, scans: Sequence[ArrayLike]) -> NDArray[np.float64]:
-        """The K sensors' readings ``scans`` [m] as one float64 array, checked for length."""
+    def pack(self, scans: Sequence[ArrayLike], min_range: float = 0.0) -> NDArray[np.float64]:
+        """The K sensors' readings ``scans`` [m] as one float64 array, checked for length, each
+        no-return reading within :data:`DROPOUT_WINDOW` of a return (readings from
+        ``min_range`` [m] up) bounded by the nearest returns on either side (module
+        docstring)."""
         ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel() for r in scans])
         if len(ranges) != self.starts[-1]:
             raise EstimatorInputError(f"scans: expected {self.sizes} readings, got "
                                       f"{[np.size(r) for r in scans]}")
-        return ranges
+        return _bounded_no_returns(ranges, self.starts, self.order, self.params, self.windows,
+                                   float(min_range))
 
     def judge(self, points: NDArray[np.float64], poses: NDArray[np.float64],
               ranges: NDArray[np.float64], margin: float, min_range: float,

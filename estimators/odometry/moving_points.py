@@ -195,7 +195,7 @@ class MovingPointFilter:
         if last is not None and same_scans and points is last[1] and car.tobytes() == last[0]:
             return last[3], last[4], last[5]
         free = (last[5] if last is not None and same_scans else
-                self._beams.free(self._beams.pack(arrays), self.min_range))
+                self._beams.free(self._beams.pack(arrays, self.min_range), self.min_range))
         world = np.ascontiguousarray(transform_points(car, points), dtype=np.float64)
         floats = car.tolist()
         sensor_poses = np.array([compose_floats(floats, mount) for mount in self._mounts])

@@ -18,9 +18,28 @@ FRONT = np.linspace(-np.pi / 2, np.pi / 2, 181)  # a 180-degree Lidar, beam 0 to
 BOX = World(segments=[[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]])
 
 
+def _bounded(ranges: np.ndarray, max_range: float, full: bool, window: int = 3) -> np.ndarray:
+    """Brute force: each no-return reading with a return within ``window`` beams bounded by
+    the farther of the nearest returns on either side."""
+    n, out = len(ranges), ranges.copy()
+    for j in np.flatnonzero(ranges >= max_range):
+        nearest = []
+        for side in (-1, 1):
+            for d in range(1, window + 1):
+                k = (j + side * d) % n if full else j + side * d
+                if 0 <= k < n and ranges[k] < max_range:
+                    nearest.append(ranges[k])
+                    break
+        if nearest:
+            out[j] = max(nearest)
+    return out
+
+
 def _oracle(point: np.ndarray, pose: np.ndarray, ranges: np.ndarray, angles: np.ndarray,
             max_range: float, margin: float) -> bool:
-    """Brute force: the nearest beam by angle (within the field of view) and its neighbours."""
+    """Brute force: the nearest beam by angle (within the field of view) and its neighbours,
+    no-return readings among returns bounded by them."""
+    ranges = _bounded(ranges, max_range, len(angles) == 360)
     dx, dy = point - pose[:2]
     distance = math.hypot(dx, dy)
     if distance + margin >= max_range:
@@ -55,6 +74,26 @@ def test_a_point_in_front_of_a_wall_is_seen_through_one_behind_it_is_not() -> No
     points = np.array([[2.0, 0.0], [5.5, 0.0], [4.9, 0.0], [0.0, -3.0]])
     flags = seen_through(points, pose[None], [ranges], [FULL], [10.0])
     np.testing.assert_array_equal(flags, [True, False, False, True])
+
+
+def test_dropped_beams_among_returns_do_not_see_through_the_wall_they_miss() -> None:
+    pose = np.array([0.0, 0.0, 0.0])
+    ranges = cast_rays(BOX, pose, FULL, 10.0)[0]
+    dropped = ranges.copy()
+    dropped[np.arange(360) % 8 < 4] = 10.0  # half the beams return nothing, in bursts of 4
+    wall = np.array([[5.3, y] for y in np.linspace(-3.0, 3.0, 13)])  # just behind the wall
+    assert not seen_through(wall, pose[None], [dropped], [FULL], [10.0]).any()
+    inside = np.array([[4.0, y] for y in np.linspace(-3.0, 3.0, 13)])  # in front of it
+    assert seen_through(inside, pose[None], [dropped], [FULL], [10.0]).all()
+
+
+def test_the_open_is_seen_free_up_to_the_max_range() -> None:
+    pose = np.array([0.0, 0.0, 0.0])
+    ranges = np.full(360, 10.0)  # nothing in range
+    ranges[170:190] = 2.0  # but one object behind the car
+    points = np.array([[6.0, 0.0], [0.0, 6.0], [-6.0, 0.0]])
+    flags = seen_through(points, pose[None], [ranges], [FULL], [10.0])
+    np.testing.assert_array_equal(flags, [True, True, False])
 
 
 def test_a_narrow_lidar_says_nothing_behind_it() -> None:
