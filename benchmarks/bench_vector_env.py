@@ -137,11 +137,12 @@ def scan_microseconds(env: Any, seconds: float, warmup_steps: int = 50) -> float
 
 
 @njit(cache=True)
-def draw_standard_normals(rngs: Any, out: NDArray[np.float64]) -> None:
-    """``out`` (n,) overwritten with n standard normals from each generator of ``rngs`` in turn,
-    drawn one at a time as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
-    for i in range(len(rngs)):
-        rng = rngs[i]
+def draw_standard_normals(items: Any, out: NDArray[np.float64]) -> None:
+    """``out`` (n,) overwritten with n standard normals from each sub-env's generator (the last
+    of its item in ``items``, :attr:`lidar_env.vector.slots.SceneSlots.scene`'s typed list) in
+    turn, drawn one at a time as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
+    for i in range(len(items)):
+        rng = items[i][5]
         for j in range(out.shape[0]):
             out[j] = rng.standard_normal()
 
@@ -164,7 +165,7 @@ def draw_microseconds(env: Any, seconds: float) -> float:
     to numpy's ``Generator.standard_normal``)."""
     env.reset(seed=0)
     out = np.empty(env._scans.shape[1])  # one draw per beam of every Lidar
-    return timed_microseconds(lambda: draw_standard_normals(env._slots.rngs, out), seconds,
+    return timed_microseconds(lambda: draw_standard_normals(env._slots.scene[0], out), seconds,
                               env.num_envs)
 
 

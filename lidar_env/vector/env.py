@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -25,13 +25,6 @@ from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.vehicle.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.world.world import World
-
-#: Keys of every step's and reset's info, in the single env's order.
-INFO_KEYS: tuple[str, ...] = ("pose", "lidar_poses", "time", "progress", "arc_position",
-                              "cross_track_error", "collision")
-
-#: Their ``_key`` masks (which sub-envs have a value), in the same order.
-INFO_MASK_KEYS: tuple[str, ...] = tuple(f"_{key}" for key in INFO_KEYS)
 
 Observation = dict[str, NDArray[np.float32]]
 
@@ -140,6 +133,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._sensor_poses = np.zeros((n, k, 3))
         self._time = np.zeros(n)
         self._arc = np.zeros(n)
+        self._progress = np.zeros(n)
         self._cross_track = np.zeros(n)
         self._collision = np.zeros(n, dtype=np.bool_)
         self._scans = np.zeros((n, int(ends[-1])), dtype=np.float32)
@@ -156,11 +150,9 @@ class DualLidarVectorEnv(VectorEnv):
         self._every_env = np.arange(n, dtype=np.int64)
         self._observe_envs, self._step_batch = EntryPoint(observe_envs), EntryPoint(step_batch)
         self._plan_motion = EntryPoint(plan_motion)
-        self._args: tuple | None = None  # step_batch's arguments after the actions and envs
-        #: each info key and its mask's key, in the single env's order
-        self._info_keys = tuple(zip(INFO_KEYS, INFO_MASK_KEYS, strict=True)) + (
-            (("moving_obstacles", "_moving_obstacles"),) if self._mover_info else ())
-        self._all_present = np.ones((len(self._info_keys), n), dtype=np.bool_)
+        self._stepper: tuple[Callable[..., tuple[int, int]], tuple] | None = None  # _bind's
+        #: the info masks, one row per info key (:meth:`_infos`)
+        self._all_present = np.ones((7 + self._mover_info, n), dtype=np.bool_)
         car = self._car  # the limits of Car.substeps_for, computed as it computes them
         self._limits = np.array([
             cfg.max_speed, cfg.max_yaw_rate, cfg.control_dt,
@@ -172,7 +164,7 @@ class DualLidarVectorEnv(VectorEnv):
 
     def __getstate__(self) -> dict[str, Any]:
         # the kernel's arguments hold numba typed lists, and the scan views must stay views
-        return {**self.__dict__, "_args": None, "_scan_views": None}
+        return {**self.__dict__, "_stepper": None, "_scan_views": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -255,7 +247,7 @@ class DualLidarVectorEnv(VectorEnv):
         """Sub-env ``i``'s reset (``DualLidarEnv.reset`` up to its scans, which
         :meth:`_observe` takes for all reset sub-envs at once)."""
         slots = self._slots
-        self._args = None  # a new scene may bring new scratch arrays
+        self._stepper = None  # a new scene may bring new scratch arrays
         if seed is not None or slots.generators[i] is None:
             slots.set_generator(i, seeding.np_random(seed)[0])
         rng = slots.generators[i]
@@ -272,12 +264,12 @@ class DualLidarVectorEnv(VectorEnv):
                                                  self._pose[i, 1], 0.0, PROGRESS_WINDOW,
                                                  trace.closed)
         self._arc[i], self._cross_track[i] = arc, cross_track
+        self._progress[i] = arc / trace.length
 
     def _observe(self, envs: NDArray[np.int64]) -> None:
         if len(envs):
             self._observe_envs(envs.astype(np.int64), self._pose, self._sensor_poses, self._scans,
-                               self._slots.scene, self._slots.rngs, self._sensors, self._work(),
-                               self._crowds.kernel)
+                               self._slots.scene, self._sensors, self._work(), self._crowds.kernel)
 
     def _work(self) -> tuple:
         """The kernels' scratch: ``(sensor poses (K, 3), draws (2 total beams,), circle and
@@ -299,38 +291,46 @@ class DualLidarVectorEnv(VectorEnv):
                 f"call reset() before step(): every sub-env must be reset once; sub-envs "
                 f"{quoted(never.tolist())} never were ({len(never)} of {self.num_envs})")
         a = self._actions(actions)
-        stepping = self._every_env
-        if self._resetting:
-            resetting = self._autoreset_envs.copy()
-            stepping = np.flatnonzero(~resetting)
-            args = self._args or self._arguments()
-            self._refuse(a, self._plan_motion(a, stepping, *args[:4], *args[4]))
-            envs = np.flatnonzero(resetting)
-            for i in envs:
-                self._reset_env(int(i), None, {})
-            self._observe(envs)
-            self._rewards[resetting] = 0.0
-            self._terminations[resetting] = False
-            self._truncations[resetting] = False
-        code, ended = self._step_batch(a, stepping, *(self._args or self._arguments()))
-        self._refuse(a, code)
+        stepping = self._autoreset(a) if self._resetting else self._every_env
+        step, args = self._stepper or self._bind()
+        code, ended = step(a, stepping, *args)
+        if code != -1:
+            self._refuse(a, code)
         if ended or self._resetting:
             np.logical_or(self._terminations, self._truncations, out=self._autoreset_envs)
             self._resetting = ended
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), self._infos(None))
 
-    def _arguments(self) -> tuple:
-        """:func:`~lidar_env.vector.kernel.step_batch`'s arguments after the actions and envs,
-        kept until a sub-env's reset."""
-        state = (self._pose, self._sensor_poses, self._time, self._arc, self._cross_track,
-                 self._collision, self._scans)
-        self._args = (self._limits, self.config.physics_substeps, MAX_SUBSTEPS,
-                      self._crowds.max_speed, (self._speed, self._yaw_rate, self._checks), state,
-                      (self._rewards, self._terminations, self._truncations), self._slots.scene,
-                      self._slots.rngs, self._sensors, self._work(), self._constants,
-                      self._crowds.kernel)
-        return self._args
+    def _autoreset(self, a: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Reset the sub-envs whose episode ended at the last step (once ``a`` is checked:
+        a bad action leaves them as they are) with reward 0 and no episode end; returns the
+        others, which step."""
+        resetting = self._autoreset_envs.copy()
+        stepping = np.flatnonzero(~resetting)
+        _, args = self._stepper or self._bind()
+        self._refuse(a, self._plan_motion(a, stepping, *args[:4], *args[4]))
+        envs = np.flatnonzero(resetting)
+        for i in envs:
+            self._reset_env(int(i), None, {})
+        self._observe(envs)
+        self._rewards[resetting] = 0.0
+        self._terminations[resetting] = False
+        self._truncations[resetting] = False
+        return stepping
+
+    def _bind(self) -> tuple[Callable[..., tuple[int, int]], tuple]:
+        """:func:`~lidar_env.vector.kernel.step_batch`'s machine code and its arguments after
+        the actions and envs, kept until a sub-env's reset."""
+        state = (self._pose, self._sensor_poses, self._time, self._arc, self._progress,
+                 self._cross_track, self._collision, self._scans)
+        args = (self._limits, self.config.physics_substeps, MAX_SUBSTEPS, self._crowds.max_speed,
+                (self._speed, self._yaw_rate, self._checks), state,
+                (self._rewards, self._terminations, self._truncations), self._slots.scene,
+                self._sensors, self._work(), self._constants, self._crowds.kernel)
+        self._stepper = self._step_batch.resolve(np.zeros((self.num_envs, 2)), self._every_env,
+                                                 *args), args
+        return self._stepper
 
     def _actions(self, actions: ArrayLike) -> NDArray[np.float64]:
         """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array, or a ConfigError."""
@@ -365,20 +365,22 @@ class DualLidarVectorEnv(VectorEnv):
         """The infos of every sub-env (``mask`` None) or of the ``mask`` ones, batched like
         ``SyncVectorEnv`` does (zeros and a False ``_key`` where a sub-env has none): new
         arrays, each key with its own mask, in the single env's key order."""
-        values = [self._pose.copy(), self._sensor_poses.copy(), self._time.copy(),
-                  self._arc / self._slots.length, self._arc.copy(), self._cross_track.copy(),
-                  self._collision.copy()]
-        if self._mover_info:  # x, y, vx, vy, radius of each mover
-            values.append(self._crowds.state(mask))
+        values = (self._pose.copy(), self._sensor_poses.copy(), self._time.copy(),
+                  self._progress.copy(), self._arc.copy(), self._cross_track.copy(),
+                  self._collision.copy())
         if mask is None:
-            present = self._all_present.copy()
+            masks = tuple(self._all_present.copy())
         else:
-            present = np.repeat(mask[None], len(values), axis=0)
+            masks = tuple(np.repeat(mask[None], len(self._all_present), axis=0))
             absent = ~mask
-            for array in values[:len(INFO_KEYS)]:
+            for array in values:
                 array[absent] = 0
-        infos: dict[str, Any] = {}
-        for (key, mask_key), array, mask_array in zip(self._info_keys, values, present,
-                                                      strict=True):
-            infos[key], infos[mask_key] = array, mask_array
+        infos = {"pose": values[0], "_pose": masks[0], "lidar_poses": values[1],
+                 "_lidar_poses": masks[1], "time": values[2], "_time": masks[2],
+                 "progress": values[3], "_progress": masks[3], "arc_position": values[4],
+                 "_arc_position": masks[4], "cross_track_error": values[5],
+                 "_cross_track_error": masks[5], "collision": values[6], "_collision": masks[6]}
+        if self._mover_info:  # x, y, vx, vy, radius of each mover
+            infos["moving_obstacles"] = self._crowds.state(mask)
+            infos["_moving_obstacles"] = masks[7]
         return infos

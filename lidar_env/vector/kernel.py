@@ -2,7 +2,7 @@
 end and every Lidar's noisy scan, for all stepped envs in one numba call.
 
 Every per-env quantity is a row of an ``(N, ...)`` array; each env's scene (obstacles, their
-grid, its trace) and random generator are items of numba typed lists (:mod:`.slots`).
+grid, its trace, its random generator) is an item of a numba typed list (:mod:`.slots`).
 :func:`step_batch` is one env step (the action check, then :func:`step_envs`) in one call. The math
 is the single env's own compiled functions, called in its order:
 :func:`lidar_env.vehicle.car.drive_arc` for the motion and collision,
@@ -54,7 +54,6 @@ def observe_envs(
     sensor_poses: NDArray[np.float64],
     scans: NDArray[np.float32],
     scene: tuple,
-    rngs: object,
     sensors: tuple,
     work: tuple,
     crowd: tuple,
@@ -62,9 +61,9 @@ def observe_envs(
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
     ``sensor_poses`` (N, K, 3) receives the Lidars' world poses. ``scene`` is
-    :attr:`lidar_env.vector.slots.SceneSlots.scene` (an env's item is taken from the typed
-    list only where its world differs from the env before); ``rngs`` a typed list of
-    N generators; ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
+    :attr:`lidar_env.vector.slots.SceneSlots.scene` (each env's generator is its item's last;
+    its world's arrays are taken only where its world differs from the env before);
+    ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.sensors.layout_kernels.cast_packed` takes
     them; ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
     allocated per env); ``crowd`` :attr:`lidar_env.vector.crowds.CrowdSlots.kernel`, whose
@@ -84,11 +83,11 @@ def observe_envs(
     if envs.shape[0] == 0:
         return
     last = envs[0]  # the env whose world arrays are held
-    env_circles, env_segments, env_grid, _, _ = items[last]
+    env_circles, env_segments, env_grid, _, _, _ = items[last]
     for i in envs:
         if world_key[i] != world_key[last]:
             last = i
-            env_circles, env_segments, env_grid, _, _ = items[i]
+            env_circles, env_segments, env_grid, _, _, _ = items[i]
         mount_poses(pose[i], mounts, sensor_poses[i])
         cast_from[:] = sensor_poses[i]
         if world_aligned:
@@ -96,7 +95,7 @@ def observe_envs(
         for j in range(movers.shape[0]):  # Crowd.circles
             movers[j, 0], movers[j, 1], movers[j, 2] = positions[i, j, 0], positions[i, j, 1], \
                 radius
-        rng = rngs[i]
+        rng = items[i][5]
         for j in range(gaussians.shape[0]):
             gaussians[j] = rng.standard_normal()
         for j in range(uniforms.shape[0]):
@@ -170,7 +169,6 @@ def step_envs(
     state: tuple,
     outcome: tuple,
     scene: tuple,
-    rngs: object,
     sensors: tuple,
     work: tuple,
     constants: NDArray[np.float64],
@@ -180,15 +178,15 @@ def step_envs(
     check), in place; returns how many of them terminated or truncated.
 
     ``speed`` [m/s], ``yaw_rate`` [rad/s] and ``checks`` (collision checks) are (N,) per env.
-    ``state`` is ``(pose (N, 3), sensor_poses (N, K, 3), time (N,), arc (N,), cross_track
-    (N,), collision (N,), scans (N, total))``; ``outcome`` ``(reward, terminated, truncated)``
-    (N,) each; ``scene``, ``rngs``, ``sensors``, ``work`` and ``crowd`` as
+    ``state`` is ``(pose (N, 3), sensor_poses (N, K, 3), time (N,), arc (N,), progress (N,),
+    cross_track (N,), collision (N,), scans (N, total))``; ``outcome`` ``(reward, terminated,
+    truncated)`` (N,) each; ``scene``, ``sensors``, ``work`` and ``crowd`` as
     :func:`observe_envs` takes them (each env's crowd steps first, as in the single env).
     ``constants``: control_dt [s], car half length and half width [m], cross_track_penalty
     [1/s], collision_penalty, goal_tolerance [m], the truncation time [s]
     (``max_episode_time - 1e-9``), the progress window [m].
     """
-    pose, sensor_poses, time, arc, cross_track, collision, scans = state
+    pose, sensor_poses, time, arc, progress, cross_track, collision, scans = state
     reward, terminated, truncated = outcome
     items, closed, length, world_key, trace_key = scene[0], scene[2], scene[3], scene[4], \
         scene[5]
@@ -200,11 +198,11 @@ def step_envs(
     if envs.shape[0] == 0:
         return ended
     held = envs[0]  # the env whose world and trace arrays are held
-    env_circles, env_segments, env_grid, env_waypoints, env_arc = items[held]
+    env_circles, env_segments, env_grid, env_waypoints, env_arc, _ = items[held]
     for i in envs:
         if world_key[i] != world_key[held] or trace_key[i] != trace_key[held]:
             held = i
-            env_circles, env_segments, env_grid, env_waypoints, env_arc = items[i]
+            env_circles, env_segments, env_grid, env_waypoints, env_arc, _ = items[i]
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(
             pose[i, 0], pose[i, 1], reach, env_circles, env_segments, env_grid,
@@ -213,7 +211,7 @@ def step_envs(
             hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
         else:  # movers first (their waypoint draws), then the car among them
-            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd, rngs[i],
+            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd, items[i][5],
                                env_circles, env_segments, env_grid)
             hit = drive_arc_among_movers(pose[i], speed[i], yaw_rate[i], dt, checks[i],
                                          half_length, half_width, near_circles, near_segments,
@@ -223,6 +221,7 @@ def step_envs(
         position, error = project_onto_polyline(env_waypoints, env_arc, pose[i, 0],
                                                 pose[i, 1], previous, window, closed[i])
         arc[i] = position
+        progress[i] = position / length[i]
         cross_track[i] = error
         collision[i] = hit
         r = position - previous - cross_penalty * abs(error) * dt
@@ -234,7 +233,7 @@ def step_envs(
         truncated[i] = not done and time[i] >= time_limit
         if done or truncated[i]:
             ended += 1
-    observe_envs(envs, pose, sensor_poses, scans, scene, rngs, sensors, work, crowd)
+    observe_envs(envs, pose, sensor_poses, scans, scene, sensors, work, crowd)
     return ended
 
 
@@ -320,7 +319,6 @@ def step_batch(
     state: tuple,
     outcome: tuple,
     scene: tuple,
-    rngs: object,
     sensors: tuple,
     work: tuple,
     constants: NDArray[np.float64],
@@ -339,8 +337,8 @@ def step_batch(
                        checks)
     if code != -1:
         return code, 0
-    return code, step_envs(envs, speed, yaw_rate, checks, state, outcome, scene, rngs, sensors,
-                           work, constants, crowd)
+    return code, step_envs(envs, speed, yaw_rate, checks, state, outcome, scene, sensors, work,
+                           constants, crowd)
 
 
 class EntryPoint:
@@ -366,8 +364,13 @@ class EntryPoint:
         module = importlib.import_module(state["module"])
         self.__init__(getattr(module, state["name"]))
 
-    def __call__(self, *args: Any) -> Any:
+    def resolve(self, *args: Any) -> Callable[..., Any]:
+        """The machine code for the types of ``args`` (those of the first call), to call with
+        arguments of those types directly."""
         if self._entry is None:
             signature = tuple(self.dispatcher.typeof_pyval(a) for a in args)
             self._entry = self.dispatcher.compile(signature)
-        return self._entry(*args)
+        return self._entry
+
+    def __call__(self, *args: Any) -> Any:
+        return self.resolve(*args)(*args)

@@ -1,9 +1,9 @@
 """Each env's scene and random generator, laid out for the compiled step of
 :mod:`lidar_env.vector.kernel`.
 
-Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid` and its trace
-are one tuple, item ``i`` of a numba typed list, and its generator item ``i`` of another (numba
-unboxes a typed list argument at every call, ~0.7 us, so the scene is one list); the scalars
+Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid`, its trace and
+its generator are one tuple, item ``i`` of a numba typed list (numba unboxes a typed list
+argument at every call, ~0.8 us, so there is one); the scalars
 (first polygon edge, closed trace, trace length [m]) are ``(N,)`` arrays. Items are views of the
 World's and Trace's own arrays (made read-only, so every item has one numba type), never copies:
 N envs in one built-in world hold one copy of it.
@@ -53,10 +53,11 @@ def _kernel_grid(grid: PrimitiveGrid) -> PrimitiveGrid:
 
 
 class SceneSlots:
-    """The scenes and generators of ``n`` envs, as the kernel reads them (``.scene``, ``.rngs``).
+    """The scenes and generators of ``n`` envs, as the kernel reads them (``.scene``).
 
-    The typed lists are filled at the first :meth:`set` (every item a copy of that scene,
-    until each env's own is set), so all ``n`` envs must be set before the kernel runs.
+    The typed list is filled once the first env has both a scene (:meth:`set`) and a generator
+    (:meth:`set_generator`), every item a copy of that env's until each env's own is set, so
+    all ``n`` envs must be set before the kernel runs.
     """
 
     def __init__(self, n: int) -> None:
@@ -78,23 +79,20 @@ class SceneSlots:
         self.segment_seen = np.zeros(0, dtype=np.int64)
         self.near_circles, self.near_segments = np.zeros((0, 3)), np.zeros((0, 4))
         self.stamp = np.ones(1, dtype=np.int64)
+        self._parts: list[tuple | None] = [None] * n  # each env's item but its generator
         self._items: Any = None
-        self._rngs: Any = None
 
     def set(self, i: int, world: World, trace: Trace) -> None:
         """Env ``i`` now drives ``trace`` in ``world``."""
         if self.worlds[i] is world and self.traces[i] is trace:
             return
-        item = (_read_only(world.circles, np.float64, 3),
-                _read_only(world.segments, np.float64, 4),
-                _kernel_grid(world.grid),
-                _read_only(trace.waypoints, np.float64, 2),
-                _read_only(trace.arc, np.float64))
-        if self._items is None:
-            self._items = _filled_list(item, self.n)
-        else:
-            _set_item(self._items, i, item)
+        self._parts[i] = (_read_only(world.circles, np.float64, 3),
+                          _read_only(world.segments, np.float64, 4),
+                          _kernel_grid(world.grid),
+                          _read_only(trace.waypoints, np.float64, 2),
+                          _read_only(trace.arc, np.float64))
         self.worlds[i], self.traces[i] = world, trace
+        self._store(i)
         if len(world.circles) > len(self.circle_seen):
             self.circle_seen = np.zeros(len(world.circles), dtype=np.int64)
             self.near_circles = np.zeros((len(world.circles), 3))
@@ -109,7 +107,7 @@ class SceneSlots:
     def __getstate__(self) -> dict[str, Any]:
         # numba's typed lists do not pickle: they are rebuilt from the worlds, traces and
         # generators (which pickle with their states, shared items staying shared)
-        return {**self.__dict__, "_items": None, "_rngs": None}
+        return {**self.__dict__, "_items": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -123,26 +121,27 @@ class SceneSlots:
 
     def set_generator(self, i: int, rng: np.random.Generator) -> None:
         """Env ``i`` draws from ``rng`` (the kernel advances its state, as numpy would)."""
-        if self._rngs is None:
-            self._rngs = _filled_list(rng, self.n)
-        else:
-            _set_item(self._rngs, i, rng)
         self.generators[i] = rng
+        self._store(i)
+
+    def _store(self, i: int) -> None:
+        """Env ``i``'s item into the typed list, once it has a scene and a generator."""
+        parts, rng = self._parts[i], self.generators[i]
+        if parts is None or rng is None:
+            return
+        if self._items is None:
+            self._items = _filled_list((*parts, rng), self.n)
+        else:
+            _set_item(self._items, i, (*parts, rng))
 
     @property
     def scene(self) -> tuple:
         """``(items, first_polygon_edge, closed, length, world_key, trace_key)``: a typed list
-        of ``(circles, segments, grid, waypoints, arc)`` per env and (N,) arrays; envs of equal
-        ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
+        of ``(circles, segments, grid, waypoints, arc, generator)`` per env and (N,) arrays;
+        envs of equal ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
         assert self._items is not None, "set every env's scene first"
         return (self._items, self.first_edge, self.closed, self.length, self.world_key,
                 self.trace_key)
-
-    @property
-    def rngs(self) -> Any:
-        """The typed list of the N generators."""
-        assert self._rngs is not None, "set every env's generator first"
-        return self._rngs
 
     def nbytes(self) -> int:
         """Bytes of the per-env arrays, counting each distinct world and trace once."""
