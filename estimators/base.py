@@ -338,10 +338,11 @@ class Estimator(ABC):
         self.clock_jumped = last is not None and self._screen.watch_clock(index, t - last)
         screened, usable = self._screen.screen([scans[key] for key in self.setup.keys],
                                                moved(self._poses))
+        scans = dict(zip(self.setup.keys, screened, strict=True))
         if self._poses and not usable:
             self._screen.skip(index)
+            self._skip(scans, t)
             return self._observations.skip(self._poses, t)
-        scans = dict(zip(self.setup.keys, screened, strict=True))
         self.skipped_before = self._screen.used_one()
         self._stepping = True
         try:
@@ -380,6 +381,10 @@ class Estimator(ABC):
 
     def _reset_state(self) -> None:  # noqa: B027 - optional hook, empty by design
         """Clear per-trajectory state (override when there is some)."""
+
+    def _skip(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:  # noqa: B027
+        """Hook: the screened scans of an observation at ``t`` [s] skipped as unusable (an
+        estimator built on another passes them on, so its inner one counts the stretch)."""
 
     @abstractmethod
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:

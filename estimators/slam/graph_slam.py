@@ -194,7 +194,6 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             raise ConfigError("frontend: expected an odometry estimator, got 'slam' itself")
         make(self.frontend, **self.frontend_params)  # unknown names fail here, listing valid ones
 
-    # ------------------------------------------------------------------ Estimator hooks
     def _reset_state(self) -> None:
         assert self.setup is not None
         self._frontend = make(self.frontend, **self.frontend_params)
@@ -234,6 +233,9 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._step(scans, t)
 
+    def _skip(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
+        self._frontend.update(scans, t)  # skipped there too: it sizes its search by the stretch
+
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         poor = len(getattr(self._frontend, "poor_matches", ()))
         odometry = np.asarray(self._frontend.update(scans, t), dtype=np.float64)
@@ -253,12 +255,12 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             if replays > self._start_replays:  # it did: build the graph anew
                 self._start_replays = replays
                 self._reset_graph()
-                for scan_points, pose in zip(kept, self._frontend.trajectory, strict=True):
+                used = np.delete(self._frontend.trajectory, self._frontend.health.skipped, 0)
+                for scan_points, pose in zip(kept, used, strict=True):
                     odometry = self.add_scan(scan_points, pose)
                 return odometry
         return self.add_scan(points, odometry)
 
-    # ------------------------------------------------------------------ the pipeline
     def add_scan(self, points: NDArray[np.float64], odometry: NDArray[np.float64]
                  ) -> NDArray[np.float64]:
         """Take one scan's car-frame points (M, 2) and the front end's pose for it; return the
@@ -356,7 +358,6 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._dirty, self._since_optimized = False, 0
         self._optimizations += 1
 
-    # ------------------------------------------------------------------ results
     @property
     def trajectory(self) -> NDArray[np.float64]:
         """``(N, 3)`` smoothed car poses, one per observation: every scan re-anchored on its

@@ -1,0 +1,50 @@
+"""The fault matrix's cells the scan-to-map estimators meet: after scans skipped (a blinded
+Lidar), lost (a clock gap) or half their beams dropped, the pose is found again."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimators.datasets.faults import with_faults
+
+_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
+sys.path.insert(0, _BENCHMARKS)
+try:
+    bench = importlib.import_module("bench_faults")
+finally:
+    sys.path.remove(_BENCHMARKS)
+
+
+@pytest.fixture(scope="module")
+def drives() -> dict:
+    return {group: bench.record_drive(group)
+            for group in ("open_cylinders/right_turn", "closed_to_open/zigzag")}
+
+
+@pytest.mark.parametrize("name", ["lidar_odometry", "slam"])
+@pytest.mark.parametrize(("group", "fault"), [
+    ("open_cylinders/right_turn", "gaps"),
+    ("open_cylinders/right_turn", "blind_3s"),
+    ("open_cylinders/right_turn", "blind_100"),
+    ("open_cylinders/right_turn", "dropout_half"),
+    ("closed_to_open/zigzag", "blind_3s"),
+    ("closed_to_open/zigzag", "dropout_half"),
+])
+def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> None:
+    recording = drives[group]
+    clean, _, _ = bench.run(name, recording, recording.truth[0])
+    clean_jump, clean_final = bench.score(clean, recording.truth)
+    period = float(np.median(np.diff(recording.times)))
+    faulted = with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
+                          seed=0)
+    poses, health, _ = bench.run(name, faulted, recording.truth[0])
+    jump, final = bench.score(poses, recording.truth[bench.steps_of(recording, faulted)])
+    assert jump - clean_jump <= bench.JUMP_MARGIN, (jump, clean_jump)
+    assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
+    if fault.startswith("blind"):
+        assert health["skipped_scans"] > 0 and health["blind_stretches"] > 0
