@@ -10,8 +10,9 @@ Prints, in one run on this machine:
   range noise, of noiseless 8-beam Lidars and of those in a world with no obstacles, so the
   differences are the noise, the exact rays, the obstacles in range and the cost per call;
   the noise split into its Gaussian draws alone (a compiled loop drawing them as the scan
-  does) and the rest; the step's remainder split into its Python (the action check,
-  observation copies, infos) and the compiled motion, collision, progress and reward; and
+  does) and the rest; the step's remainder split into its Python (the action conversion,
+  observation copies, infos) and the compiled action check, motion, collision, progress and
+  reward; and
   what 200,000 steps/s leaves per step against what the draws and the noiseless scan alone
   take; and the batched env in a large map (2,000 walls);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
@@ -171,12 +172,13 @@ def draw_microseconds(env: Any, seconds: float) -> float:
 
 def python_microseconds(env: Any, seconds: float) -> float:
     """CPU time [us] per env of a batched step's Python around its compiled call: the action
-    check (:meth:`_motion`, one compiled call), the observation copies and the infos."""
+    conversion, the observation copies and the infos (the action check itself is compiled,
+    in the step's one call)."""
     env.reset(seed=0)
-    actions = np.zeros((env.num_envs, 2))
+    actions = np.zeros((env.num_envs, 2), np.float32)
 
     def outputs() -> None:
-        env._motion(actions, env._every_env)
+        env._actions(actions)
         env._observation()
         env._infos(None)
         env._rewards.copy(), env._terminations.copy(), env._truncations.copy()
@@ -250,9 +252,10 @@ def main(argv: list[str] | None = None) -> None:
           " edges in range, their bearings, the inside-a-polygon test)\n"
           f"  {call_scan:5.2f} the scan call per env (2 Lidars x 8 beams, no obstacles: beam "
           "directions, grid bounds, readings)\n"
-          f"  {full_us - full_scan - python:5.2f} motion, collision, progress, reward (compiled)"
+          f"  {full_us - full_scan - python:5.2f} action check, motion, collision, progress, "
+          "reward (compiled)"
           + (" (the crowd's step and the scans' movers included)" if BASE else "") + "\n"
-          f"  {python:5.2f} Python: the action check, observation copies, infos\n"
+          f"  {python:5.2f} Python: the action conversion, observation copies, infos\n"
           "  (the scan figures are the scan call alone, 50 random steps into the episodes; the "
           "rest the step's)")
     print(f"  {TARGET_STEPS_PER_SECOND:,} steps/s leaves {1e6 / TARGET_STEPS_PER_SECOND:.2f} us "
