@@ -255,12 +255,15 @@ class FusionEstimator(Estimator):
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
-        # past the prediction horizon (a clock gap) the velocity says nothing: no prior
-        # the horizon of the positive intervals' median (the clock's steps: all it keeps)
+        # past the prediction horizon (a clock gap) the velocity says nothing: no prior; the
+        # guess then moves the car one typical interval on (the least time that passed, all
+        # of it when only the stamp jumped), not none (a weak prior at a standstill holds a
+        # corridor's axis back by a step's share)
         typical = [self._clock.typical_step] if self._clock.steps else []
         predicted = within_prediction_horizon(dt, typical)
         previous = self.pose.tolist()
-        step = (self._velocity * dt if predicted else np.zeros(3)).tolist()
+        step = self._velocity * (dt if predicted else min(typical, default=0.0))
+        step = step.tolist()
         to_latest = inverse_floats(latest.pose.tolist())
         guess = compose_floats(to_latest, compose_floats(previous, step))
         correlated = self._matcher.correlate(

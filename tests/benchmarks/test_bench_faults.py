@@ -1,5 +1,6 @@
-"""The fault matrix's cells the scan-to-map estimators meet: after scans skipped (a blinded
-Lidar), lost (a clock gap) or half their beams dropped, the pose is found again."""
+"""Fault-matrix cells the estimators meet: after scans skipped (a blinded Lidar), lost (a
+clock gap) or half their beams dropped, or a clock that jumps while the scans run on, the
+pose is found again."""
 
 from __future__ import annotations
 
@@ -26,15 +27,17 @@ def drives() -> dict:
             for group in ("open_cylinders/right_turn", "closed_to_open/zigzag")}
 
 
-@pytest.mark.parametrize("name", ["lidar_odometry", "slam"])
-@pytest.mark.parametrize(("group", "fault"), [
+CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, fault in (
     ("open_cylinders/right_turn", "gaps"),
     ("open_cylinders/right_turn", "blind_3s"),
     ("open_cylinders/right_turn", "blind_100"),
     ("open_cylinders/right_turn", "dropout_half"),
     ("closed_to_open/zigzag", "blind_3s"),
     ("closed_to_open/zigzag", "dropout_half"),
-])
+)] + [("pc_fusion", "closed_to_open/zigzag", "clock_jump_3s")]
+
+
+@pytest.mark.parametrize(("name", "group", "fault"), CELLS)
 def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> None:
     recording = drives[group]
     clean, _, _ = bench.run(name, recording, recording.truth[0])
