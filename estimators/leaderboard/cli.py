@@ -90,7 +90,7 @@ from estimators.leaderboard.tables import (
     write_csv,
 )
 from estimators.leaderboard.tasks import STAGES, EstimatorSpec
-from estimators.leaderboard.warmup import warm_up
+from estimators.leaderboard.warmup import marker_path, warm_up
 from estimators.leaderboard.workers import process_pool
 from estimators.paths import SHARED_DATA
 from estimators.registry import names
@@ -267,7 +267,9 @@ def _run_on_executor(args: argparse.Namespace, db: ExperimentDatabase, every: li
             seconds := warm_up(executor, tuple(spec.name for spec in specs),
                                progress=not args.no_progress)
         ):
-            print(f"compiled the numba kernels in {seconds:.0f} s (cached: later runs skip it)")
+            print(f"compiled the numba kernels in {seconds:.0f} s (cached: later runs skip it)"
+                  if marker_path().exists() else "the kernels did not all compile: each run "
+                  "compiles what it uses on first use, and reports any failure itself")
         tasks = len(every) + len(world_aligned.scenarios) + len(logs) * len(specs)
         with _progress(tasks, "scenarios", not args.no_progress) as bar:
             return run_matrix(db, every, logs, specs, executor, side_runs=[world_aligned],
