@@ -36,6 +36,7 @@ class CrowdSlots:
         self.radius = float(getattr(config, "mover_radius", 0.0))
         yields = m > 0 and config.mover_model != "waypoints"
         self.positions = np.zeros((n, m, 2))  # [m]
+        self._state_shape = (n, m, 5)
         self.velocities = np.zeros((n, m, 2))  # [m/s] held over the last step
         self.waypoints = np.zeros((n, m, 2))  # [m]
         self.speeds = np.zeros((n, m))  # [m/s]
@@ -75,7 +76,7 @@ class CrowdSlots:
     def state(self, mask: NDArray[np.bool_] | None) -> NDArray[np.float64]:
         """``(N, M, 5)`` x, y [m], vx, vy [m/s], radius [m] of every env's movers (the single
         env's ``info["moving_obstacles"]``), zeros for the envs outside ``mask``."""
-        out = np.empty((*self.positions.shape[:2], 5))
+        out = np.empty(self._state_shape)
         if not self.count:
             return out
         out[:, :, :2] = self.positions

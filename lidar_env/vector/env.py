@@ -56,7 +56,8 @@ class DualLidarVectorEnv(VectorEnv):
     truncations and infos (see that class for their meaning and units). Observations are a
     ``Dict`` of ``(num_envs, n_beams_k)`` float32 scans, actions a ``(num_envs, 2)`` Box in
     [-1, 1], infos a dict of ``(num_envs, ...)`` arrays each with its ``_key`` mask, as
-    ``SyncVectorEnv`` batches them.
+    ``SyncVectorEnv`` batches them; every returned array is new (later steps never change it)
+    and shares no memory with the env or another output.
 
     Autoreset (``metadata["autoreset_mode"]``) is Gymnasium's ``NEXT_STEP``: the step after a
     sub-env terminates or truncates resets it (its action is ignored) and returns its reset
@@ -148,6 +149,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._ready = np.zeros(n, dtype=np.bool_)  # reset at least once
         self._all_ready = False
         self._every_env = np.arange(n, dtype=np.int64)
+        self._action_shape = (n, 2)
         self._observe_envs, self._step_batch = EntryPoint(observe_envs), EntryPoint(step_batch)
         self._plan_motion = EntryPoint(plan_motion)
         self._stepper: tuple[Callable[..., tuple[int, int]], tuple] | None = None  # _bind's
@@ -334,14 +336,17 @@ class DualLidarVectorEnv(VectorEnv):
 
     def _actions(self, actions: ArrayLike) -> NDArray[np.float64]:
         """``actions`` as a C-contiguous float64 ``(num_envs, 2)`` array, or a ConfigError."""
-        expected = f"actions: expected shape ({self.num_envs}, 2) (speed, yaw rate per sub-env)"
         try:
             a = np.ascontiguousarray(actions, dtype=np.float64)
         except (TypeError, ValueError) as error:
-            raise ConfigError(f"{expected} of numbers in [-1, 1], got {actions!r:.60}") from error
-        if a.shape != (self.num_envs, 2):
-            raise ConfigError(f"{expected}, got shape {a.shape}")
+            raise ConfigError(f"{self._expected_actions()} of numbers in [-1, 1], got "
+                              f"{actions!r:.60}") from error
+        if a.shape != self._action_shape:
+            raise ConfigError(f"{self._expected_actions()}, got shape {a.shape}")
         return a
+
+    def _expected_actions(self) -> str:
+        return f"actions: expected shape ({self.num_envs}, 2) (speed, yaw rate per sub-env)"
 
     def _refuse(self, a: NDArray[np.float64], code: int) -> None:
         """The ConfigError naming the bad action behind :func:`~lidar_env.vector.kernel.
