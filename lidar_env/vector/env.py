@@ -21,7 +21,7 @@ from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.vector.crowds import CrowdSlots
-from lidar_env.vector.kernel import EntryPoint, observe_envs, plan_motion, step_batch
+from lidar_env.vector.kernel import EntryPoint, observe_envs, step_batch
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.vehicle.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.world.world import World
@@ -116,7 +116,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._scenes = SceneCache()
         self._slots = SceneSlots(self.num_envs)
         announce_first_compile("the batched DualLidar-v0's first reset",
-                               (observe_envs, step_batch, plan_motion))
+                               (observe_envs, step_batch))
         self._car = Car(cfg.car_length, cfg.car_width, np.empty((0, 3)), np.empty((0, 4)))
         layout = single.lidar
         beams, params = layout._packed
@@ -151,7 +151,6 @@ class DualLidarVectorEnv(VectorEnv):
         self._every_env = np.arange(n, dtype=np.int64)
         self._action_shape = (n, 2)
         self._observe_envs, self._step_batch = EntryPoint(observe_envs), EntryPoint(step_batch)
-        self._plan_motion = EntryPoint(plan_motion)
         self._stepper: tuple[Callable[..., tuple[int, int]], tuple] | None = None  # _bind's
         #: the info masks, one row per info key (:meth:`_infos`)
         self._all_present = np.ones((7 + self._mover_info, n), dtype=np.bool_)
@@ -293,25 +292,24 @@ class DualLidarVectorEnv(VectorEnv):
                 f"call reset() before step(): every sub-env must be reset once; sub-envs "
                 f"{quoted(never.tolist())} never were ({len(never)} of {self.num_envs})")
         a = self._actions(actions)
-        stepping = self._autoreset(a) if self._resetting else self._every_env
+        resetting = self._autoreset_envs.copy() if self._resetting else None
+        stepping = self._every_env if resetting is None else np.flatnonzero(~resetting)
         step, args = self._stepper or self._bind()
         code, ended = step(a, stepping, *args)
         if code != -1:
-            self._refuse(a, code)
-        if ended or self._resetting:
+            self._refuse(a, code)  # nothing moved, nothing was reset
+        if resetting is not None:
+            self._autoreset(resetting)
+        if ended or resetting is not None:
             np.logical_or(self._terminations, self._truncations, out=self._autoreset_envs)
             self._resetting = ended
         return (self._observation(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), self._infos(None))
 
-    def _autoreset(self, a: NDArray[np.float64]) -> NDArray[np.int64]:
-        """Reset the sub-envs whose episode ended at the last step (once ``a`` is checked:
-        a bad action leaves them as they are) with reward 0 and no episode end; returns the
-        others, which step."""
-        resetting = self._autoreset_envs.copy()
-        stepping = np.flatnonzero(~resetting)
-        _, args = self._stepper or self._bind()
-        self._refuse(a, self._plan_motion(a, stepping, *args[:4], *args[4]))
+    def _autoreset(self, resetting: NDArray[np.bool_]) -> None:
+        """Reset the ``resetting`` sub-envs (their episode ended at the step before; the
+        others have stepped: each sub-env draws from its own generator, so the order does not
+        matter) with reward 0 and no episode end."""
         envs = np.flatnonzero(resetting)
         for i in envs:
             self._reset_env(int(i), None, {})
@@ -319,7 +317,6 @@ class DualLidarVectorEnv(VectorEnv):
         self._rewards[resetting] = 0.0
         self._terminations[resetting] = False
         self._truncations[resetting] = False
-        return stepping
 
     def _bind(self) -> tuple[Callable[..., tuple[int, int]], tuple]:
         """:func:`~lidar_env.vector.kernel.step_batch`'s machine code and its arguments after

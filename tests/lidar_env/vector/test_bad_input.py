@@ -11,6 +11,7 @@ import lidar_env  # noqa: F401 - registers DualLidar-v0
 from lidar_env.core.errors import ConfigError, ResetNeededError
 from lidar_env.vector import DualLidarVectorEnv
 from lidar_env.vector.env import MAX_NUM_ENVS
+from tests.lidar_env.vector.test_identity import assert_same, pair
 
 
 def batched(num_envs: int = 2, **kwargs) -> gym.vector.VectorEnv:
@@ -98,6 +99,26 @@ def test_the_ignored_action_of_an_autoresetting_env_may_be_anything() -> None:
     assert truncated.all()
     _, reward, _, _, info = env.step(np.full((2, 2), np.nan))  # both autoreset: not used
     assert np.all(reward == 0.0) and np.all(info["time"] == 0.0)
+
+
+def test_a_bad_action_leaves_an_ended_env_waiting_for_its_reset() -> None:
+    env, reference = pair(2, world="hallway", config={"max_episode_time": 0.2})
+    zeros, lagging = np.zeros((2, 2)), {"reset_mask": np.array([False, True])}
+    for vector_env in (env, reference):  # sub-env 0 ends a step before sub-env 1
+        vector_env.reset(seed=0)
+        vector_env.step(zeros)
+        vector_env.reset(options=lagging)
+        _, _, _, truncated, _ = vector_env.step(zeros)
+        assert truncated.tolist() == [True, False]
+    with pytest.raises(ConfigError, match=r"actions\[1\]"):
+        env.step(np.array([[0.0, 0.0], [np.nan, 0.0]]))
+    actions = np.array([[0.0, 0.0], [0.5, 0.2]])
+    got, expected = env.step(actions), reference.step(actions)  # sub-env 0 resets now
+    assert_same(got[0], expected[0], "observation")
+    assert_same(got[4], expected[4], "info")
+    assert got[4]["time"].tolist() == [0.0, 0.2]
+    for index in (1, 2, 3):
+        np.testing.assert_array_equal(got[index], expected[index])
 
 
 def test_step_before_reset_and_bad_reset_arguments() -> None:
