@@ -5,7 +5,8 @@
   match checked against the previous scan by ``scan_check``),
   ``unknown_start`` (an unknown start speed) and ``moving_rejection`` (points on moving
   things left out, by ``moving_points``' filter, which asks ``free_space`` what the beams saw
-  free and keeps its recent points in ``thinned_scans``);
+  free, a dropped return only as far as its neighbours (``dropped_beams``), and keeps its
+  recent points in ``thinned_scans``);
 - two-Lidar least-squares fusion (``fusion``: ``pc_fusion``, its graph in ``sensor_graph``);
 - the motion prior both share (``motion_prior``).
 

@@ -42,14 +42,10 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.odometry.dropped_beams import DROPOUT_WINDOW, bound_dropped_returns
 from lidar_env.core import ConfigError, EstimatorInputError
 
 _TWO_PI = 2.0 * math.pi
-#: [rad] a no-return beam with a return this close on either side was dropped (a dark or
-#: glancing surface, a blinded beam) rather than cast into open space: 3 degrees, three
-#: beams of a 1-degree Lidar, over which half the beams dropped at random leave a return
-#: on one side of all but 1 in 64 dropped beams.
-DROPOUT_WINDOW = math.radians(3.0)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -167,38 +163,6 @@ def _seen_through_kernel(
                     free = False
                     break
             out[i] = free
-    return out
-
-
-@numba.njit(cache=True)
-def _bounded_no_returns(ranges: NDArray[np.float64], starts: NDArray[np.int64],
-                        order: NDArray[np.int64], sensor_params: NDArray[np.float64],
-                        windows: NDArray[np.int64], min_range: float) -> NDArray[np.float64]:
-    """``ranges`` with each no-return reading (at or beyond the max range) that has a return
-    within ``windows[k]`` beams on either side (angular order) replaced by the farther of the
-    nearest such returns on each side: a beam dropped among returns saw free space only as
-    far as its neighbours did."""
-    out = ranges.copy()
-    for k in range(len(starts) - 1):
-        a, n = starts[k], starts[k + 1] - starts[k]
-        max_range, full_turn, w = sensor_params[k, 1], sensor_params[k, 3] > 0.5, windows[k]
-        for j in range(n):
-            if not ranges[a + order[a + j]] >= max_range:
-                continue
-            bound = -1.0
-            for side in (-1, 1):
-                for d in range(1, w + 1):
-                    m = j + side * d
-                    if full_turn:
-                        m = (m + n) % n
-                    elif m < 0 or m >= n:
-                        break
-                    reading = ranges[a + order[a + m]]
-                    if min_range <= reading < max_range:
-                        bound = max(bound, reading)
-                        break
-            if bound >= 0.0:
-                out[a + order[a + j]] = bound
     return out
 
 
@@ -357,7 +321,7 @@ class BeamGeometry:
         if len(ranges) != self.starts[-1]:
             raise EstimatorInputError(f"scans: expected {self.sizes} readings, got "
                                       f"{[np.size(r) for r in scans]}")
-        return _bounded_no_returns(ranges, self.starts, self.order, self.params, self.windows,
+        return bound_dropped_returns(ranges, self.starts, self.order, self.params, self.windows,
                                    float(min_range))
 
     def judge(self, points: NDArray[np.float64], poses: NDArray[np.float64],
