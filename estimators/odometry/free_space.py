@@ -26,7 +26,7 @@ judges earlier points only where its beams lie close enough to hit a thin object
 (``MovingPointFilter``'s ``stale_resolution``). No-return beams count as seeing free space:
 in the open, space behind a walker is seen free only by beams that return nothing. But a
 no-return beam among returns (within :data:`DROPOUT_WINDOW` of one) is a dropped return,
-not a look into the open: it counts as free only as far as the farther of the nearest
+not a look into the open: it counts as free only as far as the nearer of the nearest
 returns on either side (a Lidar dropping half its beams otherwise sees through the walls it
 measures, and the odometry loses them from its map).
 

@@ -20,7 +20,7 @@ BOX = World(segments=[[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5,
 
 def _bounded(ranges: np.ndarray, max_range: float, full: bool, window: int = 3) -> np.ndarray:
     """Brute force: each no-return reading with a return within ``window`` beams bounded by
-    the farther of the nearest returns on either side."""
+    the nearer of the nearest returns on either side."""
     n, out = len(ranges), ranges.copy()
     for j in np.flatnonzero(ranges >= max_range):
         nearest = []
@@ -31,7 +31,7 @@ def _bounded(ranges: np.ndarray, max_range: float, full: bool, window: int = 3) 
                     nearest.append(ranges[k])
                     break
         if nearest:
-            out[j] = max(nearest)
+            out[j] = min(nearest)
     return out
 
 
