@@ -112,11 +112,16 @@ def score(poses: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 
 
 def steps_of(recording: Recording, faulted: Recording) -> np.ndarray:
-    """Indices into ``recording`` of ``faulted``'s observations (lost ones left out)."""
-    if faulted.truth is not None and recording.truth is not None:
-        rows = {tuple(p): i for i, p in enumerate(recording.truth)}
-        return np.array([rows[tuple(p)] for p in faulted.truth])
-    return np.arange(len(faulted))
+    """Indices into ``recording`` of ``faulted``'s observations (lost ones left out): all of
+    them when none was lost (a clock fault moves the stamps, not the scans), else those whose
+    stamps it kept."""
+    if len(faulted) == len(recording):
+        return np.arange(len(faulted))
+    steps = np.searchsorted(recording.times, faulted.times)
+    if not np.array_equal(recording.times[np.minimum(steps, len(recording) - 1)],
+                          faulted.times):
+        raise ValueError("faulted: scans lost and stamps moved at once; no reference")
+    return steps
 
 
 def matrix(drives: dict[str, Recording], names: list[str], selected: list[str] | None,

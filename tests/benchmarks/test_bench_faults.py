@@ -4,6 +4,7 @@ pose is found again."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import sys
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from estimators.datasets.faults import with_faults
+from lidar_env.faults import ScanLoss
 
 _BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
 sys.path.insert(0, _BENCHMARKS)
@@ -34,6 +36,7 @@ CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, 
     ("open_cylinders/right_turn", "dropout_half"),
     ("closed_to_open/zigzag", "blind_3s"),
     ("closed_to_open/zigzag", "dropout_half"),
+    ("closed_to_open/zigzag", "gaps"),
 )] + [("pc_fusion", "closed_to_open/zigzag", "clock_jump_3s")]
 
 
@@ -51,3 +54,12 @@ def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> 
     assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
     if fault.startswith("blind"):
         assert health["skipped_scans"] > 0 and health["blind_stretches"] > 0
+
+
+def test_a_log_without_truth_is_scored_on_the_scans_kept(drives) -> None:
+    recording = dataclasses.replace(drives["closed_to_open/zigzag"], truth=None)
+    faulted = with_faults(recording, [ScanLoss(probability=0.0, every=60, offset=30,
+                                               stretch=10)], seed=0)
+    steps = bench.steps_of(recording, faulted)
+    assert len(steps) == len(faulted) < len(recording)
+    np.testing.assert_array_equal(recording.times[steps], faulted.times)
