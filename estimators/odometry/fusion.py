@@ -35,8 +35,10 @@ from estimators.matching.rotation_pc import (
     refinement_starts,
     require_sensor_frame,
 )
+from estimators.odometry.fusion_recovery import SCORE_TOLERANCE, intervals_since_used
 from estimators.odometry.motion_prior import (
     ScanClock,
+    midpoint_velocity,
     prediction_information,
     within_prediction_horizon,
 )
@@ -251,7 +253,6 @@ class FusionEstimator(Estimator):
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
         assert self.setup is not None
         # the poses on Python floats (compose_floats), arrays only where the matcher reads them
-        mounts, mount_inverses = self._mount_floats, self._mount_inverse_floats
         current = self._prepare(scans)
         latest = self._keyframes[-1]
         dt = t - self._times[-1]
@@ -262,13 +263,51 @@ class FusionEstimator(Estimator):
         typical = [self._clock.typical_step] if self._clock.steps else []
         predicted = within_prediction_horizon(dt, typical)
         previous = self.pose.tolist()
-        step = self._velocity * (dt if predicted else min(typical, default=0.0))
-        step = step.tolist()
+        information = self._prediction_information(dt, predicted)
+        step = (self._velocity * (dt if predicted else min(typical, default=0.0))).tolist()
+        from_latest, edges, score = self._solve(latest, current, previous, step, information)
+        intervals = intervals_since_used(self.skipped_before, self.clock_jumped, dt, typical)
+        recovering = not predicted and intervals > 1 and bool(typical)
+        if recovering:
+            # or the car kept its speed over every interval since the last scan used
+            # (estimators.odometry.fusion_recovery)
+            longer = (self._velocity * (intervals * typical[0])).tolist()
+            longer[2] = step[2]
+            found = self._solve(latest, current, previous, longer, information)
+            if found[2] > score + SCORE_TOLERANCE or (
+                    self.skipped_before and found[2] >= score - SCORE_TOLERANCE):
+                from_latest, edges, score = found
+        pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
+        if (
+            np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
+            or abs(from_latest[2]) >= self.keyframe_turn
+        ):
+            pose = self._insert_keyframe(current, pose, edges)
+        motion = list(compose_floats(inverse_floats(previous), pose.tolist()))
+        if recovering:
+            # a car turning over the gap moved along the chord of its turn: straight ahead
+            # in the frame halfway through the turn, as it drives on from the end of it
+            motion = midpoint_velocity(motion).tolist()
+        speed = math.hypot(self._velocity[0], self._velocity[1])
+        typical_step = self._clock.typical_step if self._clock.steps else 0.0
+        self._update_velocity(motion, evident_time_step(math.hypot(motion[0], motion[1]), speed,
+                                                        dt, typical_step))
+        return pose
+
+    def _solve(self, latest: _Keyframe, current: tuple[PreparedScan, ...],
+               previous: list[float], step: list[float], information: FloatArray,
+               hint: bool = True) -> tuple[FloatArray, list[SensorEdge], float]:
+        """The car motion from ``latest`` to ``current`` (3,), its four edges and their mean
+        share of points explained, guessing the car moved ``step`` (car frame) from the
+        ``previous`` pose, held by the prior ``information``."""
+        assert self._matcher is not None
+        mounts, mount_inverses = self._mount_floats, self._mount_inverse_floats
         to_latest = inverse_floats(latest.pose.tolist())
         guess = compose_floats(to_latest, compose_floats(previous, step))
         correlated = self._matcher.correlate(
             latest.scans[0], current[0],
-            np.array(compose_floats(mount_inverses[0], compose_floats(guess, mounts[0]))),
+            np.array(compose_floats(mount_inverses[0], compose_floats(guess, mounts[0])))
+            if hint else None,
         )
         seed = self._motion_from_sensor_match(correlated.pose)
         # A constant twist moves the car along the chord of its turn: with the turn the
@@ -282,23 +321,11 @@ class FusionEstimator(Estimator):
             c, s = math.cos(0.5 * (turn - heading)), math.sin(0.5 * (turn - heading))
             step = [c * x - s * y, s * x + c * y, turn]
             guess = compose_floats(to_latest, compose_floats(previous, step))
-        information = self._prediction_information(dt, predicted)
         edges = self._match_all(latest, current, guess, seed, information)
         # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
         start = compose_floats(compose_floats(mounts[0], edges[0].pose.tolist()), mount_inverses[0])
         from_latest = fuse_car_motion(self._mounts, edges, start, **self._weights())
-        pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
-        if (
-            np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
-            or abs(from_latest[2]) >= self.keyframe_turn
-        ):
-            pose = self._insert_keyframe(current, pose, edges)
-        motion = list(compose_floats(inverse_floats(previous), pose.tolist()))
-        speed = math.hypot(self._velocity[0], self._velocity[1])
-        typical_step = self._clock.typical_step if self._clock.steps else 0.0
-        self._update_velocity(motion, evident_time_step(math.hypot(motion[0], motion[1]), speed,
-                                                        dt, typical_step))
-        return pose
+        return from_latest, edges, sum(edge.confidence for edge in edges) / len(edges)
 
     def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:
         """The prediction's information over ``dt`` [s]
