@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator
+from estimators.health import CLOCK_HISTORY, evident_time_step
 from estimators.matching.normal_equations import register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
@@ -248,6 +249,25 @@ def match_scans(
     return register(reference, np.asarray(query_points, dtype=np.float64), initial_guess, params)
 
 
+#: Share of points a match from the guess over a clock gap's every interval must explain
+#: beyond the one-interval match's to be taken (a stamp that jumped while the scans ran on
+#: fits the one-interval guess as well or better).
+LOST_SCANS_MARGIN = 0.05
+
+
+def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], intervals: float,
+                       step: float) -> float:
+    """How far a match ``pose`` (3,) lands from its constant-velocity ``guess`` (3,) per scan
+    interval of the ``intervals`` the guess spans: its turn off the guess [rad] plus its
+    translation off it in units of the last ``step`` [m] (at least 5 cm). Of two matches of
+    a clock gap that explain the scan alike, the one the motion model finds less surprising
+    is the likelier: a one-interval guess that has to turn 40 degrees more, or a whole-gap
+    guess that has to undo its extrapolated turn, says which of the two it was."""
+    off = pose - guess
+    turn = abs(math.remainder(float(off[2]), 2.0 * math.pi))
+    return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
+
+
 @dataclass
 class ICPEstimator(Estimator):
     """Scan-to-previous-scan PL-ICP (no odometry): the baseline a user would pick. Both
@@ -288,6 +308,14 @@ class ICPEstimator(Estimator):
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._previous = self._points(scans)
 
+    def _intervals_lost(self, t: float) -> float:
+        """Scan intervals since the last scan used when the clock jumped before ``t`` [s]:
+        the time step over the median of the last ones (1 without a jump)."""
+        if not self.clock_jumped or len(self._times) < 2:
+            return 1.0
+        typical = float(np.median(np.diff(self._times[-CLOCK_HISTORY:])))
+        return (t - self._times[-1]) / typical if typical > 0 else 1.0
+
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)
         increment = np.zeros(3)
@@ -299,13 +327,31 @@ class ICPEstimator(Estimator):
             # the guess and the kept increment per observation: skipped ones count
             # (Estimator.update)
             observations = 1 + self.skipped_before
-            guess = self._increment * observations
-            increment = match_scans(self._previous, current, guess, self.params).pose
-            if np.hypot(*(increment[:2] - guess[:2])) > self.params.max_correspondence_distance:
+            guesses = [self._increment * observations]
+            lost = self._intervals_lost(t)
+            if lost > observations:  # scans lost on the way (the car drove on), or the stamp
+                guesses.append(self._increment * lost)  # alone jumped (the scans ran on)
+            results = [match_scans(self._previous, current, guess, self.params)
+                       for guess in guesses]
+            best = 0
+            if len(results) > 1:  # the one explaining clearly more, else the less surprising
+                spans, step = (observations, lost), float(np.hypot(*self._increment[:2]))
+                surprise = [lost_scan_surprise(r.pose, g, n, step)
+                            for r, g, n in zip(results, guesses, spans, strict=True)]
+                gain = results[1].quality - results[0].quality
+                best = int(gain > LOST_SCANS_MARGIN
+                           or (gain >= -LOST_SCANS_MARGIN and surprise[1] < surprise[0]))
+            increment = results[best].pose
+            if min(np.hypot(*(increment[:2] - guess[:2])) for guess in guesses) > (
+                    self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the
-                # guess is backed by the points (a few sparse returns slid away): the guess
+                # guesses is backed by the points (a few sparse returns slid away): the guess
                 self.health.note_unusable(len(self._observations))
-                return compose(self.pose, guess)
+                return compose(self.pose, guesses[best])
+            if lost > observations:  # per interval the scans bear out at the speed held
+                observations = max(observations, evident_time_step(
+                    float(np.hypot(*increment[:2])), float(np.hypot(*self._increment[:2])),
+                    lost, 1.0))
             self._increment = increment / observations
         self._previous = current
         return compose(self.pose, increment)

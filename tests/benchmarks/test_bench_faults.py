@@ -37,7 +37,8 @@ CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, 
     ("closed_to_open/zigzag", "blind_3s"),
     ("closed_to_open/zigzag", "dropout_half"),
     ("closed_to_open/zigzag", "gaps"),
-)] + [("pc_fusion", "closed_to_open/zigzag", "clock_jump_3s")]
+)] + [("pc_fusion", "closed_to_open/zigzag", "clock_jump_3s"),
+      ("icp", "open_cylinders/right_turn", "gaps"), ("icp", "closed_to_open/zigzag", "gaps")]
 
 
 @pytest.mark.parametrize(("name", "group", "fault"), CELLS)
