@@ -28,8 +28,9 @@ A start down a bare corridor hides the start speed: measured later, the start is
 
 Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
 the car can have reached; a poor match gets correlative searches in ever wider windows, and
-one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). Every
-match is checked against the scan's match to the previous scan: a poorly explained map match
+one that stays poor is flagged in ``poor_matches`` (:mod:`estimators.odometry.far_scans`). A
+match a search placed, or one explaining less than 90 % of its scan, is checked against the
+scan's match to the previous scan: a poorly explained map match
 that turns the car away from what the two scans show is matched again from their increment
 (:mod:`estimators.odometry.scan_check`; a 180-degree Lidar down a corridor fits the walls
 about as well turned round). All

@@ -8,7 +8,9 @@ about as well, and the all-headings fallback
 (:func:`estimators.odometry.far_scans.fallback_match`) takes it for a few points more, while
 the scan matched to the previous scan explains far more of it and shows no such turn.
 
-So each matched scan is also matched to the previous scan (PL-ICP from the constant-velocity
+So a map match that a search placed, or that leaves part of its scan unexplained
+(``estimators.odometry.far_scans.CHECKED_BELOW``), is also matched to the previous scan
+(PL-ICP from the constant-velocity
 increment, :func:`estimators.matching.icp.match_scans`). Where the two turn the car by more
 than ``tolerance`` apart, the map match is run again from the previous pose composed with the
 scan-to-scan increment, and of the two map matches the one whose turn agrees with the match
