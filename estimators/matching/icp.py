@@ -37,6 +37,7 @@ from estimators.matching.point_to_line import (
     solve_normal_equations,
 )
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
+from estimators.matching.scan_recovery import one_turn_guess, search_start
 from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import compose, transform_points, wrap_angle
@@ -268,6 +269,19 @@ def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], in
     return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
 
 
+def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float64]],
+                      spans: list[float], step: float) -> int:
+    """Index of the match in ``results`` to keep, each judged against the constant-velocity
+    ``guesses[k]`` (3,) over ``spans[k]`` scan intervals: of those explaining within
+    :data:`LOST_SCANS_MARGIN` of the largest share of points, the one the motion model finds
+    least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the first on a
+    tie)."""
+    top = max(result.quality for result in results)
+    surprise = [lost_scan_surprise(r.pose, g, n, step) if r.quality >= top - LOST_SCANS_MARGIN
+                else math.inf for r, g, n in zip(results, guesses, spans, strict=True)]
+    return int(np.argmin(surprise))
+
+
 @dataclass
 class ICPEstimator(Estimator):
     """Scan-to-previous-scan PL-ICP (no odometry): the baseline a user would pick. Both
@@ -279,6 +293,11 @@ class ICPEstimator(Estimator):
     identity it needs about twice the iterations. The price: in a U-turn at a corridor's end,
     where the scan leaves a direction nearly free, a wrong sideways step of a few cm is carried
     into the next guesses and kept for several scans rather than reset.
+
+    After skipped or lost scans the match also starts from the translation extrapolated with
+    one interval's turn and from a correlative search on the last scan's likelihood grid
+    (:mod:`estimators.matching.scan_recovery`); of the matches explaining within
+    :data:`LOST_SCANS_MARGIN` of the most points, the least surprising one is kept.
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """
@@ -316,6 +335,17 @@ class ICPEstimator(Estimator):
         typical = float(np.median(np.diff(self._times[-CLOCK_HISTORY:])))
         return (t - self._times[-1]) / typical if typical > 0 else 1.0
 
+    def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float
+                         ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` scan
+        intervals and ``seconds`` [s], each with the guess its match is judged against: the
+        last increment's translation with one interval's turn, and the correlative search's
+        pose around it."""
+        assert self._previous is not None
+        kept = one_turn_guess(self._increment, span)
+        found = search_start(self._previous, current, kept, span, seconds)
+        return [(kept, kept)] + ([] if found is None else [(found, kept)])
+
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)
         increment = np.zeros(3)
@@ -331,18 +361,20 @@ class ICPEstimator(Estimator):
             lost = self._intervals_lost(t)
             if lost > observations:  # scans lost on the way (the car drove on), or the stamp
                 guesses.append(self._increment * lost)  # alone jumped (the scans ran on)
-            results = [match_scans(self._previous, current, guess, self.params)
-                       for guess in guesses]
-            best = 0
-            if len(results) > 1:  # the one explaining clearly more, else the less surprising
-                spans, step = (observations, lost), float(np.hypot(*self._increment[:2]))
-                surprise = [lost_scan_surprise(r.pose, g, n, step)
-                            for r, g, n in zip(results, guesses, spans, strict=True)]
-                gain = results[1].quality - results[0].quality
-                best = int(gain > LOST_SCANS_MARGIN
-                           or (gain >= -LOST_SCANS_MARGIN and surprise[1] < surprise[0]))
+            spans = [float(observations), lost][:len(guesses)]
+            starts = list(guesses)
+            span = max(spans)
+            if span > 1:  # the turn over the gap is the least known part of the guess
+                for start, guess in self._recovery_starts(current, span, t - self._times[-1]):
+                    starts.append(start)
+                    guesses.append(guess)
+                    spans.append(span)
+            results = [match_scans(self._previous, current, start, self.params)
+                       for start in starts]
+            best = most_likely_match(results, guesses, spans,
+                                     float(np.hypot(*self._increment[:2])))
             increment = results[best].pose
-            if min(np.hypot(*(increment[:2] - guess[:2])) for guess in guesses) > (
+            if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the
                 # guesses is backed by the points (a few sparse returns slid away): the guess

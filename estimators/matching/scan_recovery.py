@@ -1,0 +1,88 @@
+"""Where the ``icp`` estimator looks for the car after scans it could not use (a blinded Lidar)
+or never got (a clock gap): starting guesses beyond its constant-velocity one.
+
+Over a gap of ``n`` scan intervals the guess ``n x`` the last increment extrapolates the last
+turn rate for the whole gap, the least known part of it: a car that turned 45 degrees while
+blind, or stopped turning, lies outside ICP's basin from there. Two more starts cover it:
+the translation extrapolated with one interval's turn, and the exact best pose of a
+multi-resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the
+new scan on the likelihood grid of the last one used, over every pose the car can have
+reached (:func:`reach`). Poses are in the last used scan's car frame: x [m] forward,
+y [m] left, heading [rad].
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.branch_and_bound import (
+    GridPyramid,
+    angular_step_for,
+    levels_for_window,
+    likelihood_grid,
+    match,
+)
+from estimators.matching.scan_matching import voxel_downsample
+
+FloatArray = NDArray[np.float64]
+
+#: Grid cell [m] of the search: the translation step it lands within, well inside ICP's basin.
+SEARCH_RESOLUTION = 0.05
+#: Thinning [m] of the scan the search scores (a few points per metre of wall pin a 5 cm cell).
+SEARCH_VOXEL = 0.1
+#: At most this many points are scored (evenly spread); ICP refines with all of them.
+SEARCH_POINTS = 300
+#: A best mean score at or below this (one point in 20 on a wall) is "not found".
+MIN_SEARCH_SCORE = 0.05
+#: Turn [rad] the car may add per scan interval beyond the one it held (ACES's robot turns up
+#: to 20 degrees a scan on the spot at 6 Hz).
+TURN_PER_INTERVAL = math.radians(20.0)
+#: Slack [m] of the search window beyond the distance the guess extrapolates.
+REACH_MARGIN = 0.5
+#: Acceleration [m/s^2] the car may have held over the gap beyond the speed it had (the
+#: ``lidar_odometry`` motion model's): a robot that turned on the spot drives off.
+ACCELERATION = 0.5
+#: Most [m] the acceleration widens the window by: over a gap of seconds a wider one holds
+#: places elsewhere that explain more of a scan-to-scan match than the right one.
+MAX_SPEED_CHANGE_REACH = 1.0
+
+
+def one_turn_guess(increment: FloatArray, intervals: float) -> FloatArray:
+    """The last per-interval ``increment`` (3,) over ``intervals`` with its turn taken once:
+    the car kept its speed and direction and the gap's turn is left to the match."""
+    guess = increment * intervals
+    guess[2] = increment[2]
+    return guess
+
+
+def reach(guess: FloatArray, intervals: float, seconds: float) -> tuple[float, float]:
+    """The search window ``(linear [m], angular [rad])`` around ``guess`` (3,) after a gap of
+    ``intervals`` scan intervals and ``seconds`` [s]: as far again as the guess moves the car
+    (it may have stopped, or turned off the line), plus what :data:`ACCELERATION` adds over
+    the gap (at most :data:`MAX_SPEED_CHANGE_REACH`) and :data:`REACH_MARGIN`;
+    :data:`TURN_PER_INTERVAL` per interval either side (every heading past pi)."""
+    return (float(np.hypot(guess[0], guess[1]))
+            + min(0.5 * ACCELERATION * seconds**2, MAX_SPEED_CHANGE_REACH) + REACH_MARGIN,
+            min(TURN_PER_INTERVAL * intervals, math.pi))
+
+
+def search_start(reference_points: FloatArray, query_points: FloatArray, guess: FloatArray,
+                 intervals: float, seconds: float) -> FloatArray | None:
+    """The best pose (3,) of ``query_points`` (M, 2, their car frame) on the likelihood grid
+    of ``reference_points`` (N, 2, the last used scan's car frame) within :func:`reach` of
+    ``guess`` (3,), or None when nothing scores above :data:`MIN_SEARCH_SCORE`."""
+    thinned = voxel_downsample(query_points, SEARCH_VOXEL)
+    thinned = thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
+    linear, angular = reach(guess, intervals, seconds)
+    low = reference_points.min(axis=0) - 0.5
+    shape = tuple(np.maximum(np.ceil((reference_points.max(axis=0) + 0.5 - low)
+                                     / SEARCH_RESOLUTION).astype(int), 1))
+    grid = likelihood_grid(reference_points, low, shape, SEARCH_RESOLUTION)
+    pyramid = GridPyramid(grid, low, SEARCH_RESOLUTION,
+                          levels_for_window(linear, SEARCH_RESOLUTION))
+    found = match(pyramid, thinned, guess, linear, angular,
+                  angular_step_for(thinned, SEARCH_RESOLUTION), MIN_SEARCH_SCORE)
+    return found.pose if found.found else None
