@@ -35,18 +35,15 @@ from estimators.matching.rotation_pc import (
     refinement_starts,
     require_sensor_frame,
 )
-from estimators.odometry.fusion_recovery import SCORE_TOLERANCE, intervals_since_used
+from estimators.odometry.edge_consensus import fuse_from_consensus
+from estimators.odometry.fusion_recovery import intervals_since_used, recovered
 from estimators.odometry.motion_prior import (
     ScanClock,
     midpoint_velocity,
     prediction_information,
     within_prediction_horizon,
 )
-from estimators.odometry.sensor_graph import (
-    SensorEdge,
-    fuse_car_motion,
-    optimize_poses,
-)
+from estimators.odometry.sensor_graph import SensorEdge, optimize_poses
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import PoseFloats, compose_floats, inverse, inverse_floats, wrap_float
 
@@ -273,10 +270,11 @@ class FusionEstimator(Estimator):
             # (estimators.odometry.fusion_recovery)
             longer = (self._velocity * (intervals * typical[0])).tolist()
             longer[2] = step[2]
-            found = self._solve(latest, current, previous, longer, information)
-            if found[2] > score + SCORE_TOLERANCE or (
-                    self.skipped_before and found[2] >= score - SCORE_TOLERANCE):
-                from_latest, edges, score = found
+            from_latest, edges, score = recovered(
+                lambda guess: self._solve(latest, current, previous, guess, information),
+                (from_latest, edges, score), longer, bool(self.skipped_before),
+                lambda motion: list(compose_floats(inverse_floats(previous), compose_floats(
+                    latest.pose.tolist(), motion.tolist()))))
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
@@ -322,9 +320,10 @@ class FusionEstimator(Estimator):
             step = [c * x - s * y, s * x + c * y, turn]
             guess = compose_floats(to_latest, compose_floats(previous, step))
         edges = self._match_all(latest, current, guess, seed, information)
-        # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction.
+        # Start the solver at the main Lidar's own match (edges[0]): closer than the prediction
+        # (and from the others' where they disagree, estimators.odometry.edge_consensus).
         start = compose_floats(compose_floats(mounts[0], edges[0].pose.tolist()), mount_inverses[0])
-        from_latest = fuse_car_motion(self._mounts, edges, start, **self._weights())
+        from_latest = fuse_from_consensus(self._mounts, edges, start, **self._weights())
         return from_latest, edges, sum(edge.confidence for edge in edges) / len(edges)
 
     def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:

@@ -32,6 +32,10 @@ def drives() -> dict:
 CELLS = [
     ("pc_fusion", "closed_to_open/zigzag", "gaps"),
     ("pc_fusion", "hallway/zigzag", "blind_3s"),
+    # a turn while blind: the recovered motion is matched again until it converges
+    ("pc_fusion", "closed_to_open/zigzag", "blind_3s"),
+    # half the beams dropped: a match fooled along the corridor does not outvote the others
+    ("pc_fusion", "closed_to_open/zigzag", "dropout_half"),
     # the longer guess must not be taken where only the stamp jumped
     ("pc_fusion", "hallway/zigzag", "clock_jump_3s"),
     ("pc_fusion", "closed_to_open/zigzag", "clock_jump_3s"),
@@ -50,7 +54,7 @@ def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> 
     jump, final = bench.score(poses, recording.truth[bench.steps_of(recording, faulted)])
     assert jump - clean_jump <= bench.JUMP_MARGIN, (jump, clean_jump)
     assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
-    assert health["skipped_scans"] + health["clock_jumps"] > 0
+    assert fault == "dropout_half" or health["skipped_scans"] + health["clock_jumps"] > 0
 
 
 def test_intervals_count_skipped_scans_and_clock_gaps() -> None:

@@ -10,6 +10,7 @@ import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from estimators.base import LIDAR_KEYS, Sensor, SensorSetup, default_beam_angles
 from estimators.evaluation.metrics import evaluate
 from estimators.matching.rotation_pc import motion_from_sensor_match
+from estimators.odometry.edge_consensus import fuse_from_consensus
 from estimators.odometry.sensor_graph import (
     SensorEdge,
     fuse_car_motion,
@@ -235,3 +236,24 @@ def test_fusion_refuses_lidars_of_different_max_ranges_and_runs_three_270_degree
         estimator.update(observation, info["time"])
     end = relative(info["pose"], estimator.pose)
     assert np.hypot(end[0], end[1]) < 0.03 and abs(end[2]) < np.radians(0.5)
+
+
+def test_a_wrong_main_match_does_not_outvote_the_three_that_agree() -> None:
+    # The solver started at the main pair's match: 0.4 m off along the way (a corridor).
+    motion = np.array([0.1, 0.0, 0.03])
+    edges = four_edges(motion)
+    wrong = motion + np.array([0.4, 0.1, 0.0])
+    edges[0] = SensorEdge(0, 0, 1, 0, relative(MOUNTS[0], compose(wrong, MOUNTS[0])), 1.0)
+    weights = {"sigma_translation": 0.01, "sigma_heading": 0.005, "robust_scale": 3.0}
+    stuck = fuse_car_motion(MOUNTS, edges, wrong, **weights)
+    assert np.linalg.norm(stuck[:2] - motion[:2]) > 0.3  # the Cauchy loss keeps its start
+    estimate = fuse_from_consensus(MOUNTS, edges, wrong, **weights)
+    np.testing.assert_allclose(estimate, motion, atol=0.01)  # the outlier pulls a few mm
+
+
+def test_matches_that_agree_keep_the_solution_from_the_main_match() -> None:
+    edges = four_edges(np.array([0.12, 0.01, 0.05]), np.random.default_rng(3))
+    start = motion_from_sensor_match(MOUNTS[0], edges[0].pose)
+    weights = {"sigma_translation": 0.01, "sigma_heading": 0.005, "robust_scale": 3.0}
+    np.testing.assert_array_equal(fuse_from_consensus(MOUNTS, edges, start, **weights),
+                                  fuse_car_motion(MOUNTS, edges, start, **weights))
