@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from estimators.health import Health, Observations, ScanScreen, moved
+from estimators.health import MIN_RETURNS, Health, Observations, ScanScreen, moved
 from lidar_env.core import EstimatorInputError, ResetNeededError, check_time
 
 #: Observation keys ``lidar_1 .. lidar_8``; sensor ``k`` of a setup reads ``LIDAR_KEYS[k]``.
@@ -298,6 +298,8 @@ class Estimator(ABC):
 
     #: Lidars the estimator needs; a pipeline skips it (no failure) on a setup with fewer.
     min_lidars: ClassVar[int] = 1
+    #: Returns an observation needs on the sensors read to be used (``estimators.health``).
+    min_returns: ClassVar[int] = MIN_RETURNS
     setup: SensorSetup | None = field(default=None, init=False, repr=False)
     _poses: list[NDArray[np.float64]] = field(default_factory=list, init=False, repr=False)
     _times: list[float] = field(default_factory=list, init=False, repr=False)
@@ -320,7 +322,7 @@ class Estimator(ABC):
         self._initial_pose = pose.copy()
         self._observations = Observations()
         self._screen = ScanScreen([sensor.max_range for sensor in setup.sensors],
-                                  self._used_sensors(setup))
+                                  self._used_sensors(setup), self.min_returns)
         self.health = self._screen.health
         self.skipped_before = 0
         self.clock_jumped = False

@@ -2,18 +2,19 @@
 jumps and blind stretches (:class:`Health`), and the screen that finds them before a scan
 reaches the estimator's matching (:class:`ScanScreen`).
 
-A scan is usable when the sensors the estimator reads hold at least :data:`MIN_RETURNS`
-returns between them: below that a fit of a handful of points can land metres away, so the
-scan is skipped and the constant-velocity prediction carries the pose
-(:meth:`estimators.base.Estimator.update`). A sensor whose scan repeats its previous one
-exactly while another sensor's scan changed is frozen (a real Lidar's range noise never
-repeats a scan bit for bit): its scan reads 0 m for that observation (below every
+A scan is usable when the sensors the estimator reads hold at least :data:`MIN_RETURNS` returns
+between them (an estimator's ``min_returns``: scan-to-map odometry, whose map and prior hold a
+pose that one pillar's few returns pin down, asks fewer): below that a fit of a handful of
+points can land metres away, so the scan is skipped and the constant-velocity prediction
+carries the pose (:meth:`estimators.base.Estimator.update`). A sensor whose scan repeats its
+previous one exactly while another sensor's scan changed is frozen (a real Lidar's range noise
+never repeats a scan bit for bit): its scan reads 0 m for that observation (below every
 estimator's ``min_range``: no return, and unlike ``max_range`` it clears no space the sensor
 did not see). Where every sensor repeats while the estimate was moving, the repeat is counted
 as frozen but the scans are used (a car stopping dead in a noise-free simulation repeats its
-scans too, and matching them says it stands). A time
-step over :data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or
-scans lost); it is counted, and estimators that scale their prediction by time guard it.
+scans too, and matching them says it stands). A time step over :data:`CLOCK_JUMP_FACTOR` times
+the median of the recent ones is a clock jump (or scans lost); it is counted, and estimators
+that scale their prediction by time guard it.
 """
 
 from __future__ import annotations
@@ -86,11 +87,14 @@ class ScanScreen:
     Args:
         max_ranges: each sensor's max range [m], in setup order.
         used: the indices of the sensors the estimator reads.
+        min_returns: returns a usable observation holds over them (:data:`MIN_RETURNS`).
     """
 
-    def __init__(self, max_ranges: Sequence[float], used: Sequence[int]) -> None:
+    def __init__(self, max_ranges: Sequence[float], used: Sequence[int],
+                 min_returns: int = MIN_RETURNS) -> None:
         self.max_ranges = list(max_ranges)
         self.used = list(used)
+        self.min_returns = min_returns
         self.health = Health()
         self._previous: list[NDArray[np.float64] | None] = [None] * len(self.max_ranges)
         self._steps: deque[float] = deque(maxlen=CLOCK_HISTORY)
@@ -127,7 +131,7 @@ class ScanScreen:
             screened.append(scan)
         returns = sum(int(np.count_nonzero((screened[k] > 0) & (screened[k] < self.max_ranges[k])))
                       for k in self.used)
-        return screened, returns >= MIN_RETURNS
+        return screened, returns >= self.min_returns
 
     def skip(self, index: int) -> None:
         """Record observation ``index`` as skipped."""

@@ -269,15 +269,23 @@ def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], in
     return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
 
 
+#: Fewest points on each scan for the search after a gap (a pillar or two of a short-range
+#: Lidar fit anywhere: TurtleBot drives through sparse halls, 10-30 returns a scan, drifted
+#: 1.6 -> 23 % with it, ``benchmarks/bench_sparse_halls.py``).
+MIN_SEARCH_POINTS = 50
+
+
 def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float64]],
-                      spans: list[float], step: float) -> int:
+                      spans: list[float], step: float, points: int) -> int:
     """Index of the match in ``results`` to keep, each judged against the constant-velocity
     ``guesses[k]`` (3,) over ``spans[k]`` scan intervals: of those explaining within
-    :data:`LOST_SCANS_MARGIN` of the largest share of points, the one the motion model finds
-    least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the first on a
-    tie)."""
+    :data:`LOST_SCANS_MARGIN` of the largest share of the scan's ``points`` (or within that
+    share's standard error, where a scan of few points leaves it noisy), the one the motion
+    model finds least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the
+    first on a tie)."""
     top = max(result.quality for result in results)
-    surprise = [lost_scan_surprise(r.pose, g, n, step) if r.quality >= top - LOST_SCANS_MARGIN
+    margin = max(LOST_SCANS_MARGIN, math.sqrt(top * (1.0 - top) / max(points, 1)))
+    surprise = [lost_scan_surprise(r.pose, g, n, step) if r.quality >= top - margin
                 else math.inf for r, g, n in zip(results, guesses, spans, strict=True)]
     return int(np.argmin(surprise))
 
@@ -364,7 +372,9 @@ class ICPEstimator(Estimator):
             spans = [float(observations), lost][:len(guesses)]
             starts = list(guesses)
             span = max(spans)
-            if span > 1:  # the turn over the gap is the least known part of the guess
+            # the turn over the gap is the least known part of the guess; a search over metres
+            # and every heading tells places apart only from enough points
+            if span > 1 and min(len(current), len(self._previous)) >= MIN_SEARCH_POINTS:
                 for start, guess in self._recovery_starts(current, span, t - self._times[-1]):
                     starts.append(start)
                     guesses.append(guess)
@@ -372,7 +382,7 @@ class ICPEstimator(Estimator):
             results = [match_scans(self._previous, current, start, self.params)
                        for start in starts]
             best = most_likely_match(results, guesses, spans,
-                                     float(np.hypot(*self._increment[:2])))
+                                     float(np.hypot(*self._increment[:2])), len(current))
             increment = results[best].pose
             if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):

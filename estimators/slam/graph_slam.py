@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,12 +57,12 @@ from lidar_env.core.se2 import compose, relative
 @dataclass
 class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     """Front end + loop closure + pose-graph optimisation. Distances [m], angles [rad].
-
     Defaults are for 2D Lidars indoors driven at walking speed, not tuned to one log:
 
     Attributes:
         frontend, frontend_params: the odometry estimator by registry name ("lidar_odometry":
-            the most accurate registered one on ACES local relations) and its parameters.
+            the most accurate registered one on ACES local relations) and its parameters; it
+            decides which scans are usable (``min_returns`` lets through all it may take).
         keyframe_distance, keyframe_angle: a new keyframe every 0.5 m or 20 deg (keyframes
             overlap heavily; a graph of them stays ~10x smaller than one of scans).
         odometry_sigma, odometry_drift, odometry_sigma_rotation, odometry_drift_rotation:
@@ -134,6 +134,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             lines in the step check and the odometry edges' match information.
     """
 
+    min_returns: ClassVar[int] = 3
     frontend: str = "lidar_odometry"
     frontend_params: dict[str, Any] = field(default_factory=dict)
     keyframe_distance: float = 0.5
@@ -219,8 +220,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._last_loop = -(10**9)
         # (keyframe, front-end step's inlier share, the all-heading match) of checked steps
         self.step_checks: list[tuple[int, float, LoopVerification]] = []
-        # A checked step's match competes with the front end's step, not with nothing: it
-        # must be unambiguous and explain more points than the step, not a minimum share.
+        # a checked step's match must be unambiguous and explain more than the step's
         self._step_params = replace(self.loop_params, angular_window=np.pi,
                                     angular_step=self.global_angular_step, min_quality=0.0,
                                     min_score=0.0)
