@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator
-from estimators.health import CLOCK_HISTORY, evident_time_step
+from estimators.health import CLOCK_HISTORY, CLOCK_JUMP_FACTOR, evident_time_step
 from estimators.matching.normal_equations import register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
@@ -336,12 +336,15 @@ class ICPEstimator(Estimator):
         self._previous = self._points(scans)
 
     def _intervals_lost(self, t: float) -> float:
-        """Scan intervals since the last scan used when the clock jumped before ``t`` [s]:
-        the time step over the median of the last ones (1 without a jump)."""
-        if not self.clock_jumped or len(self._times) < 2:
+        """Scan intervals since the last scan used when the clock jumped before ``t`` [s]: the
+        time step over the median of the last positive ones, if :data:`CLOCK_JUMP_FACTOR` or
+        more (less, as Intel's bursty stamps jump at most scans, is no loss); else 1."""
+        steps = np.diff(self._times[-CLOCK_HISTORY:])
+        steps = steps[steps > 0]
+        if not self.clock_jumped or not len(steps):
             return 1.0
-        typical = float(np.median(np.diff(self._times[-CLOCK_HISTORY:])))
-        return (t - self._times[-1]) / typical if typical > 0 else 1.0
+        lost = (t - self._times[-1]) / float(np.median(steps))
+        return lost if lost >= CLOCK_JUMP_FACTOR else 1.0
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float
                          ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
@@ -362,18 +365,16 @@ class ICPEstimator(Estimator):
         if len(current) < MIN_MATCH_RETURNS:
             return compose(self.pose, increment)
         if self._previous is not None and len(self._previous) >= MIN_MATCH_RETURNS:
-            # the guess and the kept increment per observation: skipped ones count
-            # (Estimator.update)
-            observations = 1 + self.skipped_before
+            observations = 1 + self.skipped_before  # skipped ones count (Estimator.update)
             guesses = [self._increment * observations]
             lost = self._intervals_lost(t)
             if lost > observations:  # scans lost on the way (the car drove on), or the stamp
                 guesses.append(self._increment * lost)  # alone jumped (the scans ran on)
             spans = [float(observations), lost][:len(guesses)]
             starts = list(guesses)
-            span = max(spans)
-            # the turn over the gap is the least known part of the guess; a search over metres
-            # and every heading tells places apart only from enough points
+            # after skipped scans (a clock gap may be the stamps alone) the turn is the least
+            # known part of the guess; a search tells places apart only from enough points
+            span = float(observations)
             if span > 1 and min(len(current), len(self._previous)) >= MIN_SEARCH_POINTS:
                 for start, guess in self._recovery_starts(current, span, t - self._times[-1]):
                     starts.append(start)
