@@ -8,7 +8,7 @@ terminal's process group prints its own ``KeyboardInterrupt`` traceback. So each
   ctypes; elsewhere a daemon thread polls the parent's pid every second instead), and exits at
   once if the parent is already gone when it starts;
 * ignores SIGINT: the parent handles Ctrl-C, commits what is finished and stops the workers
-  (:func:`stop_workers`).
+  once their tasks in flight are done (:func:`stop_workers`).
 """
 
 from __future__ import annotations
@@ -26,6 +26,8 @@ from concurrent.futures import ProcessPoolExecutor
 PR_SET_PDEATHSIG = 1
 #: [s] how often a worker without prctl checks that its parent is alive.
 PARENT_POLL_INTERVAL = 1.0
+#: [s] how long the tasks in flight get to finish after Ctrl-C before their workers are killed.
+FINISH_SECONDS = 30.0
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
@@ -60,14 +62,19 @@ def _watch_parent(parent_pid: int) -> None:
 
 
 def stop_workers(executor: object) -> None:
-    """Cancel what is queued on a process pool and kill its workers now (after Ctrl-C: the
-    tasks in flight are abandoned, their scenarios not committed, a re-run redoes them)."""
+    """Cancel what is queued on a process pool and stop its workers (after Ctrl-C): the tasks
+    in flight finish (not committed: a re-run redoes them) and the workers exit; one still
+    busy after :data:`FINISH_SECONDS` is killed. Killed at once, a worker can die halfway
+    through writing its result, and the pool's reader thread then waits for the rest of it
+    for ever, holding the process open after it printed that it was interrupted."""
     if not isinstance(executor, ProcessPoolExecutor):
         return
     processes = list((getattr(executor, "_processes", None) or {}).values())
     executor.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + FINISH_SECONDS
+    for process in processes:
+        process.join(timeout=max(0.0, deadline - time.monotonic()))
     for process in processes:
         if process.is_alive():
             process.kill()
-    for process in processes:
-        process.join(timeout=5.0)
+            process.join(timeout=5.0)
