@@ -165,6 +165,18 @@ def evident_time_step(distance: float, speed: float, dt: float, typical: float) 
     return float(np.clip(distance / speed, typical, dt))
 
 
+def intervals_since_used(skipped_before: int, clock_jumped: bool, interval: float,
+                         typical: float) -> float:
+    """How many scan intervals the car may have moved since the last scan an estimator used:
+    one plus the scans skipped since (each one interval), or, on a clock jump (scans lost on
+    the way, or only the stamp jumped), the ``interval`` [s] over the ``typical`` one (0 when
+    none is known yet)."""
+    intervals = 1.0 + skipped_before
+    if clock_jumped and typical > 0:
+        intervals = max(intervals, interval / typical)
+    return intervals
+
+
 def moved(poses: Sequence[NDArray[np.float64]]) -> bool:
     """Whether the last of ``poses`` moved from the one before (over 1 mm or 1 mrad)."""
     if len(poses) < 2:

@@ -26,7 +26,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator
-from estimators.health import CLOCK_HISTORY, CLOCK_JUMP_FACTOR, evident_time_step
+from estimators.health import (
+    CLOCK_HISTORY,
+    CLOCK_JUMP_FACTOR,
+    evident_time_step,
+    intervals_since_used,
+)
 from estimators.matching.normal_equations import register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
@@ -37,7 +42,13 @@ from estimators.matching.point_to_line import (
     solve_normal_equations,
 )
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
-from estimators.matching.scan_recovery import one_turn_guess, search_start
+from estimators.matching.scan_recovery import (
+    LOST_SCANS_MARGIN,
+    MIN_SEARCH_POINTS,
+    lost_scan_surprise,
+    one_turn_guess,
+    search_start,
+)
 from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import compose, transform_points, wrap_angle
@@ -250,31 +261,6 @@ def match_scans(
     return register(reference, np.asarray(query_points, dtype=np.float64), initial_guess, params)
 
 
-#: Share of points a match from the guess over a clock gap's every interval must explain
-#: beyond the one-interval match's to be taken (a stamp that jumped while the scans ran on
-#: fits the one-interval guess as well or better).
-LOST_SCANS_MARGIN = 0.05
-
-
-def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], intervals: float,
-                       step: float) -> float:
-    """How far a match ``pose`` (3,) lands from its constant-velocity ``guess`` (3,) per scan
-    interval of the ``intervals`` the guess spans: its turn off the guess [rad] plus its
-    translation off it in units of the last ``step`` [m] (at least 5 cm). Of two matches of
-    a clock gap that explain the scan alike, the one the motion model finds less surprising
-    is the likelier: a one-interval guess that has to turn 40 degrees more, or a whole-gap
-    guess that has to undo its extrapolated turn, says which of the two it was."""
-    off = pose - guess
-    turn = abs(math.remainder(float(off[2]), 2.0 * math.pi))
-    return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
-
-
-#: Fewest points on each scan for the search after a gap (a pillar or two of a short-range
-#: Lidar fit anywhere: TurtleBot drives through sparse halls, 10-30 returns a scan, drifted
-#: 1.6 -> 23 % with it, ``benchmarks/bench_sparse_halls.py``).
-MIN_SEARCH_POINTS = 50
-
-
 def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float64]],
                       spans: list[float], step: float, points: int) -> int:
     """Index of the match in ``results`` to keep, each judged against the constant-velocity
@@ -341,9 +327,8 @@ class ICPEstimator(Estimator):
         more (less, as Intel's bursty stamps jump at most scans, is no loss); else 1."""
         steps = np.diff(self._times[-CLOCK_HISTORY:])
         steps = steps[steps > 0]
-        if not self.clock_jumped or not len(steps):
-            return 1.0
-        lost = (t - self._times[-1]) / float(np.median(steps))
+        lost = intervals_since_used(0, self.clock_jumped, t - self._times[-1],
+                                    float(np.median(steps)) if len(steps) else 0.0)
         return lost if lost >= CLOCK_JUMP_FACTOR else 1.0
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float

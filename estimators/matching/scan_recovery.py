@@ -3,12 +3,14 @@ or never got (a clock gap): starting guesses beyond its constant-velocity one.
 
 Over a gap of ``n`` scan intervals the guess ``n x`` the last increment extrapolates the last
 turn rate for the whole gap, the least known part of it: a car that turned 45 degrees while
-blind, or stopped turning, lies outside ICP's basin from there. Two more starts cover it:
-the translation extrapolated with one interval's turn, and the exact best pose of a
-multi-resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the
-new scan on the likelihood grid of the last one used, over every pose the car can have
-reached (:func:`reach`). Poses are in the last used scan's car frame: x [m] forward,
-y [m] left, heading [rad].
+blind, or stopped turning, lies outside ICP's basin from there. Two more starts cover it: the
+translation extrapolated with one interval's turn, and the exact best pose of a multi-
+resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the new scan
+on the likelihood grid of the last one used, over every pose the car can have reached
+(:func:`reach`). Of the matches from all starts,
+:func:`estimators.matching.icp.most_likely_match` keeps the one explaining clearly more of the
+scan, else the one the motion model finds least surprising (:func:`lost_scan_surprise`). Poses
+are in the last used scan's car frame: x [m] forward, y [m] left, heading [rad].
 """
 
 from __future__ import annotations
@@ -18,25 +20,12 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.branch_and_bound import (
-    GridPyramid,
-    angular_step_for,
-    levels_for_window,
-    likelihood_grid,
-    match,
-)
-from estimators.matching.scan_matching import voxel_downsample
+from estimators.matching.window_search import search_in_box, thinned_for_search
 
 FloatArray = NDArray[np.float64]
 
 #: Grid cell [m] of the search: the translation step it lands within, well inside ICP's basin.
 SEARCH_RESOLUTION = 0.05
-#: Thinning [m] of the scan the search scores (a few points per metre of wall pin a 5 cm cell).
-SEARCH_VOXEL = 0.1
-#: At most this many points are scored (evenly spread); ICP refines with all of them.
-SEARCH_POINTS = 300
-#: A best mean score at or below this (one point in 20 on a wall) is "not found".
-MIN_SEARCH_SCORE = 0.05
 #: Turn [rad] the car may add per scan interval beyond the one it held (ACES's robot turns up
 #: to 20 degrees a scan on the spot at 6 Hz).
 TURN_PER_INTERVAL = math.radians(20.0)
@@ -73,16 +62,37 @@ def search_start(reference_points: FloatArray, query_points: FloatArray, guess: 
                  intervals: float, seconds: float) -> FloatArray | None:
     """The best pose (3,) of ``query_points`` (M, 2, their car frame) on the likelihood grid
     of ``reference_points`` (N, 2, the last used scan's car frame) within :func:`reach` of
-    ``guess`` (3,), or None when nothing scores above :data:`MIN_SEARCH_SCORE`."""
-    thinned = voxel_downsample(query_points, SEARCH_VOXEL)
-    thinned = thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
+    ``guess`` (3,), or None when nothing scores above
+    :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
+    thinned = thinned_for_search(query_points)
     linear, angular = reach(guess, intervals, seconds)
     low = reference_points.min(axis=0) - 0.5
-    shape = tuple(np.maximum(np.ceil((reference_points.max(axis=0) + 0.5 - low)
-                                     / SEARCH_RESOLUTION).astype(int), 1))
-    grid = likelihood_grid(reference_points, low, shape, SEARCH_RESOLUTION)
-    pyramid = GridPyramid(grid, low, SEARCH_RESOLUTION,
-                          levels_for_window(linear, SEARCH_RESOLUTION))
-    found = match(pyramid, thinned, guess, linear, angular,
-                  angular_step_for(thinned, SEARCH_RESOLUTION), MIN_SEARCH_SCORE)
+    high = reference_points.max(axis=0) + 0.5
+    found = search_in_box(reference_points, low, high, thinned, guess, linear, angular,
+                          SEARCH_RESOLUTION)
     return found.pose if found.found else None
+
+
+#: Share of points a match from the guess over a clock gap's every interval must explain
+#: beyond the one-interval match's to be taken (a stamp that jumped while the scans ran on
+#: fits the one-interval guess as well or better).
+LOST_SCANS_MARGIN = 0.05
+
+
+def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], intervals: float,
+                       step: float) -> float:
+    """How far a match ``pose`` (3,) lands from its constant-velocity ``guess`` (3,) per scan
+    interval of the ``intervals`` the guess spans: its turn off the guess [rad] plus its
+    translation off it in units of the last ``step`` [m] (at least 5 cm). Of two matches of
+    a clock gap that explain the scan alike, the one the motion model finds less surprising
+    is the likelier: a one-interval guess that has to turn 40 degrees more, or a whole-gap
+    guess that has to undo its extrapolated turn, says which of the two it was."""
+    off = pose - guess
+    turn = abs(math.remainder(float(off[2]), 2.0 * math.pi))
+    return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
+
+
+#: Fewest points on each scan for the search after a gap (a pillar or two of a short-range
+#: Lidar fit anywhere: TurtleBot drives through sparse halls, 10-30 returns a scan, drifted
+#: 1.6 -> 23 % with it, ``benchmarks/bench_sparse_halls.py``).
+MIN_SEARCH_POINTS = 50

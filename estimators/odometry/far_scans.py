@@ -44,19 +44,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.health import CLOCK_JUMP_FACTOR
-from estimators.matching.branch_and_bound import (
-    GridPyramid,
-    Match,
-    angular_step_for,
-    levels_for_window,
-    likelihood_grid,
-    match,
-)
+from estimators.health import CLOCK_JUMP_FACTOR, intervals_since_used
+from estimators.matching.branch_and_bound import Match
 from estimators.matching.correlative import correlative_search
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
-from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
+from estimators.matching.scan_matching import LikelihoodField
+from estimators.matching.window_search import search_in_box, thinned_for_search
 from estimators.odometry.motion_prior import ScanClock
 from estimators.odometry.scan_check import check_against_scan
 from lidar_env.core.se2 import relative, wrap_angle
@@ -69,16 +63,6 @@ FloatArray = NDArray[np.float64]
 #: and the fast-turn drives (``benchmarks/bench_fast_turns.py``) it replaced no match at all,
 #: and checking every scan took a quarter of the CPU.
 CHECKED_BELOW = 0.9
-
-#: Thinning [m] of the scan the branch-and-bound scores: a few points per metre of wall is what
-#: pins a pose to a 5 cm cell, and the cost is linear in the points.
-SEARCH_VOXEL = 0.1
-#: At most this many points are scored (evenly spread); ICP refines with all of them.
-SEARCH_POINTS = 300
-#: A best mean score at or below this (a scan landing on nothing of the map: 0.05 = one point
-#: in 20 on a wall) is "not found".
-MIN_SEARCH_SCORE = 0.05
-
 
 @dataclass(frozen=True)
 class SearchWindow:
@@ -126,8 +110,7 @@ class GlobalSearch:
 
     def search(self, points: FloatArray, guess: FloatArray, window: SearchWindow) -> Match:
         """Exact best pose of ``points`` (M, 2, car frame) within ``window`` of ``guess``."""
-        thinned = voxel_downsample(points, SEARCH_VOXEL)
-        thinned = thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
+        thinned = thinned_for_search(points)
         scan_reach = float(np.hypot(thinned[:, 0], thinned[:, 1]).max())
         # no shift beyond where the scan still touches the map counts: a clock gap of minutes
         # must not size the search (memory and time) by max_speed x the gap
@@ -138,14 +121,8 @@ class GlobalSearch:
         reach = window.linear + scan_reach + 0.5
         low = np.maximum(self.map_points.min(axis=0), guess[:2] - reach) - 0.5
         high = np.minimum(self.map_points.max(axis=0), guess[:2] + reach) + 0.5
-        shape = tuple(np.maximum(np.ceil((high - low) / self.resolution).astype(int), 1))
-        inside = np.all((self.map_points >= low) & (self.map_points <= high), axis=1)
-        grid = likelihood_grid(self.map_points[inside], low, shape, self.resolution)
-        levels = levels_for_window(window.linear, self.resolution)
-        pyramid = GridPyramid(grid, low, self.resolution, levels)
-        step = angular_step_for(thinned, self.resolution)
-        return match(pyramid, thinned, guess, window.linear, window.angular, step,
-                     MIN_SEARCH_SCORE)
+        return search_in_box(self.map_points, low, high, thinned, guess, window.linear,
+                             window.angular, self.resolution)
 
 
 def far_match(
@@ -288,17 +265,6 @@ class FarScanMatching:
         clock = self._clock.median if self._clock.settled else typical
         return self.prediction_acceleration * clock**2 > self.prior_sigma_translation
 
-    def _intervals_since_used(self, interval: float, typical: float) -> float:
-        """How many scan intervals the car may have moved since the last scan used: one,
-        plus the scans skipped as unusable since (each one interval), or, where the clock
-        jumped (scans lost on the way, or only the stamp jumped), the ``interval`` over the
-        ``typical`` one [s]. The far-apart window grows with it: after 3 s of blind scans
-        the car can be metres and a full turn from where the last few steps point."""
-        intervals = 1.0 + self.skipped_before
-        if self.clock_jumped and typical > 0:
-            intervals = max(intervals, interval / typical)
-        return intervals
-
     def _match(self, points: FloatArray, guess: FloatArray, predicted: FloatArray,
                interval: float) -> MatchResult:
         """The registration of ``points`` (M, 2, car frame) near ``guess`` (3,), the car
@@ -309,7 +275,8 @@ class FarScanMatching:
         assert self._reference is not None
         typical = self._clock.typical_step if self._clock.steps else interval
         window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
-        intervals = self._intervals_since_used(interval, typical)
+        intervals = intervals_since_used(self.skipped_before, self.clock_jumped, interval,
+                                         typical)
         if self._far_steps:  # a stalled clock does not mean the car drove or turned further
             longest = max(length for length, _ in self._far_steps)
             sharpest = max(turn for _, turn in self._far_steps)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
-from estimators.health import evident_time_step
+from estimators.health import evident_time_step, intervals_since_used
 from estimators.matching.curve_refinement import PRIOR_INFORMATION, PRIOR_SIGMA
 from estimators.matching.rotation_pc import (
     PreparedScan,
@@ -36,7 +36,7 @@ from estimators.matching.rotation_pc import (
     require_sensor_frame,
 )
 from estimators.odometry.edge_consensus import fuse_from_consensus
-from estimators.odometry.fusion_recovery import intervals_since_used, recovered
+from estimators.odometry.fusion_recovery import recovered
 from estimators.odometry.motion_prior import (
     ScanClock,
     midpoint_velocity,
@@ -263,7 +263,8 @@ class FusionEstimator(Estimator):
         information = self._prediction_information(dt, predicted)
         step = (self._velocity * (dt if predicted else min(typical, default=0.0))).tolist()
         from_latest, edges, score = self._solve(latest, current, previous, step, information)
-        intervals = intervals_since_used(self.skipped_before, self.clock_jumped, dt, typical)
+        intervals = intervals_since_used(self.skipped_before, self.clock_jumped, dt,
+                                         min(typical, default=0.0))
         recovering = not predicted and intervals > 1 and bool(typical)
         if recovering:
             # or the car kept its speed over every interval since the last scan used

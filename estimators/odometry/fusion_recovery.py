@@ -18,7 +18,7 @@ iterations from there stop short of the fit. So the kept motion is matched again
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,17 +30,6 @@ Solution = tuple[NDArray[np.float64], Any, float]
 #: Two candidate motions whose matches explain shares of the scans within this of each other
 #: are equally good fits (``rotation_pc.QUALITY_TOLERANCE``'s reading of a share).
 SCORE_TOLERANCE = 0.02
-
-
-def intervals_since_used(skipped_before: int, clock_jumped: bool, interval: float,
-                         typical: Sequence[float]) -> float:
-    """How many scan intervals the car may have moved since the last scan used: one plus the
-    scans skipped since (each one interval), or, on a clock jump, the ``interval`` [s] over
-    the ``typical`` one (``typical``: the median step, or empty when none is known)."""
-    intervals = 1.0 + skipped_before
-    if clock_jumped and typical and typical[0] > 0:
-        intervals = max(intervals, interval / typical[0])
-    return intervals
 
 
 #: Most rounds of matching a recovered motion again from itself (each converges further;

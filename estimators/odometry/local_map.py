@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimators.base import Estimator
-from estimators.health import evident_time_step
+from estimators.health import evident_time_step, intervals_since_used
 from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
@@ -330,7 +330,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             typical = self._clock.typical_step if self._clock.steps else interval
             dt = evident_time_step(float(np.hypot(increment[0], increment[1])),
                                    float(np.hypot(self._velocity[0], self._velocity[1])),
-                                   self._intervals_since_used(interval, typical), 1.0)
+                                   intervals_since_used(self.skipped_before,
+                                                        self.clock_jumped, interval, typical),
+                                   1.0)
         self._velocity = self._updated_velocity(increment, dt)
         self._remember(pose, scans, seen, self._misses[-1])
         last_keyframe = self._keyframes[-1][0]

@@ -15,7 +15,13 @@ import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents import PurePursuitDriver
 from estimators import SensorSetup
 from estimators.base import Sensor
-from estimators.health import MIN_RETURNS, Health, ScanScreen, evident_time_step
+from estimators.health import (
+    MIN_RETURNS,
+    Health,
+    ScanScreen,
+    evident_time_step,
+    intervals_since_used,
+)
 from estimators.odometry.far_scans import GlobalSearch, SearchWindow
 from lidar_env.faults import Blind, ClockJump, FrozenLidar, apply_faults
 from lidar_env.faults.frames import Frame
@@ -182,3 +188,10 @@ def test_the_evident_time_step_follows_the_scans_over_a_jump():
     assert evident_time_step(0.1, 1.0, 3.1, 0.1) == pytest.approx(0.1)  # scans ran on
     assert evident_time_step(1.0, 1.0, 3.1, 0.1) == pytest.approx(1.0)  # a real gap
     assert evident_time_step(0.0, 0.0, 3.1, 0.1) == 0.1  # standing: the typical step
+
+
+def test_intervals_count_skipped_scans_and_clock_gaps() -> None:
+    assert intervals_since_used(0, False, 0.1, 0.1) == 1.0
+    assert intervals_since_used(30, False, 3.1, 0.1) == 31.0
+    assert intervals_since_used(0, True, 1.1, 0.1) == pytest.approx(11.0)
+    assert intervals_since_used(2, True, 0.2, 0.0) == 3.0  # no typical step known yet
