@@ -143,3 +143,26 @@ def test_a_scan_with_few_returns_is_no_update_not_a_jump(drive, name, returns):
     final = estimator.update(frames[7][0], 0.7)
     reference = run(name, setup, frames[:8], 0.1 * np.arange(8))[-1]
     assert np.hypot(*(final[:2] - reference[:2])) < 0.25
+
+
+@pytest.mark.parametrize(("name", "used"), [("lidar_odometry", True), ("slam", True),
+                                            ("icp", False), ("pc_fusion", False)])
+def test_scan_to_map_estimators_use_a_scan_of_a_few_returns(drive, name, used):
+    """One pillar of a short-range Lidar (5 returns) pins a pose against the map: the
+    scan-to-map estimators (``min_returns`` 3) use it, the others (10) skip it."""
+    setup, frames = drive
+    estimator = estimators.make(name)
+    estimator.reset(setup, frames[0][1])
+    for k, (observation, _) in enumerate(frames[:6]):
+        estimator.update(observation, 0.1 * k)
+    sparse = {}
+    for key in setup.keys:
+        scan = np.full(len(frames[6][0][key]), setup.max_range, dtype=np.float32)
+        kept = np.flatnonzero(frames[6][0][key] < setup.max_range)[:5 if key == setup.keys[0]
+                                                                    else 0]
+        scan[kept] = frames[6][0][key][kept]
+        sparse[key] = scan
+    after = estimator.update(sparse, 0.6)
+    assert np.all(np.isfinite(after))
+    assert estimator.health.skipped_scans == (0 if used else 1)
+    assert np.hypot(*(after[:2] - frames[6][1][:2])) < 0.25
