@@ -3,6 +3,7 @@
     python benchmarks/bench_peers.py                          # ACES and Intel, 2,000 scans each
     python benchmarks/bench_peers.py --limit 500 my.clf.gz my_bag --json peers.json
     python benchmarks/bench_peers.py --peers-path /tmp/kiss   # KISS-ICP installed with --target
+    python benchmarks/bench_peers.py --env --peers-path DIR   # the peers' Lidars, not the logs
 
 Runs ``lidar_odometry``, ``slam`` and ``icp`` (``--estimators``) and KISS-ICP (PyPI
 ``kiss-icp``, the ``peers`` extra; its Python API, ``KissICP.register_frame``) over the first
@@ -18,6 +19,12 @@ trajectory. Printed per log: CPU ms per scan of each, the ratios to KISS-ICP (an
 relations; Intel: the SLAM-corrected log's poses, pseudo ground truth); ``--json`` writes all
 of it with the settings and the machine. The clocks are bench_real_logs.py's: ACES on the IPC
 stamps, Intel on the logger's made to run forward (``estimators.datasets.real_log``).
+
+``--env`` times the simulators' Lidars instead: IR-SIM's (PyPI ``ir-sim``) and VMAS's (PyPI
+``vmas``, on torch) 360-beam scans against our kernel on one walled room of discs and boxes from
+``--seed``, at ``--poses`` random free poses, CPU time per scan in turns, each peer's ranges
+checked against ours (``peer_lidars``). A peer that does not import is skipped with a line naming
+its pip command. It replaces the log runs, whose peer and measure (odometry) differ.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import peer_lidars
 from numpy.typing import NDArray
 
 from estimators import make
@@ -268,12 +276,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-default-logs", action="store_true",
                         help="skip ACES and Intel")
     parser.add_argument("--peers-path", type=existing_path, default=None,
-                        help="a directory holding kiss-icp (pip install --target DIR "
-                             "kiss-icp), searched after this environment's packages")
+                        help="a directory holding the peers (pip install --target DIR kiss-icp, "
+                             "or a venv's site-packages holding ir-sim and vmas), searched "
+                             "after this environment's packages")
+    parser.add_argument("--env", action="store_true",
+                        help="time IR-SIM's and VMAS's Lidars against ours instead of the logs")
+    parser.add_argument("--poses", type=positive, default=300, help="--env: poses to scan")
+    parser.add_argument("--seed", type=int, default=0, help="--env: the scene and the poses")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
     if args.peers_path is not None:
         sys.path.append(str(args.peers_path))
+    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
+               f"python {platform.python_version()}")
+    if args.env:
+        if args.logs:
+            parser.error("--env scans a simulated room: give no logs with it")
+        return bench_env(args, machine)
     try:
         import kiss_icp
         peer_version = getattr(kiss_icp, "__version__", "unknown")
@@ -284,8 +303,6 @@ def main(argv: list[str] | None = None) -> int:
     loaders = sources(args)
     if not loaders:
         parser.error(f"no logs: {DATA} is missing and none was given")
-    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
-               f"python {platform.python_version()}")
     print(f"machine: {machine}; CPU time per scan, runners interleaved scan by scan")
     if peer_version:
         print(f"KISS-ICP {peer_version}: {KISS_SETTINGS}")
@@ -296,10 +313,25 @@ def main(argv: list[str] | None = None) -> int:
         result = bench_log(source, args.estimators, peer_version is not None)
         print_log(source.name, result)
         report["logs"][source.name] = result
-    if args.json is not None:
-        args.json.write_text(json.dumps(report, indent=1))
-        print(f"wrote {args.json}")
+    write_json(args.json, report)
     return 0
+
+
+def bench_env(args: argparse.Namespace, machine: str) -> int:
+    """``--env``: the peers' Lidars against ours on one scene (see :mod:`peer_lidars`)."""
+    print(f"machine: {machine}; CPU time per scan, scanners in turns over blocks of poses")
+    result, skipped = peer_lidars.run(list(peer_lidars.PEERS), args.seed, args.poses)
+    for line in skipped:
+        print(line, file=sys.stderr)
+    peer_lidars.print_result(result)
+    write_json(args.json, {"machine": machine, "env": result})
+    return 0
+
+
+def write_json(path: Path | None, report: dict[str, Any]) -> None:
+    if path is not None:
+        path.write_text(json.dumps(report, indent=1))
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":
