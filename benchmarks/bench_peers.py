@@ -1,4 +1,4 @@
-"""Peers benchmark: our Lidar odometry against KISS-ICP on the same scans, CPU time per scan.
+"""Peers benchmark: our odometry against KISS-ICP, or our Lidar against IR-SIM's and VMAS's.
 
     python benchmarks/bench_peers.py                          # ACES and Intel, 2,000 scans each
     python benchmarks/bench_peers.py --limit 500 my.clf.gz my_bag --json peers.json

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -300,7 +301,8 @@ def bench_scene(peers: list[PeerLidar], scene: Scene, poses: NDArray[np.float64]
     result: dict[str, Any] = {
         "poses": len(poses), "beams": lidar.n_beams, "max_range_m": lidar.max_range,
         "ours": {"call": "lidar_env.sensors.lidar.cast_rays(world, pose, angles, max_range)",
-                 "passes_per_block": OUR_PASSES, "block_poses": BLOCK},
+                 "passes_per_block": OUR_PASSES, "block_poses": BLOCK,
+                 "numba": numba.__version__, "numpy": np.__version__},
         "agreement": {}, "peers": {}}
     for peer in peers:  # the untimed pass: loads the kernels and keeps the ranges
         theirs = np.array([peer.scan(pose) for pose in poses])
