@@ -158,7 +158,8 @@ class IrSimLidar:
         with tempfile.TemporaryDirectory() as folder:
             path = Path(folder) / "peer_room.yaml"
             path.write_text(json.dumps(config))  # JSON is YAML
-            self.env = irsim.make(str(path), headless=True, log_file=None, log_level="ERROR")
+            self.env = irsim.make(str(path), display=False, disable_all_plot=True, log_file=None,
+                                  log_level="ERROR")
         self.lidar = self.env.robot.sensors[0]
         self.beam_angles = self.turn + np.asarray(self.lidar.angle_list, dtype=np.float64)
         self.version = irsim.__version__
