@@ -22,9 +22,10 @@ stamps, Intel on the logger's made to run forward (``estimators.datasets.real_lo
 
 ``--env`` times the simulators' Lidars instead: IR-SIM's (PyPI ``ir-sim``) and VMAS's (PyPI
 ``vmas``, on torch) 360-beam scans against our kernel on one walled room of discs and boxes from
-``--seed``, at ``--poses`` random free poses, CPU time per scan in turns, each peer's ranges
-checked against ours (``peer_lidars``). A peer that does not import is skipped with a line naming
-its pip command. It replaces the log runs, whose peer and measure (odometry) differ.
+``--seed``, at ``--poses`` random free poses (``--batch`` of them a call), CPU time per scan
+in turns, each peer's ranges checked against ours (``peer_lidars``). A peer that does not
+import is skipped with a line naming its pip command. It replaces the log runs, whose peers and
+measure (odometry) differ.
 """
 
 from __future__ import annotations
@@ -282,6 +283,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--env", action="store_true",
                         help="time IR-SIM's and VMAS's Lidars against ours instead of the logs")
     parser.add_argument("--poses", type=positive, default=300, help="--env: poses to scan")
+    parser.add_argument("--batch", type=positive, default=1,
+                        help="--env: poses per scan call (VMAS's environments, our sensors)")
     parser.add_argument("--seed", type=int, default=0, help="--env: the scene and the poses")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
@@ -292,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.env:
         if args.logs:
             parser.error("--env scans a simulated room: give no logs with it")
+        if args.batch > args.poses:
+            parser.error(f"--batch: expected at most --poses ({args.poses}), got {args.batch}")
         return bench_env(args, machine)
     try:
         import kiss_icp
@@ -320,7 +325,8 @@ def main(argv: list[str] | None = None) -> int:
 def bench_env(args: argparse.Namespace, machine: str) -> int:
     """``--env``: the peers' Lidars against ours on one scene (see :mod:`peer_lidars`)."""
     print(f"machine: {machine}; CPU time per scan, scanners in turns over blocks of poses")
-    result, skipped = peer_lidars.run(list(peer_lidars.PEERS), args.seed, args.poses)
+    result, skipped = peer_lidars.run(list(peer_lidars.PEERS), args.seed, args.poses,
+                                      args.batch)
     for line in skipped:
         print(line, file=sys.stderr)
     peer_lidars.print_result(result)

@@ -7,9 +7,11 @@ walls as segments, the boxes as polygons) scanned by :func:`lidar_env.sensors.li
 IR-SIM (PyPI ``ir-sim``) gets linestring walls, circle and rectangle obstacles and a
 ``lidar2d`` sensor whose ``Lidar2D.step`` is timed; VMAS (PyPI ``vmas``) gets ``Line``,
 ``Sphere`` and ``Box`` landmarks and an agent carrying a ``Lidar`` whose ``measure`` is timed,
-one environment in the batch, torch on one thread. Every Lidar casts 360 beams 1 degree apart
-from the pose's heading, 10 m range, noiseless, from the same random poses at least 0.3 m from
-any obstacle.
+torch on one thread. Every Lidar casts 360 beams 1 degree apart from the pose's heading, 10 m
+range, noiseless, from the same random poses at least 0.3 m from any obstacle. Each call scans
+one pose, or a batch of ``B`` poses: VMAS then scans ``B`` environments in one ``measure``,
+ours casts ``B`` sensors in one ``cast_rays`` call, and IR-SIM, which has no batch, scans them
+one after the other; the time per scan is the call's divided by ``B``.
 
 Each scanner is charged the CPU time (``time.process_time``) of its scan calls (placing the
 sensor at the pose and scanning; no physics step, no drawing), measured in blocks of poses in
@@ -40,6 +42,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from lidar_env.core import ConfigError
 from lidar_env.sensors.lidar import Lidar, cast_rays
 from lidar_env.world.world import World
 
@@ -118,25 +121,27 @@ def free_poses(world: World, rng: np.random.Generator, count: int) -> NDArray[np
 
 
 class PeerLidar(Protocol):
-    """A peer's Lidar placed in the scene: ``scan(pose)`` returns its ``(n,)`` ranges [m];
-    ``beam_angles`` are its beams' directions [rad] from the pose's heading."""
+    """A peer's Lidar placed in the scene: ``scan(poses)`` returns the ``(B, n)`` ranges [m]
+    of ``B`` sensors at ``poses`` ``(B, 3)`` (``B`` fixed when the peer is made);
+    ``beam_angles`` are its beams' directions [rad] from a pose's heading."""
 
     name: str
     version: str
     settings: dict[str, Any]
     beam_angles: NDArray[np.float64]
 
-    def scan(self, pose: NDArray[np.float64]) -> NDArray[np.float64]: ...
+    def scan(self, poses: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
 
 class IrSimLidar:
     """IR-SIM's ``lidar2d`` on a robot in the scene, written as a world file and loaded by
     ``irsim.make``, headless. Its beams span ``angle_range`` centred on its heading, so the
-    heading is turned by half the span to put beam 0 on the pose's heading."""
+    heading is turned by half the span to put beam 0 on the pose's heading. IR-SIM scans one
+    sensor per call: a batch of poses is scanned one after the other."""
 
     name = "IR-SIM"
 
-    def __init__(self, scene: Scene, n_beams: int, max_range: float) -> None:
+    def __init__(self, scene: Scene, n_beams: int, max_range: float, batch: int = 1) -> None:
         import irsim
 
         span = 2 * math.pi * (n_beams - 1) / n_beams
@@ -167,18 +172,22 @@ class IrSimLidar:
                          "number": n_beams, "range_max_m": max_range, "noise": False,
                          "circles": "shapely buffer, 64-gon"}
 
-    def scan(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        self.lidar.step(np.array([[pose[0]], [pose[1]], [pose[2] + self.turn]]))
-        return np.array(self.lidar.range_data, dtype=np.float64)
+    def scan(self, poses: NDArray[np.float64]) -> NDArray[np.float64]:
+        ranges = np.empty((len(poses), self.lidar.number))
+        for k, (x, y, heading) in enumerate(poses):
+            self.lidar.step(np.array([[x], [y], [heading + self.turn]]))
+            ranges[k] = self.lidar.range_data
+        return ranges
 
 
 class VmasLidar:
-    """VMAS's ``Lidar`` on an agent in a one-environment world of landmarks, torch on one
-    thread; the agent is placed at the pose, then ``measure`` scans."""
+    """VMAS's ``Lidar`` on an agent in a world of landmarks batched over ``batch``
+    environments, torch on one thread; the agent is placed at each environment's pose, then one
+    ``measure`` scans them all."""
 
     name = "VMAS"
 
-    def __init__(self, scene: Scene, n_beams: int, max_range: float) -> None:
+    def __init__(self, scene: Scene, n_beams: int, max_range: float, batch: int = 1) -> None:
         import torch
         import vmas
         from vmas.simulator.core import Agent, Box, Landmark, Line, Sphere
@@ -187,7 +196,7 @@ class VmasLidar:
 
         torch.set_num_threads(1)
         self.torch = torch
-        world = VmasWorld(batch_dim=1, device=torch.device("cpu"))
+        world = VmasWorld(batch_dim=batch, device=torch.device("cpu"))
         self.sensor = VmasSensor(world, n_rays=n_beams, max_range=max_range, render=False)
         self.agent = Agent("lidar", shape=Sphere(0.05), sensors=[self.sensor])
         world.add_agent(self.agent)
@@ -206,17 +215,17 @@ class VmasLidar:
         self.beam_angles = self.sensor._angles[0].double().numpy()
         self.version = vmas.__version__
         self.settings = {"call": "Lidar.measure()", "n_rays": n_beams, "max_range_m": max_range,
-                         "batch_dim": 1, "torch": torch.__version__, "torch_threads": 1,
+                         "batch_dim": batch, "torch": torch.__version__, "torch_threads": 1,
                          "dtype": "float32"}
 
-    def scan(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        placed = self.torch.from_numpy(pose.astype(np.float32)[None])
+    def scan(self, poses: NDArray[np.float64]) -> NDArray[np.float64]:
+        placed = self.torch.from_numpy(poses.astype(np.float32))
         self.agent.state.pos, self.agent.state.rot = placed[:, :2], placed[:, 2:]
-        return self.sensor.measure()[0].double().numpy()
+        return self.sensor.measure().double().numpy()
 
 
 #: Peer name -> (module to import, pip install command, adapter).
-PEERS: dict[str, tuple[str, str, Callable[[Scene, int, float], PeerLidar]]] = {
+PEERS: dict[str, tuple[str, str, Callable[[Scene, int, float, int], PeerLidar]]] = {
     "ir-sim": ("irsim", "pip install ir-sim", IrSimLidar),
     "vmas": ("vmas", "pip install torch vmas", VmasLidar),
 }
@@ -239,28 +248,29 @@ def importable_peers(names: list[str]) -> tuple[list[str], list[str]]:
 
 
 def our_scanner(world: World, lidar: Lidar) -> Scan:
-    """Our exact ranges of one sensor at a pose, as the env casts them."""
+    """Our exact ranges of sensors at poses ``(B, 3)``, all in one call, as the env casts them."""
     angles, max_range = lidar.beam_angles, lidar.max_range
-    return lambda pose: cast_rays(world, pose[None], angles, max_range)[0]
+    return lambda poses: cast_rays(world, poses, angles, max_range)
 
 
-def interleaved_cpu(scans: dict[str, Scan], poses: NDArray[np.float64],
+def interleaved_cpu(scans: dict[str, Scan], batches: NDArray[np.float64],
                     passes: dict[str, int], block: int = BLOCK) -> dict[str, float]:
-    """CPU time [us] per scan of each scanner, timed in turns: for each block of ``block``
-    poses, ``passes[name]`` passes of each scanner over the block."""
+    """CPU time [us] per scan (per pose) of each scanner called on ``batches`` ``(G, B, 3)``,
+    timed in turns: for each block of ``block`` batches, ``passes[name]`` passes of each
+    scanner over the block."""
     spent = dict.fromkeys(scans, 0.0)
     calls = dict.fromkeys(scans, 0)
     clock = time.process_time
-    for start in range(0, len(poses), block):
-        part = poses[start:start + block]
+    for start in range(0, len(batches), block):
+        part = batches[start:start + block]
         for name, scan in scans.items():
             begin = clock()
             for _ in range(passes[name]):
-                for pose in part:
-                    scan(pose)
+                for poses in part:
+                    scan(poses)
             spent[name] += clock() - begin
             calls[name] += passes[name] * len(part)
-    return {name: 1e6 * spent[name] / calls[name] for name in scans}
+    return {name: 1e6 * spent[name] / (calls[name] * batches.shape[1]) for name in scans}
 
 
 def disc_hits(scene: Scene, poses: NDArray[np.float64], angles: NDArray[np.float64],
@@ -293,43 +303,55 @@ def agreement(peer: NDArray[np.float64], ours: NDArray[np.float64], on_disc: NDA
 TOLERANCE_M = {"IR-SIM": 2e-3, "VMAS": 1e-4}
 
 
-def bench_scene(peers: list[PeerLidar], scene: Scene, poses: NDArray[np.float64],
+def bench_scene(peers: list[PeerLidar], scene: Scene, batches: NDArray[np.float64],
                 lidar: Lidar) -> dict[str, Any]:
-    """Time our kernel and every peer on ``poses`` and check each peer's ranges against ours."""
+    """Time our kernel and every peer on ``batches`` of poses ``(G, B, 3)``, one call per batch,
+    and check each peer's ranges against ours."""
     world = scene.world()
+    poses = batches.reshape(-1, 3)
     scans: dict[str, Scan] = {"ours": our_scanner(world, lidar)}
     scans.update({peer.name: peer.scan for peer in peers})
     result: dict[str, Any] = {
-        "poses": len(poses), "beams": lidar.n_beams, "max_range_m": lidar.max_range,
-        "ours": {"call": "lidar_env.sensors.lidar.cast_rays(world, pose, angles, max_range)",
-                 "passes_per_block": OUR_PASSES, "block_poses": BLOCK,
+        "poses": len(poses), "batch": batches.shape[1], "beams": lidar.n_beams,
+        "max_range_m": lidar.max_range,
+        "ours": {"call": "lidar_env.sensors.lidar.cast_rays(world, poses, angles, max_range)",
+                 "passes_per_block": OUR_PASSES, "block_batches": _block(batches),
                  "numba": numba.__version__, "numpy": np.__version__},
         "agreement": {}, "peers": {}}
     for peer in peers:  # the untimed pass: loads the kernels and keeps the ranges
-        theirs = np.array([peer.scan(pose) for pose in poses])
+        theirs = np.concatenate([peer.scan(part) for part in batches])
         ours = cast_rays(world, poses, peer.beam_angles, lidar.max_range)
         on_disc = disc_hits(scene, poses, peer.beam_angles, ours)
         result["agreement"][peer.name] = agreement(theirs, ours, on_disc, TOLERANCE_M[peer.name])
         result["peers"][peer.name] = {"version": peer.version, "settings": peer.settings}
-    for pose in poses:
-        scans["ours"](pose)
+    for part in batches:
+        scans["ours"](part)
     passes = {name: OUR_PASSES if name == "ours" else 1 for name in scans}
-    per_scan = interleaved_cpu(scans, poses, passes)
+    per_scan = interleaved_cpu(scans, batches, passes, _block(batches))
     result["cpu_us_per_scan"] = per_scan
     result["ratios"] = {f"{peer.name}/ours": per_scan[peer.name] / per_scan["ours"]
                         for peer in peers}
     return result
 
 
-def run(names: list[str], seed: int, count: int) -> tuple[dict[str, Any], list[str]]:
-    """The scene of ``seed``, ``count`` free poses, and :func:`bench_scene` over the importable
-    peers among ``names``; also the lines naming the peers skipped."""
+def _block(batches: NDArray[np.float64]) -> int:
+    """Batches per block: :data:`BLOCK` poses, at least one batch."""
+    return max(1, BLOCK // batches.shape[1])
+
+
+def run(names: list[str], seed: int, count: int,
+        batch: int = 1) -> tuple[dict[str, Any], list[str]]:
+    """The scene of ``seed``, ``count`` free poses (rounded down to whole batches of
+    ``batch``), and :func:`bench_scene` over the importable peers among ``names``; also the
+    lines naming the peers skipped."""
+    if not 1 <= batch <= count:
+        raise ConfigError(f"batch: expected 1 to {count} poses (the count), got {batch}")
     found, skipped = importable_peers(names)
     scene = make_scene(seed)
     lidar = Lidar()
-    poses = free_poses(scene.world(), np.random.default_rng(seed), count)
-    peers = [PEERS[name][2](scene, lidar.n_beams, lidar.max_range) for name in found]
-    result = bench_scene(peers, scene, poses, lidar)
+    poses = free_poses(scene.world(), np.random.default_rng(seed), count - count % batch)
+    peers = [PEERS[name][2](scene, lidar.n_beams, lidar.max_range, batch) for name in found]
+    result = bench_scene(peers, scene, poses.reshape(-1, batch, 3), lidar)
     result["scene"] = {"seed": seed, "room_m": 2 * ROOM_HALF_M, "circles": len(scene.circles),
                        "boxes": len(scene.boxes), "pose_clearance_m": POSE_CLEARANCE_M}
     return result, skipped
@@ -339,8 +361,8 @@ def print_result(result: dict[str, Any]) -> None:
     """Per scanner: CPU us per scan, the ratio to ours and the agreement with ours."""
     scene = result["scene"]
     print(f"scene: {scene['room_m']:g} m room, {scene['circles']} discs, {scene['boxes']} boxes "
-          f"(seed {scene['seed']}); {result['poses']} poses, {result['beams']} beams, "
-          f"{result['max_range_m']:g} m")
+          f"(seed {scene['seed']}); {result['poses']} poses, {result['batch']} a call; "
+          f"{result['beams']} beams, {result['max_range_m']:g} m")
     print(f"  {'ours':15s} {result['cpu_us_per_scan']['ours']:10.1f} us/scan CPU")
     for name, peer in result["peers"].items():
         agree = result["agreement"][name]

@@ -130,22 +130,24 @@ class KernelPeer:
         self.world, self.error = scene.world(), error
         self.beam_angles = Lidar().beam_angles + np.pi
 
-    def scan(self, pose):
+    def scan(self, poses):
         from lidar_env.sensors.lidar import cast_rays
 
-        return cast_rays(self.world, pose[None], self.beam_angles, 10.0)[0] + self.error
+        return cast_rays(self.world, poses, self.beam_angles, 10.0) + self.error
 
 
-@pytest.mark.parametrize("error", [0.0, 0.05])
-def test_a_peer_is_compared_along_its_own_beams_and_timed_beside_ours(monkeypatch,
-                                                                      error) -> None:
+@pytest.mark.parametrize(("error", "batch"), [(0.0, 1), (0.05, 1), (0.0, 2)])
+def test_a_peer_is_compared_along_its_own_beams_and_timed_beside_ours(monkeypatch, error,
+                                                                      batch) -> None:
     from lidar_env.sensors.lidar import Lidar
 
     monkeypatch.setitem(lidars.TOLERANCE_M, "kernel", 1e-9)
     monkeypatch.setattr(lidars, "OUR_PASSES", 2)
     scene = lidars.make_scene(2)
     poses = lidars.free_poses(scene.world(), np.random.default_rng(2), 4)
-    result = lidars.bench_scene([KernelPeer(scene, error)], scene, poses, Lidar())
+    result = lidars.bench_scene([KernelPeer(scene, error)], scene, poses.reshape(-1, batch, 3),
+                                Lidar())
+    assert result["poses"] == 4 and result["batch"] == batch
     agree = result["agreement"]["kernel"]
     assert agree["median_abs_m"] == pytest.approx(error, abs=1e-12)
     assert agree["max_abs_off_discs_m"] == pytest.approx(error, abs=1e-12)
@@ -160,9 +162,10 @@ def test_scanners_are_charged_their_own_cpu_time_in_blocks() -> None:
     slow, fast = Burner(0.002), Burner(0.0005)
     per_scan = lidars.interleaved_cpu({"slow": lambda p: slow.update(p, 0.0),
                                        "fast": lambda p: fast.update(p, 0.0)},
-                                      np.zeros((6, 3)), {"slow": 1, "fast": 3}, block=4)
+                                      np.zeros((6, 2, 3)), {"slow": 1, "fast": 3}, block=4)
     assert len(slow.seen) == 6 and len(fast.seen) == 18
-    assert per_scan["slow"] > 2 * per_scan["fast"] >= 2 * 500
+    # charged per pose: a call on a batch of 2 poses counts as 2 scans
+    assert per_scan["slow"] > 2 * per_scan["fast"] >= 2 * 250
 
 
 def test_env_skips_a_missing_peer_with_its_pip_command_and_times_ours(monkeypatch, capsys,
@@ -181,6 +184,13 @@ def test_env_skips_a_missing_peer_with_its_pip_command_and_times_ours(monkeypatc
     report = json.loads(out.read_text())["env"]
     assert set(report["cpu_us_per_scan"]) == {"ours"} and report["peers"] == {}
     assert report["poses"] == 3 and report["beams"] == 360
+
+
+def test_a_batch_larger_than_the_poses_is_a_one_line_error(capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(["--env", "--poses", "4", "--batch", "8"])
+    assert exit_info.value.code == 2
+    assert "--batch" in capsys.readouterr().err.strip().splitlines()[-1]
 
 
 def test_env_takes_no_logs(capsys, tmp_path) -> None:
