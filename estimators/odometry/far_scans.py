@@ -51,11 +51,15 @@ from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
 from estimators.matching.window_search import search_in_box, thinned_for_search
-from estimators.odometry.motion_prior import ScanClock
+from estimators.odometry.motion_prior import ScanClock, constant_velocity_increment
+from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
-from lidar_env.core.se2 import relative, wrap_angle
+from lidar_env.core.se2 import compose, relative, rotate, wrap_angle
 
 FloatArray = NDArray[np.float64]
+#: The share of car-frame points (M, 2) that a car pose (3,) puts in space the last scans saw
+#: as free (:meth:`~estimators.odometry.moving_points.MovingPointFilter.seen_free_share`).
+SeenFree = Callable[[FloatArray, FloatArray], float]
 
 #: Map matches from the guess (no search) explaining at least this share of their scan are not
 #: checked against the previous scan: the check replaces a match only where the scan-to-scan
@@ -79,6 +83,17 @@ def reach_window(max_speed: float, max_turn_rate: float, interval: float,
     that glitches short must not shrink the window; a non-finite one counts as typical)."""
     dt = max(interval if np.isfinite(interval) else 0.0, typical if np.isfinite(typical) else 0.0)
     return SearchWindow(max_speed * dt, min(max_turn_rate * dt, np.pi))
+
+
+def one_turn_start(pose: FloatArray, predicted: FloatArray, intervals: float) -> FloatArray:
+    """Where the car is after ``intervals`` scan intervals (> 1: scans skipped or lost) if it
+    kept its speed and direction but turned only one interval's share of ``predicted`` (3,),
+    the constant-velocity increment over them, from ``pose`` (3,): over a gap the
+    extrapolated turn is the least known part of the guess (a car weaving down a corridor
+    has turned back by the time the scans return)."""
+    turn = float(predicted[2])
+    straight = rotate(-0.5 * turn, predicted[:2])
+    return compose(pose, constant_velocity_increment([*straight, turn / intervals], 1.0))
 
 
 def far_apart(increment: FloatArray, keyframe_distance: float, turn_window: float) -> bool:
@@ -128,7 +143,8 @@ class GlobalSearch:
 def far_match(
     search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
     guess: FloatArray, window: SearchWindow, params: ICPParams,
-    prior_information: FloatArray,
+    prior_information: FloatArray, seen_free: SeenFree | None = None,
+    min_quality: float = 0.5, near_starts: tuple[FloatArray, ...] = (),
 ) -> MatchResult:
     """ICP of ``points`` from the guess and from the branch-and-bound's best pose in
     ``window`` around it, both held by the weak prior ``prior_information`` (3,) at ``guess``.
@@ -144,7 +160,14 @@ def far_match(
     share's standard error: a stretch of corridor seen turned round (or any place symmetric
     under a half turn) fits the scan as well, and of two such poses the one the car reaches
     by the smaller turn from the guess is the likelier (after 3 s of blind scans the window
-    holds every heading)."""
+    holds every heading). ICP from each of ``near_starts`` (poses (3,), each another guess,
+    the prior held at it) competes with the near half's match. A near match is kept too
+    where it explains at least ``min_quality`` of the points and puts no larger share of them
+    (within the same error) in space the last scans saw as free (``seen_free(points,
+    pose)``): the points it leaves unexplained lie beyond the map, not against it. The true
+    pose at the end of a blind stretch looks past the mapped part of a corridor, and
+    explains less of its scan than the corridor seen turned round, which the map covers
+    whole."""
     from_guess = register(reference, points, guess, params, guess, prior_information)
     found = search.search(points, guess, window)
     if not found.found:
@@ -156,9 +179,22 @@ def far_match(
     near = search.search(points, guess, SearchWindow(window.linear, 0.5 * window.angular))
     if not near.found:
         return best
-    from_near = register(reference, points, near.pose, params, guess, prior_information)
+    options = [register(reference, points, near.pose, params, guess, prior_information)] + [
+        register(reference, points, start, params, start, prior_information)
+        for start in near_starts]
+    options = [option for option in options
+               if abs(wrap_angle(option.pose[2] - guess[2])) <= 0.5 * window.angular] or options[:1]
     tie = max(np.sqrt(best.quality * (1.0 - best.quality) / len(points)), 1.0 / len(points))
-    return from_near if from_near.quality >= best.quality - tie else best
+    as_good = [option for option in options if option.quality >= best.quality - tie]
+    if as_good:
+        return max(as_good, key=lambda option: option.quality)
+    if seen_free is None:
+        return best
+    against_best = seen_free(points, best.pose) + tie
+    uncontradicted = [(free, -option.quality, k, option) for k, option in enumerate(options)
+                      if option.quality >= min_quality
+                      and (free := seen_free(points, option.pose)) <= against_best]
+    return min(uncontradicted)[3] if uncontradicted else best
 
 
 def fallback_match(
@@ -222,6 +258,7 @@ class FarScanMatching:
     skipped_before: int
     clock_jumped: bool
     match_information: FloatArray
+    _moving: MovingPointFilter | None
 
     def _checked_against_scan(self, result: MatchResult, points: FloatArray, guess: FloatArray,
                               predicted: FloatArray, searched: bool) -> MatchResult:
@@ -294,13 +331,18 @@ class FarScanMatching:
             self.far_searches += 1
             searched = True
             self.match_information = self._far_prior(window)
+            seen_free = None if self._moving is None else self._moving.seen_free_share
+            starts = (one_turn_start(self._poses[-1], predicted, intervals),) if (
+                intervals > 1) else ()
             result = far_match(self._global_search(), self._reference, points, guess, window,
-                               self.params, self.match_information)
+                               self.params, self.match_information, seen_free,
+                               self.min_quality, starts)
             if result.quality < self.min_quality and window.angular < np.pi:
                 self.fallbacks += 1
                 retry = far_match(self._global_search(), self._reference, points, guess,
                                   SearchWindow(window.linear, np.pi), self.params,
-                                  self.match_information)
+                                  self.match_information, seen_free, self.min_quality,
+                                  starts)
                 result = retry if retry.quality > result.quality else result
         else:
             self.match_information = self._prediction_information()

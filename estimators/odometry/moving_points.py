@@ -232,6 +232,20 @@ class MovingPointFilter:
             moving |= _near_any(world, near, self.radius)
         return moving, flags
 
+    def seen_free_share(self, points: NDArray[np.float64], pose: NDArray[np.float64]) -> float:
+        """The share of car-frame ``points`` (n, 2) that, with the car at ``pose`` (3,), lie
+        in space the remembered scans saw as free (0 with none remembered): how much a
+        candidate pose contradicts what the Lidar saw, where the share a map explains says
+        nothing of the points that fall outside the map."""
+        if not self._history or not len(points):
+            return 0.0
+        world = np.ascontiguousarray(transform_points(np.asarray(pose, dtype=np.float64),
+                                                      points), dtype=np.float64)
+        past = self._past_beams[len(self._history) - 1]
+        seen = past.judge_free(world, self._past_poses, self._past_free, self.margin,
+                               self.min_range, math.inf)
+        return float(np.count_nonzero(seen)) / len(points)
+
     def mappable(self, world: NDArray[np.float64], moving: NDArray[np.bool_],
                  map_points: list[NDArray[np.float64]]) -> NDArray[np.bool_]:
         """``(n,)`` True for the scan's ``world`` points (n, 2) fit for the map, given which
