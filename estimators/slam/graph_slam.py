@@ -39,7 +39,8 @@ from estimators.matching.branch_and_bound import PyramidBuffer
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
-from estimators.slam.keyframe_matching import Keyframe, KeyframeMatching, KeyframeTable
+from estimators.slam.keyframe_matching import KeyframeMatching
+from estimators.slam.keyframe_table import Keyframe, KeyframeTable
 from estimators.slam.loop_closure import (
     LoopClosureParams,
     LoopVerification,
@@ -295,9 +296,10 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         keyframe (None: the first), a keyframe: a node, its odometry edge, its loops."""
         path_length = 0.0 if step is None else self.keyframes[-1].path_length + np.hypot(*step[:2])
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
+        poor = getattr(self, "_poor_scan", False)  # set by _step (add_scan: never)
         if not self.keyframes:
             self.graph.add_node(odometry)
-            covariance = np.zeros((3, 3))
+            error = (np.zeros((3, 3)), np.zeros((3, 3)))
         else:
             assert step is not None
             previous = self.keyframes[-1]
@@ -305,20 +307,18 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
                 previous.points, self.loop_params.normal_neighbours,
                 self.loop_params.denoise_reference)
                 if len(previous.points) >= 3 and len(points) >= 3 else None)
-            if reference is not None and self.check_steps and not getattr(self, "_poor_scan",
-                                                                          False):
+            if reference is not None and self.check_steps and not poor:
                 step = self._checked_step(reference, previous.points, points, step)
             index = self.graph.add_node(compose(self.graph.pose(-1), step))
-            information = self._odometry_information(step)
-            if self.match_odometry and reference is not None:
-                information = self._matched_information(reference, points, step, information)
+            drift = self._odometry_information(step)
+            information = (self._matched_information(reference, points, step, drift)
+                           if self.match_odometry and reference is not None else drift)
             self.graph.add_edge(index - 1, index, step, information)
-            covariance = np.linalg.inv(information)
+            error = self._odometry_error(step, np.linalg.inv(information) if poor else None)
         self.keyframes.append(keyframe)
-        self._table.append(keyframe, covariance)
+        self._table.append(keyframe, *error)
         self._since_optimized += 1
         index = len(self.keyframes) - 1
-        poor = getattr(self, "_poor_scan", False)  # set by _step (add_scan: never)
         if not poor and self._close_loops(index):
             self._last_loop = index
         elif (not poor and self.global_every and index % self.global_every == 0

@@ -10,14 +10,15 @@ headings for large drift (:meth:`KeyframeMatching._close_global_loops`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimators.matching.point_to_line import PointToLineReference
-from estimators.slam.growing_rows import GrowingRows
+from estimators.slam.keyframe_table import largest_shift
 from estimators.slam.loop_closure import (
+    MIN_POINTS,
     LoopVerification,
     PlaceMap,
     descriptor_distances,
@@ -124,20 +125,45 @@ class KeyframeMatching:
                          information: NDArray[np.float64]) -> float:
         """Mahalanobis distance of a loop measurement (keyframe ``new``'s pose (3,) in keyframe
         ``old``'s frame, ``information`` (3, 3)) from the graph's current estimate of it, under
-        the odometry chain's covariance from ``old`` to ``new`` plus the measurement's own.
+        the covariance of the front end's error along the odometry chain from ``old`` to
+        ``new`` plus the measurement's own.
 
-        The chain's edge errors may be correlated (a front end errs the same way all along a
-        featureless stretch), so their covariance is bounded for any correlation
-        (:func:`~estimators.slam.pose_graph.chain_covariance` with ``correlated=True``); and the
-        chain ignores loop edges already in the graph, which only shrink the uncertainty:
-        both err on the side of accepting a true loop after a long, drifting drive."""
+        The chain's error is the front end's error model (:meth:`_odometry_error`): its noise
+        adds up independently from edge to edge, its drift is bounded for any correlation
+        (:func:`~estimators.slam.pose_graph.chain_covariance` with ``correlated=True``: a front
+        end may err the same way all along a featureless stretch), so the bound grows with
+        the distance driven, not with the number of keyframes. The chain ignores loop edges
+        already in the graph, which only shrink the uncertainty: both err on the side of
+        accepting a true loop after a long, drifting drive."""
         poses = self.graph.poses
-        chain = chain_covariance(poses[old:new + 1],
-                                 self._table.odometry_covariances[old + 1:new + 1],
-                                 correlated=True)
+        table = self._table
+        chain = (chain_covariance(poses[old:new + 1], table.noise_covariances[old + 1:new + 1])
+                 + chain_covariance(poses[old:new + 1], table.drift_covariances[old + 1:new + 1],
+                                    correlated=True))
         residual = compose(inverse(pose), relative(poses[old], poses[new]))  # the graph residual
         covariance = chain + np.linalg.inv(information)
         return float(np.sqrt(residual @ np.linalg.solve(covariance, residual)))
+
+    def _odometry_error(self, step: NDArray[np.float64],
+                        matched: NDArray[np.float64] | None = None
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The front end's error over one keyframe ``step`` (3,) as the loop gate models it:
+        the covariances (3, 3) of its noise (``odometry_sigma``, ``odometry_sigma_rotation``)
+        and of its drift (``odometry_drift``, ``odometry_drift_rotation`` times the distance).
+        Where the front end flagged its match of the keyframe's scan as poor, the drift is
+        ``matched`` (the edge's covariance from the two keyframes' match, see
+        :meth:`_matched_information`) instead. The keyframe match alone does not bound a
+        step the front end matched: where two keyframes share one post, it leaves the turn
+        about the post free (a covariance of metres and radians) while the front end, which
+        matched its whole map, errs by centimetres."""
+        distance = float(np.hypot(step[0], step[1]))
+        noise = np.diag([self.odometry_sigma**2, self.odometry_sigma**2,
+                         self.odometry_sigma_rotation**2])
+        if matched is not None:
+            return noise, matched
+        drift = np.diag([(self.odometry_drift * distance)**2] * 2
+                        + [(self.odometry_drift_rotation * distance)**2])
+        return noise, drift
 
     def _gate(self, old: int, new: int, result: LoopVerification) -> LoopVerification:
         """``result``, rejected if the graph cannot have drifted to it (``loop_gate``)."""
@@ -229,10 +255,15 @@ class KeyframeMatching:
                       ) -> NDArray[np.float64]:
         """The front end's step (3,) between two keyframes, or, if it leaves fewer than
         ``min_quality`` of the new keyframe's points on the previous one's walls, the step
-        found by matching the two keyframes over all headings (when that match is accepted
-        and explains more). A front end can lose a fast turn (tens of degrees of a corner in a
-        second or two); left in the edge, the loop closures cannot localise the
-        error and spread it over tens of metres of corridor, bending them into arcs."""
+        found by matching the two keyframes over all headings when that match is accepted
+        and explains more. A front end can lose a fast turn (tens of degrees of a corner in a
+        second or two); left in the edge, the loop closures cannot localise the error and
+        spread it over tens of metres of corridor, bending them into arcs. A match farther
+        from the step than ``ambiguity_distance`` or ``angular_window`` is another place, not
+        a refinement: it must put at least :data:`~estimators.slam.loop_closure.MIN_POINTS`
+        points on the walls, and the step must explain less than ``ambiguity_ratio`` of its
+        share (where a scan sees a few posts, the all-heading match often puts a few more
+        points on them turned by 90 or 180 degrees than the right step does)."""
         world = transform_points(step, points)
         share = len(reference.correspond(world, self.loop_params.inlier_distance).index)
         share /= len(points)
@@ -242,69 +273,9 @@ class KeyframeMatching:
         result = verify_loop(place, points, step, self.keyframe_distance, self._step_params,
                              measure_rejected=False)
         self.step_checks.append((len(self.keyframes), share, result))
-        return result.pose if result.accepted and result.quality > share else step
-
-
-@dataclass
-class Keyframe:
-    """A graph node's data: its car-frame points (M, 2), place descriptor, the front end's
-    pose when it was taken, and the path length [m] driven up to it."""
-
-    points: NDArray[np.float64]
-    descriptor: NDArray[np.float64]
-    odometry: NDArray[np.float64]
-    path_length: float
-
-
-class KeyframeTable:
-    """What the loop search reads of every keyframe, as arrays that grow one row at a time
-    (:class:`~estimators.slam.growing_rows.GrowingRows`: read once per keyframe, over all of
-    them, they would otherwise be rebuilt from the keyframes each time): path lengths (K,) [m],
-    place descriptors (K, B), the covariance (K, 3, 3) of the odometry edge into each
-    keyframe (keyframe 0: zeros), and the reach (K,) [m] of each keyframe's points (the
-    farthest one's distance from its origin)."""
-
-    def __init__(self) -> None:
-        self._path = GrowingRows()
-        self._descriptors = GrowingRows(None)
-        self._covariances = GrowingRows((3, 3))
-        self._reach = GrowingRows()
-
-    def append(self, keyframe: Keyframe, covariance: NDArray[np.float64]) -> None:
-        """Add the next keyframe's row and its odometry edge's covariance (3, 3)."""
-        self._path.append(keyframe.path_length)
-        self._descriptors.append(keyframe.descriptor)
-        self._covariances.append(covariance)
-        points = keyframe.points
-        self._reach.append(np.hypot(points[:, 0], points[:, 1]).max() if len(points) else 0.0)
-
-    @property
-    def path_lengths(self) -> NDArray[np.float64]:
-        """``(K,)`` path length [m] driven up to each keyframe (a view)."""
-        return self._path.rows
-
-    @property
-    def descriptors(self) -> NDArray[np.float64]:
-        """``(K, B)`` place descriptors (a view)."""
-        return self._descriptors.rows
-
-    @property
-    def odometry_covariances(self) -> NDArray[np.float64]:
-        """``(K, 3, 3)`` covariance of the odometry edge into each keyframe (a view)."""
-        return self._covariances.rows
-
-    @property
-    def reach(self) -> NDArray[np.float64]:
-        """``(K,)`` distance [m] of each keyframe's farthest point from its origin (a view)."""
-        return self._reach.rows
-
-
-def largest_shift(before: NDArray[np.float64], after: NDArray[np.float64],
-                  reach: NDArray[np.float64]) -> float:
-    """The most [m] a point moves between two placements of the same keyframes (poses (n, 3)
-    ``before`` and ``after``, each keyframe's points within ``reach`` (n,) [m] of its origin):
-    ``|dt| + 2 |sin(dtheta / 2)| reach``, the bound for a point at that distance turned by
-    ``dtheta`` and moved by ``dt``."""
-    turn = np.abs(np.sin(0.5 * (after[:, 2] - before[:, 2])))
-    shift = np.hypot(after[:, 0] - before[:, 0], after[:, 1] - before[:, 1])
-    return float(np.max(shift + 2.0 * turn * reach)) if len(reach) else 0.0
+        params, change = self.loop_params, relative(step, result.pose)
+        near = (np.hypot(change[0], change[1]) < params.ambiguity_distance
+                and abs(change[2]) < params.angular_window)
+        clear = near or (result.quality * len(points) >= MIN_POINTS
+                         and share < params.ambiguity_ratio * result.quality)
+        return result.pose if result.accepted and result.quality > share and clear else step

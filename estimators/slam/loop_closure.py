@@ -43,6 +43,9 @@ from estimators.slam.place_grid import search_pyramid
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import transform_points, wrap_angle
 
+#: A match is judged on at least this many points (fewer fit too many places).
+MIN_POINTS = 10
+
 
 def range_histogram(
     points: NDArray[np.float64], n_bins: int = 40, max_range: float = 20.0
@@ -344,11 +347,11 @@ def verify_loop(
     if not linear_window >= 0:
         raise ConfigError(f"linear_window: expected a distance >= 0 [m], got {linear_window}")
     nothing = np.zeros((3, 3))
-    if len(query) < 10:
-        return LoopVerification(False, f"too few query points ({len(query)} < 10)", guess,
+    if len(query) < MIN_POINTS:
+        return LoopVerification(False, f"too few query points ({len(query)} < {MIN_POINTS})", guess,
                                 nothing, 0.0, 0.0, 0.0)
     near = query[np.hypot(query[:, 0], query[:, 1]) <= params.search_range]
-    thinned = voxel_downsample(near if len(near) >= 10 else query, params.voxel_size)
+    thinned = voxel_downsample(near if len(near) >= MIN_POINTS else query, params.voxel_size)
     search = CorrelativeMatch(place, thinned, guess, linear_window, params)
     icp = ICPParams(max_correspondence_distance=3 * params.inlier_distance,
                     inlier_distance=params.inlier_distance, loss_scale=params.loss_scale)

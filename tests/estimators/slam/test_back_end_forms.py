@@ -14,7 +14,7 @@ from scipy import ndimage
 from estimators.base import SensorSetup
 from estimators.matching.likelihood_grids import distance_scores
 from estimators.slam.graph_slam import GraphSlam
-from estimators.slam.keyframe_matching import Keyframe, KeyframeTable, largest_shift
+from estimators.slam.keyframe_table import Keyframe, KeyframeTable, largest_shift
 from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _damped, _diagonal_positions, _WhitenedProblem
@@ -40,12 +40,13 @@ def test_keyframe_table_holds_every_row_as_appended() -> None:
     table = KeyframeTable()
     keyframes = [Keyframe(np.zeros((0, 2)), rng.random(40), np.zeros(3), float(k))
                  for k in range(50)]  # past two doublings
-    covariances = rng.random((50, 3, 3))
-    for keyframe, covariance in zip(keyframes, covariances, strict=True):
-        table.append(keyframe, covariance)
+    noise, drift = rng.random((2, 50, 3, 3))
+    for keyframe, one, other in zip(keyframes, noise, drift, strict=True):
+        table.append(keyframe, one, other)
     assert np.array_equal(table.path_lengths, np.arange(50.0))
     assert np.array_equal(table.descriptors, np.array([k.descriptor for k in keyframes]))
-    assert np.array_equal(table.odometry_covariances, covariances)
+    assert np.array_equal(table.noise_covariances, noise)
+    assert np.array_equal(table.drift_covariances, drift)
 
 
 def random_graph(rng: np.random.Generator, n: int, loops: int) -> PoseGraph:

@@ -319,7 +319,8 @@ def test_the_global_search_closes_a_loop_beyond_every_local_window() -> None:
     """1.4 laps on an odometry 10 % long and turning 3 deg/m: at the revisit the estimate is
     metres from the start, outside the local search's windows (loop_radius + loop_drift x
     path, at most max_search_window); with overlap edges and step checks off only the global
-    all-heading search can find the loop."""
+    all-heading search can find the loop. The drift model says how far the odometry may
+    have drifted (the loop gate's bound)."""
     laps, n = 1.4, 504
     phase = 2 * np.pi * laps * np.arange(n) / n
     truth = np.column_stack([10 + 6.5 * np.cos(phase), 7 + 4.2 * np.sin(phase),
@@ -330,7 +331,8 @@ def test_the_global_search_closes_a_loop_beyond_every_local_window() -> None:
     ends = {}
     for every in (6, 0):
         slam = GraphSlam(min_loop_separation=8.0, min_overlap_separation=8.0, check_steps=False,
-                         global_every=every)
+                         global_every=every, odometry_drift=0.1,
+                         odometry_drift_rotation=np.radians(3.0))
         replay(slam, truth, odometry, seed=0)
         ends[every] = (slam.n_loops, np.hypot(*(slam.trajectory[-1, :2] - truth[-1, :2])))
     assert ends[0][0] == 0 and ends[0][1] == pytest.approx(drift, rel=1e-6)
