@@ -54,7 +54,7 @@ from estimators.matching.window_search import search_in_box, thinned_for_search
 from estimators.odometry.motion_prior import ScanClock, constant_velocity_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
-from lidar_env.core.se2 import compose, relative, rotate, wrap_angle
+from lidar_env.core.se2 import compose, relative, wrap_angle
 
 FloatArray = NDArray[np.float64]
 #: The share of car-frame points (M, 2) that a car pose (3,) puts in space the last scans saw
@@ -85,15 +85,13 @@ def reach_window(max_speed: float, max_turn_rate: float, interval: float,
     return SearchWindow(max_speed * dt, min(max_turn_rate * dt, np.pi))
 
 
-def one_turn_start(pose: FloatArray, predicted: FloatArray, intervals: float) -> FloatArray:
-    """Where the car is after ``intervals`` scan intervals (> 1: scans skipped or lost) if it
-    kept its speed and direction but turned only one interval's share of ``predicted`` (3,),
-    the constant-velocity increment over them, from ``pose`` (3,): over a gap the
-    extrapolated turn is the least known part of the guess (a car weaving down a corridor
-    has turned back by the time the scans return)."""
-    turn = float(predicted[2])
-    straight = rotate(-0.5 * turn, predicted[:2])
-    return compose(pose, constant_velocity_increment([*straight, turn / intervals], 1.0))
+def one_turn_start(pose: FloatArray, step: FloatArray, intervals: float) -> FloatArray:
+    """Where the car is after ``intervals`` scan intervals (> 1: scans skipped or lost) from
+    ``pose`` (3,) if it kept the speed and direction of its last per-interval ``step`` (3,)
+    but turned only once: over a gap the extrapolated turn is the least known part of the
+    guess (a car weaving down a corridor has turned back by the time the scans return)."""
+    return compose(pose, constant_velocity_increment([step[0], step[1], step[2] / intervals],
+                                                     intervals))
 
 
 def far_apart(increment: FloatArray, keyframe_distance: float, turn_window: float) -> bool:
@@ -259,6 +257,8 @@ class FarScanMatching:
     clock_jumped: bool
     match_information: FloatArray
     _moving: MovingPointFilter | None
+    _velocity: FloatArray  # car frame, per scan or per second (use_timestamps)
+    use_timestamps: bool
 
     def _checked_against_scan(self, result: MatchResult, points: FloatArray, guess: FloatArray,
                               predicted: FloatArray, searched: bool) -> MatchResult:
@@ -332,7 +332,8 @@ class FarScanMatching:
             searched = True
             self.match_information = self._far_prior(window)
             seen_free = None if self._moving is None else self._moving.seen_free_share
-            starts = (one_turn_start(self._poses[-1], predicted, intervals),) if (
+            step = self._velocity * (typical if self.use_timestamps else 1.0)
+            starts = (one_turn_start(self._poses[-1], step, intervals),) if (
                 intervals > 1) else ()
             result = far_match(self._global_search(), self._reference, points, guess, window,
                                self.params, self.match_information, seen_free,

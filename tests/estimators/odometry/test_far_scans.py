@@ -13,7 +13,6 @@ from agents.scripted import PurePursuitDriver
 from estimators import SensorSetup
 from estimators.odometry.far_scans import SearchWindow, far_apart, one_turn_start, reach_window
 from estimators.odometry.local_map import LocalMapOdometry
-from estimators.odometry.motion_prior import constant_velocity_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from lidar_env import lidars_with_noise
 from lidar_env.core.se2 import relative
@@ -119,13 +118,11 @@ def test_speed_limits_must_be_positive() -> None:
 
 
 def test_after_a_gap_the_one_turn_start_keeps_the_speed_and_takes_one_turn() -> None:
-    # ten intervals at 0.1 m and 0.1 rad each: the guess turns the car by 1 rad, the start
-    # by 0.1 rad, both along the chord of the guess's turn
-    predicted = constant_velocity_increment([0.1, 0.0, 0.1], 10.0)
-    start = one_turn_start(np.array([2.0, 1.0, 0.5]), predicted, 10.0)
+    # ten intervals at 0.1 m and 0.1 rad each: the constant-velocity guess turns the car by
+    # 1 rad, the start by 0.1 rad, 1 m along the chord of that one turn
+    start = one_turn_start(np.array([2.0, 1.0, 0.5]), np.array([0.1, 0.0, 0.1]), 10.0)
     np.testing.assert_allclose(start[2], 0.6)
-    straight = np.hypot(*predicted[:2])
-    np.testing.assert_allclose(np.hypot(start[0] - 2.0, start[1] - 1.0), straight)
+    np.testing.assert_allclose(np.hypot(start[0] - 2.0, start[1] - 1.0), 1.0)
     np.testing.assert_allclose(np.arctan2(start[1] - 1.0, start[0] - 2.0), 0.55)
 
 
