@@ -59,13 +59,15 @@ def reach(guess: FloatArray, intervals: float, seconds: float) -> tuple[float, f
 
 
 def search_start(reference_points: FloatArray, query_points: FloatArray, guess: FloatArray,
-                 intervals: float, seconds: float) -> FloatArray | None:
+                 intervals: float, seconds: float, max_turn: float = math.pi,
+                 ) -> FloatArray | None:
     """The best pose (3,) of ``query_points`` (M, 2, their car frame) on the likelihood grid
     of ``reference_points`` (N, 2, the last used scan's car frame) within :func:`reach` of
-    ``guess`` (3,), or None when nothing scores above
-    :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
+    ``guess`` (3,), turned by at most ``max_turn`` [rad] from it, or None when nothing scores
+    above :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
     thinned = thinned_for_search(query_points)
     linear, angular = reach(guess, intervals, seconds)
+    angular = min(angular, max_turn)
     low = reference_points.min(axis=0) - 0.5
     high = reference_points.max(axis=0) + 0.5
     found = search_in_box(reference_points, low, high, thinned, guess, linear, angular,

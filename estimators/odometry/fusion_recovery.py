@@ -10,6 +10,13 @@ the correlation measures the turn); where the scans cannot tell them apart
 (a corridor's axis, which the prior decides), the longer guess wins only after skipped scans,
 which prove the time passed.
 
+After skipped scans (a blinded Lidar) where both scans hold enough points, a third start is
+the exact best pose of a branch-and-bound search of the new scan on the latest keyframe's
+points over every pose the car can have reached (:func:`searched_motion`, the ``icp``
+estimator's :func:`~estimators.matching.scan_recovery.search_start`): the car may have turned
+or stopped while blind, out of reach of either guess. It runs where neither guess's matches explain
+half of the scans, and is kept where its matches explain clearly more.
+
 Either guess may be a metre or more from the car after a turn, and the correlation that seeds
 the matches is ambiguous across such a gap (it may land a metre off too); a few ICP
 iterations from there stop short of the fit. So the kept motion is matched again from itself
@@ -18,11 +25,14 @@ iterations from there stop short of the fit. So the kept motion is matched again
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from estimators.matching.scan_recovery import MIN_SEARCH_POINTS, search_start
+from lidar_env.core.se2 import transform_points
 
 #: A car motion (3,) from the latest keyframe, its edges and their mean share explained.
 Solution = tuple[NDArray[np.float64], Any, float]
@@ -37,17 +47,52 @@ SCORE_TOLERANCE = 0.02
 POLISH_ROUNDS = 5
 
 
+#: Mean share of the scans explained below which the guesses' matches are lost and the search
+#: runs (``lidar_odometry``'s ``min_quality``): where the guesses fit, a search over a
+#: corridor finds a place along it that explains a little more because the keyframe saw
+#: more of it.
+POOR_SCORE = 0.5
+#: [rad] the search after skipped scans turns the car at most this far from the guess: with no
+#: map to tell free space from unseen space, a corridor seen turned round fits the scans as
+#: well as the way the car faces, and better where the keyframe saw more of it behind.
+SEARCH_MAX_TURN = 0.5 * np.pi
+
+
+def searched_motion(mounts: Sequence[NDArray[np.float64]], keyframe_scans: Sequence[Any],
+                    scans: Sequence[Any], guess: NDArray[np.float64], intervals: float,
+                    seconds: float) -> NDArray[np.float64] | None:
+    """The car motion (3,) from the latest keyframe that the search finds for the new scans
+    after a gap of ``intervals`` scan intervals and ``seconds`` [s] around ``guess`` (3,, the
+    same frame), or None (too few points on either side, or nothing found). Each sensor's
+    ``keyframe_scans`` and ``scans`` (``PreparedScan``: ``points`` in the sensor frame) are
+    moved onto the car by its mount."""
+    reference, query = (np.concatenate([transform_points(mount, scan.points) for mount, scan
+                                        in zip(mounts, prepared, strict=True)])
+                        for prepared in (keyframe_scans, scans))
+    if min(len(reference), len(query)) < MIN_SEARCH_POINTS:
+        return None
+    return search_start(reference, query, guess, intervals, seconds, SEARCH_MAX_TURN)
+
+
 def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer: list[float],
-              skipped: bool, step_to: Callable[[NDArray[np.float64]], list[float]]) -> Solution:
+              skipped: bool, step_to: Callable[[NDArray[np.float64]], list[float]],
+              search: Callable[[], NDArray[np.float64] | None] | None = None) -> Solution:
     """The motion found after scans lost or skipped: ``found`` (matched from the one-interval
     guess) or the match from the ``longer`` guess (car frame, from the last pose used) where
-    it explains more of the scans, or as much after ``skipped`` scans; then matched again
-    from itself (``step_to``: a motion from the keyframe as a guess from the last pose used)
-    while that explains more. ``solve``: the matches from a guess."""
+    it explains more of the scans, or as much after ``skipped`` scans; where neither explains
+    :data:`POOR_SCORE` of the scans, the match from the motion ``search`` finds (from the
+    keyframe; None: nothing found) where it explains clearly more. Then matched again from
+    itself (``step_to``: a motion from the keyframe as a guess from the last pose used) while
+    that explains more. ``solve``: the matches from a guess."""
     other = solve(longer)
     if other[2] > found[2] + SCORE_TOLERANCE or (
             skipped and other[2] >= found[2] - SCORE_TOLERANCE):
         found = other
+    searched = None if search is None or found[2] >= POOR_SCORE else search()
+    if searched is not None:
+        other = solve(step_to(searched))
+        if other[2] > found[2] + SCORE_TOLERANCE:
+            found = other
     for _ in range(POLISH_ROUNDS):
         again = solve(step_to(found[0]))
         if not again[2] > found[2]:
