@@ -41,13 +41,9 @@ from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_po
 from estimators.registry import make
 from estimators.slam.keyframe_matching import KeyframeMatching
 from estimators.slam.keyframe_table import Keyframe, KeyframeTable
-from estimators.slam.loop_closure import (
-    LoopClosureParams,
-    LoopVerification,
-    PlaceMap,
-    range_histogram,
-)
+from estimators.slam.loop_closure import LoopClosureParams, LoopVerification, PlaceMap
 from estimators.slam.outputs import SlamOutputs
+from estimators.slam.place_descriptor import range_histogram
 from estimators.slam.pose_graph import PoseGraph
 from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import EliminationOrdering, optimize

@@ -21,10 +21,10 @@ from estimators.slam.loop_closure import (
     MIN_POINTS,
     LoopVerification,
     PlaceMap,
-    descriptor_distances,
     match_information,
     verify_loop,
 )
+from estimators.slam.place_descriptor import descriptor_distances
 from estimators.slam.pose_graph import chain_covariance
 from lidar_env.core.se2 import compose, inverse, relative, transform_points
 
@@ -73,7 +73,10 @@ class KeyframeMatching:
                 kept[0].forget_levels()
                 self._places[key] = (kept[0], kept[1], self._optimizations)
             return kept[0]
-        place = PlaceMap(self._placed_points(lo, placed), self.loop_params, self._pyramid_buffer)
+        seen = np.repeat(placed[:, :2], [len(self.keyframes[lo + k].points)
+                                         for k in range(len(placed))], axis=0)
+        place = PlaceMap(self._placed_points(lo, placed), self.loop_params, self._pyramid_buffer,
+                         seen)
         self._places[key] = (place, placed, self._optimizations)
         self._places.move_to_end(key)
         while len(self._places) > self.max_places:

@@ -2,10 +2,10 @@
 
 Three stages, each a pure function of plain arrays:
 
-1. **Place descriptor** (:func:`range_histogram`): the histogram of the ranges of a
-   keyframe's points from the car's origin. It does not change when the car turns on the
-   spot, so it ranks candidate places without knowing the heading. It only ranks: where the
-   drift is small the candidates come from the pose uncertainty.
+1. **Place descriptor** (:mod:`estimators.slam.place_descriptor`): the histogram of the
+   ranges of a keyframe's points from the car's origin. It does not change when the car
+   turns on the spot, so it ranks candidate places without knowing the heading. It only
+   ranks: where the drift is small the candidates come from the pose uncertainty.
 2. **Verification** (:func:`verify_loop`): a correlative scan match (Olson, "Real-time
    correlative scan matching", ICRA 2009) over a window of headings and translations on a
    likelihood field of the old place's points, searched exactly by the multi-resolution
@@ -38,41 +38,18 @@ from estimators.matching.branch_and_bound import (
 )
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
-from estimators.matching.scan_matching import LikelihoodField, voxel_downsample
+from estimators.matching.scan_matching import (
+    LikelihoodField,
+    first_in_each_cell,
+    voxel_downsample,
+)
 from estimators.slam.place_grid import search_pyramid
+from estimators.slam.view_side import far_side_share
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import transform_points, wrap_angle
 
 #: A match is judged on at least this many points (fewer fit too many places).
 MIN_POINTS = 10
-
-
-def range_histogram(
-    points: NDArray[np.float64], n_bins: int = 40, max_range: float = 20.0
-) -> NDArray[np.float64]:
-    """Rotation-invariant place descriptor: normalised histogram ``(n_bins,)`` of the
-    distances [m] of ``points`` (M, 2, car frame) from the origin, up to ``max_range``.
-
-    Default 40 bins over 20 m (0.5 m bins): coarser than a step between keyframes changes
-    most ranges, finer than the layout of a room."""
-    if n_bins < 1 or not max_range > 0:
-        raise ConfigError(f"n_bins, max_range: expected >= 1 and > 0, got {n_bins}, {max_range}")
-    ranges = np.hypot(points[:, 0], points[:, 1]) if len(points) else np.zeros(0)
-    counts, _ = np.histogram(np.minimum(ranges, max_range), bins=n_bins, range=(0.0, max_range))
-    total = counts.sum()
-    return counts / total if total else counts.astype(np.float64)
-
-
-def descriptor_distance(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    """Half the L1 distance of two normalised histograms: 0 = identical, 1 = disjoint."""
-    return 0.5 * float(np.abs(a - b).sum())
-
-
-def descriptor_distances(a: NDArray[np.float64], others: NDArray[np.float64]
-                         ) -> NDArray[np.float64]:
-    """``(K,)`` :func:`descriptor_distance` of ``a`` (B,) to each row of ``others`` (K, B), in
-    one pass (each row summed as numpy sums one histogram, so the same numbers)."""
-    return 0.5 * np.abs(others - a).sum(axis=1)
 
 
 @dataclass(frozen=True)
@@ -103,6 +80,9 @@ class LoopClosureParams:
             this share of the best (0.9: a corridor's repetitive structure gives two
             near-equal peaks; a real place gives one clear peak).
         ambiguity_distance: (0.5 m).
+        max_far_side: reject when more than this share of the matched points lies on
+            surfaces the old place saw from their other side
+            (:func:`~estimators.slam.view_side.far_side_share`).
         normal_neighbours, denoise_reference: the old place's lines come from each point's
             9 nearest neighbours, the point moved onto the parabola through them
             (:meth:`~estimators.matching.icp.PointToLineReference.with_estimated_normals`, as the
@@ -140,6 +120,7 @@ class LoopClosureParams:
     min_score: float = 0.4
     ambiguity_ratio: float = 0.9
     ambiguity_distance: float = 0.5
+    max_far_side: float = 0.5
     normal_neighbours: int = 9
     denoise_reference: bool = True
     point_sigma: float = 0.05
@@ -167,7 +148,7 @@ class LoopClosureParams:
         if self.angular_window < 0 or self.coarse_factor < 0:
             raise ConfigError("angular_window and coarse_factor: expected values >= 0, got "
                              f"{self.angular_window}, {self.coarse_factor}")
-        for name in ("min_quality", "min_score", "ambiguity_ratio"):
+        for name in ("min_quality", "min_score", "ambiguity_ratio", "max_far_side"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ConfigError(f"{name}: expected a share in [0, 1], got {getattr(self, name)}")
 
@@ -185,7 +166,9 @@ class LoopVerification:
             of a match at least ``ambiguity_distance`` away, relative to the best, when
             above ``ambiguity_ratio`` (else 0: not searched further, see
             :meth:`CorrelativeMatch.runner_up`); searched only when every other test passed
-            (else 0, and ``reason`` lists the others that failed).
+            (else 0, and ``reason`` lists the others that failed). far_side: share of the
+            matched points seen from the other side of their surface (``max_far_side``; 0
+            where not measured).
     """
 
     accepted: bool
@@ -195,25 +178,32 @@ class LoopVerification:
     quality: float
     score: float
     runner_up: float
+    far_side: float = 0.0
 
 
 class PlaceMap:
     """The old place's points (reference frame) ready for matching: likelihood field
     (:class:`~estimators.matching.scan_matching.LikelihoodField`), the part of its max-pooled
-    pyramid each search reads (:meth:`pyramid`), and a point-to-line ICP reference. Its pyramids go
-    into ``buffer`` when given (shared by places searched one after another: each pyramid is
-    valid until the buffer's next, see
+    pyramid each search reads (:meth:`pyramid`), a point-to-line ICP reference, and where each
+    of its points was seen from (``viewpoints`` (N, 2), default the origin: one scan's points
+    in its car frame). Its pyramids go into ``buffer`` when given (shared by places searched
+    one after another: each pyramid is valid until the buffer's next, see
     :class:`~estimators.matching.branch_and_bound.PyramidBuffer`)."""
 
     def __init__(self, points: ArrayLike, params: LoopClosureParams,
-                 buffer: PyramidBuffer | None = None) -> None:
+                 buffer: PyramidBuffer | None = None, viewpoints: ArrayLike | None = None) -> None:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 3:
             raise EstimatorInputError(
                 f"reference points: expected shape (N >= 3, 2), got {points.shape}")
-        thinned = voxel_downsample(points, params.resolution)
-        if len(thinned) < 3:
-            thinned = points
+        seen = np.zeros_like(points) if viewpoints is None else np.asarray(viewpoints, np.float64)
+        if seen.shape != points.shape:
+            raise EstimatorInputError(f"viewpoints: expected the points' shape {points.shape}, "
+                                      f"got {seen.shape}")
+        keep = first_in_each_cell(np.ascontiguousarray(points), params.resolution)
+        if keep.sum() >= 3:
+            points, seen = points[keep], seen[keep]
+        thinned, self.viewpoints = points, seen
         self.field = LikelihoodField(thinned, params.resolution, params.sigma)
         self._levels, self._buffer = 0, buffer
         self.reference = PointToLineReference.with_estimated_normals(
@@ -369,6 +359,11 @@ def verify_loop(
         failures.append(f"ICP left the search window ({offset:.2f} m, {np.degrees(turn):.1f} deg)")
     # The ambiguity search costs as much as the match: only a match that passed the rest
     # needs it (most rejected candidates fail on the inlier share).
+    far_side = 0.0 if failures else far_side_share(
+        place.reference, place.viewpoints, query, pose, params.inlier_distance)
+    if far_side > params.max_far_side:
+        failures.append(f"seen from behind: {far_side:.2f} of the matched points lie on "
+                        f"surfaces the place saw from their other side > {params.max_far_side}")
     runner_up = 0.0 if failures else search.runner_up()
     if runner_up > params.ambiguity_ratio:
         failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
@@ -377,4 +372,4 @@ def verify_loop(
     information = (match_information(place.reference, query, pose, params)
                    if measure_rejected or not failures else nothing)
     return LoopVerification(not failures, reason, pose, information, result.quality, score,
-                            runner_up)
+                            runner_up, far_side)

@@ -15,7 +15,7 @@ from estimators.base import SensorSetup
 from estimators.matching.likelihood_grids import distance_scores
 from estimators.slam.graph_slam import GraphSlam
 from estimators.slam.keyframe_table import Keyframe, KeyframeTable, largest_shift
-from estimators.slam.loop_closure import descriptor_distance, descriptor_distances
+from estimators.slam.place_descriptor import descriptor_distance, descriptor_distances
 from estimators.slam.pose_graph import DisconnectedGraphError, PoseGraph
 from estimators.slam.solver import _damped, _diagonal_positions, _WhitenedProblem
 from lidar_env.core.se2 import inverse, transform_points, wrap_angle

@@ -337,3 +337,28 @@ def test_the_global_search_closes_a_loop_beyond_every_local_window() -> None:
         ends[every] = (slam.n_loops, np.hypot(*(slam.trajectory[-1, :2] - truth[-1, :2])))
     assert ends[0][0] == 0 and ends[0][1] == pytest.approx(drift, rel=1e-6)
     assert ends[6][0] >= 1 and ends[6][1] < 0.25 * drift
+
+
+def test_a_grid_shifted_turned_place_is_refused_where_keyframes_share_one_pillar() -> None:
+    """A 3.5 m Lidar down an aisle beside one row of pillars 4.5 m apart: most keyframes see
+    one pillar, so the match of two keyframes leaves the turn about it free. The loop gate
+    still bounds the chain by the front end's drift model: the row seen from a placement
+    one period along and turned by 90 degrees (what a square grid of pillars offers) is
+    unreachable after 13 m, the true revisit is not."""
+    row = np.array([[4.5 * k, 2.25, 0.12] for k in range(5)])
+    truth = np.column_stack([np.linspace(0.0, 13.0, 131), np.zeros(131), np.zeros(131)])
+    max_range = 3.5
+    slam = GraphSlam(min_loop_separation=8.0)
+    slam.reset(SensorSetup(np.zeros((1, 3)), ANGLES, max_range), truth[0])
+    ranges = cast_rays((row, np.zeros((0, 4))), truth, ANGLES, max_range)
+    for scan, pose in zip(ranges, truth, strict=True):
+        slam.add_scan(scan_to_points(scan, ANGLES, max_range), pose)
+    last = len(slam.keyframes) - 1
+    edges = slam.graph.information[~slam.graph.is_loop]
+    free = [np.linalg.eigvalsh(np.linalg.inv(info)).max() for info in edges]
+    assert max(free) > 1.0  # some edge leaves a direction free by metres or radians
+    information = np.diag([1e4, 1e4, 1e4])
+    true_loop = relative(slam.graph.poses[0], slam.graph.poses[last])
+    assert slam.loop_mahalanobis(0, last, true_loop, information) < 1.0
+    aliased = compose(true_loop, np.array([4.5, 0.0, np.pi / 2]))
+    assert slam.loop_mahalanobis(0, last, aliased, information) > slam.loop_gate

@@ -13,10 +13,9 @@ from estimators.slam.loop_closure import (
     LoopClosureParams,
     PlaceMap,
     correlative_match,
-    descriptor_distance,
-    range_histogram,
     verify_loop,
 )
+from estimators.slam.place_descriptor import descriptor_distance, range_histogram
 from lidar_env.core.se2 import relative, transform_points, wrap_angle
 from lidar_env.sensors.lidar import cast_rays
 from tests.estimators.room_scans import ANGLES, scan_points
