@@ -7,10 +7,11 @@ blind, or stopped turning, lies outside ICP's basin from there. Two more starts 
 translation extrapolated with one interval's turn, and the exact best pose of a multi-
 resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the new scan
 on the likelihood grid of the last one used, over every pose the car can have reached
-(:func:`reach`). Of the matches from all starts,
-:func:`estimators.matching.icp.most_likely_match` keeps the one explaining clearly more of the
-scan, else the one the motion model finds least surprising (:func:`lost_scan_surprise`). Poses
-are in the last used scan's car frame: x [m] forward, y [m] left, heading [rad].
+(:func:`reach`) turned at most :data:`MAX_SEARCH_TURN` from the guess. Of the matches from
+all starts, :func:`estimators.matching.icp.most_likely_match` keeps the one explaining clearly
+more of the scan, else the one the motion model finds least surprising
+(:func:`lost_scan_surprise`). Poses are in the last used scan's car frame: x [m] forward,
+y [m] left, heading [rad].
 """
 
 from __future__ import annotations
@@ -39,6 +40,13 @@ ACCELERATION = 0.5
 MAX_SPEED_CHANGE_REACH = 1.0
 
 
+#: [rad] the search turns the car at most this far from the guess: matched to the last scan
+#: alone, with no map to tell the space it saw free from space it never saw, a corridor seen
+#: turned round fits the new scan as well as the way the car faces, and better where the last
+#: scan saw more of it (the fault matrix's hallway after 3 s blind: 29 m off).
+MAX_SEARCH_TURN = 0.5 * math.pi
+
+
 def one_turn_guess(increment: FloatArray, intervals: float) -> FloatArray:
     """The last per-interval ``increment`` (3,) over ``intervals`` with its turn taken once:
     the car kept its speed and direction and the gap's turn is left to the match."""
@@ -59,15 +67,14 @@ def reach(guess: FloatArray, intervals: float, seconds: float) -> tuple[float, f
 
 
 def search_start(reference_points: FloatArray, query_points: FloatArray, guess: FloatArray,
-                 intervals: float, seconds: float, max_turn: float = math.pi,
-                 ) -> FloatArray | None:
+                 intervals: float, seconds: float) -> FloatArray | None:
     """The best pose (3,) of ``query_points`` (M, 2, their car frame) on the likelihood grid
     of ``reference_points`` (N, 2, the last used scan's car frame) within :func:`reach` of
-    ``guess`` (3,), turned by at most ``max_turn`` [rad] from it, or None when nothing scores
-    above :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
+    ``guess`` (3,), turned by at most :data:`MAX_SEARCH_TURN` from it, or None when nothing
+    scores above :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
     thinned = thinned_for_search(query_points)
     linear, angular = reach(guess, intervals, seconds)
-    angular = min(angular, max_turn)
+    angular = min(angular, MAX_SEARCH_TURN)
     low = reference_points.min(axis=0) - 0.5
     high = reference_points.max(axis=0) + 0.5
     found = search_in_box(reference_points, low, high, thinned, guess, linear, angular,

@@ -12,10 +12,10 @@ which prove the time passed.
 
 After skipped scans (a blinded Lidar) where both scans hold enough points, a third start is
 the exact best pose of a branch-and-bound search of the new scan on the latest keyframe's
-points over every pose the car can have reached (:func:`searched_motion`, the ``icp``
+points over the poses the car can have reached (:func:`searched_motion`, the ``icp``
 estimator's :func:`~estimators.matching.scan_recovery.search_start`): the car may have turned
-or stopped while blind, out of reach of either guess. It runs where neither guess's matches explain
-half of the scans, and is kept where its matches explain clearly more.
+or stopped while blind, out of reach of either guess. It runs where neither guess's matches
+explain half of the scans, and is kept where its matches explain clearly more.
 
 Either guess may be a metre or more from the car after a turn, and the correlation that seeds
 the matches is ambiguous across such a gap (it may land a metre off too); a few ICP
@@ -52,12 +52,6 @@ POLISH_ROUNDS = 5
 #: corridor finds a place along it that explains a little more because the keyframe saw
 #: more of it.
 POOR_SCORE = 0.5
-#: [rad] the search after skipped scans turns the car at most this far from the guess: with no
-#: map to tell free space from unseen space, a corridor seen turned round fits the scans as
-#: well as the way the car faces, and better where the keyframe saw more of it behind.
-SEARCH_MAX_TURN = 0.5 * np.pi
-
-
 def searched_motion(mounts: Sequence[NDArray[np.float64]], keyframe_scans: Sequence[Any],
                     scans: Sequence[Any], guess: NDArray[np.float64], intervals: float,
                     seconds: float) -> NDArray[np.float64] | None:
@@ -71,7 +65,7 @@ def searched_motion(mounts: Sequence[NDArray[np.float64]], keyframe_scans: Seque
                         for prepared in (keyframe_scans, scans))
     if min(len(reference), len(query)) < MIN_SEARCH_POINTS:
         return None
-    return search_start(reference, query, guess, intervals, seconds, SEARCH_MAX_TURN)
+    return search_start(reference, query, guess, intervals, seconds)
 
 
 def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer: list[float],

@@ -50,6 +50,9 @@ CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, 
     ("icp", "open_cylinders/right_turn", "blind_3s"),
     ("icp", "open_cylinders/right_turn", "blind_100"),
     ("icp", "closed_to_open/zigzag", "blind_3s"),
+    # icp down a corridor after 3 s and 10 s blind: not the corridor seen turned round
+    ("icp", "hallway/zigzag", "blind_3s"),
+    ("icp", "hallway/zigzag", "blind_100"),
 ]
 
 
