@@ -31,10 +31,12 @@ along: nothing in the scans tells the two apart. A start that stays unobservable
 ``max_start_replay`` scans keeps its estimate and the prior returns; one whose velocity is
 measured before anything left it unknown (the real logs, every built-in drive with a
 360-degree Lidar) is left exactly as it was, and so is every start with a no-sideslip prior
-(``sideslip_sigma``: the weave gives the speed away) or on a clock of 4 Hz or slower (the
-far-apart search, not the prior, places those scans: on the keyframes of
-``intel-corrected.log.gz`` a replay held a speed over scans seconds apart, 2.2 -> 2.6 % of
-steps off by > 0.2 m). The trajectory
+(``sideslip_sigma``: the weave gives the speed away) or on keyframes, scans
+:data:`KEYFRAME_INTERVAL` or more apart (the far-apart search, not the prior, places those:
+on the keyframes of ``intel-corrected.log.gz`` a replay held a speed over scans seconds
+apart, 2.2 -> 2.6 % of steps off by > 0.2 m). A 4 Hz Lidar's start is watched: down a
+corridor the far-apart search finds each scan where the last one was as readily as the
+prior does. The trajectory
 (``Estimator.trajectory``) is revised by the replay; the poses ``update`` returned during the
 start were the guess of the time.
 """
@@ -54,6 +56,10 @@ from estimators.odometry.motion_prior import ScanClock
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]
+
+#: [s] scans this far apart or more are keyframes, placed by the far-apart search: no start
+#: is watched.
+KEYFRAME_INTERVAL = 0.5
 
 #: Times the start is matched again. The first measure of the speed comes from the data alone
 #: where the first surfaces across the axis come into view (few, far, 1-3 % off in the
@@ -105,7 +111,7 @@ class UnknownStartSpeed:
         reference = self._reference
         pose = self._odometry_step(scans, t)
         assert self._kept is not None
-        if self._clock.settled and self._slow_clock(0.0):  # the far-apart search, not
+        if self._clock.settled and self._clock.median >= KEYFRAME_INTERVAL:  # the search, not
             self._kept, self.speed_unknown = None, False  # the prior, decides: nothing stalls
             return pose
         self._kept.append((scans, t))
