@@ -13,7 +13,7 @@ front end's own window), within ``overlap_radius`` plus the drift since then of 
 estimate, ranked by place descriptor; each candidate is
 verified by a correlative scan match plus ICP against the old keyframe and its neighbours
 (:func:`estimators.slam.loop_closure.verify_loop`) and, if accepted and reachable from the graph's
-estimate (within ``loop_gate`` Mahalanobis distance under the odometry chain's covariance since
+estimate (within ``loop_gate`` Mahalanobis distance under the front end's drift model since
 the old keyframe: a symmetric corridor's far end seen turned around passes every scan test but
 not this one), becomes a loop edge. After new loop edges the graph is optimised
 (Levenberg–Marquardt, a Cauchy kernel on loop edges); loop edges it still cannot reconcile
@@ -88,11 +88,11 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
         loop_gate: a verified match becomes a loop edge only if it is reachable from the
             graph's current estimate: its Mahalanobis distance from it, under the covariance
-            of the odometry chain since the old keyframe plus the match's own, is at most
-            this (5, as ``max_loop_sigma``). A look-alike place the odometry cannot have
-            drifted to (the far end of a symmetric corridor, seen turned by 180 degrees
-            after a straight drive) fails it; a true revisit after any drift the odometry
-            edges' model allows passes.
+            of the front end's drift model (the ``odometry_*`` settings) along the chain since
+            the old keyframe plus the match's own, is at most this (5, as
+            ``max_loop_sigma``). A look-alike place the odometry cannot have drifted to (a
+            corridor's far end seen turned round, a grid of pillars one period along) fails
+            it; a true revisit after any drift that model allows passes.
         max_loop_sigma: loop edges whose Mahalanobis error after optimisation exceeds this
             are dropped (5: far outside any honest measurement's spread).
         optimize_every: after a loop closure, optimise again once this many keyframes were
@@ -120,8 +120,9 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         check_steps: check each odometry step against the two keyframes' scans (True): if it
             leaves less than ``loop_params.min_quality`` of the new keyframe's points within
             ``inlier_distance`` of the previous one's walls, match the two over all headings
-            and keep the match if it is unambiguous and explains more points: a corner turn
-            the front end lost is found here, before loop edges spread it along a corridor.
+            and keep the match if it is unambiguous and explains more points (clearly more,
+            if it is another place, see :meth:`_checked_step`): a corner turn the front end
+            lost is found here, before loop edges spread it along a corridor.
         place_tolerance, max_places: an old place's map (likelihood field and lines) is kept
             across optimisations while none of its points moved by more than 1 mm (2 % of a
             field cell, a tenth of 1 cm range noise and of a loop edge's ~1 cm sigma; 0: rebuilt

@@ -14,7 +14,9 @@ Three stages, each a pure function of plain arrays:
    (:func:`estimators.matching.icp.register`).
 3. **Rejection** of false loops: a match is accepted only if enough of the scan lands on the
    old map (ICP inlier share and likelihood-field score) and if the best match is clearly
-   better than the best match elsewhere in the window (ambiguity test); the pose graph then
+   better than the best match elsewhere in the window (ambiguity test) and if it does not lay
+   the scan onto the far side of what the old place saw (:mod:`estimators.slam.view_side`:
+   a shelf or a row of posts seen from the aisles on either side); the pose graph then
    weighs loop edges with a robust kernel and drops those it cannot reconcile
    (:mod:`estimators.slam.graph_slam`).
 
