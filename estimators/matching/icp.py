@@ -357,9 +357,10 @@ class ICPEstimator(Estimator):
                 guesses.append(self._increment * lost)  # alone jumped (the scans ran on)
             spans = [float(observations), lost][:len(guesses)]
             starts = list(guesses)
-            # after skipped scans (a clock gap may be the stamps alone) the turn is the least
-            # known part of the guess; a search tells places apart only from enough points
-            span = float(observations)
+            # after skipped scans, or scans lost in a clock gap (a stamp that jumped alone is
+            # told apart by the matches), the turn is the least known part of the guess; a
+            # search tells places apart only from enough points
+            span = float(max(observations, lost))
             if span > 1 and min(len(current), len(self._previous)) >= MIN_SEARCH_POINTS:
                 for start, guess in self._recovery_starts(current, span, t - self._times[-1]):
                     starts.append(start)

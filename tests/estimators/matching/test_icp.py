@@ -213,6 +213,25 @@ def test_icp_estimator_follows_a_ray_cast_drive():
 
 
 
+def test_icp_estimator_finds_the_car_after_scans_lost_in_a_turn():
+    # 15 scans (1.5 s) lost while the car turned 70 degrees against the turn it held: neither
+    # the one-interval nor the whole-gap guess is within ICP's reach, the search on the last
+    # scan is
+    rng = np.random.default_rng(3)
+    estimator = make("icp")
+    pose = np.array([-3.0, -2.0, 0.6])
+    estimator.reset(SensorSetup(np.zeros((1, 3)), ANGLES, 20.0), pose)
+    step, t = np.array([0.08, 0.0, 0.03]), 0.0
+    for k in range(30):
+        if k == 20:
+            pose, t = compose(pose, [0.3, 0.0, np.radians(-70.0)]), t + 1.5
+        estimator.update({"lidar_1": ray_cast(pose, noise=0.01, rng=rng)}, t)
+        pose, t = compose(pose, step), t + 0.1
+    error = relative(compose(pose, inverse(step)), estimator.pose)
+    assert np.hypot(error[0], error[1]) < 0.05 and abs(wrap_angle(error[2])) < np.radians(1.0)
+    assert estimator.health.clock_jumps == 1
+
+
 def test_icp_estimator_starts_each_match_from_the_last_increment(monkeypatch):
     import estimators.matching.icp as icp
 
