@@ -2,18 +2,11 @@
 
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
-
 import pytest
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)
-try:
-    bench = importlib.import_module("bench_cold_start")
-finally:
-    sys.path.remove(_BENCHMARKS)
+from tests.benchmarks.bench_modules import load
+
+bench = load("bench_cold_start")
 
 
 def test_a_negative_vector_size_is_a_one_line_error(capsys) -> None:

@@ -4,19 +4,14 @@ asked for against ``icp``."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_estimators.py"
-_SPEC = importlib.util.spec_from_file_location("bench_estimators", _PATH)
-bench = importlib.util.module_from_spec(_SPEC)
-sys.modules["bench_estimators"] = bench  # dataclasses look their module up
-_SPEC.loader.exec_module(bench)
+from tests.benchmarks.bench_modules import load
+
+bench = load("bench_estimators")
 
 
 def test_forward_clock_moves_only_the_stamps_that_jump_back() -> None:

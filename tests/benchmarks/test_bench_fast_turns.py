@@ -3,18 +3,11 @@ its 180-degree front Lidar sees only the walls of is placed by the speed it show
 
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
-
 import numpy as np
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)
-try:
-    bench = importlib.import_module("bench_fast_turns")
-finally:
-    sys.path.remove(_BENCHMARKS)
+from tests.benchmarks.bench_modules import load
+
+bench = load("bench_fast_turns")
 
 
 def test_a_4_hz_start_down_a_bare_corridor_is_matched_again() -> None:

@@ -5,22 +5,15 @@ pose is found again."""
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from estimators.datasets.faults import with_faults
 from lidar_env.faults import ScanLoss
+from tests.benchmarks.bench_modules import load
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)
-try:
-    bench = importlib.import_module("bench_faults")
-finally:
-    sys.path.remove(_BENCHMARKS)
+bench = load("bench_faults")
 
 
 CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, fault in (

@@ -2,22 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from estimators.base import SensorSetup
 from estimators.leaderboard.records import SensorDataset
 from lidar_env.sensors.lidar import cast_rays
 from lidar_env.world.world import World
+from tests.benchmarks.bench_modules import load
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_movers_estimators.py"
-_SPEC = importlib.util.spec_from_file_location("bench_movers_estimators", _PATH)
-bench = importlib.util.module_from_spec(_SPEC)
-sys.modules["bench_movers_estimators"] = bench
-_SPEC.loader.exec_module(bench)
+bench = load("bench_movers_estimators")
 
 ANGLES = 2 * np.pi * np.arange(360) / 360
 WALLS = [[-6, -6, 6, -6], [6, -6, 6, 6], [6, 6, -6, 6], [-6, 6, -6, -6]]

@@ -3,23 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from estimators.base import SensorSetup
+from tests.benchmarks.bench_modules import load
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)
-try:
-    bench = importlib.import_module("bench_peers")
-finally:
-    sys.path.remove(_BENCHMARKS)
+bench = load("bench_peers")
 
 
 class Burner:

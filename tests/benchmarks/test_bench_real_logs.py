@@ -3,21 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import importlib
-import sys
-from pathlib import Path
 
 import pytest
 
 from estimators import make
+from tests.benchmarks.bench_modules import load
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)  # the benchmarks import each other by name
-try:
-    bench = importlib.import_module("bench_real_logs")
-    parameter = importlib.import_module("bench_layouts").parameter
-finally:
-    sys.path.remove(_BENCHMARKS)
+bench = load("bench_real_logs")
+parameter = load("bench_layouts").parameter
 
 
 def test_a_dotted_name_sets_one_key_of_a_mapping_parameter() -> None:

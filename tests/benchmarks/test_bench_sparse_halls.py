@@ -3,23 +3,17 @@ stops at corners, and a quick run scores every estimator on a small hall."""
 
 from __future__ import annotations
 
-import importlib
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from lidar_env.world import World
+from tests.benchmarks.bench_modules import load
 
-_BENCHMARKS = str(Path(__file__).resolve().parents[2] / "benchmarks")
-sys.path.insert(0, _BENCHMARKS)
-try:
-    bench = importlib.import_module("bench_sparse_halls")
-finally:
-    sys.path.remove(_BENCHMARKS)
+bench = load("bench_sparse_halls")
 
 
 @pytest.mark.parametrize("name", list(bench.DRIVES))

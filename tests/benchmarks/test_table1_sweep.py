@@ -3,20 +3,16 @@ density where a line first reaches the paper's figure (the runs themselves are t
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from estimators.leaderboard.records import TraceDataset, TraceRecord
 from lidar_env.world.feature_worlds import parse_world_name
+from tests.benchmarks.bench_modules import load
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "table1_sweep.py"
-_SPEC = importlib.util.spec_from_file_location("table1_sweep", _PATH)
-sweep = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(sweep)
+sweep = load("table1_sweep")
 
 
 def test_crossing_is_linear_between_the_densities_and_never_extrapolates() -> None:
