@@ -194,9 +194,12 @@ def export_tum_files(db: ExperimentDatabase, records: dict[tuple[Scenario, str],
 
 
 def _progress(total: int, label: str, enabled: bool) -> Any:
+    """A bar of scenarios done on stderr, when ``enabled`` and stderr is a terminal (a log file
+    gets no carriage-return frames)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=label, unit="scenario", disable=not enabled, leave=False)
+    return tqdm(total=total, desc=label, unit="scenario", disable=None if enabled else True,
+                leave=False)
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "duallidar leaderboard") -> int:

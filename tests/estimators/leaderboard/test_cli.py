@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import io
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +104,19 @@ def test_tiny_matrix_end_to_end_then_resume(tmp_path: Path,
     assert leaderboard.main([*TINY, "--no-real", "--rank-by", "map", "--out", str(out)]) == 0
     ious = [float(r["map_iou"]) for r in read_csv(out / "leaderboard.csv")]
     assert len(ious) == 2 and ious == sorted(ious, reverse=True)
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_the_scenario_bar_draws_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch,
+                                                   terminal: bool) -> None:
+    stream = io.StringIO()
+    monkeypatch.setattr(stream, "isatty", lambda: terminal)
+    monkeypatch.setattr(sys, "stderr", stream)
+    with leaderboard._progress(3, "scenarios", True) as bar:
+        bar.update(3)
+    assert ("\r" in stream.getvalue()) is terminal  # a log gets no carriage-return frames
+    with leaderboard._progress(3, "scenarios", False) as bar:  # --no-progress
+        assert bar.disable
 
 
 def test_missing_real_data_is_a_printed_note(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
