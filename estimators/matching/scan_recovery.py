@@ -38,8 +38,6 @@ ACCELERATION = 0.5
 #: Most [m] the acceleration widens the window by: over a gap of seconds a wider one holds
 #: places elsewhere that explain more of a scan-to-scan match than the right one.
 MAX_SPEED_CHANGE_REACH = 1.0
-
-
 #: [rad] the search turns the car at most this far from the guess: matched to the last scan
 #: alone, with no map to tell the space it saw free from space it never saw, a corridor seen
 #: turned round fits the new scan as well as the way the car faces, and better where the last
@@ -60,21 +58,20 @@ def reach(guess: FloatArray, intervals: float, seconds: float) -> tuple[float, f
     ``intervals`` scan intervals and ``seconds`` [s]: as far again as the guess moves the car
     (it may have stopped, or turned off the line), plus what :data:`ACCELERATION` adds over
     the gap (at most :data:`MAX_SPEED_CHANGE_REACH`) and :data:`REACH_MARGIN`;
-    :data:`TURN_PER_INTERVAL` per interval either side (every heading past pi)."""
+    :data:`TURN_PER_INTERVAL` per interval either side, at most :data:`MAX_SEARCH_TURN`."""
     return (float(np.hypot(guess[0], guess[1]))
             + min(0.5 * ACCELERATION * seconds**2, MAX_SPEED_CHANGE_REACH) + REACH_MARGIN,
-            min(TURN_PER_INTERVAL * intervals, math.pi))
+            min(TURN_PER_INTERVAL * intervals, MAX_SEARCH_TURN))
 
 
 def search_start(reference_points: FloatArray, query_points: FloatArray, guess: FloatArray,
                  intervals: float, seconds: float) -> FloatArray | None:
     """The best pose (3,) of ``query_points`` (M, 2, their car frame) on the likelihood grid
     of ``reference_points`` (N, 2, the last used scan's car frame) within :func:`reach` of
-    ``guess`` (3,), turned by at most :data:`MAX_SEARCH_TURN` from it, or None when nothing
-    scores above :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
+    ``guess`` (3,), or None when nothing scores above
+    :data:`~estimators.matching.window_search.MIN_SEARCH_SCORE`."""
     thinned = thinned_for_search(query_points)
     linear, angular = reach(guess, intervals, seconds)
-    angular = min(angular, MAX_SEARCH_TURN)
     low = reference_points.min(axis=0) - 0.5
     high = reference_points.max(axis=0) + 0.5
     found = search_in_box(reference_points, low, high, thinned, guess, linear, angular,

@@ -45,13 +45,13 @@ SCORE_TOLERANCE = 0.02
 #: Most rounds of matching a recovered motion again from itself (each converges further;
 #: two or three reach the fit).
 POLISH_ROUNDS = 5
-
-
 #: Mean share of the scans explained below which the guesses' matches are lost and the search
 #: runs (``lidar_odometry``'s ``min_quality``): where the guesses fit, a search over a
 #: corridor finds a place along it that explains a little more because the keyframe saw
 #: more of it.
 POOR_SCORE = 0.5
+
+
 def searched_motion(mounts: Sequence[NDArray[np.float64]], keyframe_scans: Sequence[Any],
                     scans: Sequence[Any], guess: NDArray[np.float64], intervals: float,
                     seconds: float) -> NDArray[np.float64] | None:

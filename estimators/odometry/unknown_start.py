@@ -90,7 +90,6 @@ class UnknownStartSpeed:
     _reset_state: Callable[[], None]
     _odometry_step: Callable[[Scans, float], FloatArray]
     _model_information: Callable[[], FloatArray]
-    _slow_clock: Callable[[float], bool]
 
     def _watch_start(self, scans: Scans, t: float) -> None:
         """Keep the first scans (called by ``_start``)."""
