@@ -111,22 +111,36 @@ def test_the_prediction_horizon_follows_the_clock():
     assert not within_prediction_horizon(0.0, [0.1])
 
 
+def after_six_scans(name, setup, frames):
+    """Estimator ``name`` after the drive's first six observations (0.1 s apart)."""
+    estimator = estimators.make(name)
+    estimator.reset(setup, frames[0][1])
+    for k, (observation, _) in enumerate(frames[:6]):
+        estimator.update(observation, 0.1 * k)
+    return estimator
+
+
+def thinned_scan(setup, observation, keep):
+    """``observation`` with every reading no return (``max_range``, float32) but those at the
+    indices ``keep(key, scan)`` picks of each sensor's scan."""
+    sparse = {}
+    for key in setup.keys:
+        scan = np.full(len(observation[key]), setup.max_range, dtype=np.float32)
+        kept = keep(key, observation[key])
+        scan[kept] = observation[key][kept]
+        sparse[key] = scan
+    return sparse
+
+
 @pytest.mark.parametrize("name", ["icp", "pc", "pc_offset", "pc_pg", "pc_rot", "pc_rot_icp",
                                   "pc_fusion"])
 @pytest.mark.parametrize("returns", [0, 3, 5])
 def test_a_scan_with_few_returns_is_no_update_not_a_jump(drive, name, returns):
     setup, frames = drive
-    estimator = estimators.make(name)
-    estimator.reset(setup, frames[0][1])
-    for k, (observation, _) in enumerate(frames[:6]):
-        estimator.update(observation, 0.1 * k)
-    sparse = {}
+    estimator = after_six_scans(name, setup, frames)
     rng = np.random.default_rng(returns)
-    for key in setup.keys:
-        scan = np.full(len(frames[6][0][key]), setup.max_range, dtype=np.float32)
-        kept = rng.choice(len(scan), returns, replace=False)
-        scan[kept] = frames[6][0][key][kept]
-        sparse[key] = scan
+    sparse = thinned_scan(setup, frames[6][0],
+                          lambda key, scan: rng.choice(len(scan), returns, replace=False))
     earlier, before = estimator.trajectory[-2:]
     after = estimator.update(sparse, 0.6)
     true_step = np.hypot(*(frames[6][1][:2] - frames[5][1][:2]))
@@ -151,17 +165,9 @@ def test_scan_to_map_estimators_use_a_scan_of_a_few_returns(drive, name, used):
     """One pillar of a short-range Lidar (5 returns) pins a pose against the map: the
     scan-to-map estimators (``min_returns`` 3) use it, the others (10) skip it."""
     setup, frames = drive
-    estimator = estimators.make(name)
-    estimator.reset(setup, frames[0][1])
-    for k, (observation, _) in enumerate(frames[:6]):
-        estimator.update(observation, 0.1 * k)
-    sparse = {}
-    for key in setup.keys:
-        scan = np.full(len(frames[6][0][key]), setup.max_range, dtype=np.float32)
-        kept = np.flatnonzero(frames[6][0][key] < setup.max_range)[:5 if key == setup.keys[0]
-                                                                    else 0]
-        scan[kept] = frames[6][0][key][kept]
-        sparse[key] = scan
+    estimator = after_six_scans(name, setup, frames)
+    sparse = thinned_scan(setup, frames[6][0], lambda key, scan: np.flatnonzero(
+        scan < setup.max_range)[:5 if key == setup.keys[0] else 0])
     after = estimator.update(sparse, 0.6)
     assert np.all(np.isfinite(after))
     assert estimator.health.skipped_scans == (0 if used else 1)
