@@ -3,9 +3,13 @@ the search on the keyframe runs."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
-from estimators.odometry.fusion_recovery import POOR_SCORE, recovered
+from estimators.odometry.fusion_recovery import POOR_SCORE, recovered, searched_motion
+from lidar_env.core.se2 import compose
+from tests.estimators.room_scans import scan_points
 
 
 def solver(scores: dict[float, float]):
@@ -43,3 +47,18 @@ def test_a_search_that_explains_no_more_is_not_taken() -> None:
     nothing = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], False, same,
                         lambda: None)
     assert nothing[0][0] == 1.0
+
+
+
+def test_the_search_finds_the_car_on_the_keyframe_and_needs_enough_points() -> None:
+    rng = np.random.default_rng(0)
+    start, motion = np.array([4.0, 5.0, 0.3]), np.array([0.8, -0.3, np.radians(50.0)])
+    keyframe = [SimpleNamespace(points=scan_points(start, rng))]
+    scan = [SimpleNamespace(points=scan_points(compose(start, motion), rng))]
+    mounts = [np.zeros(3)]
+    # guessed as no motion at all: 0.85 m and 50 degrees off, past any ICP basin
+    found = searched_motion(mounts, keyframe, scan, np.zeros(3), 10.0, 1.0)
+    assert found is not None
+    assert np.hypot(*(found[:2] - motion[:2])) < 0.1 and abs(found[2] - motion[2]) < 0.05
+    few = [SimpleNamespace(points=scan[0].points[:20])]  # under MIN_SEARCH_POINTS
+    assert searched_motion(mounts, keyframe, few, np.zeros(3), 10.0, 1.0) is None
