@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 import lidar_env  # registers DualLidar-v0
 from lidar_env.config import MOVER_MODELS
+from lidar_env.vector.draws import fill_standard_normals
 from lidar_env.world.world import World
 
 TARGET_STEPS_PER_SECOND = 200_000
@@ -139,13 +140,11 @@ def scan_microseconds(env: Any, seconds: float, warmup_steps: int = 50) -> float
 
 @njit(cache=True)
 def draw_standard_normals(items: Any, out: NDArray[np.float64]) -> None:
-    """``out`` (n,) overwritten with n standard normals from each sub-env's generator (the last
-    of its item in ``items``, :attr:`lidar_env.vector.slots.SceneSlots.scene`'s typed list) in
-    turn, drawn one at a time as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
+    """``out`` (n,) overwritten with n standard normals from each sub-env's generator (its state
+    words, the last of its item in ``items``, :attr:`lidar_env.vector.slots.SceneSlots.scene`'s
+    typed list) in turn, drawn as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
     for i in range(len(items)):
-        rng = items[i][5]
-        for j in range(out.shape[0]):
-            out[j] = rng.standard_normal()
+        fill_standard_normals(items[i][5], out)
 
 
 def timed_microseconds(call: Callable[[], Any], seconds: float, per: int) -> float:
@@ -162,8 +161,8 @@ def timed_microseconds(call: Callable[[], Any], seconds: float, per: int) -> flo
 
 def draw_microseconds(env: Any, seconds: float) -> float:
     """CPU time [us] per env of the range noise's draws alone: one standard normal per beam
-    from each sub-env's generator, as the batched scan draws them (numba's draws, bit-identical
-    to numpy's ``Generator.standard_normal``)."""
+    from each sub-env's generator, as the batched scan draws them (compiled PCG64 draws,
+    bit-identical to numpy's ``Generator.standard_normal``)."""
     env.reset(seed=0)
     out = np.empty(env._scans.shape[1])  # one draw per beam of every Lidar
     return timed_microseconds(lambda: draw_standard_normals(env._slots.scene[0], out), seconds,
@@ -243,8 +242,8 @@ def main(argv: list[str] | None = None) -> None:
     python = python_microseconds(make("vector_entry_point", n).unwrapped, args.seconds)
     full_us = 1e6 / rates[n]
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
-          f"  {draws:5.2f} the 720 Gaussian draws of the range noise alone (numba's, one at a time"
-          " from each sub-env's generator)\n"
+          f"  {draws:5.2f} the 720 Gaussian draws of the range noise alone (compiled PCG64 "
+          "ziggurat over each sub-env's generator state)\n"
           f"  {full_scan - noiseless_scan - draws:5.2f} the rest of the noise (adding it; the "
           "draws in the scan beyond a bare loop of them)\n"
           f"  {noiseless_scan - few_scan:5.2f} the other 704 exact rays and their readings\n"

@@ -2,7 +2,7 @@
 end and every Lidar's noisy scan, for all stepped envs in one numba call.
 
 Every per-env quantity is a row of an ``(N, ...)`` array; each env's scene (obstacles, their
-grid, its trace, its random generator) is an item of a numba typed list (:mod:`.slots`).
+grid, its trace, its random generator's state) is an item of a numba typed list (:mod:`.slots`).
 :func:`step_batch` is one env step (the action check, then :func:`step_envs`) in one call. The math
 is the single env's own compiled functions, called in its order:
 :func:`lidar_env.vehicle.car.drive_arc` for the motion and collision,
@@ -13,9 +13,9 @@ is the single env's own compiled functions, called in its order:
 :func:`lidar_env.movers.kernels.advance_crowd` for the crowd (its waypoint draws first),
 :func:`lidar_env.movers.crowd.fill_car_circles` for the car as yielding movers see it and
 :func:`lidar_env.vehicle.car.drive_arc_among_movers` for the car among them. Each env draws its
-noise (and its movers' waypoints) from its own ``numpy.random.Generator`` inside the kernel (numba
-draws bit-identically to numpy and advances the same state), so an env's stream is the one a single
-env seeded alike would use.
+noise (and its movers' waypoints) from its own ``numpy.random.Generator`` inside the kernel
+(:mod:`lidar_env.vector.draws`: numpy's draws bit for bit, advancing the generator's own state), so
+an env's stream is the one a single env seeded alike would use.
 
 Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world frame.
 """
@@ -35,6 +35,7 @@ from lidar_env.movers.crowd import WAYPOINT_TRIES, fill_car_circles
 from lidar_env.movers.kernels import advance_crowd
 from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
+from lidar_env.vector.draws import fill_standard_normals, fill_uniforms
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
@@ -61,16 +62,15 @@ def observe_envs(
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
     ``sensor_poses`` (N, K, 3) receives the Lidars' world poses. ``scene`` is
-    :attr:`lidar_env.vector.slots.SceneSlots.scene` (each env's generator is its item's last;
-    its world's arrays are taken only where its world differs from the env before);
+    :attr:`lidar_env.vector.slots.SceneSlots.scene` (each env's generator state is its item's
+    last; its world's arrays are taken only where its world differs from the env before);
     ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.sensors.layout_kernels.cast_packed` takes
     them; ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
     allocated per env); ``crowd`` :attr:`lidar_env.vector.crowds.CrowdSlots.kernel`, whose
     movers the Lidars see (none when M = 0). Draws per env: a standard normal per beam if any
     Lidar is noisy, then a uniform per beam if any drops out (the order of
-    :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), one at a time: numba's scalar draws
-    are the steps of its (and numpy's) array draws.
+    :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), as numpy's array draws.
     """
     items, first_edge, world_key = scene[0], scene[1], scene[4]
     mounts, world_aligned, noisy, dropping, beams, params = sensors
@@ -95,11 +95,9 @@ def observe_envs(
         for j in range(movers.shape[0]):  # Crowd.circles
             movers[j, 0], movers[j, 1], movers[j, 2] = positions[i, j, 0], positions[i, j, 1], \
                 radius
-        rng = items[i][5]
-        for j in range(gaussians.shape[0]):
-            gaussians[j] = rng.standard_normal()
-        for j in range(uniforms.shape[0]):
-            uniforms[j] = rng.random()
+        words = items[i][5]
+        fill_standard_normals(words, gaussians)
+        fill_uniforms(words, uniforms)
         exact = cast_packed(env_circles, env_segments, first_edge[i], env_grid, cast_from,
                             beams, params, movers, no_car, (circle_seen, segment_seen),
                             stamp[0], no_facing)
@@ -240,13 +238,14 @@ def step_envs(
 @njit(cache=True)
 def step_crowd(
     i: int, car_pose: NDArray[np.float64], half_length: float, half_width: float, dt: float,
-    crowd: tuple, rng: Any, circles: NDArray[np.float64], segments: NDArray[np.float64],
-    grid: Any,
+    crowd: tuple, words: NDArray[np.uint64], circles: NDArray[np.float64],
+    segments: NDArray[np.float64], grid: Any,
 ) -> NDArray[np.float64]:
     """Env ``i``'s crowd (``crowd`` as :func:`step_envs` takes it) advanced by ``dt`` [s], as
-    :meth:`lidar_env.movers.crowd.Crowd.step` does, among the world's ``circles``, ``segments`` and
-    ``grid`` and (yielding movers) the car standing at ``car_pose``. Returns the movers'
-    circles (M, 3) [m] before the step (a view of the crowd's scratch)."""
+    :meth:`lidar_env.movers.crowd.Crowd.step` does (its waypoints drawn from the generator state
+    ``words``), among the world's ``circles``, ``segments`` and ``grid`` and (yielding movers)
+    the car standing at ``car_pose``. Returns the movers' circles (M, 3) [m] before the step (a
+    view of the crowd's scratch)."""
     positions, velocities, waypoints, speeds, stuck, needs, bounds, params, work = crowd
     start, car, draws = work
     radius = params[0]
@@ -259,8 +258,7 @@ def step_crowd(
     for j in range(needs.shape[1]):
         waiting += needs[i, j]
     chosen = draws[:waiting * WAYPOINT_TRIES * 2]
-    for j in range(chosen.shape[0]):  # rng.random((waiting, WAYPOINT_TRIES, 2)), in order
-        chosen[j] = rng.random()
+    fill_uniforms(words, chosen)  # rng.random((waiting, WAYPOINT_TRIES, 2))
     advance_crowd(positions[i], velocities[i], waypoints[i], speeds[i], stuck[i], needs[i],
                   chosen.reshape((waiting, WAYPOINT_TRIES, 2)), radius, dt, bounds[i], circles,
                   segments, grid, car)

@@ -2,11 +2,12 @@
 :mod:`lidar_env.vector.kernel`.
 
 Env ``i``'s obstacles, their :class:`~lidar_env.world.primitive_grid.PrimitiveGrid`, its trace and
-its generator are one tuple, item ``i`` of a numba typed list (numba unboxes a typed list
-argument at every call, ~0.8 us, so there is one); the scalars
-(first polygon edge, closed trace, trace length [m]) are ``(N,)`` arrays. Items are views of the
-World's and Trace's own arrays (made read-only, so every item has one numba type), never copies:
-N envs in one built-in world hold one copy of it.
+its generator's PCG64 state (:func:`lidar_env.vector.draws.state_words`, a view that keeps the
+generator alive) are one tuple, item ``i`` of a numba typed list (numba unboxes a typed list
+argument at every call, ~0.8 us, so there is one); the scalars (first polygon edge, closed trace,
+trace length [m]) are ``(N,)`` arrays. Items are views of the World's and Trace's own arrays (made
+read-only, so every item has one numba type), never copies: N envs in one built-in world hold
+one copy of it.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from numba.typed import List
 from numpy.typing import DTypeLike, NDArray
 
 from lidar_env.routes.trace_geometry import Trace
+from lidar_env.vector.draws import state_words
 from lidar_env.world.primitive_grid import PrimitiveGrid
 from lidar_env.world.world import World
 
@@ -79,7 +81,7 @@ class SceneSlots:
         self.segment_seen = np.zeros(0, dtype=np.int64)
         self.near_circles, self.near_segments = np.zeros((0, 3)), np.zeros((0, 4))
         self.stamp = np.ones(1, dtype=np.int64)
-        self._parts: list[tuple | None] = [None] * n  # each env's item but its generator
+        self._parts: list[tuple | None] = [None] * n  # each env's item but its generator's
         self._items: Any = None
 
     def set(self, i: int, world: World, trace: Trace) -> None:
@@ -120,7 +122,8 @@ class SceneSlots:
                 self.set_generator(i, rng)
 
     def set_generator(self, i: int, rng: np.random.Generator) -> None:
-        """Env ``i`` draws from ``rng`` (the kernel advances its state, as numpy would)."""
+        """Env ``i`` draws from ``rng``, a PCG64 generator (the kernel advances its state, as
+        numpy would)."""
         self.generators[i] = rng
         self._store(i)
 
@@ -130,15 +133,15 @@ class SceneSlots:
         if parts is None or rng is None:
             return
         if self._items is None:
-            self._items = _filled_list((*parts, rng), self.n)
+            self._items = _filled_list((*parts, state_words(rng)), self.n)
         else:
-            _set_item(self._items, i, (*parts, rng))
+            _set_item(self._items, i, (*parts, state_words(rng)))
 
     @property
     def scene(self) -> tuple:
         """``(items, first_polygon_edge, closed, length, world_key, trace_key)``: a typed list
-        of ``(circles, segments, grid, waypoints, arc, generator)`` per env and (N,) arrays;
-        envs of equal ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
+        of ``(circles, segments, grid, waypoints, arc, generator state words)`` per env and (N,)
+        arrays; envs of equal ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
         assert self._items is not None, "set every env's scene first"
         return (self._items, self.first_edge, self.closed, self.length, self.world_key,
                 self.trace_key)
