@@ -191,7 +191,8 @@ class KeyframeMatching:
                 measure_rejected=False))
             self.loop_attempts.append((old, index, result))
             if result.accepted:
-                self.graph.add_edge(old, index, result.pose, result.information, is_loop=True)
+                self.graph.add_edge(old, index, result.pose, result.edge_information,
+                                    is_loop=True)
                 self._dirty = True
                 behind = self.keyframes[index].path_length - self.keyframes[old].path_length
                 revisited |= behind >= self.min_loop_separation
@@ -226,8 +227,9 @@ class KeyframeMatching:
                 error = relative(predicted, other.pose)
                 if (np.hypot(error[0], error[1]) <= self.consistency_distance
                         and abs(error[2]) <= self.consistency_angle):
-                    self.graph.add_edge(old_k, new_k, other.pose, other.information, True)
-                    self.graph.add_edge(int(k), index, result.pose, result.information, True)
+                    self.graph.add_edge(old_k, new_k, other.pose, other.edge_information, True)
+                    self.graph.add_edge(int(k), index, result.pose, result.edge_information,
+                                        True)
                     trusted = np.zeros(self.graph.n_edges, dtype=bool)
                     trusted[-2:] = True
                     self.optimize(trusted=trusted)

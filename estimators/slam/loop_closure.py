@@ -26,7 +26,7 @@ query keyframe in the frame of the reference keyframe. Distances [m], angles [ra
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,6 +45,7 @@ from estimators.matching.scan_matching import (
     first_in_each_cell,
     voxel_downsample,
 )
+from estimators.slam.match_spread import score_spread
 from estimators.slam.place_grid import search_pyramid
 from estimators.slam.view_side import far_side_share
 from lidar_env.core import ConfigError, EstimatorInputError
@@ -108,6 +109,10 @@ class LoopClosureParams:
             matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
             made it (0.05 m, 20: neighbouring residuals are strongly correlated, so hundreds
             of pairs would claim mm accuracy; loop matches are good to ~1-2 cm).
+        spread_turn: an accepted match's covariance adds the spread of the poses within
+            ``ambiguity_distance`` and 5 deg of it that score at least ``ambiguity_ratio`` of
+            the best (:func:`~estimators.slam.match_spread.score_spread`): the Hessian's
+            point noise does not hold where one pillar or a shelf's end fixes a direction.
     """
 
     resolution: float = 0.05
@@ -130,6 +135,8 @@ class LoopClosureParams:
     loss_scale: float = 0.03
     max_normal_neighbours: int | None = 72
     search_levels: int = 5
+    spread_turn: float = np.radians(5.0)
+    spread_sigmas: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("resolution", "sigma", "angular_step", "voxel_size", "inlier_distance",
@@ -147,9 +154,10 @@ class LoopClosureParams:
         if self.normal_neighbours < 3:
             raise ConfigError("normal_neighbours: expected an integer >= 3 (a line needs "
                              f"neighbours), got {self.normal_neighbours}")
-        if self.angular_window < 0 or self.coarse_factor < 0:
-            raise ConfigError("angular_window and coarse_factor: expected values >= 0, got "
-                             f"{self.angular_window}, {self.coarse_factor}")
+        if self.angular_window < 0 or self.coarse_factor < 0 or self.spread_turn < 0:
+            raise ConfigError("angular_window, coarse_factor and spread_turn: expected values "
+                             f">= 0, got {self.angular_window}, {self.coarse_factor}, "
+                             f"{self.spread_turn}")
         for name in ("min_quality", "min_score", "ambiguity_ratio", "max_far_side"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ConfigError(f"{name}: expected a share in [0, 1], got {getattr(self, name)}")
@@ -170,7 +178,9 @@ class LoopVerification:
             :meth:`CorrelativeMatch.runner_up`); searched only when every other test passed
             (else 0, and ``reason`` lists the others that failed). far_side: share of the
             matched points seen from the other side of their surface (``max_far_side``; 0
-            where not measured).
+            where not measured). spread: ``(3, 3)`` covariance of the near-best poses about
+            ``pose`` (:func:`~estimators.slam.match_spread.score_spread`; zeros where
+            ``information`` is).
     """
 
     accepted: bool
@@ -181,6 +191,15 @@ class LoopVerification:
     score: float
     runner_up: float
     far_side: float = 0.0
+    spread: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)))
+
+    @property
+    def edge_information(self) -> NDArray[np.float64]:
+        """``(3, 3)`` information of the loop edge: the inverse of the Hessian's covariance
+        plus :attr:`spread` (the Hessian's alone is the match's, which the loop gate tests)."""
+        if not self.spread.any():
+            return self.information
+        return np.linalg.inv(np.linalg.inv(self.information) + self.spread)
 
 
 class PlaceMap:
@@ -371,7 +390,11 @@ def verify_loop(
         failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
                         f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
     reason = "; ".join(failures) if failures else "accepted"
-    information = (match_information(place.reference, query, pose, params)
-                   if measure_rejected or not failures else nothing)
+    measured = measure_rejected or not failures
+    information = match_information(place.reference, query, pose, params) if measured else nothing
+    spread = (score_spread(place.field, thinned, pose, params.ambiguity_distance,
+                           params.spread_turn, params.angular_step, params.ambiguity_ratio,
+                           params.spread_sigmas)
+              if measured else nothing)
     return LoopVerification(not failures, reason, pose, information, result.quality, score,
-                            runner_up, far_side)
+                            runner_up, far_side, spread)
