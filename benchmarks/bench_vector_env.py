@@ -4,7 +4,8 @@ Prints, in one run on this machine:
 
 * env steps/s (CPU time of this process, ``time.process_time``; random actions, autoresets
   included) of ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` and of
-  ``vectorization_mode="sync"`` at N = 1, 16, 64, 256, and their ratio;
+  ``vectorization_mode="sync"`` at N = 1, 16, 64, 256, and their ratio (the two timed in
+  alternating slices of 50 ms, so load from other work on the machine falls on both alike);
 * where a batched env step goes at the largest N [us per env step]: the scan call alone
   (every sub-env, 50 random steps after a reset) of the default Lidars, of the same without
   range noise, of noiseless 8-beam Lidars and of those in a world with no obstacles, so the
@@ -91,51 +92,77 @@ def make(mode: str, num_envs: int, config: dict[str, Any] | None = None,
                         config={**BASE, **(config or {})}, **kwargs)
 
 
-def single_steps_per_second(seconds: float, seed: int = 0) -> float:
-    """Steps per CPU second of one ``gym.make`` env, random actions, reset when an episode
-    ends; one step before timing, as :func:`cpu_steps_per_second`."""
+def single_stepper(seed: int = 0) -> Callable[[], int]:
+    """One step of a ``gym.make`` env per call (random actions, reset when an episode ends);
+    returns the env steps taken (1). One step is taken first, so compiling (or loading the
+    numba cache) is not timed."""
     env = gym.make("DualLidar-v0", config=dict(BASE) or None)
     env.reset(seed=seed)
     env.action_space.seed(seed)
     actions = [env.action_space.sample() for _ in range(64)]
     env.step(actions[0])
     steps = 0
-    start = time.process_time()
-    while time.process_time() - start < seconds:
+
+    def step() -> int:
+        nonlocal steps
         _, _, terminated, truncated, _ = env.step(actions[steps % len(actions)])
         if terminated or truncated:
             env.reset()
         steps += 1
-    return steps / (time.process_time() - start)
+        return 1
+
+    return step
 
 
-def cpu_steps_per_second(env: gym.vector.VectorEnv, seconds: float, seed: int = 0) -> float:
-    """Env steps (N per vector step) per CPU second, random actions, autoreset included.
-
-    One step is taken before timing, so compiling (or loading the numba cache) is not timed.
-    """
+def vector_stepper(env: gym.vector.VectorEnv, seed: int = 0) -> Callable[[], int]:
+    """One step of ``env`` per call (random actions, autoreset included); returns the env
+    steps taken (N). One step is taken first, as :func:`single_stepper`."""
     env.reset(seed=seed)
     env.action_space.seed(seed)
     actions = [env.action_space.sample() for _ in range(64)]
     env.step(actions[0])
     steps = 0
-    start = time.process_time()
-    while time.process_time() - start < seconds:
+
+    def step() -> int:
+        nonlocal steps
         env.step(actions[steps % len(actions)])
         steps += 1
-    return steps * env.num_envs / (time.process_time() - start)
+        return env.num_envs
+
+    return step
 
 
-def scan_microseconds(env: Any, seconds: float, warmup_steps: int = 50) -> float:
-    """CPU time [us] per env of the batched env's scan call alone (every sub-env), at the poses
+def cpu_steps_per_second(*steppers: Callable[[], int], seconds: float,
+                         slice_seconds: float = 0.05) -> list[float]:
+    """Env steps per CPU second of each stepper, timed in alternating slices of about
+    ``slice_seconds`` each until each has had ``seconds``: on a machine shared with other
+    work, the envs compared see the same load, so their ratio does not follow it."""
+    steps, spent = [0] * len(steppers), [0.0] * len(steppers)
+    while min(spent) < seconds:
+        for k, step in enumerate(steppers):
+            start = time.process_time()
+            while time.process_time() - start < slice_seconds:
+                steps[k] += step()
+            spent[k] += time.process_time() - start
+    return [count / cpu for count, cpu in zip(steps, spent, strict=True)]
+
+
+def scan_call(env: Any, warmup_steps: int = 50) -> Callable[[], int]:
+    """The batched env's scan call alone (every sub-env) per call, at the poses
     ``warmup_steps`` random steps after a reset (where the timed loop's cars are, not at their
-    starts)."""
+    starts); returns N, the envs scanned."""
     env.reset(seed=0)
     env.action_space.seed(0)
     for _ in range(warmup_steps):
         env.step(env.action_space.sample())
     every = np.arange(env.num_envs)
-    return timed_microseconds(lambda: env._observe(every), seconds, env.num_envs)
+    env._observe(every)
+
+    def scan() -> int:
+        env._observe(every)
+        return env.num_envs
+
+    return scan
 
 
 @njit(cache=True)
@@ -147,42 +174,36 @@ def draw_standard_normals(items: Any, out: NDArray[np.float64]) -> None:
         fill_standard_normals(items[i][5], out)
 
 
-def timed_microseconds(call: Callable[[], Any], seconds: float, per: int) -> float:
-    """CPU time [us] of ``call()`` divided by ``per``, over ``seconds`` of repeats (one untimed
-    call first)."""
-    call()
-    calls = 0
-    start = time.process_time()
-    while time.process_time() - start < seconds:
-        call()
-        calls += 1
-    return (time.process_time() - start) / calls / per * 1e6
-
-
-def draw_microseconds(env: Any, seconds: float) -> float:
-    """CPU time [us] per env of the range noise's draws alone: one standard normal per beam
-    from each sub-env's generator, as the batched scan draws them (compiled PCG64 draws,
-    bit-identical to numpy's ``Generator.standard_normal``)."""
+def draw_call(env: Any) -> Callable[[], int]:
+    """The range noise's draws alone per call: one standard normal per beam from each sub-env's
+    generator, as the batched scan draws them (compiled PCG64 draws, bit-identical to numpy's
+    ``Generator.standard_normal``); returns N."""
     env.reset(seed=0)
     out = np.empty(env._scans.shape[1])  # one draw per beam of every Lidar
-    return timed_microseconds(lambda: draw_standard_normals(env._slots.scene[0], out), seconds,
-                              env.num_envs)
+    draw_standard_normals(env._slots.scene[0], out)
+
+    def draw() -> int:
+        draw_standard_normals(env._slots.scene[0], out)
+        return env.num_envs
+
+    return draw
 
 
-def python_microseconds(env: Any, seconds: float) -> float:
-    """CPU time [us] per env of a batched step's Python around its compiled call: the action
-    conversion, the observation copies and the infos (the action check itself is compiled,
-    in the step's one call)."""
+def python_call(env: Any) -> Callable[[], int]:
+    """A batched step's Python around its compiled call, per call: the action conversion, the
+    observation copies and the infos (the action check itself is compiled, in the step's one
+    call); returns N."""
     env.reset(seed=0)
     actions = np.zeros((env.num_envs, 2), np.float32)
 
-    def outputs() -> None:
+    def outputs() -> int:
         env._actions(actions)
         env._observation()
         env._infos(None)
         env._rewards.copy(), env._terminations.copy(), env._truncations.copy()
+        return env.num_envs
 
-    return timed_microseconds(outputs, seconds, env.num_envs)
+    return outputs
 
 
 def traced_bytes_per_env(mode: str, num_envs: int) -> float:
@@ -223,24 +244,29 @@ def main(argv: list[str] | None = None) -> None:
     print(f"{'N':>5} {'batched steps/s':>16} {'sync steps/s':>13} {'ratio':>6}")
     rates, ratios = {}, {}
     for n in args.sizes:
-        batched = cpu_steps_per_second(make("vector_entry_point", n), args.seconds)
-        sync = cpu_steps_per_second(make("sync", n), args.seconds)
+        batched, sync = cpu_steps_per_second(vector_stepper(make("vector_entry_point", n)),
+                                             vector_stepper(make("sync", n)), seconds=args.seconds)
         rates[n], ratios[n] = batched, batched / sync
         print(f"{n:>5} {batched:>16,.0f} {sync:>13,.0f} {batched / sync:>5.1f}x")
-    single = single_steps_per_second(args.seconds)
-    one = cpu_steps_per_second(make("vector_entry_point", 1), args.seconds)
+    single, one = cpu_steps_per_second(single_stepper(),
+                                       vector_stepper(make("vector_entry_point", 1)),
+                                       seconds=args.seconds)
     print(f"single env (gym.make): {single:,.0f} steps/s; the batched env at N = 1: {one:,.0f} "
           f"steps/s, {one / single:.2f}x")
     n = max(args.sizes)
-    noiseless = cpu_steps_per_second(make("vector_entry_point", n, NOISELESS), args.seconds)
-    few = cpu_steps_per_second(make("vector_entry_point", n, FEW_BEAMS), args.seconds)
-    full_scan, noiseless_scan, few_scan, call_scan = (
-        scan_microseconds(make("vector_entry_point", n, config, **kwargs).unwrapped, args.seconds)
-        for config, kwargs in ((None, {}), (NOISELESS, {}), (FEW_BEAMS, {}),
-                               (FEW_BEAMS, EMPTY_WORLD)))
-    draws = draw_microseconds(make("vector_entry_point", n).unwrapped, args.seconds)
-    python = python_microseconds(make("vector_entry_point", n).unwrapped, args.seconds)
-    full_us = 1e6 / rates[n]
+    scans = [scan_call(make("vector_entry_point", n, config, **kwargs).unwrapped)
+             for config, kwargs in ((None, {}), (NOISELESS, {}), (FEW_BEAMS, {}),
+                                    (FEW_BEAMS, EMPTY_WORLD))]
+    # every figure of the split in one interleaved run: their differences see the same load
+    rates_split = cpu_steps_per_second(
+        vector_stepper(make("vector_entry_point", n)), *scans,
+        draw_call(make("vector_entry_point", n).unwrapped),
+        python_call(make("vector_entry_point", n).unwrapped),
+        vector_stepper(make("vector_entry_point", n, NOISELESS)),
+        vector_stepper(make("vector_entry_point", n, FEW_BEAMS)), seconds=args.seconds)
+    full_us, full_scan, noiseless_scan, few_scan, call_scan, draws, python = (
+        1e6 / rate for rate in rates_split[:7])
+    noiseless, few = rates_split[7:]
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
           f"  {draws:5.2f} the 720 Gaussian draws of the range noise alone (compiled PCG64 "
           "ziggurat over each sub-env's generator state)\n"
@@ -262,12 +288,14 @@ def main(argv: list[str] | None = None) -> None:
           f"{noiseless_scan:.2f} = {draws + noiseless_scan:.2f} us")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     if BASE:
-        still = cpu_steps_per_second(make("vector_entry_point", n, {"moving_obstacles": 0}),
-                                     args.seconds)
+        still, = cpu_steps_per_second(
+            vector_stepper(make("vector_entry_point", n, {"moving_obstacles": 0})),
+            seconds=args.seconds)
         print(f"  of which the crowd: {full_us - 1e6 / still:5.2f} (without movers: {still:,.0f}"
               " steps/s)")
-    cluttered = cpu_steps_per_second(make("vector_entry_point", n, **cluttered_world(2000)),
-                                     args.seconds)
+    cluttered, = cpu_steps_per_second(
+        vector_stepper(make("vector_entry_point", n, **cluttered_world(2000))),
+        seconds=args.seconds)
     print(f"  in a 60 m square of 2,000 short walls: {cluttered:,.0f} steps/s")
     env = make("vector_entry_point", n)
     env.reset(seed=0)

@@ -15,6 +15,7 @@ output); the normals are numpy's ziggurat (``random_standard_normal`` of numpy's
 from __future__ import annotations
 
 import ctypes
+from typing import Any
 
 import numpy as np
 from llvmlite import ir
@@ -76,14 +77,33 @@ def state_words(rng: np.random.Generator) -> NDArray[np.uint64]:
 
 
 @intrinsic
-def _high_product(typingctx: object, a: types.Type, b: types.Type) -> tuple:
-    """The high 64 bits of the 128-bit product of two uint64."""
-    signature = types.uint64(types.uint64, types.uint64)
+def _affine(
+    typingctx: object,
+    low: types.Type,
+    high: types.Type,
+    a_low: types.Type,
+    a_high: types.Type,
+    c_low: types.Type,
+    c_high: types.Type,
+) -> tuple:
+    """``(low, high) * (a_low, a_high) + (c_low, c_high)`` mod 2**128, as ``(low, high)``
+    words: one 128-bit multiply-add, which LLVM lowers to three 64-bit multiplies."""
+    word = types.uint64
+    signature = types.UniTuple(word, 2)(word, word, word, word, word, word)
 
-    def codegen(context: object, builder: ir.IRBuilder, sig: object, args: list) -> ir.Value:
-        wide = ir.IntType(128)
-        product = builder.mul(builder.zext(args[0], wide), builder.zext(args[1], wide))
-        return builder.trunc(builder.lshr(product, ir.Constant(wide, 64)), ir.IntType(64))
+    def codegen(context: Any, builder: ir.IRBuilder, sig: object, args: list) -> ir.Value:
+        wide, narrow = ir.IntType(128), ir.IntType(64)
+        shift = ir.Constant(wide, 64)
+
+        def joined(lo: ir.Value, hi: ir.Value) -> ir.Value:
+            return builder.or_(builder.shl(builder.zext(hi, wide), shift), builder.zext(lo, wide))
+
+        value = builder.add(
+            builder.mul(joined(args[0], args[1]), joined(args[2], args[3])),
+            joined(args[4], args[5]),
+        )
+        parts = (builder.trunc(value, narrow), builder.trunc(builder.lshr(value, shift), narrow))
+        return context.make_tuple(builder, sig.return_type, parts)
 
     return signature, codegen
 
@@ -94,17 +114,9 @@ def _next_uint64(
 ) -> tuple[np.uint64, np.uint64, np.uint64]:
     """PCG64's next output and its new state ``(output, low, high)``: the step
     state * multiplier + increment (mod 2**128), then XSL-RR of the new state."""
-    new_low = low * MULTIPLIER_LOW + inc_low
-    carry = _U1 if new_low < inc_low else np.uint64(0)
-    new_high = (
-        _high_product(low, MULTIPLIER_LOW)
-        + low * MULTIPLIER_HIGH
-        + high * MULTIPLIER_LOW
-        + inc_high
-        + carry
-    )
-    mixed, turn = new_high ^ new_low, new_high >> _U58
-    return (mixed >> turn) | (mixed << ((_U64 - turn) & _U63)), new_low, new_high
+    low, high = _affine(low, high, MULTIPLIER_LOW, MULTIPLIER_HIGH, inc_low, inc_high)
+    mixed, turn = high ^ low, high >> _U58
+    return (mixed >> turn) | (mixed << ((_U64 - turn) & _U63)), low, high
 
 
 @njit(cache=True, inline="always")
