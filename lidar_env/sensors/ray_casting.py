@@ -5,16 +5,17 @@ primitives: each one within ``max_range`` updates only the beams inside the angu
 subtends from the sensor, found by index arithmetic for uniformly spaced beams and by binary
 search otherwise. Every candidate beam then gets the exact ray-circle or ray-segment
 intersection, so the interval only has to be conservative (it is widened by
-:data:`lidar_env.sensors.beam_wedge.ANGLE_MARGIN`). Four culls keep the primitives a sensor touches
-few, none of which can change a range (each skips only primitives no beam can hit closer than
-it already reads):
+:data:`lidar_env.sensors.beam_wedge.ANGLE_MARGIN`). Three culls keep the primitives a sensor
+touches few, none of which can change a range (each skips only primitives no beam can hit
+closer than it already reads):
 
 - the grid cells (:class:`~lidar_env.world.primitive_grid.PrimitiveGrid`) visited are those over the
   bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
-  90-degree Lidar visits about a quarter of a 360-degree one's;
-- cells are visited in rings of growing distance from the sensor, and a cell (listing three
-  or more primitives) whose every beam already ends nearer than the cell's nearest point is
-  skipped with its primitives (on a map of thousands of edges, many cells behind the walls);
+  90-degree Lidar visits about a quarter of a 360-degree one's; they are visited in rings of
+  growing distance from the sensor, so the near primitives shorten the beams first and a far
+  one's hits mostly fail the cheap "surely farther" tests (no square root, no division). No
+  cell is skipped for lying behind the beams' current ends: that test costs about what the
+  primitives it would skip cost;
 - a cell or primitive wholly outside a narrow sensor's beam wedge
   (:mod:`lidar_env.sensors.beam_wedge`) is skipped before bearings;
 - a polygon edge whose filled side faces the sensor is skipped (back-face culling, with the
@@ -213,41 +214,6 @@ def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: flo
 
 
 @njit(cache=True, fastmath=False)
-def _cell_hidden(
-    ranges: NDArray[np.float64], ox: float, oy: float, heading: float,
-    x0: float, y0: float, x1: float, y1: float, sorted_angles: NDArray[np.float64],
-    order: NDArray[np.int64], step: float, max_range: float,
-) -> bool:
-    """True when nothing in the cell ``[x0, x1] x [y0, y1]`` [m] (padded) can shorten a beam:
-    it lies beyond ``max_range``, or every beam towards it already ends nearer than it."""
-    gx = max(x0 - ox, ox - x1, 0.0)
-    gy = max(y0 - oy, oy - y1, 0.0)
-    if gx == 0.0 and gy == 0.0:
-        return False  # the sensor is in the cell
-    nearest2 = gx * gx + gy * gy  # squared: the pad keeps the comparison below safe
-    if nearest2 >= max_range * max_range:
-        return True
-    # The two corners that bound the cell's silhouette seen from the sensor.
-    if gy == 0.0:  # beside the cell: its near side
-        ax = bx = x0 if ox < x0 else x1
-        ay, by = y0, y1
-    elif gx == 0.0:  # above or below it
-        ay = by = y0 if oy < y0 else y1
-        ax, bx = x0, x1
-    elif (ox < x0) == (oy < y0):  # diagonal, lower left or upper right
-        ax, ay, bx, by = x0, y1, x1, y0
-    else:
-        ax, ay, bx, by = x0, y0, x1, y1
-    lo, width = _subtended(ax - ox, ay - oy, bx - ox, by - oy, heading)
-    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-    for q in range(l0 - f0 + l1 - f1):
-        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-        if ranges[j] * ranges[j] > nearest2:
-            return False
-    return True
-
-
-@njit(cache=True, fastmath=False)
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
     cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
@@ -317,12 +283,10 @@ def cast_sensor(
                           + segment_start[c + 1] - segment_start[c])
                 if column < c0 or listed == 0:
                     continue
-                if ring > 0 and listed > 2:  # the tests cost about what two primitives do
+                if cull and ring > 0 and listed > 2:  # the test costs about two primitives
                     bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
                     bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
-                    if (cull and box_outside_wedge(wedge, bx0, by0, bx1, by1)) or _cell_hidden(
-                            ranges, ox, oy, heading, bx0 + ox, by0 + oy, bx1 + ox, by1 + oy,
-                            sorted_angles, order, step, max_range):
+                    if box_outside_wedge(wedge, bx0, by0, bx1, by1):
                         continue
                 for p in range(circle_start[c], circle_start[c + 1]):
                     i = circle_ids[p]

@@ -142,8 +142,8 @@ def test_rgb_rendering_draws_lidars_of_different_lengths():
     [LidarConfig((0.35, 0.0, 0.0), 181, math.pi, 8.0)],
 ], ids=["4 x 90", "1 x 180"])
 def test_narrow_lidars_on_a_traced_map_agree_with_pymunk(lidars) -> None:
-    # the caster skips cells outside each wedge, cells hidden behind walls and primitives
-    # outside the wedge: none of that may lose a hit
+    # the caster skips cells and primitives outside each wedge and edges facing away: none of
+    # that may lose a hit
     image = np.zeros((200, 200), dtype=np.uint8)
     image[:4], image[-4:], image[:, :4], image[:, -4:] = 255, 255, 255, 255
     rows, cols = np.ogrid[:200, :200]
