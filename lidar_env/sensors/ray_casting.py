@@ -4,18 +4,16 @@ Instead of testing every beam against every primitive, :func:`cast_sensor` sweep
 primitives: each one within ``max_range`` updates only the beams inside the angular interval it
 subtends from the sensor, found by index arithmetic for uniformly spaced beams and by binary
 search otherwise. Every candidate beam then gets the exact ray-circle or ray-segment
-intersection, so the interval only has to be conservative (it is widened by
-:data:`lidar_env.sensors.beam_wedge.ANGLE_MARGIN`). Three culls keep the primitives a sensor
-touches few, none of which can change a range (each skips only primitives no beam can hit
-closer than it already reads):
+intersection (computed whole and kept or not without a branch), so the interval only has to
+be conservative (it is widened by :data:`lidar_env.sensors.beam_wedge.ANGLE_MARGIN`). Three
+culls keep the primitives a sensor touches few, none of which can change a range (each skips
+only primitives no beam can hit closer than it already reads):
 
 - the grid cells (:class:`~lidar_env.world.primitive_grid.PrimitiveGrid`) visited are those over the
   bounding box of the sensor's sector (its beams' angular range out to ``max_range``), so a
-  90-degree Lidar visits about a quarter of a 360-degree one's; they are visited in rings of
-  growing distance from the sensor, so the near primitives shorten the beams first and a far
-  one's hits mostly fail the cheap "surely farther" tests (no square root, no division). No
-  cell is skipped for lying behind the beams' current ends: that test costs about what the
-  primitives it would skip cost;
+  90-degree Lidar visits about a quarter of a 360-degree one's (row by row: the ranges are the
+  nearest hits whatever the order; no cell is skipped for lying behind the beams' current
+  ends, a test that costs about what the primitives it would skip cost);
 - a cell or primitive wholly outside a narrow sensor's beam wedge
   (:mod:`lidar_env.sensors.beam_wedge`) is skipped before bearings;
 - a polygon edge whose filled side faces the sensor is skipped (back-face culling, with the
@@ -45,14 +43,9 @@ from lidar_env.world.primitive_grid import cell_block, odd_crossings, point_segm
 _ENDPOINT_TOLERANCE = 1e-12
 #: [rad] a beam wedge leaving less of the circle than this out is not worth culling against.
 _MIN_CULLED_ANGLE = 0.2
-#: A hit at ``t * denom`` beyond ``range * denom`` times this (far above rounding) is farther.
-_SURELY_FARTHER = 1.0 + 1e-12
 #: [m] a segment's bounding box farther than this from the sensor cannot touch it, and one whose
 #: nearest end is within ``max_range * sqrt(_IN_RANGE)`` is in range: no exact distance needed.
 _NEAR, _IN_RANGE = 1e-9, 1.0 - 1e-9
-#: A circle's ``b - r`` beyond a range by more than this times ``b + r`` surely hits farther (far
-#: above the rounding of ``b - sqrt(disc)``): its square root is not needed.
-_CIRCLE_SLACK = 1e-9
 _TWO_PI = 2.0 * math.pi
 
 
@@ -137,19 +130,6 @@ def _subtended(v1x: float, v1y: float, v2x: float, v2y: float, heading: float):
 
 
 @njit(cache=True, fastmath=False)
-def _circle_hit(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float, r: float):
-    """Distance along the unit ray ``o + t d`` to the circle (sensor outside), or inf."""
-    fx, fy = cx - ox, cy - oy
-    b = fx * dx + fy * dy  # distance along the ray to the foot of the centre
-    off_ray = fx * dy - fy * dx  # distance of the centre from the ray's line
-    # (r - p)(r + p) rather than b^2 - |f|^2 + r^2: no cancellation near tangency.
-    disc = (r - off_ray) * (r + off_ray)
-    if disc < 0.0 or b < 0.0:
-        return math.inf
-    return b - math.sqrt(disc)
-
-
-@njit(cache=True, fastmath=False)
 def segment_hit(ox: float, oy: float, dx: float, dy: float, x1: float, y1: float, x2: float,
                 y2: float, nearer_than: float) -> float:
     """Distance along the unit ray ``o + t d`` to the segment if below ``nearer_than``, else
@@ -177,13 +157,21 @@ def _circle_window(fx: float, fy: float, d: float, r: float, heading: float):
 
 @njit(cache=True, fastmath=False)
 def _circle_lower(ox: float, oy: float, dx: float, dy: float, cx: float, cy: float, r: float,
-                    current: float) -> float:
-    """A beam's range ``current`` lowered to its exact hit on the circle ``(cx, cy, r)``."""
-    b = (cx - ox) * dx + (cy - oy) * dy  # as in _circle_hit, whose t is >= b - r
-    if b - r - current > _CIRCLE_SLACK * (b + r):
-        return current  # surely not nearer: skip the square root
-    t = _circle_hit(ox, oy, dx, dy, cx, cy, r)
-    return t if t < current else current
+                  current: float) -> float:
+    """A beam's range ``current`` lowered to its exact hit on the circle ``(cx, cy, r)``: the
+    distance along the unit ray ``o + t d`` (sensor outside the circle) to where it enters
+    the circle, if the ray meets it ahead and nearer than ``current``.
+
+    Both outcomes are computed and one is picked, without a branch: whether a beam of a
+    circle's window hits follows no pattern a branch predictor learns, and a mispredicted
+    branch costs more than the square root."""
+    fx, fy = cx - ox, cy - oy
+    b = fx * dx + fy * dy  # distance along the ray to the foot of the centre
+    off_ray = fx * dy - fy * dx  # distance of the centre from the ray's line
+    # (r - p)(r + p) rather than b^2 - |f|^2 + r^2: no cancellation near tangency.
+    disc = (r - off_ray) * (r + off_ray)
+    t = b - math.sqrt(max(disc, 0.0))
+    return t if (disc >= 0.0) & (b >= 0.0) & (t < current) else current
 
 
 # cast_sensor writes both sweeps out, guards odd_crossings and hands cell_block the grid's
@@ -271,94 +259,87 @@ def cast_sensor(
     c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
                                         0.0, 1.0, 0.0), grid[:5])
     pad = 1e-9 * size
-    for ring in range(max(sx - c0, c1 - sx, sy - r0, r1 - sy) + 1):
-        for iy in range(max(r0, sy - ring), min(r1, sy + ring) + 1):
-            edge_row = iy == sy - ring or iy == sy + ring
-            ix = max(c0, sx - ring) if edge_row else sx - ring
-            while ix <= min(c1, sx + ring):
-                column = ix
-                ix += 1 if edge_row else 2 * ring
-                c = iy * nx + column
-                listed = (circle_start[c + 1] - circle_start[c]
-                          + segment_start[c + 1] - segment_start[c])
-                if column < c0 or listed == 0:
+    for iy in range(r0, r1 + 1):
+        for column in range(c0, c1 + 1):
+            c = iy * nx + column
+            listed = (circle_start[c + 1] - circle_start[c]
+                      + segment_start[c + 1] - segment_start[c])
+            if listed == 0:
+                continue
+            if cull and (column != sx or iy != sy) and listed > 2:  # costs about two primitives
+                bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
+                bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
+                if box_outside_wedge(wedge, bx0, by0, bx1, by1):
                     continue
-                if cull and ring > 0 and listed > 2:  # the test costs about two primitives
-                    bx0, by0 = x0 + column * size - pad - ox, y0 + iy * size - pad - oy
-                    bx1, by1 = bx0 + size + 2.0 * pad, by0 + size + 2.0 * pad
-                    if box_outside_wedge(wedge, bx0, by0, bx1, by1):
+            for p in range(circle_start[c], circle_start[c + 1]):
+                i = circle_ids[p]
+                if circle_seen[i] == stamp:
+                    continue
+                circle_seen[i] = stamp
+                cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
+                if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
+                        cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
+                    continue
+                fx, fy = cx - ox, cy - oy  # the circle's sweep (see sweep_circle)
+                d = math.sqrt(fx * fx + fy * fy)
+                if d - r >= max_range:
+                    continue
+                if d <= r:
+                    ranges.fill(0.0)
+                    return
+                lo, width = _circle_window(fx, fy, d, r, heading)
+                f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+                for q in range(l0 - f0 + l1 - f1):
+                    j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+                    ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+            for p in range(segment_start[c], segment_start[c + 1]):
+                i = segment_ids[p]
+                if segment_seen[i] == stamp:
+                    continue
+                segment_seen[i] = stamp
+                # the segment's sweep (see sweep_circle), on scalars: a row view costs
+                x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
+                v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
+                ex, ey = x2 - x1, y2 - y1
+                if culls_faces and facing[i] != 0 and facing[i] * (ex * -v1y + ey * v1x) < (
+                        -BACK_FACE_TOLERANCE * (abs(ex) + abs(ey))):
+                    continue  # the sensor is on its filled side: it faces away
+                if cull and outside_wedge(wedge, v1x, v1y, v2x, v2y, 0.0):
+                    continue
+                gap = max(min(v1x, v2x), -max(v1x, v2x), min(v1y, v2y), -max(v1y, v2y))
+                if gap >= max_range:
+                    continue
+                # Its distance only matters when the sensor may touch it or it may lie out
+                # of range: both are ruled out cheaply for most segments.
+                if gap <= _NEAR or min(v1x * v1x + v1y * v1y, v2x * v2x + v2y * v2y) >= (
+                        max_range * max_range * _IN_RANGE):
+                    d2 = point_segment_distance2(ox, oy, x1, y1, x2, y2)
+                    if d2 >= max_range * max_range:
                         continue
-                for p in range(circle_start[c], circle_start[c + 1]):
-                    i = circle_ids[p]
-                    if circle_seen[i] == stamp:
-                        continue
-                    circle_seen[i] = stamp
-                    cx, cy, r = circles[i, 0], circles[i, 1], circles[i, 2]
-                    if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
-                            cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
-                        continue
-                    fx, fy = cx - ox, cy - oy  # the circle's sweep (see sweep_circle)
-                    d = math.sqrt(fx * fx + fy * fy)
-                    if d - r >= max_range:
-                        continue
-                    if d <= r:
+                    if d2 == 0.0:
                         ranges.fill(0.0)
                         return
-                    lo, width = _circle_window(fx, fy, d, r, heading)
-                    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-                    for q in range(l0 - f0 + l1 - f1):
-                        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
-                for p in range(segment_start[c], segment_start[c + 1]):
-                    i = segment_ids[p]
-                    if segment_seen[i] == stamp:
-                        continue
-                    segment_seen[i] = stamp
-                    # the segment's sweep (see sweep_circle), on scalars: a row view costs
-                    x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
-                    v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
-                    ex, ey = x2 - x1, y2 - y1
-                    if culls_faces and facing[i] != 0 and facing[i] * (ex * -v1y + ey * v1x) < (
-                            -BACK_FACE_TOLERANCE * (abs(ex) + abs(ey))):
-                        continue  # the sensor is on its filled side: it faces away
-                    if cull and outside_wedge(wedge, v1x, v1y, v2x, v2y, 0.0):
-                        continue
-                    gap = max(min(v1x, v2x), -max(v1x, v2x), min(v1y, v2y), -max(v1y, v2y))
-                    if gap >= max_range:
-                        continue
-                    # Its distance only matters when the sensor may touch it or it may lie out
-                    # of range: both are ruled out cheaply for most segments.
-                    if gap <= _NEAR or min(v1x * v1x + v1y * v1y, v2x * v2x + v2y * v2y) >= (
-                            max_range * max_range * _IN_RANGE):
-                        d2 = point_segment_distance2(ox, oy, x1, y1, x2, y2)
-                        if d2 >= max_range * max_range:
-                            continue
-                        if d2 == 0.0:
-                            ranges.fill(0.0)
-                            return
-                    a1 = _bearing(v1y, v1x)
-                    a2 = _bearing(v2y, v2x)
-                    if v1x * v2y - v1y * v2x >= 0.0:
-                        lo, width = a1, _wrap_positive(a2 - a1)
-                    else:
-                        lo, width = a2, _wrap_positive(a1 - a2)
-                    if width > math.pi:
-                        width = math.pi if width < 1.5 * math.pi else 0.0
-                    lo = _wrap_positive(lo - heading)
-                    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-                    n0 = max(l0 - f0, 0)
-                    along = v1x * ey - v1y * ex  # t * denom
-                    for q in range(n0 + l1 - f1):
-                        j = order[f0 + q] if q < n0 else order[f1 + q - n0]
-                        denom = dir_x[j] * ey - dir_y[j] * ex
-                        if denom == 0.0:
-                            continue
-                        reach = ranges[j] * denom * _SURELY_FARTHER
-                        if along >= reach if denom > 0.0 else along <= reach:
-                            continue  # t > ranges[j] for sure: skip the division
-                        t = along / denom
-                        if t < 0.0 or t >= ranges[j]:
-                            continue
-                        u = (v1x * dir_y[j] - v1y * dir_x[j]) / denom
-                        if -_ENDPOINT_TOLERANCE <= u <= 1.0 + _ENDPOINT_TOLERANCE:
-                            ranges[j] = t
+                a1 = _bearing(v1y, v1x)
+                a2 = _bearing(v2y, v2x)
+                if v1x * v2y - v1y * v2x >= 0.0:
+                    lo, width = a1, _wrap_positive(a2 - a1)
+                else:
+                    lo, width = a2, _wrap_positive(a1 - a2)
+                if width > math.pi:
+                    width = math.pi if width < 1.5 * math.pi else 0.0
+                lo = _wrap_positive(lo - heading)
+                f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
+                n0 = max(l0 - f0, 0)
+                along = v1x * ey - v1y * ex  # t * denom
+                for q in range(n0 + l1 - f1):
+                    j = order[f0 + q] if q < n0 else order[f1 + q - n0]
+                    # both divisions always, the hit picked without a branch (see
+                    # _circle_lower); a parallel beam (denom 0) misses
+                    denom = dir_x[j] * ey - dir_y[j] * ex
+                    divisor = denom if denom != 0.0 else 1.0
+                    t = along / divisor
+                    u = (v1x * dir_y[j] - v1y * dir_x[j]) / divisor
+                    current = ranges[j]
+                    hit = (denom != 0.0) & (t >= 0.0) & (t < current) & (
+                        u >= -_ENDPOINT_TOLERANCE) & (u <= 1.0 + _ENDPOINT_TOLERANCE)
+                    ranges[j] = t if hit else current
