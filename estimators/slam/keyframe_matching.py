@@ -21,9 +21,9 @@ from estimators.slam.loop_closure import (
     MIN_POINTS,
     LoopVerification,
     PlaceMap,
-    match_information,
     verify_loop,
 )
+from estimators.slam.match_uncertainty import match_information
 from estimators.slam.place_descriptor import descriptor_distances
 from estimators.slam.pose_graph import chain_covariance
 from lidar_env.core.se2 import compose, inverse, relative, transform_points

@@ -16,7 +16,11 @@ Three stages, each a pure function of plain arrays:
    old map (ICP inlier share and likelihood-field score) and if the best match is clearly
    better than the best match elsewhere in the window (ambiguity test) and if it does not lay
    the scan onto the far side of what the old place saw (:mod:`estimators.slam.view_side`:
-   a shelf or a row of posts seen from the aisles on either side); the pose graph then
+   a shelf or a row of posts seen from the aisles on either side). An accepted match is
+   refined without its points on surfaces seen from their other side (a pillar's far side
+   laid on its near side is a pillar's width off), and its edge's uncertainty is its ICP
+   Hessian's plus the spread of the near-best poses
+   (:mod:`estimators.slam.match_uncertainty`); the pose graph then
    weighs loop edges with a robust kernel and drops those it cannot reconcile
    (:mod:`estimators.slam.graph_slam`).
 
@@ -39,15 +43,15 @@ from estimators.matching.branch_and_bound import (
     match,
 )
 from estimators.matching.icp import ICPParams, register
-from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
+from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     LikelihoodField,
     first_in_each_cell,
     voxel_downsample,
 )
-from estimators.slam.match_spread import score_spread
+from estimators.slam.match_uncertainty import match_information, score_spread
 from estimators.slam.place_grid import search_pyramid
-from estimators.slam.view_side import far_side_share
+from estimators.slam.view_side import far_side_share, without_far_side
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import transform_points, wrap_angle
 
@@ -109,10 +113,11 @@ class LoopClosureParams:
             matrix as if ``effective_points`` independent pairs of noise ``point_sigma`` had
             made it (0.05 m, 20: neighbouring residuals are strongly correlated, so hundreds
             of pairs would claim mm accuracy; loop matches are good to ~1-2 cm).
-        spread_turn: an accepted match's covariance adds the spread of the poses within
-            ``ambiguity_distance`` and 5 deg of it that score at least ``ambiguity_ratio`` of
-            the best (:func:`~estimators.slam.match_spread.score_spread`): the Hessian's
-            point noise does not hold where one pillar or a shelf's end fixes a direction.
+        spread_turn, spread_sigmas: an accepted match's covariance adds the spread of the
+            poses within ``ambiguity_distance`` and 5 deg of it that score at least
+            ``ambiguity_ratio`` of the best or within 2 standard errors of it
+            (:func:`~estimators.slam.match_uncertainty.score_spread`): the Hessian's point
+            noise does not hold where one pillar or a shelf's end fixes a direction.
     """
 
     resolution: float = 0.05
@@ -179,7 +184,7 @@ class LoopVerification:
             (else 0, and ``reason`` lists the others that failed). far_side: share of the
             matched points seen from the other side of their surface (``max_far_side``; 0
             where not measured). spread: ``(3, 3)`` covariance of the near-best poses about
-            ``pose`` (:func:`~estimators.slam.match_spread.score_spread`; zeros where
+            ``pose`` (:func:`~estimators.slam.match_uncertainty.score_spread`; zeros where
             ``information`` is).
     """
 
@@ -307,32 +312,6 @@ def correlative_match(
     return found.pose, found.score, found.runner_up()
 
 
-def match_information(
-    reference: PointToLineReference, points: NDArray[np.float64], pose: NDArray[np.float64],
-    params: LoopClosureParams,
-) -> NDArray[np.float64]:
-    """``(3, 3)`` information of a registration: the point-to-line Gauss-Newton Hessian over
-    the inlier pairs at ``pose``, ``mean(J^T J) * effective_points / point_sigma^2``; small
-    along directions the scene leaves free (a corridor's axis), large across them.
-
-    Expressed in the pose graph's residual coordinates (the pose's own frame): the Hessian
-    over a reference-frame perturbation ``(dx, dy, dtheta)`` is rotated by ``R(theta)``."""
-    world = transform_points(pose, points)
-    pairs = reference.correspond(world, params.inlier_distance)
-    if len(pairs.index) == 0:
-        return 1e-2 * np.eye(3)
-    jacobian = point_to_line_jacobian(world[pairs.index], pose[:2], pairs.normals)
-    hessian = jacobian.T @ jacobian / len(jacobian) * params.effective_points
-    hessian /= params.point_sigma**2
-    to_local = np.eye(3)
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    to_local[:2, :2] = [[c, -s], [s, c]]
-    hessian = to_local.T @ hessian @ to_local
-    # A floor (sigma 10 m / 10 rad) keeps the matrix invertible in a degenerate scene without
-    # adding information the scan does not hold.
-    return hessian + 1e-2 * np.eye(3)
-
-
 def verify_loop(
     place: PlaceMap,
     query_points: ArrayLike,
@@ -390,6 +369,13 @@ def verify_loop(
         failures.append(f"ambiguous: a match {params.ambiguity_distance} m away scores "
                         f"{runner_up:.2f} of the best > {params.ambiguity_ratio}")
     reason = "; ".join(failures) if failures else "accepted"
+    if far_side > 0:  # refined, weighed and spread on the pairs seen from their own side
+        kept = without_far_side(place.reference, place.viewpoints, query, pose,
+                                params.inlier_distance)
+        thinned = without_far_side(place.reference, place.viewpoints, thinned, pose,
+                                   params.inlier_distance)
+        if len(kept) >= MIN_POINTS:
+            query, pose = kept, register(place.reference, kept, pose, icp).pose
     measured = measure_rejected or not failures
     information = match_information(place.reference, query, pose, params) if measured else nothing
     spread = (score_spread(place.field, thinned, pose, params.ambiguity_distance,

@@ -8,7 +8,7 @@ import pytest
 
 from estimators.matching.scan_matching import scan_to_points
 from estimators.slam.loop_closure import LoopClosureParams, PlaceMap, verify_loop
-from estimators.slam.view_side import far_side_share
+from estimators.slam.view_side import far_side_pairs, far_side_share, without_far_side
 from lidar_env.core import EstimatorInputError
 from lidar_env.sensors.lidar import cast_rays
 
@@ -57,3 +57,16 @@ def test_a_loop_match_onto_the_far_side_is_refused_with_a_reason() -> None:
     honest = verify_loop(place, points_at(revisit, 2), revisit - SOUTH + [0.2, 0.1, 0.0], 0.5)
     assert honest.accepted and honest.far_side < 0.1
     np.testing.assert_allclose(honest.pose[:2], (revisit - SOUTH)[:2], atol=0.03)
+
+
+def test_points_on_the_far_side_are_left_out_and_the_rest_kept() -> None:
+    place = PlaceMap(points_at(SOUTH, 0), LoopClosureParams())
+    north = points_at(NORTH, 1)
+    alias = NORTH - SOUTH - np.array([0.0, 0.6, 0.0])  # the north face on the south face
+    counted, far = far_side_pairs(place.reference, place.viewpoints, north, alias, 0.1)
+    kept = without_far_side(place.reference, place.viewpoints, north, alias, 0.1)
+    assert far.sum() > 0.9 * counted.sum() > 0 and len(kept) == len(north) - far.sum()
+    revisit = np.array([0.4, -1.1, 0.2])
+    same_side = points_at(revisit, 2)
+    kept = without_far_side(place.reference, place.viewpoints, same_side, revisit - SOUTH, 0.1)
+    assert len(kept) > 0.95 * len(same_side)

@@ -1,7 +1,9 @@
-"""How far a verified loop match could move and fit as well: the spread of the near-best poses
-around it on the likelihood field, as a covariance the loop edge adds to its ICP Hessian's.
+"""How uncertain a verified loop match is: the information of its point-to-line ICP Hessian
+(:func:`match_information`), and how far it could move and fit as well (:func:`score_spread`:
+the spread of the near-best poses around it on the likelihood field), a covariance the loop
+edge adds to the Hessian's.
 
-The ICP Hessian (:func:`~estimators.slam.loop_closure.match_information`) says how sharply the
+The ICP Hessian says how sharply the
 point-to-line cost rises at the match, as if its residuals were independent noise. Where few
 surfaces fix a direction (a pillar or two, the end of a shelf, a corner), their errors do not
 average out: a pillar seen from another side, or the end face of a shelf seen from the other
@@ -20,11 +22,22 @@ angles [rad].
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.matching.point_to_line import PointToLineReference, point_to_line_jacobian
 from estimators.matching.scan_matching import LikelihoodField
 from lidar_env.core.se2 import transform_points
+
+if TYPE_CHECKING:
+    from estimators.slam.loop_closure import LoopClosureParams
+
+#: [m] standard deviation along a direction the near-best translations fill up to the window's
+#: edge (unbounded: an aisle's axis), as :func:`match_information`'s
+#: floor: no information.
+UNBOUNDED_SIGMA = 10.0
 
 
 def score_spread(
@@ -38,10 +51,14 @@ def score_spread(
     sigmas: float = 0.0,
 ) -> NDArray[np.float64]:
     """``(3, 3)`` second moment of the offsets ``(dx, dy, dtheta)`` from ``pose`` (3,) whose
-    mean score of ``points`` (M, 2, query frame) on ``field`` is at least ``ratio`` times the
-    best: translations within ``reach`` [m] per axis on the field's cells, headings within
-    ``turn`` [rad] in ``angular_step`` steps. Translations are turned into ``pose``'s frame.
-    Zeros without points."""
+    mean score of ``points`` (M, 2, query frame) on ``field`` is near the best: at least
+    ``ratio`` times it, or within ``sigmas`` standard errors of it (its points' scores' standard
+    deviation over the square root of their count: a match on a handful of points is no
+    sharper than that). Translations within ``reach`` [m] per axis on the field's cells,
+    headings within ``turn`` [rad] in ``angular_step`` steps; where near-best translations
+    reach the edge of that window, the direction they fill (their main axis: an aisle's)
+    gets ``UNBOUNDED_SIGMA`` on top. Translations are turned into ``pose``'s frame. Zeros
+    without points."""
     if len(points) == 0:
         return np.zeros((3, 3))
     n = int(round(reach / field.resolution))
@@ -74,7 +91,38 @@ def score_spread(
         ]
     )
     moment = offsets.T @ offsets / len(offsets)
+    if np.any(np.abs(near[:, 1:] - n) == n):
+        _, axes = np.linalg.eigh(moment[:2, :2])
+        moment[:2, :2] += UNBOUNDED_SIGMA**2 * np.outer(axes[:, -1], axes[:, -1])
     c, s = np.cos(pose[2]), np.sin(pose[2])
     to_local = np.eye(3)
     to_local[:2, :2] = [[c, -s], [s, c]]
     return to_local.T @ moment @ to_local
+
+
+def match_information(
+    reference: PointToLineReference,
+    points: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    params: LoopClosureParams,
+) -> NDArray[np.float64]:
+    """``(3, 3)`` information of a registration: the point-to-line Gauss-Newton Hessian over
+    the inlier pairs at ``pose``, ``mean(J^T J) * effective_points / point_sigma^2``; small
+    along directions the scene leaves free (a corridor's axis), large across them.
+
+    Expressed in the pose graph's residual coordinates (the pose's own frame): the Hessian
+    over a reference-frame perturbation ``(dx, dy, dtheta)`` is rotated by ``R(theta)``."""
+    world = transform_points(pose, points)
+    pairs = reference.correspond(world, params.inlier_distance)
+    if len(pairs.index) == 0:
+        return 1e-2 * np.eye(3)
+    jacobian = point_to_line_jacobian(world[pairs.index], pose[:2], pairs.normals)
+    hessian = jacobian.T @ jacobian / len(jacobian) * params.effective_points
+    hessian /= params.point_sigma**2
+    to_local = np.eye(3)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    to_local[:2, :2] = [[c, -s], [s, c]]
+    hessian = to_local.T @ hessian @ to_local
+    # A floor (sigma 10 m / 10 rad) keeps the matrix invertible in a degenerate scene without
+    # adding information the scan does not hold.
+    return hessian + 1e-2 * np.eye(3)
