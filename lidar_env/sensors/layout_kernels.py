@@ -124,7 +124,6 @@ def cast_packed(
     total = table.shape[1]
     rows = table.ravel()  # 1-D row slices stay contiguous for numba (2-D ones would not)
     exact = rows[3 * total:4 * total]
-    outline = car_outline(car) if car.shape[0] == 5 else np.empty((0, 4))
     for k in range(sensor_poses.shape[0]):
         a, b = int(params[k, FIRST]), int(params[k, END])
         max_range, housing = params[k, MAX_RANGE], params[k, HOUSING]
@@ -139,10 +138,10 @@ def cast_packed(
             cast_movers(ranges, pose[0], pose[1], pose[2] % (2.0 * math.pi), movers, own,
                         max_range)
         if housing >= 0.0:
-            if outline.shape[0] == 0:
+            if car.shape[0] != 5:
                 raise ConfigError("car: a self-occluded Lidar needs the car's pose and size "
                                   "(LidarLayout.scan(..., car_pose=...)), got none")
-            cast_body(ranges, pose[0], pose[1], outline, housing, own, max_range)
+            cast_body(ranges, pose[0], pose[1], car_outline(car), housing, own, max_range)
     return exact
 
 
