@@ -85,8 +85,12 @@ def _sorted_range(
     """Positions ``[first, last)`` in ``sorted_angles`` of the angles within ``[lo, hi]``."""
     n = sorted_angles.shape[0]
     if step > 0.0:
-        first = max(0, int(math.ceil((lo - sorted_angles[0]) / step)))
-        last = min(n, int(math.floor((hi - sorted_angles[0]) / step)) + 1)
+        # times the reciprocal (hoisted out of a sensor's loops once inlined), not divided:
+        # it moves a bound by one beam at most, and only for a beam at the edge of the
+        # margin-widened interval, which cannot hit
+        per_step = 1.0 / step
+        first = max(0, int(math.ceil((lo - sorted_angles[0]) * per_step)))
+        last = min(n, int(math.floor((hi - sorted_angles[0]) * per_step)) + 1)
         return first, last
     return np.searchsorted(sorted_angles, lo, "left"), np.searchsorted(sorted_angles, hi, "right")
 
