@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import re
 import shutil
 from pathlib import Path
 
@@ -63,6 +64,17 @@ def test_a_path_pinned_line_is_named(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("script", ["setup.sh", "lock.sh"])
-def test_set_up_scripts_install_from_the_lock_with_pip(script: str) -> None:
+def test_set_up_scripts_work_from_the_lock(script: str) -> None:
     text = (ROOT / "scripts" / script).read_text()
-    assert "requirements.lock" in text and "uv " not in text and "poetry" not in text
+    assert "requirements.lock" in text and "poetry" not in text
+
+
+def test_set_up_installs_torch_with_pip_before_uv_installs_the_lock() -> None:
+    """uv does not look at this machine's CPU build of torch: pip installs it first, at the
+    lock's version, so uv finds it there and never resolves a multi-GB CUDA build."""
+    text = (ROOT / "scripts" / "setup.sh").read_text()
+    torch = text.index('install --no-compile --no-deps "torch==2.13.0"')
+    assert torch < text.index("install -q --no-deps -r requirements.lock")
+    assert torch < text.index("sync -q requirements.lock")
+    assert re.search(r"^UV_VERSION=\d+\.\d+\.\d+$", text, flags=re.M)
+    assert "torch==2.13.0+cpu" in (ROOT / "requirements.lock").read_text()
