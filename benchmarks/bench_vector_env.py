@@ -13,9 +13,10 @@ Prints, in one run on this machine:
   the noise split into its Gaussian draws alone (a compiled loop drawing them as the scan
   does) and the rest; the step's remainder split into its Python (the action conversion,
   observation copies, infos) and the compiled action check, motion, collision, progress and
-  reward; and
-  what 200,000 steps/s leaves per step against what the draws and the noiseless scan alone
-  take; and the batched env in a large map (2,000 walls);
+  reward (every figure of the split, the whole step included, timed in one run of
+  alternating slices, so their differences see the same load); what 200,000 steps/s leaves
+  per step against what the draws and the noiseless scan alone take; and the batched env in
+  a large map (2,000 walls);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
