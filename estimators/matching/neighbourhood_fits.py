@@ -33,6 +33,13 @@ Tree = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], NDArray[
 
 #: Most points of a node whose points are searched together by :func:`neighbours_of`.
 BATCH_SIZE = 2 * LEAF_SIZE
+#: A neighbourhood that is no line is fitted again through more points while it spreads across
+#: no more than this many times the noise limit (twice the median spread of the first fits);
+#: the grown line is kept only within the limit itself. In the band of a noisy wall, about 2 %
+#: of the first fits spread just past the limit by chance (5 cm voxels, 1.5 cm range noise);
+#: left as "no line", their two-nearest-point pairs lie across the band and pin the motion
+#: along the wall with their noise (a TurtleBot down a depot's aisle drifted metres).
+GROW_SPREAD = 1.5
 
 
 @njit(cache=True, inline="always")
@@ -276,7 +283,8 @@ def fit_neighbourhoods(
     """Every point's fit (:func:`_fit`) through its ``k`` nearest neighbours within
     ``max_radius`` [m] (found by :func:`neighbours_of`, in the tree's order); then, with
     twice the median spread across of those fits as the noise limit, the points whose
-    neighbours are no line but spread across no more than that are fitted again through
+    neighbours are no line but spread across no more than ``GROW_SPREAD`` times that are
+    fitted again through
     twice as many, and again those of them still so, up to ``limit`` neighbours (a point
     with fewer neighbours than were asked for already has all within ``max_radius``)."""
     n = points.shape[0]
@@ -298,7 +306,7 @@ def fit_neighbourhoods(
         still = 0
         for i in range(fitting):
             row = order[positions[i]]
-            if not valid[row] and count[row] == width and across[row] <= noise:
+            if not valid[row] and count[row] == width and across[row] <= GROW_SPREAD * noise:
                 positions[still] = positions[i]
                 still += 1
         fitting, width = still, min(2 * width, limit)

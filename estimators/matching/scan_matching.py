@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from estimators.base import SensorSetup
 from estimators.matching.likelihood_grids import likelihood_scores
 from estimators.matching.nearest import PointIndex
-from estimators.matching.neighbourhood_fits import local_fits
+from estimators.matching.neighbourhood_fits import GROW_SPREAD, local_fits
 from estimators.matching.prediction import median
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import transform_points
@@ -244,7 +244,8 @@ def _fit_lines(
     kept only if its spread across is at most twice the typical one of the first fits (their
     median, i.e. the walls' range noise): where the sensor is precise, the feature stands out
     of that noise and stays a feature; where it is as noisy as the feature is deep, it cannot
-    be told from a wall anyway.
+    be told from a wall anyway. Growing is tried up to ``GROW_SPREAD`` times that limit: a
+    noisy wall's band has first fits just past it by chance.
     """
     fit = _fit_rows(points, tree, np.arange(len(points)), min(k, len(points)), max_radius)
     noise = 2.0 * median(fit.across)  # np.median's, bit for bit
@@ -255,7 +256,7 @@ def _fit_lines(
         # Only the widest group can grow: a point with fewer neighbours than its width has
         # its whole neighbourhood within max_radius in the fit already.
         widest = groups[-1]
-        grow = ~widest.valid & (widest.count == width) & (widest.across <= noise)
+        grow = ~widest.valid & (widest.count == width) & (widest.across <= GROW_SPREAD * noise)
         if not np.any(grow):
             break
         width = min(2 * width, limit)
