@@ -94,13 +94,16 @@ class ICPParams:
 class MatchResult:
     """A registration: ``pose`` (3,) of the query frame in the reference frame; ``quality`` is
     the share of query points within ``inlier_distance`` of their line (0 = no overlap,
-    1 = every point explained); ``rmse`` [m] over those inliers."""
+    1 = every point explained); ``rmse`` [m] over those inliers; ``information`` (3, 3) the
+    points' ``J^T W J`` at ``pose`` over those pairs (x, y [m], heading [rad]; one point squarely
+    facing a direction adds 1 to it), None where not computed."""
 
     pose: NDArray[np.float64]
     quality: float
     rmse: float
     iterations: int
     converged: bool
+    information: NDArray[np.float64] | None = None
 
 
 def register(
@@ -138,7 +141,7 @@ def register(
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     if compiled and params.trim_ratio >= 1.0 and (information is None) == (prior is None):
         has_normals = reference.normals is not None
-        pose, iterations, converged, residuals = register_loop(
+        pose, iterations, converged, residuals, hessian = register_loop(
             *reference.search_tree.arrays, reference.points,
             np.ascontiguousarray(reference.normals if has_normals else reference.points,
                                  dtype=np.float64),
@@ -149,7 +152,7 @@ def register(
             prior is not None, np.zeros(3) if prior is None else prior,
             np.zeros((3, 3)) if information is None else information, params.min_information,
             params.tolerance_translation, params.tolerance_rotation, params.inlier_distance)
-        return _assess(residuals, pose, params, iterations, converged)
+        return _assess(residuals, pose, params, iterations, converged, hessian)
     converged = False
     iterations = 0
     while iterations < params.max_iterations:
@@ -173,9 +176,9 @@ def register(
         ):
             converged = True
             break
-    *_, residuals = reference.normal_equations(
+    hessian, *_, residuals = reference.normal_equations(
         query_points, pose, params.inlier_distance, params.loss, params.loss_scale)
-    return _assess(residuals, pose, params, iterations, converged)
+    return _assess(residuals, pose, params, iterations, converged, hessian)
 
 
 def leaves_a_direction_free(reference: PointToLineReference, query_points: NDArray[np.float64],
@@ -224,15 +227,15 @@ def _trimmed_step(
 
 
 def _assess(residuals: NDArray[np.float64], pose: NDArray[np.float64], params: ICPParams,
-            iterations: int, converged: bool) -> MatchResult:
+            iterations: int, converged: bool, information: NDArray[np.float64]) -> MatchResult:
     """The match at ``pose`` from each query point's residual [m] against its pair within
-    ``params.inlier_distance`` (NaN for none)."""
+    ``params.inlier_distance`` (NaN for none) and those pairs' ``information`` (3, 3)."""
     magnitudes = np.abs(residuals)
     inliers = magnitudes[magnitudes < params.inlier_distance]  # NaN (no pair) is never below
     quality = len(inliers) / max(len(residuals), 1)
     # np.mean's sum and division, without its checks
     rmse = math.sqrt(np.add.reduce(inliers * inliers) / len(inliers)) if len(inliers) else math.inf
-    return MatchResult(pose, quality, rmse, iterations, converged)
+    return MatchResult(pose, quality, rmse, iterations, converged, information)
 
 
 def match_scans(

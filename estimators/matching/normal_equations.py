@@ -212,11 +212,12 @@ def register_loop(
     scale: float, has_prior: bool, prior: NDArray[np.float64],
     prior_information: NDArray[np.float64], min_information: float,
     tolerance_translation: float, tolerance_rotation: float, inlier_distance: float,
-) -> tuple[NDArray[np.float64], int, bool, NDArray[np.float64]]:
+) -> tuple[NDArray[np.float64], int, bool, NDArray[np.float64], NDArray[np.float64]]:
     """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
-    run, whether the step fell below the tolerances, and each query point's residual [m] at
-    that pose against its pair within ``inlier_distance`` (NaN for none), which the match is
-    assessed on. ``prior_information`` is (3, 3)."""
+    run, whether the step fell below the tolerances, each query point's residual [m] at that
+    pose against its pair within ``inlier_distance`` (NaN for none), which the match is
+    assessed on, and those pairs' ``J^T W J`` (3, 3), the points' information at the pose.
+    ``prior_information`` is (3, 3)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
     kept, near = fresh_neighbours(query.shape[0])
@@ -239,7 +240,7 @@ def register_loop(
                 abs(step[2]) < tolerance_rotation):
             converged = True
             break
-    point_to_line_system(order, tree_points, start, end, child, box, points, normals, valid,
-                         anchors, has_normals, query, pose, inlier_distance, loss, scale,
-                         residuals, kept, near)
-    return pose, iterations, converged, residuals
+    hessian = point_to_line_system(
+        order, tree_points, start, end, child, box, points, normals, valid, anchors,
+        has_normals, query, pose, inlier_distance, loss, scale, residuals, kept, near)[0]
+    return pose, iterations, converged, residuals, hessian

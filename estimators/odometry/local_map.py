@@ -144,8 +144,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             3-4 voxels thick needs ~70 points to span 1 m of wall). At 2-3 cm range noise
             9 neighbours of a wall look like a blob, their two-nearest-point lines point anywhere
             in the band, and that noise passes for information along a corridor's axis; at
-            1 cm the walls' 9-point fits already pass. A 5 m wide featureless corridor at
-            2-3 cm range noise still drifts about 1 m over 5 m: the remaining
+            1 cm the walls' 9-point fits already pass (fits just past that spread are
+            grown too: ``neighbourhood_fits.GROW_SPREAD``). A 5 m wide featureless corridor at
+            2-3 cm range noise still drifts 0.1-1.5 m over 15 m: the remaining
             two-nearest-point pairs, often two points of a wall's noise band lying across it,
             carry more information along the axis than the fitted lines and outvote the
             prior (a known limit; see the design page).
@@ -169,6 +170,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
+        speed_information: a direction the match pins with less than this many points' worth
+            of information moves the velocity only in proportion (10; see
+            ``velocity_model.ConstantVelocityModel._weakly_seen_held``): at 1-2 cm range noise
+            ten points fix a step to about 5 mm, below that its noise would walk the speed.
         start_speed_scans, max_start_replay: where the first scans cannot tell the start
             velocity (:mod:`estimators.odometry.unknown_start`), it is the mean over this many
             scans in a row that pin every direction down (20: the mean of n increments is the
@@ -209,6 +214,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     normal_neighbours: int = 9
     max_normal_neighbours: int = 72
     velocity_window: int = 5
+    speed_information: float = 10.0
     denoise_map: bool = True
     prediction_acceleration: float = 0.5
     reject_dynamic: bool = True
@@ -226,6 +232,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             "prior_sigma_translation",
             "prior_sigma_rotation", "noise_sigma", "search_linear_window",
             "search_angular_window", "search_resolution", "prediction_acceleration",
+            "speed_information",
             "dynamic_margin", "max_speed", "max_turn_rate", "sideslip_sigma",
         ):
             if not getattr(self, name) > 0:
@@ -333,7 +340,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                                    intervals_since_used(self.skipped_before,
                                                         self.clock_jumped, interval, typical),
                                    1.0)
-        self._velocity = self._updated_velocity(increment, dt)
+        self._velocity = self._updated_velocity(increment, dt, result.information)
         self._remember(pose, scans, seen, self._misses[-1])
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)

@@ -82,6 +82,7 @@ class UnknownStartSpeed:
     _poses: list[FloatArray]
     _velocity: FloatArray
     _translations: deque[FloatArray]
+    _seen_translation: FloatArray
     _clock: ScanClock
     _keyframes: deque[tuple[FloatArray, FloatArray]]
     _build_reference: Callable[[], None]
@@ -124,7 +125,7 @@ class UnknownStartSpeed:
                 reference, points, pose, replace(self.params, min_information=least)):
             self.speed_unknown, self._measured = not refining, []
         else:
-            self._measured.append(self._translations[-1].copy())
+            self._measured.append(self._seen_translation.copy())
         if len(self._measured) >= self.start_speed_scans:
             if self.speed_unknown or refining:
                 return self._replay_start()

@@ -11,6 +11,7 @@ Distances [m], angles [rad], times [s] or scans.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -26,9 +27,10 @@ class ConstantVelocityModel:
     """The motion model of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin:
     it reads the front end's settings (``use_timestamps``, ``velocity_window``,
     ``noise_sigma``, ``prior_sigma_translation``, ``prediction_acceleration``,
-    ``sideslip_sigma``), ``_prior_information``, ``pose`` and ``speed_unknown``, and keeps
-    ``_velocity``, ``_translations``, ``_misses``, ``_clock``, ``_last_time`` and
-    ``_degenerate`` (set by the matching step: the scan at the guess leaves a direction free)."""
+    ``sideslip_sigma``, ``speed_information``), ``_prior_information``, ``pose`` and
+    ``speed_unknown``, and keeps ``_velocity``, ``_seen_translation``, ``_translations``,
+    ``_misses``, ``_clock``, ``_last_time`` and ``_degenerate`` (set by the matching step: the
+    scan at the guess leaves a direction free)."""
 
     use_timestamps: bool
     velocity_window: int
@@ -36,6 +38,7 @@ class ConstantVelocityModel:
     prior_sigma_translation: float
     prediction_acceleration: float
     sideslip_sigma: float
+    speed_information: float
     speed_unknown: bool
     pose: FloatArray  # the estimator's current pose (``Estimator.pose``)
     _prior_information: FloatArray
@@ -43,6 +46,7 @@ class ConstantVelocityModel:
     def _reset_motion_model(self) -> None:
         """At rest, no clock seen (called by ``_reset_state``)."""
         self._velocity = np.zeros(3)  # car frame, per second or per scan
+        self._seen_translation = np.zeros(2)  # the last increment's, midpoint frame
         self._translations: deque[FloatArray] = deque(maxlen=self.velocity_window)
         self._misses: deque[float] = deque(maxlen=self.velocity_window)
         self._degenerate = False  # the scan at the guess leaves a direction free
@@ -87,7 +91,8 @@ class ConstantVelocityModel:
         return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
                                                     step[0], sideways)
 
-    def _updated_velocity(self, increment: FloatArray, dt: float) -> FloatArray:
+    def _updated_velocity(self, increment: FloatArray, dt: float,
+                          information: FloatArray | None = None) -> FloatArray:
         """Constant-velocity model after ``increment`` over ``dt`` (scans or seconds): the
         translation in the increment's midpoint frame (``motion_prior.midpoint_velocity``)
         averaged over the last ``velocity_window`` increments (one carries the noise of two
@@ -96,9 +101,37 @@ class ConstantVelocityModel:
         With a finite ``sideslip_sigma`` (the car frame at the wheels' no-slip point) the
         velocity has no sideways part: where the scan leaves an axis free, the increments'
         error along it shows up sideways in the car frame, and carried on in the guess it
-        drifted down a corridor while the car rocked back and forth (3.3 m)."""
+        drifted down a corridor while the car rocked back and forth (3.3 m). With the match's
+        ``information`` (3, 3, world frame), a direction it pins weakly moves the velocity
+        only in proportion (:meth:`_weakly_seen_held`), unless the speed is still unknown;
+        ``_seen_translation`` keeps the increment's own."""
         translation = motion_prior.midpoint_velocity(increment, dt)[:2]
+        self._seen_translation = translation.copy()
+        if information is not None and self._translations and not self.speed_unknown:
+            translation = self._weakly_seen_held(translation, information[:2, :2],
+                                                 float(self.pose[2] + 0.5 * increment[2]))
         if np.isfinite(self.sideslip_sigma):
             translation[1] = 0.0
         self._translations.append(translation)
         return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
+
+    def _weakly_seen_held(self, translation: FloatArray, information: FloatArray,
+                          heading: float) -> FloatArray:
+        """``translation`` (2, midpoint frame at ``heading`` [rad]) with its part along each
+        direction the points' ``information`` (2, 2, world frame) pins with less than
+        ``speed_information`` points' worth replaced by the velocity's in proportion: a
+        direction pinned by 2 of 10 points' worth moves the velocity a fifth as far.
+
+        Where a few returns pin the motion along an aisle (the gaps between shelf units, a
+        door jamb, the fitted normals' own noise), each match's step along it is mostly their
+        noise and the prior's guess; fed back whole into the velocity, that noise walks the
+        speed along the aisle (a TurtleBot down a depot's aisles drifted 9-15 % of the path,
+        sometimes backwards) where the car kept its speed. The pose still takes the match's
+        step; only the speed it carries on with is held.
+        """
+        c, s = math.cos(heading), math.sin(heading)
+        rotation = np.array([[c, -s], [s, c]])
+        values, vectors = np.linalg.eigh(rotation.T @ information @ rotation)
+        gains = np.maximum(values, 0.0) / (np.maximum(values, 0.0) + self.speed_information)
+        held = self._velocity[:2]
+        return held + vectors @ (gains * (vectors.T @ (translation - held)))

@@ -3,6 +3,7 @@ stops at corners, and a quick run scores every estimator on a small hall."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -60,3 +61,13 @@ def test_turn_in_place_driver_stops_to_turn() -> None:
     on_the_spot = (np.abs(steps[:, 2]) > 0.19) & (np.hypot(steps[:, 0], steps[:, 1]) < 1e-3)
     corners = np.flatnonzero(np.diff(on_the_spot.astype(int)) == 1)  # [rad] 1 rad/s for 0.2 s
     assert len(corners) == len(bench.layout(drive)[1]) - 2  # one turn on the spot a corner
+
+
+def test_the_seed_sweep_scores_a_drive_kind_rebuilt_from_another_seed() -> None:
+    sweep = load("bench_sparse_hall_seeds")
+    results = sweep.main(["--seeds", "10", "--drives", "hall_20x15_burger",
+                          "--estimators", "icp"])
+    row = results["hall_20x15_burger"]
+    assert row["failed_seeds"] == [] and len(row["icp"]) == 1
+    rebuilt = bench.record(dataclasses.replace(bench.DRIVES["hall_20x15_burger"], seed=10))
+    assert row["icp"][0] == bench.score(rebuilt, bench.replay(rebuilt, "icp")[0])["drift_percent"]

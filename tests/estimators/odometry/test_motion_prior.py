@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from estimators.odometry.local_map import LocalMapOdometry
 from estimators.odometry.motion_prior import (
     MIN_PREDICTION_SIGMA,
     ScanClock,
@@ -115,3 +116,16 @@ def test_float_forms_are_the_array_forms_bit_for_bit(seed: int, rows: int, dt: f
     jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
     full = np.diag(information) + 0.0 * np.outer(jacobian, jacobian)
     assert bits(no_sideslip_information(information, heading, forward, 0.0)) == bits(full)
+
+
+@pytest.mark.parametrize("heading", [0.0, np.pi / 2])
+def test_a_weakly_pinned_direction_moves_the_speed_in_proportion(heading: float) -> None:
+    # The car heads along world x (heading 0) or y (pi / 2); the scan pins world x with 2
+    # points' worth and world y with 200. Along the weak direction the measured speed moves
+    # the held one by 2 / (2 + 10); along the pinned one by 200 / 210.
+    model = LocalMapOdometry()
+    model._velocity = np.array([0.1, 0.0, 0.0])
+    measured = np.array([0.04, 0.01])
+    held = model._weakly_seen_held(measured, np.diag([2.0, 200.0]), heading)
+    forward, sideways = (2.0 / 12.0, 200.0 / 210.0) if heading == 0.0 else (200 / 210, 2 / 12)
+    np.testing.assert_allclose(held, [0.1 + forward * (0.04 - 0.1), sideways * 0.01], atol=1e-12)
