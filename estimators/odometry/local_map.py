@@ -340,7 +340,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                                    intervals_since_used(self.skipped_before,
                                                         self.clock_jumped, interval, typical),
                                    1.0)
-        self._velocity = self._updated_velocity(increment, dt, result.information)
+        # after skipped or lost scans the speed held is stale: the match alone sets the new one
+        resumed = self.skipped_before > 0 or self.clock_jumped
+        self._velocity = self._updated_velocity(increment, dt,
+                                                None if resumed else result.information)
         self._remember(pose, scans, seen, self._misses[-1])
         last_keyframe = self._keyframes[-1][0]
         step = relative(last_keyframe, pose)
