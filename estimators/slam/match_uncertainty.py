@@ -22,7 +22,7 @@ angles [rad].
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,8 +31,14 @@ from estimators.matching.point_to_line import PointToLineReference, point_to_lin
 from estimators.matching.scan_matching import LikelihoodField
 from lidar_env.core.se2 import transform_points
 
-if TYPE_CHECKING:
-    from estimators.slam.loop_closure import LoopClosureParams
+
+class MatchNoise(Protocol):
+    """What :func:`match_information` reads of the loop-closure settings
+    (:class:`~estimators.slam.loop_closure.LoopClosureParams`)."""
+
+    inlier_distance: float  # [m] pairs nearer than this count
+    effective_points: float  # independent points a registration is worth
+    point_sigma: float  # [m] one point's residual noise
 
 #: [m] standard deviation along a direction the near-best translations fill up to the window's
 #: edge (unbounded: an aisle's axis), as :func:`match_information`'s
@@ -104,7 +110,7 @@ def match_information(
     reference: PointToLineReference,
     points: NDArray[np.float64],
     pose: NDArray[np.float64],
-    params: LoopClosureParams,
+    params: MatchNoise,
 ) -> NDArray[np.float64]:
     """``(3, 3)`` information of a registration: the point-to-line Gauss-Newton Hessian over
     the inlier pairs at ``pose``, ``mean(J^T J) * effective_points / point_sigma^2``; small
