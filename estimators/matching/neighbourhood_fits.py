@@ -284,9 +284,9 @@ def fit_neighbourhoods(
     ``max_radius`` [m] (found by :func:`neighbours_of`, in the tree's order); then, with
     twice the median spread across of those fits as the noise limit, the points whose
     neighbours are no line but spread across no more than ``GROW_SPREAD`` times that are
-    fitted again through
-    twice as many, and again those of them still so, up to ``limit`` neighbours (a point
-    with fewer neighbours than were asked for already has all within ``max_radius``)."""
+    fitted again through twice as many, and again those of them still so, up to ``limit``
+    neighbours (a point with fewer neighbours than were asked for already has all within
+    ``max_radius``)."""
     n = points.shape[0]
     order = tree[0]
     count, across = np.empty(n), np.empty(n)

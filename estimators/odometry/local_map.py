@@ -170,10 +170,11 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
-        speed_information: a direction the match pins with less than this many points' worth
-            of information moves the velocity only in proportion (10; see
+        speed_information: [points] a direction the match pins with ``lambda`` points' worth
+            of information moves the velocity ``lambda / (lambda + speed_information)`` of
+            the way to the match's increment (10; see
             ``velocity_model.ConstantVelocityModel._weakly_seen_held``): at 1-2 cm range noise
-            ten points fix a step to about 5 mm, below that its noise would walk the speed.
+            ten points fix a step to about 5 mm, far fewer leave its noise to walk the speed.
         start_speed_scans, max_start_replay: where the first scans cannot tell the start
             velocity (:mod:`estimators.odometry.unknown_start`), it is the mean over this many
             scans in a row that pin every direction down (20: the mean of n increments is the

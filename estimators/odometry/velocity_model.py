@@ -117,15 +117,16 @@ class ConstantVelocityModel:
 
     def _weakly_seen_held(self, translation: FloatArray, information: FloatArray,
                           heading: float) -> FloatArray:
-        """``translation`` (2, midpoint frame at ``heading`` [rad]) with its part along each
-        direction the points' ``information`` (2, 2, world frame) pins with less than
-        ``speed_information`` points' worth replaced by the velocity's in proportion: a
-        direction pinned by 2 of 10 points' worth moves the velocity a fifth as far.
+        """``translation`` (2, midpoint frame at ``heading`` [rad]) moved from the velocity's
+        along each eigendirection of the points' ``information`` (2, 2, world frame) by
+        ``lambda / (lambda + speed_information)`` of the way, ``lambda`` that direction's
+        information in points' worth: with ``speed_information`` 10, a direction pinned by 2
+        points' worth moves the velocity a sixth of the way, one pinned by 200 about 95 %.
 
         Where a few returns pin the motion along an aisle (the gaps between shelf units, a
         door jamb, the fitted normals' own noise), each match's step along it is mostly their
         noise and the prior's guess; fed back whole into the velocity, that noise walks the
-        speed along the aisle (a TurtleBot down a depot's aisles drifted 9-15 % of the path,
+        speed along the aisle (a TurtleBot down a depot's aisles drifted 9-35 % of the path,
         sometimes backwards) where the car kept its speed. The pose still takes the match's
         step; only the speed it carries on with is held.
         """

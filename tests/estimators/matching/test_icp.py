@@ -111,6 +111,23 @@ def test_degenerate_direction_is_left_to_the_prior():
     assert abs(guarded[1]) < 1e-6
 
 
+def test_a_match_carries_its_pairs_information_at_the_pose_it_found():
+    # The compiled loop and the Python steps return the inlier pairs' J^T W J at the final
+    # pose: what normal_equations gives there, symmetric, and large across the walls seen.
+    rng = np.random.default_rng(3)
+    reference = PointToLineReference.with_estimated_normals(
+        points_at(np.zeros(3), noise=0.01, rng=rng), 9)
+    query = points_at(np.array([0.1, -0.05, 0.03]), noise=0.01, rng=rng)
+    params = ICPParams()
+    for compiled in (True, False):
+        result = register(reference, query, np.zeros(3), params, compiled=compiled)
+        expected = reference.normal_equations(query, result.pose, params.inlier_distance,
+                                              params.loss, params.loss_scale)[0]
+        np.testing.assert_allclose(result.information, expected, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(result.information, result.information.T, atol=1e-9)
+        assert np.linalg.eigvalsh(result.information[:2, :2])[0] > 10.0
+
+
 @pytest.mark.parametrize("offset", [(0.2, -0.1, np.radians(6.0)), (-0.3, 0.15, np.radians(-10.0))])
 def test_match_scans_recovers_the_pose_between_two_views(offset):
     rng = np.random.default_rng(7)
