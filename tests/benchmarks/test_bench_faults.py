@@ -58,12 +58,13 @@ def drives() -> dict:
 def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> None:
     recording = drives[group]
     clean, _, _ = bench.run(name, recording, recording.truth[0])
-    clean_jump, clean_final = bench.score(clean, recording.truth)
+    clean_jump, clean_final = bench.score(clean, recording.truth, recording.truth)
     period = float(np.median(np.diff(recording.times)))
     faulted = with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
                           seed=0)
     poses, health, _ = bench.run(name, faulted, recording.truth[0])
-    jump, final = bench.score(poses, recording.truth[bench.steps_of(recording, faulted)])
+    kept = recording.truth[bench.steps_of(recording, faulted)]
+    jump, final = bench.score(poses, kept, kept)
     assert jump - clean_jump <= bench.JUMP_MARGIN, (jump, clean_jump)
     assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
     if fault.startswith("blind"):
@@ -77,3 +78,24 @@ def test_a_log_without_truth_is_scored_on_the_scans_kept(drives) -> None:
     steps = bench.steps_of(recording, faulted)
     assert len(steps) == len(faulted) < len(recording)
     np.testing.assert_array_equal(recording.times[steps], faulted.times)
+
+
+def test_truth_at_keyframes_scores_the_end_between_the_first_and_last_of_them() -> None:
+    truth = np.full((5, 3), np.nan)
+    truth[1] = (1.0, 0.0, np.pi / 2)
+    truth[3] = (1.0, 2.0, np.pi / 2)  # 2 m ahead of keyframe 1, in its frame
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.5, 0.0, 0.0],
+                      [9.0, 9.0, 0.0]])
+    jump, final = bench.score(poses, poses, truth)
+    assert jump == 0.0  # the steps are their own reference
+    assert final == pytest.approx(0.5)  # 2.5 m ahead where the truth went 2 m
+
+
+@pytest.mark.skipif(not (bench.ACES.exists() and bench.ACES_TRUTH.exists()),
+                    reason="ACES and aces-corrected are absent from ../shared/data/radish")
+def test_aces_carries_the_corrected_keyframes_at_their_scans() -> None:
+    recording = bench.aces_recording(600)
+    known = np.flatnonzero(np.isfinite(recording.truth[:, 0]))
+    assert 30 <= len(known) <= 60  # a keyframe every 0.5-1 m of ~40 m driven
+    steps = np.linalg.norm(np.diff(recording.truth[known, :2], axis=0), axis=1)
+    assert 0.3 < np.median(steps) < 1.5  # [m] the keyframe spacing, not a scan far off
