@@ -168,6 +168,7 @@ class MovingPointFilter:
                             for n in range(1, max(history, 1) + 1)]
         self._beams = self._past_beams[0]
         self._mounts = [[float(v) for v in s.mount] for s in setup.sensors]
+        self._keys = list(setup.keys)
         # the last scans' sensor poses and free reach (BeamGeometry.free), packed
         self._history: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque(
             maxlen=history)
@@ -178,6 +179,9 @@ class MovingPointFilter:
         self._anchor_resolution = math.inf
         self._jumps: deque[float] = deque(maxlen=max(history, 1))
         self._last_scan: tuple[Any, ...] | None = None  # what _at saw and gave last
+        # the map arrays classify was given last and their concatenation (read-only, as scans)
+        self._last_map: tuple[list[NDArray[np.float64]], NDArray[np.float64]] = (
+            [], np.zeros((0, 2)))
 
     def _at(self, pose: NDArray[np.float64], points: NDArray[np.float64],
             scans: Mapping[str, NDArray[np.float64]],
@@ -188,7 +192,7 @@ class MovingPointFilter:
         them as read-only), the reach for the same scans at any pose (a scan is classified at
         up to two poses, then remembered at the last)."""
         car = np.asarray(pose, dtype=np.float64)
-        arrays = [scans[key] for key in self.setup.keys]
+        arrays = [scans[key] for key in self._keys]
         last = self._last_scan
         same_scans = last is not None and all(
             a is b for a, b in zip(arrays, last[2], strict=True))
@@ -221,7 +225,7 @@ class MovingPointFilter:
             self._anchors, sensor_poses, free, self.margin, self.min_range,
             self._anchor_resolution), self._anchors, axis=0)]
         if sum(sizes):  # stale: map points it sees through, where its beams are dense
-            stacked = np.ascontiguousarray(np.concatenate(map_points), dtype=np.float64)
+            stacked = self._stacked(map_points)
             seen = self._beams.judge_free(stacked, sensor_poses, free, self.margin,
                                           self.min_range, self.stale_resolution)
             ends = list(itertools.accumulate(sizes))
@@ -231,6 +235,16 @@ class MovingPointFilter:
         if len(near) and len(world):  # moved on: next to a point the new scan sees through
             moving |= _near_any(world, near, self.radius)
         return moving, flags
+
+    def _stacked(self, map_points: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+        """``map_points`` concatenated (C-contiguous float64): the last concatenation again for
+        the same arrays (a scan is classified up to three times against the same map)."""
+        last, stacked = self._last_map
+        if len(last) != len(map_points) or any(
+                a is not b for a, b in zip(last, map_points, strict=True)):
+            stacked = np.ascontiguousarray(np.concatenate(map_points), dtype=np.float64)
+            self._last_map = (list(map_points), stacked)
+        return stacked
 
     def seen_free_share(self, points: NDArray[np.float64], pose: NDArray[np.float64]) -> float:
         """The share of car-frame ``points`` (n, 2) that, with the car at ``pose`` (3,), lie

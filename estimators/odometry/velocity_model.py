@@ -15,6 +15,7 @@ import math
 from collections import deque
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 
 import estimators.odometry.motion_prior as motion_prior
@@ -132,7 +133,9 @@ class ConstantVelocityModel:
         """
         c, s = math.cos(heading), math.sin(heading)
         rotation = np.array([[c, -s], [s, c]])
-        values, vectors = np.linalg.eigh(rotation.T @ information @ rotation)
+        # np.linalg.eigh's own LAPACK call (dsyevd, lower triangle) without its per-call checks
+        # and error-state context, which cost several times the 2 x 2 decomposition
+        values, vectors = _umath_linalg.eigh_lo(rotation.T @ information @ rotation)
         gains = np.maximum(values, 0.0) / (np.maximum(values, 0.0) + self.speed_information)
         held = self._velocity[:2]
         return held + vectors @ (gains * (vectors.T @ (translation - held)))
