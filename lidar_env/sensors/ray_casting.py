@@ -323,15 +323,7 @@ def cast_sensor(
                     if d2 == 0.0:
                         ranges.fill(0.0)
                         return
-                a1 = _bearing(v1y, v1x)
-                a2 = _bearing(v2y, v2x)
-                if v1x * v2y - v1y * v2x >= 0.0:
-                    lo, width = a1, _wrap_positive(a2 - a1)
-                else:
-                    lo, width = a2, _wrap_positive(a1 - a2)
-                if width > math.pi:
-                    width = math.pi if width < 1.5 * math.pi else 0.0
-                lo = _wrap_positive(lo - heading)
+                lo, width = _subtended(v1x, v1y, v2x, v2y, heading)
                 f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
                 n0 = max(l0 - f0, 0)
                 along = v1x * ey - v1y * ex  # t * denom
