@@ -120,9 +120,10 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         check_steps: check each odometry step against the two keyframes' scans (True): if it
             leaves less than ``loop_params.min_quality`` of the new keyframe's points within
             ``inlier_distance`` of the previous one's walls, match the two over all headings
-            and keep the match if it is unambiguous and explains more points (clearly more,
-            if it is another place, see :meth:`_checked_step`): a corner turn the front end
-            lost is found here, before loop edges spread it along a corridor.
+            and keep the match if it is unambiguous, explains more points (clearly more, if
+            it is another place) and the step lies beyond ``loop_gate`` of it (see
+            :meth:`_checked_step`): a corner turn the front end lost is found here, before
+            loop edges spread it along a corridor.
         place_tolerance, max_places: an old place's map (likelihood field and lines) is kept
             across optimisations while none of its points moved by more than 1 mm (2 % of a
             field cell, a tenth of 1 cm range noise and of a loop edge's ~1 cm sigma; 0: rebuilt

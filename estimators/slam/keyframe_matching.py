@@ -268,7 +268,13 @@ class KeyframeMatching:
         a refinement: it must put at least :data:`~estimators.slam.loop_closure.MIN_POINTS`
         points on the walls, and the step must explain less than ``ambiguity_ratio`` of its
         share (where a scan sees a few posts, the all-heading match often puts a few more
-        points on them turned by 90 or 180 degrees than the right step does)."""
+        points on them turned by 90 or 180 degrees than the right step does). The match
+        replaces the step only where the step lies more than ``loop_gate`` Mahalanobis
+        distances from it, under the match's covariance plus the front end's error model
+        (:meth:`_odometry_error`): a lost turn is many sigmas off, while a step the match
+        merely disagrees with within their uncertainties (along a corridor, or where walkers
+        hide the walls both scans share) was matched against the front end's whole local
+        map and is the better of the two."""
         world = transform_points(step, points)
         share = len(reference.correspond(world, self.loop_params.inlier_distance).index)
         share /= len(points)
@@ -283,4 +289,9 @@ class KeyframeMatching:
                 and abs(change[2]) < params.angular_window)
         clear = near or (result.quality * len(points) >= MIN_POINTS
                          and share < params.ambiguity_ratio * result.quality)
-        return result.pose if result.accepted and result.quality > share and clear else step
+        if not (result.accepted and result.quality > share and clear):
+            return step
+        noise, drift = self._odometry_error(step)
+        covariance = noise + drift + np.linalg.inv(result.edge_information)
+        lost = float(np.sqrt(change @ np.linalg.solve(covariance, change))) > self.loop_gate
+        return result.pose if lost else step
