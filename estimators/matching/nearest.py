@@ -216,27 +216,17 @@ def search(
 
 
 @njit(cache=True, inline="always")
-def search_near(
-    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
-    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
-    points: NDArray[np.float64], qx: float, qy: float, k: int, bound: float,
-    pending: NDArray[np.int64], row: int, kept: NDArray[np.float64], near: NDArray[np.int64],
-) -> tuple[float, int, float, int, float, int]:
-    """:func:`search` (``k`` 1 or 2) for query ``row`` of a set of queries asked again as they
-    move (ICP's iterations), with the same answer, from the points last found nearest where
-    they suffice.
-
-    Each search of a query keeps its ``KEPT`` nearest points: their indices in ``near``
-    (M, 3), ``n`` for none, and in ``kept`` (M, 9) where the query stood [m] (NaN: never
-    searched), ``reach`` [m], the distance within which those were all the points (the
-    third's distance, or the bound's), and their coordinates (NaN for none). A query that
-    has moved ``m`` since lies at least ``reach - m`` from every other point (triangle
-    inequality), so when its ``k``-th nearest kept point, or the bound where there is none,
-    lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept points hold the
-    answer: their distances are computed as :func:`search` computes them, so it is
-    bit-identical. Else the query is searched again, seeded with them. ``points`` (N, 2) are
-    the tree's points in their original order."""
-    n = tree_points.shape[0]
+def kept_answer(kept: NDArray[np.float64], near: NDArray[np.int64], row: int, qx: float,
+                qy: float, k: int, bound: float, n: int,
+                ) -> tuple[float, int, float, int, float, int, bool]:
+    """The kept points of query ``row`` (:func:`search_near`'s ``kept`` and ``near``) ranked
+    by their squared distance to where it stands now, (qx, qy): ``(d0, i0, d1, i1, d2, i2,
+    holds)``, ``holds`` whether they answer :func:`search` (``k`` 1 or 2, ``bound``, ``n``
+    points in the tree) by the triangle inequality, the answer then cut at the bound as
+    :func:`search` cuts it. ICP asks it inline before it calls :func:`search_near`: a query
+    the kept points answer then costs a few nanoseconds, where passing through
+    :func:`search_near` with the tree's arrays cost about ten times that (half the time of
+    an iteration)."""
     best0 = best1 = best2 = np.inf
     at0 = at1 = at2 = n
     for j in range(KEPT):  # a missing one's (or a never searched row's) NaN ranks nowhere
@@ -252,17 +242,55 @@ def search_near(
             best0, at0 = np.inf, n
         if not best1 < bound:
             best1, at1 = np.inf, n
-        return best0, at0, best1, at1, np.inf, n
-    # seeded by the kept points (none before the first search): most of the tree is skipped
+        return best0, at0, best1, at1, np.inf, n, True
+    return best0, at0, best1, at1, best2, at2, False
+
+
+@njit(cache=True, inline="always")
+def search_near(
+    order: NDArray[np.int64], tree_points: NDArray[np.float64], start: NDArray[np.int64],
+    end: NDArray[np.int64], child: NDArray[np.int64], box: NDArray[np.float64],
+    points: NDArray[np.float64], qx: float, qy: float, k: int, bound: float,
+    pending: NDArray[np.int64], row: int, kept: NDArray[np.float64], near: NDArray[np.int64],
+) -> tuple[float, int, float, int, float, int]:
+    """:func:`search` (``k`` 1 or 2) for query ``row`` of a set of queries asked again as they
+    move (ICP's iterations), with the same answer, from the points last found nearest where
+    they suffice.
+
+    Each search of a query keeps its ``KEPT`` nearest points: their indices in ``near``
+    (M, 3), ``n`` for none, and in ``kept`` (M, 9) where the query stood [m] (NaN: never
+    searched), ``reach`` [m], the distance within which those were all the points (the
+    third's distance; inf with fewer than three points in the tree), and their coordinates
+    (NaN for none). A query that has moved ``m`` since lies at least ``reach - m`` from every
+    other point (triangle inequality), so when its ``k``-th nearest kept point, or the bound
+    where there is none, lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept
+    points hold the answer (:func:`kept_answer`): their distances are computed as
+    :func:`search` computes them, so it is bit-identical. Else the query is searched again,
+    seeded with them. ``points`` (N, 2) are the tree's points in their original order."""
+    n = tree_points.shape[0]
+    best0, at0, best1, at1, best2, at2, holds = kept_answer(kept, near, row, qx, qy, k, bound,
+                                                            n)
+    if holds:
+        return best0, at0, best1, at1, best2, at2
+    # seeded by the kept points (none before the first search): most of the tree is skipped;
+    # not cut at the bound, so that a query with fewer than three points within it keeps a
+    # reach past it (a reach capped at the bound fails the test after any move, and a tenth
+    # of ICP's queries, those near no wall, would be searched again at every iteration)
     best0, at0, best1, at1, best2, at2 = search_from(
-        order, tree_points, start, end, child, box, qx, qy, KEPT, bound, pending,
+        order, tree_points, start, end, child, box, qx, qy, KEPT, np.inf, pending,
         best0, at0, best1, at1, best2, at2)
-    kept[row, 0], kept[row, 1], kept[row, 2] = qx, qy, np.sqrt(min(best2, bound))
+    kept[row, 0], kept[row, 1], kept[row, 2] = qx, qy, np.sqrt(best2)
     near[row, 0], near[row, 1], near[row, 2] = at0, at1, at2
     for j in range(KEPT):
         at = near[row, j]
         kept[row, 3 + 2 * j] = points[at, 0] if at < n else np.nan
         kept[row, 4 + 2 * j] = points[at, 1] if at < n else np.nan
+    if not best0 < bound:  # the k nearest within the bound lead the nearest overall
+        best0, at0 = np.inf, n
+    if not best1 < bound:
+        best1, at1 = np.inf, n
+    if not best2 < bound:
+        best2, at2 = np.inf, n
     return best0, at0, best1, at1, best2, at2
 
 

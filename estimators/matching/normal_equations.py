@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from estimators.matching.nearest import KEPT, STACK, search, search_near
+from estimators.matching.nearest import KEPT, STACK, kept_answer, search, search_near
 
 #: Loss codes of the kernels, in the order of :data:`estimators.matching.point_to_line.LOSSES`.
 CAUCHY, HUBER, SQUARED = 0, 1, 2
@@ -91,8 +91,11 @@ def point_to_line_system(
         # the two nearest: one call site, as each inlines the whole search
         k = 1 if has_normals else 2
         while True:
-            d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child, box,
-                                               points, wx, wy, k, bound, pending, i, kept, near)
+            d0, i0, d1, i1, _, _, holds = kept_answer(kept, near, i, wx, wy, k, bound, n)
+            if not holds:
+                d0, i0, d1, i1, _, _ = search_near(order, tree_points, start, end, child,
+                                                   box, points, wx, wy, k, bound, pending, i,
+                                                   kept, near)
             if k == 2 or i0 == n or valid[i0]:
                 break
             k = 2

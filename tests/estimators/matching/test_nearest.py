@@ -9,7 +9,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from estimators.matching.nearest import KEPT, STACK, PointIndex, search, search_from, search_near
+from estimators.matching.nearest import (
+    KEPT,
+    STACK,
+    PointIndex,
+    kept_answer,
+    search,
+    search_from,
+    search_near,
+)
 
 
 def _brute(points: np.ndarray, queries: np.ndarray, k: int, bound: float):
@@ -115,7 +123,8 @@ def test_kept_neighbours_give_the_searchs_answer_as_queries_move(
 ) -> None:
     """``search_near`` over queries that move as ICP's do (small steps, some large, some
     back onto a point) answers as a fresh ``search`` does, bit for bit, for one and two
-    neighbours and any bound, and a seeded ``search_from`` too."""
+    neighbours and any bound, and a seeded ``search_from`` too; so does ``kept_answer``
+    wherever it says the kept points hold the answer."""
     rng = np.random.default_rng(seed)
     points = rng.uniform(-spread, spread, (n, 2))
     if duplicates:
@@ -132,6 +141,9 @@ def test_kept_neighbours_give_the_searchs_answer_as_queries_move(
             qx, qy = queries[row]
             for k, b in ((1, bound**2), (2, bound**2), (2, (0.3 * bound) ** 2)):
                 expected = search(*index.arrays, qx, qy, k, b, pending)
+                *answer, holds = kept_answer(kept, near, row, qx, qy, k, b, n)
+                if holds:
+                    assert tuple(answer[: 2 * k]) == expected[: 2 * k]
                 found = search_near(*index.arrays, points, qx, qy, k, b, pending, row, kept,
                                     near)
                 assert found[: 2 * k] == expected[: 2 * k]
