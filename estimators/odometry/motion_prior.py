@@ -27,6 +27,7 @@ lagged the turn rate and cost 4-6 % of the speed over 8 m of the closed_to_open 
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
@@ -66,6 +67,15 @@ def clock_jitter(intervals: ArrayLike, centre: float | None = None) -> float:
     return median(np.abs(intervals - (median(intervals) if centre is None else centre)))
 
 
+def sorted_median(ordered: Sequence[float]) -> float:
+    """:func:`~estimators.matching.prediction.median` of values already sorted (not empty, no
+    NaN): the middle one, or the mean of the middle two, bit for bit."""
+    half = len(ordered) // 2
+    if len(ordered) % 2:
+        return float(ordered[half])
+    return (float(ordered[half - 1]) + float(ordered[half])) / 2
+
+
 #: Intervals a clock must have shown before its median stands for it.
 SETTLED_INTERVALS = 5
 
@@ -73,7 +83,8 @@ SETTLED_INTERVALS = 5
 class ScanClock:
     """The last scan intervals [s] of a logged clock and their robust statistics, each
     computed once per new interval (a median of a few hundred stamps costs tens of
-    microseconds, and a scan of ``lidar_odometry`` asks for them several times).
+    microseconds, and a scan of ``lidar_odometry`` asks for them several times); the
+    intervals and steps are also kept sorted, so that their medians are read, not computed.
 
     ``intervals`` holds the last ``max_intervals`` finite ones, ``steps`` the last
     ``max_steps`` positive ones (a glitching clock's zero or negative stamps are no step);
@@ -83,19 +94,31 @@ class ScanClock:
     def __init__(self, max_intervals: int = 201, max_steps: int = 21) -> None:
         self.intervals: deque[float] = deque(maxlen=max_intervals)
         self.steps: deque[float] = deque(maxlen=max_steps)
+        self._sorted_intervals: list[float] = []
+        self._sorted_steps: list[float] = []
         self._statistics: dict[str, float] = {}
+
+    @staticmethod
+    def _push(values: deque[float], ordered: list[float], value: float) -> None:
+        """Append ``value`` to ``values`` and to their sorted copy ``ordered``, the value that
+        falls out of a full ``values`` out of both."""
+        if len(values) == values.maxlen:
+            del ordered[bisect.bisect_left(ordered, values[0])]
+        values.append(value)
+        bisect.insort(ordered, value)
 
     def add(self, dt: float) -> None:
         """One more interval ``dt`` [s]; a non-finite one is ignored."""
         if np.isfinite(dt):
-            self.intervals.append(dt)
+            self._push(self.intervals, self._sorted_intervals, dt)
             if dt > 0:
-                self.steps.append(dt)
+                self._push(self.steps, self._sorted_steps, dt)
             self._statistics.clear()
 
     def extend(self, intervals: Iterable[float]) -> None:
         """More finite intervals [s], as the clock's history only (not as steps)."""
-        self.intervals.extend(intervals)
+        for dt in intervals:
+            self._push(self.intervals, self._sorted_intervals, dt)
         self._statistics.clear()
 
     def _cached(self, name: str, values: deque[float],
@@ -113,7 +136,7 @@ class ScanClock:
     @property
     def median(self) -> float:
         """The median interval [s] (needs one)."""
-        return self._cached("median", self.intervals, median)
+        return sorted_median(self._sorted_intervals)
 
     @property
     def jitter(self) -> float:
@@ -124,7 +147,7 @@ class ScanClock:
     @property
     def typical_step(self) -> float:
         """The median step [s] (needs one)."""
-        return self._cached("step", self.steps, median)
+        return sorted_median(self._sorted_steps)
 
 
 def prediction_sigma(

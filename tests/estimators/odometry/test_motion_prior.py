@@ -83,6 +83,21 @@ def test_scan_clock_statistics_are_those_of_its_last_intervals() -> None:
     assert clock.typical_step == np.median([value for value in seen if value > 0][-3:])
 
 
+def test_scan_clock_medians_stay_numpys_over_many_repeated_intervals() -> None:
+    """The medians ``ScanClock`` reads off its sorted intervals and steps are ``np.median`` of
+    the last ones, bit for bit, while repeated values (a logger's quantised stamps) come and
+    fall out of the window in any order, odd and even counts alike."""
+    rng = np.random.default_rng(1)
+    clock = ScanClock(max_intervals=10, max_steps=5)
+    seen: list[float] = []
+    for dt in rng.choice([0.0, 0.1, 0.1, 0.2, 0.25, -0.1, 0.3], 300):
+        clock.add(float(dt))
+        seen.append(float(dt))
+        steps = [value for value in seen if value > 0][-5:]
+        assert clock.median == float(np.median(seen[-10:]))
+        assert clock.typical_step == float(np.median(steps))
+
+
 @settings(max_examples=80, deadline=None)
 @given(values=st.lists(st.floats(-1e3, 1e3) | st.sampled_from([0.1, np.inf, -np.inf]),
                        min_size=1, max_size=60))
