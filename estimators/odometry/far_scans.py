@@ -21,10 +21,14 @@ on the likelihood field of the local map (Olson 2009):
   apart). The result explaining more points is kept; the motion prior weighs what the
   guess is worth over the interval (``prediction_acceleration * dt^2``, unclipped).
 * **Fallback** (:func:`fallback_match`), when a match explains too few points: a correlative
-  search in a small window around the guess, then over every heading, then over the
-  far-apart window. A turn faster than the motion model, or one spanning a gap in the scans,
-  lies outside any small window around the guess (an 80-degree turn between two scans 3 s
-  apart looks like a few degrees and a sideways step from there).
+  search in a small window around the guess, then over every heading the car can have
+  turned to (twice ``max_turn_rate`` times the interval: a turn rate reversed at full rate;
+  every heading over a gap in the scans), then over the far-apart window. A turn faster than
+  the motion model, or one spanning a gap in the scans, lies outside any small window around
+  the guess (an 80-degree turn between two scans 3 s apart looks like a few degrees and a
+  sideways step from there). Headings no turn reaches are left out: where a scan holds a
+  handful of returns (a short-range Lidar among pillars), one turned half round can explain
+  a point or two more by chance.
 
 A match that still explains less than ``min_quality`` of the scan (no overlap with the map:
 the car was carried off, a scan of a new room through a door) is kept as the best there is
@@ -197,18 +201,19 @@ def far_match(
 
 def fallback_match(
     search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
-    guess: FloatArray, near: SearchWindow, far: SearchWindow | None, params: ICPParams,
-    min_quality: float,
+    guess: FloatArray, near: SearchWindow, turn: float, far: SearchWindow | None,
+    params: ICPParams, min_quality: float,
 ) -> MatchResult:
     """The best-explaining ICP match of ``points`` from correlative searches around ``guess``
     in ever wider windows, until one explains ``min_quality`` of the points: exhaustive
     (:func:`~estimators.matching.correlative.correlative_search`) in the ``near`` window,
-    then over every heading at its translations, then (if given) branch-and-bound in the
-    ``far`` window."""
+    then over headings up to ``turn`` [rad] either side at its translations (skipped when
+    the near window covers them), then (if given) branch-and-bound in the ``far`` window."""
     best: MatchResult | None = None
-    for window in (near, SearchWindow(near.linear, np.pi), far):
+    wide = SearchWindow(near.linear, min(turn, np.pi)) if turn > near.angular else None
+    for window in (near, wide, far):
         if window is None:
-            break
+            continue
         if window is far:
             start = search.search(points, guess, window).pose
         else:
@@ -353,8 +358,11 @@ class FarScanMatching:
             if searched:
                 self.fallbacks += 1
                 near = SearchWindow(self.search_linear_window, self.search_angular_window)
+                # headings the car can reach: its turn rate may have changed by up to twice
+                # the fastest turn over the interval (a turn the other way at full rate)
                 retry = fallback_match(self._global_search(), self._reference, points, guess,
-                                       near, window if window.linear > near.linear else None,
+                                       near, 2.0 * window.angular,
+                                       window if window.linear > near.linear else None,
                                        self.params, self.min_quality)
                 result = retry if retry.quality > result.quality else result
         result = self._checked_against_scan(result, points, guess, predicted, searched)

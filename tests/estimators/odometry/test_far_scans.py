@@ -11,11 +11,20 @@ import pytest
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
 from agents.scripted import PurePursuitDriver
 from estimators import SensorSetup
-from estimators.odometry.far_scans import SearchWindow, far_apart, one_turn_start, reach_window
+from estimators.matching.icp import ICPParams
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.odometry.far_scans import (
+    GlobalSearch,
+    SearchWindow,
+    fallback_match,
+    far_apart,
+    one_turn_start,
+    reach_window,
+)
 from estimators.odometry.local_map import LocalMapOdometry
 from estimators.odometry.moving_points import MovingPointFilter
 from lidar_env import lidars_with_noise
-from lidar_env.core.se2 import relative
+from lidar_env.core.se2 import relative, wrap_angle
 from lidar_env.sensors.lidar import cast_rays
 from lidar_env.world.world import World
 
@@ -162,3 +171,24 @@ def test_a_corridor_seen_turned_round_is_not_taken_after_3_s_of_blind_scans() ->
     # Turned round, the car ends 30 m off. Along the bare corridor's axis, where it came back
     # after 3 s is the match's guess (0.4-1.8 m off, as small changes elsewhere move it).
     assert np.hypot(*(estimator.trajectory[-1, :2] - truth[-1, :2])) < 2.5
+
+
+def test_the_fallback_turns_the_car_only_as_far_as_it_can_turn() -> None:
+    # ten posts around the origin; the scan was taken turned 150 degrees from the guess: only
+    # a search over headings that far out finds it
+    centres = np.random.default_rng(3).uniform(-4.0, 4.0, (10, 2))
+    around = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    world_points = (centres[:, None, :] + 0.15 * np.stack([np.cos(around), np.sin(around)],
+                                                          axis=1)[None]).reshape(-1, 2)
+    true_pose = np.array([0.0, 0.0, np.radians(150.0)])
+    c, s = np.cos(true_pose[2]), np.sin(true_pose[2])
+    scan = world_points @ np.array([[c, -s], [s, c]])  # world -> car frame (R^T p)
+    reference = PointToLineReference(world_points)
+    search = GlobalSearch(world_points, 0.05)
+    near = SearchWindow(0.5, np.radians(30.0))
+    guess = np.zeros(3)
+    kept = fallback_match(search, reference, scan, guess, near, 0.6, None, ICPParams(), 0.5)
+    assert kept.quality < 0.5  # no heading within reach explains the scan: a poor match
+    found = fallback_match(search, reference, scan, guess, near, np.pi, None, ICPParams(), 0.5)
+    assert found.quality > 0.9
+    assert abs(wrap_angle(found.pose[2] - true_pose[2])) < np.radians(1.0)
