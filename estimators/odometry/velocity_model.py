@@ -15,13 +15,18 @@ import math
 from collections import deque
 
 import numpy as np
-from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 
 import estimators.odometry.motion_prior as motion_prior
 from estimators.odometry.motion_prior import ScanClock, missed_sigma, prediction_sigma
 
 FloatArray = NDArray[np.float64]
+
+try:  # np.linalg.eigh's own LAPACK call (dsyevd, lower triangle) without its per-call checks
+    # and error-state context, which cost several times a 2 x 2 decomposition
+    from numpy.linalg._umath_linalg import eigh_lo as _symmetric_eigh
+except ImportError:  # a numpy that keeps it elsewhere: the public call, the same values
+    _symmetric_eigh = np.linalg.eigh
 
 
 class ConstantVelocityModel:
@@ -133,9 +138,7 @@ class ConstantVelocityModel:
         """
         c, s = math.cos(heading), math.sin(heading)
         rotation = np.array([[c, -s], [s, c]])
-        # np.linalg.eigh's own LAPACK call (dsyevd, lower triangle) without its per-call checks
-        # and error-state context, which cost several times the 2 x 2 decomposition
-        values, vectors = _umath_linalg.eigh_lo(rotation.T @ information @ rotation)
+        values, vectors = _symmetric_eigh(rotation.T @ information @ rotation)
         gains = np.maximum(values, 0.0) / (np.maximum(values, 0.0) + self.speed_information)
         held = self._velocity[:2]
         return held + vectors @ (gains * (vectors.T @ (translation - held)))

@@ -18,6 +18,7 @@ from estimators.odometry.motion_prior import (
     no_sideslip_information,
     prediction_sigma,
 )
+from estimators.odometry.velocity_model import _symmetric_eigh
 from lidar_env.core.se2 import rotate
 
 
@@ -144,3 +145,14 @@ def test_a_weakly_pinned_direction_moves_the_speed_in_proportion(heading: float)
     held = model._weakly_seen_held(measured, np.diag([2.0, 200.0]), heading)
     forward, sideways = (2.0 / 12.0, 200.0 / 210.0) if heading == 0.0 else (200 / 210, 2 / 12)
     np.testing.assert_allclose(held, [0.1 + forward * (0.04 - 0.1), sideways * 0.01], atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=3, max_size=3))
+def test_the_speed_hold_s_eigendecomposition_is_numpy_s_bit_for_bit(entries) -> None:
+    a, b, c = entries
+    matrix = np.array([[a, b], [b, c]])
+    values, vectors = _symmetric_eigh(matrix)
+    expected_values, expected_vectors = np.linalg.eigh(matrix)
+    np.testing.assert_array_equal(values, expected_values)
+    np.testing.assert_array_equal(vectors, expected_vectors)
