@@ -98,7 +98,8 @@ def cast_body(ranges: NDArray[np.float64], ox: float, oy: float,
                 ranges[j] = t
 
 
-@njit(cache=True, fastmath=False)
+# inlined into its caller, as readings (see cast_sensor): no reference counts for its arrays
+@njit(cache=True, fastmath=False, inline="always")
 def cast_packed(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
@@ -162,7 +163,7 @@ def exact_ranges_kernel(circles: NDArray[np.float64], segments: NDArray[np.float
                        np.empty(0, dtype=np.int64)).copy()
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")
 def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
              gaussians: NDArray[np.float64], uniforms: NDArray[np.float64],
              out: NDArray[np.float32]) -> NDArray[np.float32]:

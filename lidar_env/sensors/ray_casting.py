@@ -95,7 +95,7 @@ def _sorted_range(
     return np.searchsorted(sorted_angles, lo, "left"), np.searchsorted(sorted_angles, hi, "right")
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")
 def _beam_span(
     lo: float, width: float, sorted_angles: NDArray[np.float64], step: float
 ) -> tuple[int, int, int, int]:
@@ -152,7 +152,7 @@ def segment_hit(ox: float, oy: float, dx: float, dy: float, x1: float, y1: float
     return t
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")
 def _circle_window(fx: float, fy: float, d: float, r: float, heading: float):
     """``(lo in [0, 2 pi), width)`` [rad] from ``heading`` of a circle at ``(fx, fy)``, d > r."""
     half = _bearing(r, math.sqrt((d - r) * (d + r)))  # asin(r / d)
@@ -205,7 +205,7 @@ def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: flo
     return True
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, inline="always")
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
     cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
@@ -221,7 +221,10 @@ def beam_directions(
     return sorted_angles, order, step, dir_x, dir_y
 
 
-@njit(cache=True, fastmath=False)
+# inlined into its caller (numba's own inlining), as beam_directions: a compiled call takes two
+# atomic reference counts per array it is handed (14 here), which cost more than a scan of few
+# beams does
+@njit(cache=True, fastmath=False, inline="always")
 def cast_sensor(
     ranges: NDArray[np.float64],
     pose: tuple[float, float, float],

@@ -4,7 +4,9 @@ where numpy leaves it, at a third of the cost of numba's ``Generator`` draws (wh
 generator through a function pointer per draw).
 
 :func:`state_words` views a ``numpy.random.Generator``'s 128-bit PCG64 state and increment as
-four ``uint64`` words in the generator's own memory; :func:`fill_standard_normals` and
+four ``uint64`` words in the generator's own memory (:func:`state_address` and :func:`words_at`
+the same words by address, for a kernel taking many generators' states in one array);
+:func:`fill_standard_normals` and
 :func:`fill_uniforms` draw a block into an array, holding the state in registers and writing it
 back once. The step is PCG64's (O'Neill 2014, "PCG: A family of simple fast space-efficient
 statistically good algorithms for random number generation", the 128-bit LCG with the XSL-RR
@@ -19,7 +21,7 @@ from typing import Any
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, types
+from numba import carray, njit, types
 from numba.extending import intrinsic
 from numba.np.random._constants import (
     fi_double,
@@ -74,6 +76,31 @@ def state_words(rng: np.random.Generator) -> NDArray[np.uint64]:
                 "memory (numpy built with 128-bit integers)"
             )
     return words
+
+
+def state_address(rng: np.random.Generator) -> int:
+    """The address of :func:`state_words`'s four words of ``rng``, for :func:`words_at`; valid
+    while ``rng`` lives (the caller keeps it)."""
+    return int(state_words(rng).ctypes.data)
+
+
+@intrinsic
+def _words_pointer(typingctx: object, address: types.Type) -> tuple:
+    """A ``uint64`` pointer from an address held as a ``uint64``."""
+    signature = types.CPointer(types.uint64)(types.uint64)
+
+    def codegen(context: Any, builder: ir.IRBuilder, sig: Any, args: list) -> ir.Value:
+        return builder.inttoptr(args[0], context.get_value_type(sig.return_type))
+
+    return signature, codegen
+
+
+@njit(cache=True, inline="always")
+def words_at(address: np.uint64) -> NDArray[np.uint64]:
+    """The four state words at ``address`` (:func:`state_address`) as a (4,) ``uint64`` array
+    owning nothing: unlike a view held in a container, handing it on costs no reference
+    counting."""
+    return carray(_words_pointer(address), 4)
 
 
 @intrinsic

@@ -35,7 +35,7 @@ from lidar_env.movers.crowd import WAYPOINT_TRIES, fill_car_circles
 from lidar_env.movers.kernels import advance_crowd
 from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
-from lidar_env.vector.draws import fill_standard_normals, fill_uniforms
+from lidar_env.vector.draws import fill_standard_normals, fill_uniforms, words_at
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
@@ -62,8 +62,9 @@ def observe_envs(
     """Scan from the cars of ``envs`` at ``pose`` (N, 3) into ``scans`` (N, total beams).
 
     ``sensor_poses`` (N, K, 3) receives the Lidars' world poses. ``scene`` is
-    :attr:`lidar_env.vector.slots.SceneSlots.scene` (each env's generator state is its item's
-    last; its world's arrays are taken only where its world differs from the env before);
+    :attr:`lidar_env.vector.slots.SceneSlots.scene` (each env's generator state taken by its
+    address, its last; its world's arrays are taken only where its world differs from the env
+    before);
     ``sensors`` ``(mounts (K, 3), world_aligned, noisy, dropping, beams, params)``
     with ``beams`` and ``params`` as :func:`~lidar_env.sensors.layout_kernels.cast_packed` takes
     them; ``work`` the scratch of :meth:`lidar_env.vector.env.DualLidarVectorEnv._work` (nothing is
@@ -72,7 +73,7 @@ def observe_envs(
     Lidar is noisy, then a uniform per beam if any drops out (the order of
     :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), as numpy's array draws.
     """
-    items, first_edge, world_key = scene[0], scene[1], scene[4]
+    items, first_edge, world_key, addresses = scene[0], scene[1], scene[4], scene[6]
     mounts, world_aligned, noisy, dropping, beams, params = sensors
     cast_from, draws, circle_seen, segment_seen, stamp = work[:5]
     total, k = scans.shape[1], mounts.shape[0]
@@ -95,7 +96,7 @@ def observe_envs(
         for j in range(movers.shape[0]):  # Crowd.circles
             movers[j, 0], movers[j, 1], movers[j, 2] = positions[i, j, 0], positions[i, j, 1], \
                 radius
-        words = items[i][5]
+        words = words_at(addresses[i])
         fill_standard_normals(words, gaussians)
         fill_uniforms(words, uniforms)
         exact = cast_packed(env_circles, env_segments, first_edge[i], env_grid, cast_from,
@@ -209,7 +210,8 @@ def step_envs(
             hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
         else:  # movers first (their waypoint draws), then the car among them
-            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd, items[i][5],
+            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd,
+                               words_at(scene[6][i]),
                                env_circles, env_segments, env_grid)
             hit = drive_arc_among_movers(pose[i], speed[i], yaw_rate[i], dt, checks[i],
                                          half_length, half_width, near_circles, near_segments,

@@ -20,7 +20,7 @@ from numba.typed import List
 from numpy.typing import DTypeLike, NDArray
 
 from lidar_env.routes.trace_geometry import Trace
-from lidar_env.vector.draws import state_words
+from lidar_env.vector.draws import state_address, state_words
 from lidar_env.world.primitive_grid import PrimitiveGrid
 from lidar_env.world.world import World
 
@@ -81,6 +81,9 @@ class SceneSlots:
         self.segment_seen = np.zeros(0, dtype=np.int64)
         self.near_circles, self.near_segments = np.zeros((0, 3)), np.zeros((0, 4))
         self.stamp = np.ones(1, dtype=np.int64)
+        #: each env's generator state by address (lidar_env.vector.draws.words_at), valid while
+        #: ``generators`` holds it
+        self.state_addresses = np.zeros(n, dtype=np.uint64)
         self._parts: list[tuple | None] = [None] * n  # each env's item but its generator's
         self._items: Any = None
 
@@ -114,6 +117,7 @@ class SceneSlots:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         worlds, traces, generators = self.worlds, self.traces, self.generators
+        self.state_addresses = np.zeros(self.n, dtype=np.uint64)  # another process's are void
         self.worlds, self.traces = [None] * self.n, [None] * self.n
         for i, (world, trace, rng) in enumerate(zip(worlds, traces, generators, strict=True)):
             if world is not None and trace is not None:
@@ -125,6 +129,7 @@ class SceneSlots:
         """Env ``i`` draws from ``rng``, a PCG64 generator (the kernel advances its state, as
         numpy would)."""
         self.generators[i] = rng
+        self.state_addresses[i] = state_address(rng)
         self._store(i)
 
     def _store(self, i: int) -> None:
@@ -139,12 +144,14 @@ class SceneSlots:
 
     @property
     def scene(self) -> tuple:
-        """``(items, first_polygon_edge, closed, length, world_key, trace_key)``: a typed list
-        of ``(circles, segments, grid, waypoints, arc, generator state words)`` per env and (N,)
-        arrays; envs of equal ``world_key`` (``trace_key``) hold the same world (trace) arrays."""
+        """``(items, first_polygon_edge, closed, length, world_key, trace_key, state_addresses)``:
+        a typed list of ``(circles, segments, grid, waypoints, arc, generator state words)`` per
+        env and (N,) arrays; envs of equal ``world_key`` (``trace_key``) hold the same world
+        (trace) arrays; the kernels take each env's generator state by its address (taking an
+        item from the typed list costs some 30 reference counts)."""
         assert self._items is not None, "set every env's scene first"
         return (self._items, self.first_edge, self.closed, self.length, self.world_key,
-                self.trace_key)
+                self.trace_key, self.state_addresses)
 
     def nbytes(self) -> int:
         """Bytes of the per-env arrays, counting each distinct world and trace once."""

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numba import njit
 
 from lidar_env.core.errors import ArgumentTypeError
 from lidar_env.vector.draws import (
     fill_standard_normals,
     fill_uniforms,
+    state_address,
     state_words,
+    words_at,
 )
 
 
@@ -58,3 +61,16 @@ def test_the_words_keep_their_generator_alive() -> None:
 def test_another_bit_generator_is_refused_by_name() -> None:
     with pytest.raises(ArgumentTypeError, match="expected a numpy PCG64 generator, got Philox"):
         state_words(np.random.Generator(np.random.Philox(0)))
+
+
+@njit(cache=True)
+def _normals_at(address: np.uint64, out: np.ndarray) -> None:
+    fill_standard_normals(words_at(address), out)
+
+
+def test_the_words_at_a_generators_address_are_its_state() -> None:
+    numpy_rng, compiled_rng = np.random.default_rng(3), np.random.default_rng(3)
+    got = np.empty(720)
+    _normals_at(np.uint64(state_address(compiled_rng)), got)
+    assert got.tobytes() == numpy_rng.standard_normal(720).tobytes()
+    assert compiled_rng.bit_generator.state == numpy_rng.bit_generator.state
