@@ -185,7 +185,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     After a run, ``fallbacks`` counts the correlative searches that were needed, ``far_searches``
     the far-apart ones, ``scan_corrections`` the map matches the scan-to-scan check replaced
     (:mod:`estimators.odometry.scan_check`), and ``poor_matches`` lists the scans still matched
-    poorly (flagged).
+    poorly (flagged). ``scan_information`` is the last scan's match information (3, 3): its
+    inlier pairs' ``J^T W J`` at the matched pose (world-frame x, y [m], heading [rad]; one
+    point squarely facing a direction adds 1), zeros for a scan matched to nothing.
     """
 
     #: One pillar in range (3-9 returns of a short-range Lidar in a hall) still pins the pose
@@ -271,6 +273,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self._previous_scan: tuple[int, NDArray[np.float64]] | None = None  # (index, points)
         self._far_steps: deque[tuple[float, float]] = deque(maxlen=self.velocity_window)
         self.poor_matches: list[int] = []
+        self.scan_information = np.zeros((3, 3))
 
     def _points(self, scans: dict[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         points = self._car_points(scans)
@@ -315,6 +318,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             if self._moving is not None:
                 points = self._static_points(points, guess, scans)
             self.poor_matches.append(len(self._poses))  # nothing to match: the guess, flagged
+            self.scan_information = np.zeros((3, 3))
             self._remember(guess, scans, seen, float("inf"))  # a guess: a jump
             if len(points) >= 2:
                 self._add_keyframe(guess, self._map_points(guess, seen, points))
@@ -330,6 +334,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             result = register(self._reference, points, result.pose, self.params, guess,
                               self.match_information)
         pose = result.pose
+        self.scan_information = (np.zeros((3, 3)) if result.information is None
+                                 else result.information)
         miss = relative(guess, pose)
         self._misses.append(float(np.hypot(miss[0], miss[1])))
         increment = relative(self.pose, pose)

@@ -39,6 +39,7 @@ from estimators.matching.branch_and_bound import PyramidBuffer
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, scans_to_car_points
 from estimators.registry import make
+from estimators.slam.frontend_drift import FrontEndDrift
 from estimators.slam.keyframe_matching import KeyframeMatching
 from estimators.slam.keyframe_table import Keyframe, KeyframeTable
 from estimators.slam.loop_closure import LoopClosureParams, LoopVerification, PlaceMap
@@ -88,11 +89,12 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
         loop_gate: a verified match becomes a loop edge only if it is reachable from the
             graph's current estimate: its Mahalanobis distance from it, under the covariance
-            of the front end's drift model (the ``odometry_*`` settings) along the chain since
-            the old keyframe plus the match's own, is at most this (5, as
-            ``max_loop_sigma``). A look-alike place the odometry cannot have drifted to (a
-            corridor's far end seen turned round, a grid of pillars one period along) fails
-            it; a true revisit after any drift that model allows passes.
+            of the front end's drift along the chain since the old keyframe plus the match's
+            own, is at most this (5, as ``max_loop_sigma``). The drift of a step is the front
+            end's own, from its scan matches' information where it reports them
+            (:mod:`estimators.slam.frontend_drift`), else the ``odometry_*`` model. A look-alike
+            place the front end cannot have drifted to (a corridor's far end seen turned round,
+            the next aisle of a depot, a grid of pillars one period along) fails it.
         max_loop_sigma: loop edges whose Mahalanobis error after optimisation exceeds this
             are dropped (5: far outside any honest measurement's spread).
         optimize_every: after a loop closure, optimise again once this many keyframes were
@@ -108,8 +110,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             compares the last 6 keyframes (~3 m of path) with 6 on each side of the old one,
             and must explain 75 % of the points with no other match within 80 % of its score
             (stricter than local matches: nothing but the scans vouches for it).
-        global_confirmation: a global match becomes a loop edge only when a second one within
-            this many keyframes implies the same correction (10 keyframes; agreement within
+        global_confirmation: a global match becomes a loop edge only when a second one, of
+            another query within this many keyframes, implies the same correction (10; within
             ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
             place is common indoors, two consistent ones in a row rarely are.
         min_range: readings at or below this [m] are "no return".
@@ -206,6 +208,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self.graph = PoseGraph()
         self.keyframes: list[Keyframe] = []
         self._table = KeyframeTable()  # their path lengths, descriptors, edge covariances
+        self._drift = FrontEndDrift(self._frontend, self.keyframe_distance)  # since a keyframe
         self._scan_keyframe: list[int] = []  # keyframe index each scan hangs from
         self._scan_odometry: list[NDArray[np.float64]] = []
         # (keyframe, neighbours) -> (map, the poses it was built at, optimisations by then)
@@ -238,6 +241,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         poor = len(getattr(self._frontend, "poor_matches", ()))
         odometry = np.asarray(self._frontend.update(scans, t), dtype=np.float64)
+        self._drift.add(float(odometry[2]))
         # a scan the front end could not match (not even by its searches) seeds no loop
         # closure and no keyframe check: on noise those searches cost seconds and find nothing
         self._poor_scan = len(getattr(self._frontend, "poor_matches", ())) > poor
@@ -295,6 +299,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         path_length = 0.0 if step is None else self.keyframes[-1].path_length + np.hypot(*step[:2])
         keyframe = Keyframe(points.copy(), range_histogram(points), odometry.copy(), path_length)
         poor = getattr(self, "_poor_scan", False)  # set by _step (add_scan: never)
+        measured = self._drift.take(step)  # the front end's drift over the step
         if not self.keyframes:
             self.graph.add_node(odometry)
             error = (np.zeros((3, 3)), np.zeros((3, 3)))
@@ -312,7 +317,8 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             information = (self._matched_information(reference, points, step, drift)
                            if self.match_odometry and reference is not None else drift)
             self.graph.add_edge(index - 1, index, step, information)
-            error = self._odometry_error(step, np.linalg.inv(information) if poor else None)
+            error = self._odometry_error(step, np.linalg.inv(information) if poor else None,
+                                         measured)
         self.keyframes.append(keyframe)
         self._table.append(keyframe, *error)
         self._since_optimized += 1
@@ -324,12 +330,6 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             self._close_global_loops(index)
         if self._dirty and self._since_optimized >= self.optimize_every:
             self.optimize()
-
-    def _odometry_information(self, step: NDArray[np.float64]) -> NDArray[np.float64]:
-        distance = float(np.hypot(step[0], step[1]))
-        sigma_xy = self.odometry_sigma + self.odometry_drift * distance
-        sigma_th = self.odometry_sigma_rotation + self.odometry_drift_rotation * distance
-        return np.diag([sigma_xy**-2, sigma_xy**-2, sigma_th**-2])
 
     def optimize(self, trusted: NDArray[np.bool_] | None = None) -> None:
         """Optimise the graph (Cauchy kernel on loop edges); drop loop edges whose error is

@@ -131,11 +131,13 @@ class KeyframeMatching:
         the covariance of the front end's error along the odometry chain from ``old`` to
         ``new`` plus the measurement's own.
 
-        The chain's error is the front end's error model (:meth:`_odometry_error`): its noise
-        adds up independently from edge to edge, its drift is bounded for any correlation
-        (:func:`~estimators.slam.pose_graph.chain_covariance` with ``correlated=True``: a front
-        end may err the same way all along a featureless stretch), so the bound grows with
-        the distance driven, not with the number of keyframes. The chain ignores loop edges
+        The chain's error is the front end's error model (:meth:`_odometry_error`): its noise,
+        and its drift measured from its scan matches (errors correlated within one of its
+        maps, :mod:`~estimators.slam.frontend_drift`), add up independently from edge to edge;
+        the distance model's drift, used where the front end reports no scan matches, is
+        bounded for any correlation (:func:`~estimators.slam.pose_graph.chain_covariance` with
+        ``correlated=True``: a front end may err the same way all along a featureless
+        stretch), so that bound grows with the distance driven. The chain ignores loop edges
         already in the graph, which only shrink the uncertainty: both err on the side of
         accepting a true loop after a long, drifting drive."""
         poses = self.graph.poses
@@ -147,12 +149,28 @@ class KeyframeMatching:
         covariance = chain + np.linalg.inv(information)
         return float(np.sqrt(residual @ np.linalg.solve(covariance, residual)))
 
+    def _odometry_information(self, step: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(3, 3)`` information of an odometry edge over ``step`` (3,) by the distance model
+        (the ``odometry_*`` settings)."""
+        distance = float(np.hypot(step[0], step[1]))
+        sigma_xy = self.odometry_sigma + self.odometry_drift * distance
+        sigma_th = self.odometry_sigma_rotation + self.odometry_drift_rotation * distance
+        return np.diag([sigma_xy**-2, sigma_xy**-2, sigma_th**-2])
+
     def _odometry_error(self, step: NDArray[np.float64],
-                        matched: NDArray[np.float64] | None = None
+                        matched: NDArray[np.float64] | None = None,
+                        measured: NDArray[np.float64] | None = None
                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The front end's error over one keyframe ``step`` (3,) as the loop gate models it:
-        the covariances (3, 3) of its noise (``odometry_sigma``, ``odometry_sigma_rotation``)
-        and of its drift (``odometry_drift``, ``odometry_drift_rotation`` times the distance).
+        the covariances (3, 3) of what adds up independently from edge to edge (its noise,
+        ``odometry_sigma`` and ``odometry_sigma_rotation``, plus ``measured``, the drift
+        :class:`~estimators.slam.frontend_drift.FrontEndDrift` found in its scan matches over
+        the step) and of its drift that may be correlated all along the chain (without
+        ``measured``: ``odometry_drift``, ``odometry_drift_rotation`` times the distance).
+        A front end's drift measured from its matches is tight where hundreds of returns
+        pinned each scan (a depot's shelves: millimetres and hundredths of a degree per map
+        keyframe, so the next aisle, one pitch over, is out of reach) and loose where a few
+        posts did; the distance model allows metres and tens of degrees after 50 m anywhere.
         Where the front end flagged its match of the keyframe's scan as poor, the drift is
         ``matched`` (the edge's covariance from the two keyframes' match, see
         :meth:`_matched_information`) instead. The keyframe match alone does not bound a
@@ -164,6 +182,8 @@ class KeyframeMatching:
                          self.odometry_sigma_rotation**2])
         if matched is not None:
             return noise, matched
+        if measured is not None:
+            return noise + measured, np.zeros((3, 3))
         drift = np.diag([(self.odometry_drift * distance)**2] * 2
                         + [(self.odometry_drift_rotation * distance)**2])
         return noise, drift
@@ -200,8 +220,10 @@ class KeyframeMatching:
 
     def _close_global_loops(self, index: int) -> None:
         """Match keyframe ``index`` over all headings against look-alike old keyframes; add
-        loop edges once two matches agree on the correction (then optimise at once, trusting
-        them: the robust kernel would otherwise refuse a correction of many metres)."""
+        loop edges once two matches of different queries agree on the correction (then
+        optimise at once, trusting them: the robust kernel would otherwise refuse a correction
+        of many metres). Two candidates of one query (neighbouring old keyframes, whose places
+        share most points) are one piece of evidence: the look-alike fits both alike."""
         current = self.keyframes[index]
         path = self._table.path_lengths[:index]
         old = np.flatnonzero(current.path_length - path >= self.min_loop_separation)
@@ -223,6 +245,8 @@ class KeyframeMatching:
             # where the match puts this keyframe, as a correction of the whole graph
             correction = compose(compose(poses[k], result.pose), inverse(poses[index]))
             for old_k, new_k, other in self._pending:
+                if new_k == index:  # the same query's other candidate: the same evidence
+                    continue
                 predicted = relative(poses[old_k], compose(correction, poses[new_k]))
                 error = relative(predicted, other.pose)
                 if (np.hypot(error[0], error[1]) <= self.consistency_distance

@@ -320,3 +320,25 @@ def test_a_shelf_aisle_seen_through_a_few_joints_is_crossed_near_the_car_s_speed
     errors = np.array(errors)
     assert np.median(np.abs(errors[:, 0])) < 3.0
     assert np.all(np.abs(errors[:, 1:]) < [0.01, np.radians(0.5)])
+
+
+def test_each_scan_s_match_information_is_kept_for_the_last_scan():
+    # Midway down a 5 m wide, 40 m long corridor, its ends beyond the 8 m range: the side
+    # walls pin y with a point's worth per return squarely facing it, x hardly at all (only
+    # through the walls' noise).
+    corners = np.array([(0.0, -2.5), (40.0, -2.5), (40.0, 2.5), (0.0, 2.5)])
+    world = World(segments=np.hstack([corners, np.roll(corners, -1, axis=0)]))
+    lidar = Lidar(noise_std=0.01, max_range=8.0)
+    truth = np.column_stack([20.0 + 0.1 * np.arange(4), np.zeros((4, 2))])
+    rng = np.random.default_rng(0)
+    scans = [{"lidar_1": lidar.scan(world, pose[None], rng)[0].astype(np.float64)}
+             for pose in truth]
+    setup = SensorSetup(np.zeros((1, 3)), lidar.beam_angles, lidar.max_range)
+    estimator = LocalMapOdometry()
+    _replay(estimator, setup, truth[0], scans, 0.1 * np.arange(len(truth)))
+    information = estimator.scan_information
+    assert information.shape == (3, 3)
+    np.testing.assert_allclose(information, information.T, atol=1e-9)
+    assert np.linalg.eigvalsh(information)[0] >= -1e-9
+    assert information[1, 1] > 50  # dozens of returns face y squarely
+    assert information[0, 0] < 0.05 * information[1, 1]  # the corridor's axis is (nearly) free
