@@ -157,34 +157,54 @@ def _next_double(
 
 
 @njit(cache=True)
+def _finish_normal(
+    r: np.uint64, low: np.uint64, high: np.uint64, inc_low: np.uint64, inc_high: np.uint64
+) -> tuple[float, np.uint64, np.uint64]:
+    """The rest of a ziggurat draw whose first output ``r`` fell outside its rectangle: the
+    tail or the wedge test, and new outputs from the state ``(low, high)`` after ``r`` until
+    one is accepted; returns ``(value, low, high)``."""
+    while True:
+        idx = r & _LOW_BYTE
+        r >>= _U8
+        rabs = (r >> _U1) & _MANTISSA
+        x = np.float64(np.int64(rabs)) * wi_double[idx] * _SIGNS[r & _U1]
+        if rabs < ki_double[idx]:
+            return x, low, high
+        if idx == 0:  # the tail beyond ziggurat_nor_r
+            while True:
+                u, low, high = _next_double(low, high, inc_low, inc_high)
+                xx = -ziggurat_nor_inv_r * np.log1p(-u)
+                u, low, high = _next_double(low, high, inc_low, inc_high)
+                yy = -np.log1p(-u)
+                if yy + yy > xx * xx:
+                    break
+            x = -(ziggurat_nor_r + xx) if (rabs >> _U8) & _U1 else ziggurat_nor_r + xx
+            return x, low, high
+        u, low, high = _next_double(low, high, inc_low, inc_high)
+        if (fi_double[idx - 1] - fi_double[idx]) * u + fi_double[idx] < np.exp(-0.5 * x * x):
+            return x, low, high
+        r, low, high = _next_uint64(low, high, inc_low, inc_high)
+
+
+@njit(cache=True)
 def fill_standard_normals(words: NDArray[np.uint64], out: NDArray[np.float64]) -> None:
     """``out`` (n,) overwritten with n standard normals of the PCG64 state ``words``
-    (:func:`state_words`), which it advances: ``rng.standard_normal(n)`` bit for bit."""
+    (:func:`state_words`), which it advances: ``rng.standard_normal(n)`` bit for bit.
+
+    The 1% of draws not accepted at their first output finish in :func:`_finish_normal`, a
+    call, so the loop holds no call of its own (``exp``, ``log1p``) and keeps its values in
+    registers (about 2.9 against 3.1 ns a draw)."""
     low, high, inc_low, inc_high = words[0], words[1], words[2], words[3]
     for j in range(out.shape[0]):
-        while True:
-            r, low, high = _next_uint64(low, high, inc_low, inc_high)
-            idx = r & _LOW_BYTE
-            r >>= _U8
-            rabs = (r >> _U1) & _MANTISSA
-            # the sign by a product, not a branch: a branch on a fair coin mispredicts half the
-            # time, which costs more than the rest of the draw; x * -1.0 is -x bit for bit
-            x = np.float64(np.int64(rabs)) * wi_double[idx] * _SIGNS[r & _U1]
-            if rabs < ki_double[idx]:
-                break  # 99.3% of draws
-            if idx == 0:  # the tail beyond ziggurat_nor_r
-                while True:
-                    u, low, high = _next_double(low, high, inc_low, inc_high)
-                    xx = -ziggurat_nor_inv_r * np.log1p(-u)
-                    u, low, high = _next_double(low, high, inc_low, inc_high)
-                    yy = -np.log1p(-u)
-                    if yy + yy > xx * xx:
-                        break
-                x = -(ziggurat_nor_r + xx) if (rabs >> _U8) & _U1 else ziggurat_nor_r + xx
-                break
-            u, low, high = _next_double(low, high, inc_low, inc_high)
-            if (fi_double[idx - 1] - fi_double[idx]) * u + fi_double[idx] < np.exp(-0.5 * x * x):
-                break
+        r, low, high = _next_uint64(low, high, inc_low, inc_high)
+        idx = r & _LOW_BYTE
+        rest = r >> _U8
+        rabs = (rest >> _U1) & _MANTISSA
+        # the sign by a product, not a branch: a branch on a fair coin mispredicts half the
+        # time, which costs more than the rest of the draw; x * -1.0 is -x bit for bit
+        x = np.float64(np.int64(rabs)) * wi_double[idx] * _SIGNS[rest & _U1]
+        if rabs >= ki_double[idx]:  # 0.7% of draws
+            x, low, high = _finish_normal(r, low, high, inc_low, inc_high)
         out[j] = x
     words[0], words[1] = low, high
 

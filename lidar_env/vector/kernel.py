@@ -36,6 +36,7 @@ from lidar_env.movers.kernels import advance_crowd
 from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
 from lidar_env.vector.draws import fill_standard_normals, fill_uniforms, words_at
+from lidar_env.vector.unowned import unowned, unowned_grid
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
@@ -73,22 +74,31 @@ def observe_envs(
     Lidar is noisy, then a uniform per beam if any drops out (the order of
     :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), as numpy's array draws.
     """
-    items, first_edge, world_key, addresses = scene[0], scene[1], scene[4], scene[6]
-    mounts, world_aligned, noisy, dropping, beams, params = sensors
-    cast_from, draws, circle_seen, segment_seen, stamp = work[:5]
+    # every array used per env is an unowned view (of the arguments, held by the caller)
+    items, first_edge, world_key, addresses = scene[0], unowned(scene[1]), unowned(scene[4]), \
+        unowned(scene[6])
+    pose, sensor_poses, scans = unowned(pose), unowned(sensor_poses), unowned(scans)
+    mounts, world_aligned, noisy, dropping = unowned(sensors[0]), sensors[1], sensors[2], \
+        sensors[3]
+    beams, params = (unowned(sensors[4][0]), unowned(sensors[4][1])), unowned(sensors[5])
+    cast_from, draws, circle_seen, segment_seen, stamp = unowned(work[0]), unowned(work[1]), \
+        unowned(work[2]), unowned(work[3]), unowned(work[4])
     total, k = scans.shape[1], mounts.shape[0]
     gaussians = draws[:total] if noisy else draws[:0]
     uniforms = draws[total:2 * total] if dropping else draws[:0]
     no_car, no_facing = np.empty(0), np.empty(0, dtype=np.int64)
-    positions, radius, movers = crowd[0], crowd[7][0], crowd[8][0]
+    positions, radius, movers = unowned(crowd[0]), crowd[7][0], unowned(crowd[8][0])
     if envs.shape[0] == 0:
         return
     last = envs[0]  # the env whose world arrays are held
-    env_circles, env_segments, env_grid, _, _, _ = items[last]
+    circles, segments, grid, _, _, _ = items[last]
+    env_circles, env_segments, env_grid = unowned(circles), unowned(segments), unowned_grid(grid)
     for i in envs:
         if world_key[i] != world_key[last]:
-            last = i
-            env_circles, env_segments, env_grid, _, _, _ = items[i]
+            last = i  # the typed list holds its arrays
+            circles, segments, grid, _, _, _ = items[i]
+            env_circles, env_segments, env_grid = unowned(circles), unowned(segments), \
+                unowned_grid(grid)
         mount_poses(pose[i], mounts, sensor_poses[i])
         cast_from[:] = sensor_poses[i]
         if world_aligned:
@@ -196,18 +206,25 @@ def step_envs(
     ended = 0
     if envs.shape[0] == 0:
         return ended
+    # the arrays used per env as unowned views (see observe_envs), the crowd's step aside
+    car_pose, seen = unowned(pose), (unowned(work[2]), unowned(work[3]))
+    stamp, near = unowned(work[4]), (unowned(work[5]), unowned(work[6]))
     held = envs[0]  # the env whose world and trace arrays are held
-    env_circles, env_segments, env_grid, env_waypoints, env_arc, _ = items[held]
+    env_circles, env_segments, env_grid, waypoints, trace_arc, _ = items[held]
+    circles, segments, grid = unowned(env_circles), unowned(env_segments), unowned_grid(env_grid)
+    env_waypoints, env_arc = unowned(waypoints), unowned(trace_arc)
     for i in envs:
         if world_key[i] != world_key[held] or trace_key[i] != trace_key[held]:
-            held = i
-            env_circles, env_segments, env_grid, env_waypoints, env_arc, _ = items[i]
+            held = i  # the typed list holds its arrays
+            env_circles, env_segments, env_grid, waypoints, trace_arc, _ = items[i]
+            circles, segments = unowned(env_circles), unowned(env_segments)
+            grid, env_waypoints, env_arc = unowned_grid(env_grid), unowned(waypoints), \
+                unowned(trace_arc)
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(
-            pose[i, 0], pose[i, 1], reach, env_circles, env_segments, env_grid,
-            (work[2], work[3]), work[4], work[5], work[6])
+            pose[i, 0], pose[i, 1], reach, circles, segments, grid, seen, stamp, near[0], near[1])
         if crowd[0].shape[1] == 0:
-            hit = drive_arc(pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
+            hit = drive_arc(car_pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
         else:  # movers first (their waypoint draws), then the car among them
             start = step_crowd(i, pose[i], half_length, half_width, dt, crowd,
