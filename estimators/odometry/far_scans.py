@@ -316,7 +316,7 @@ class FarScanMatching:
         scan to use."""
         assert self._reference is not None
         typical = self._clock.typical_step if self._clock.steps else interval
-        window = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
+        window = reach = reach_window(self.max_speed, self.max_turn_rate, interval, typical)
         intervals = intervals_since_used(self.skipped_before, self.clock_jumped, interval,
                                          typical)
         if self._far_steps:  # a stalled clock does not mean the car drove or turned further
@@ -359,9 +359,10 @@ class FarScanMatching:
                 self.fallbacks += 1
                 near = SearchWindow(self.search_linear_window, self.search_angular_window)
                 # headings the car can reach: its turn rate may have changed by up to twice
-                # the fastest turn over the interval (a turn the other way at full rate)
+                # the fastest turn over the interval (a turn the other way at full rate); the
+                # reach itself, not held to the last steps' turns (a car at rest may turn)
                 retry = fallback_match(self._global_search(), self._reference, points, guess,
-                                       near, 2.0 * window.angular,
+                                       near, 2.0 * reach.angular,
                                        window if window.linear > near.linear else None,
                                        self.params, self.min_quality)
                 result = retry if retry.quality > result.quality else result

@@ -133,12 +133,18 @@ def test_correlative_search_finds_a_pose_far_from_the_guess():
     assert score > 0.8
 
 
-def test_a_turn_beyond_the_motion_model_and_search_window_is_found():
+@pytest.mark.parametrize(("times", "settings"), [
+    ([0.0, 0.1, 0.2, 3.2, 3.3, 3.4], {}),  # over a 3 s gap (ACES, 613 s)
+    ([0.0, 0.1, 0.2, 0.3, 0.4, 0.5], {"max_turn_rate": np.radians(900.0)}),  # a car that can
+])
+def test_a_turn_beyond_the_motion_model_and_search_window_is_found(times, settings):
     # One 360-beam Lidar at the car's origin: turning the car in place by k degrees rolls its
     # scan by k beams, so the true headings are known exactly. An 80-degree turn between two
-    # scans (a fast turn or dropped scans) lies far outside the 30-degree search window around
-    # the constant-velocity guess (0 here); the scan after it, standing still again, lies 80
-    # degrees from the new guess (ACES, 613 s: a 78-degree turn over a 3 s gap was lost).
+    # scans lies far outside the 30-degree search window around the constant-velocity guess
+    # (0 here); the scan after it, standing still again, lies 80 degrees from the new guess
+    # (ACES, 613 s: a 78-degree turn over a 3 s gap was lost). The search reaches it where the
+    # car can have turned that far: over a gap in the scans, or at a max_turn_rate that allows
+    # 80 degrees in 0.1 s.
     env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight")
     observation, _ = env.reset(seed=3)
     env_setup = SensorSetup.from_env(env)
@@ -146,16 +152,32 @@ def test_a_turn_beyond_the_motion_model_and_search_window_is_found():
     ranges = observation["lidar_1"].astype(np.float64)
     turn = 80
     headings = [0, 0, 0, turn, turn, turn]
-    estimator = LocalMapOdometry()
+    estimator = LocalMapOdometry(**settings)
     estimator.reset(setup, np.zeros(3))
-    for t, heading in enumerate(headings):
-        estimator.update({"lidar_1": np.roll(ranges, -heading)}, 0.1 * t)
+    for t, heading in zip(times, headings, strict=True):
+        estimator.update({"lidar_1": np.roll(ranges, -heading)}, t)
     trajectory = estimator.trajectory
     np.testing.assert_allclose(
         np.degrees(trajectory[:, 2]), headings, atol=1.0, err_msg="headings [deg]"
     )
     assert np.max(np.hypot(trajectory[:, 0], trajectory[:, 1])) < 0.05
-    assert estimator.fallbacks >= 1
+    assert estimator.fallbacks + estimator.far_searches >= 1
+
+
+def test_a_turn_no_car_makes_between_two_scans_is_not_taken() -> None:
+    # the same 80-degree roll 0.1 s after the last scan: 800 deg/s, beyond max_turn_rate
+    # (1.5 rad/s); no search turns the car that far, and the match stays poor and flagged
+    env = gym.make("DualLidar-v0", world="open_cylinders", trace="straight")
+    observation, _ = env.reset(seed=3)
+    env_setup = SensorSetup.from_env(env)
+    setup = SensorSetup(np.zeros((1, 3)), env_setup.beam_angles, env_setup.max_range)
+    ranges = observation["lidar_1"].astype(np.float64)
+    estimator = LocalMapOdometry()
+    estimator.reset(setup, np.zeros(3))
+    for t, heading in enumerate([0, 0, 0, 80]):
+        estimator.update({"lidar_1": np.roll(ranges, -heading)}, 0.1 * t)
+    assert abs(np.degrees(estimator.trajectory[-1, 2])) < 40.0
+    assert estimator.poor_matches == [3]
 
 
 def _corridor_drive(
