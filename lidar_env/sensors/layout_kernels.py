@@ -43,6 +43,7 @@ from lidar_env.sensors.lidar_config import (
 from lidar_env.sensors.ray_casting import (
     beam_directions,
     cast_sensor,
+    inline_into_scan_loops,
     segment_hit,
     sweep_circle,
 )
@@ -98,8 +99,7 @@ def cast_body(ranges: NDArray[np.float64], ox: float, oy: float,
                 ranges[j] = t
 
 
-# inlined into its caller, as readings (see cast_sensor): no reference counts for its arrays
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def cast_packed(
     circles: NDArray[np.float64],
     segments: NDArray[np.float64],
@@ -163,7 +163,7 @@ def exact_ranges_kernel(circles: NDArray[np.float64], segments: NDArray[np.float
                        np.empty(0, dtype=np.int64)).copy()
 
 
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def readings(exact: NDArray[np.float64], params: NDArray[np.float64],
              gaussians: NDArray[np.float64], uniforms: NDArray[np.float64],
              out: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -29,6 +29,8 @@ through :func:`.layout_kernels.cast_packed`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -47,6 +49,22 @@ _MIN_CULLED_ANGLE = 0.2
 #: nearest end is within ``max_range * sqrt(_IN_RANGE)`` is in range: no exact distance needed.
 _NEAR, _IN_RANGE = 1e-9, 1.0 - 1e-9
 _TWO_PI = 2.0 * math.pi
+
+
+def scan_loop(kernel: Callable[..., Any]) -> Callable[..., Any]:
+    """Marks ``kernel`` (a Python function, before ``njit``) as one that scans many times per
+    call, such as the batched env's: :func:`cast_sensor`, :func:`beam_directions` and the
+    layout's ``cast_packed`` and ``readings`` are compiled inline into it (numba's own
+    inlining), where its arrays are handed on with no reference counting and no call; other
+    callers call them."""
+    kernel.inlines_scans = True  # type: ignore[attr-defined]
+    return kernel
+
+
+def inline_into_scan_loops(call: Any, caller: Any, callee: Any) -> bool:
+    """numba's inline cost model for the scan's kernels: inline into :func:`scan_loop`
+    kernels only."""
+    return getattr(caller.func_id.func, "inlines_scans", False)
 
 
 @njit(cache=True, fastmath=False)
@@ -205,7 +223,7 @@ def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: flo
     return True
 
 
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
     cos_beam: NDArray[np.float64], sin_beam: NDArray[np.float64], dir_x: NDArray[np.float64],
@@ -221,10 +239,7 @@ def beam_directions(
     return sorted_angles, order, step, dir_x, dir_y
 
 
-# inlined into its caller (numba's own inlining), as beam_directions: a compiled call takes two
-# atomic reference counts per array it is handed (14 here), which cost more than a scan of few
-# beams does
-@njit(cache=True, fastmath=False, inline="always")
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def cast_sensor(
     ranges: NDArray[np.float64],
     pose: tuple[float, float, float],

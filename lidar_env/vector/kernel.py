@@ -35,6 +35,7 @@ from lidar_env.movers.crowd import WAYPOINT_TRIES, fill_car_circles
 from lidar_env.movers.kernels import advance_crowd
 from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
+from lidar_env.sensors.ray_casting import scan_loop
 from lidar_env.vector.draws import fill_standard_normals, fill_uniforms, words_at
 from lidar_env.vector.unowned import unowned, unowned_grid
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
@@ -50,6 +51,7 @@ WHOLE_DISC = (2.0 * math.pi, 1.0, 0.0, 1.0, 0.0)
 
 
 @njit(cache=True)
+@scan_loop  # the scan's kernels compiled inline: no calls, no reference counts per env
 def observe_envs(
     envs: NDArray[np.int64],
     pose: NDArray[np.float64],
