@@ -10,9 +10,11 @@ PYTHON="${PYTHON:-python3}"
 UV_VERSION=0.13.9
 # The leaderboard report's test renders report.html in a headless browser: Debian's chromium,
 # installed quietly when missing; without apt-get (or when it fails) one line says so and that
-# test skips.
-if ! command -v chromium >/dev/null 2>&1; then
-    apt=(env DEBIAN_FRONTEND=noninteractive apt-get -qq -y)
+# test skips. It installs in the background, beside the Python install and the compile (about
+# 20 s of a fresh machine's set-up), and its line comes at the end.
+install_chromium() {
+    command -v chromium >/dev/null 2>&1 && return 0
+    local apt=(env DEBIAN_FRONTEND=noninteractive apt-get -qq -y)
     [ "$(id -u)" = 0 ] || apt=(sudo -n "${apt[@]}")
     if command -v apt-get >/dev/null 2>&1 && { "${apt[@]}" install chromium >/dev/null 2>&1 \
             || { "${apt[@]}" update >/dev/null 2>&1 \
@@ -21,7 +23,12 @@ if ! command -v chromium >/dev/null 2>&1; then
     else
         echo "set-up: chromium not installed (no apt-get, or it failed): the report's browser test skips"
     fi
-fi
+}
+chromium_log="$(mktemp)"
+install_chromium >"$chromium_log" 2>&1 </dev/null &
+chromium_job=$!
+finish_chromium() { wait "$chromium_job" || true; cat "$chromium_log"; rm -f "$chromium_log"; }
+trap finish_chromium EXIT
 stamp=.venv/.setup-stamp
 wanted="$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)"
 if [ -x .venv/bin/python ] && [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ]; then
