@@ -272,6 +272,11 @@ def search_near(
                                                             n)
     if holds:
         return best0, at0, best1, at1, best2, at2
+    if row > 0 and np.isnan(kept[row, 2]) and not np.isnan(kept[row - 1, 2]):
+        # never searched: seeded by the previous query's kept points instead (a scan's
+        # consecutive points lie close), which bound the search as well as a first leaf
+        best0, at0, best1, at1, best2, at2 = kept_answer(kept, near, row - 1, qx, qy, k, bound,
+                                                         n)[:6]
     # seeded by the kept points (none before the first search): most of the tree is skipped;
     # not cut at the bound, so that a query with fewer than three points within it keeps a
     # reach past it (a reach capped at the bound fails the test after any move, and a tenth

@@ -51,6 +51,7 @@ documentation's design page (``docs/design-choices.md``).
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -74,7 +75,13 @@ from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointR
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.core import ConfigError
-from lidar_env.core.se2 import compose, relative, transform_points, wrap_angle
+from lidar_env.core.se2 import (
+    compose,
+    compose_floats,
+    inverse_floats,
+    transform_points,
+    wrap_float,
+)
 
 
 @dataclass
@@ -323,7 +330,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             if len(points) >= 2:
                 self._add_keyframe(guess, self._map_points(guess, seen, points))
             return guess
-        self._degenerate = bool(np.isfinite(self.sideslip_sigma)) and leaves_a_direction_free(
+        self._degenerate = math.isfinite(self.sideslip_sigma) and leaves_a_direction_free(
             self._reference, points, guess, self.params)
         result = self._match(points, guess, predicted, interval)
         for _ in range(2 if self._moving is not None else 0):  # (module docstring)
@@ -336,9 +343,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         pose = result.pose
         self.scan_information = (np.zeros((3, 3)) if result.information is None
                                  else result.information)
-        miss = relative(guess, pose)
+        floats = pose.tolist()  # relative()'s operations on Python floats, bit for bit
+        miss = compose_floats(inverse_floats(guess.tolist()), floats)
         self._misses.append(float(np.hypot(miss[0], miss[1])))
-        increment = relative(self.pose, pose)
+        increment = np.array(compose_floats(inverse_floats(self.pose.tolist()), floats))
         if self.clock_jumped and not self.use_timestamps:  # lost scans, or a jumping stamp:
             # the scan intervals the increment spans at the speed the car held
             typical = self._clock.typical_step if self._clock.steps else interval
@@ -352,11 +360,10 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self._velocity = self._updated_velocity(increment, dt,
                                                 None if resumed else result.information)
         self._remember(pose, scans, seen, self._misses[-1])
-        last_keyframe = self._keyframes[-1][0]
-        step = relative(last_keyframe, pose)
+        step = compose_floats(inverse_floats(self._keyframes[-1][0].tolist()), floats)
         if (
             np.hypot(step[0], step[1]) >= self.keyframe_distance
-            or abs(wrap_angle(step[2])) >= self.keyframe_angle
+            or abs(wrap_float(step[2])) >= self.keyframe_angle
         ):
             self._add_keyframe(pose, self._map_points(pose, seen, points))
         return pose

@@ -212,6 +212,16 @@ class MovingPointFilter:
     ) -> tuple[NDArray[np.bool_], list[NDArray[np.bool_]]]:
         """``(moving (n,), stale masks)`` for the new scan's car-frame ``points`` (n, 2) at
         (estimated) car ``pose`` and each world ``map_points`` array."""
+        moving, stale = self.classify_stacked(points, pose, scans, map_points)
+        ends = itertools.accumulate(len(p) for p in map_points)
+        return moving, [stale[end - len(p):end] for p, end in zip(map_points, ends, strict=True)]
+
+    def classify_stacked(
+        self, points: NDArray[np.float64], pose: NDArray[np.float64],
+        scans: Mapping[str, NDArray[np.float64]], map_points: list[NDArray[np.float64]],
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """:meth:`classify` with the stale masks as one: over ``map_points`` concatenated in
+        order (one count and no split where few are stale)."""
         world, sensor_poses, free = self._at(pose, points, scans)
         if self._history:  # moved in: seen through by one of the last scans
             past = self._past_beams[len(self._history) - 1]
@@ -219,30 +229,29 @@ class MovingPointFilter:
                                      self.min_range, math.inf)
         else:
             moving = np.zeros(len(points), dtype=np.bool_)
-        sizes = [len(p) for p in map_points]
-        flags = [np.zeros(0, dtype=np.bool_) for _ in map_points]
-        anchors = [np.compress(self._beams.judge_free(  # the recent scans'
+        stacked = self._stacked(map_points)
+        near = np.compress(self._beams.judge_free(  # the recent scans'
             self._anchors, sensor_poses, free, self.margin, self.min_range,
-            self._anchor_resolution), self._anchors, axis=0)]
-        if sum(sizes):  # stale: map points it sees through, where its beams are dense
-            stacked = self._stacked(map_points)
-            seen = self._beams.judge_free(stacked, sensor_poses, free, self.margin,
-                                          self.min_range, self.stale_resolution)
-            ends = list(itertools.accumulate(sizes))
-            flags = [seen[end - size:end] for size, end in zip(sizes, ends, strict=True)]
-            anchors.append(np.compress(seen, stacked, axis=0))
-        near = np.concatenate(anchors)
+            self._anchor_resolution), self._anchors, axis=0)
+        if len(stacked):  # stale: map points it sees through, where its beams are dense
+            stale = self._beams.judge_free(stacked, sensor_poses, free, self.margin,
+                                           self.min_range, self.stale_resolution)
+            near = np.concatenate((near, np.compress(stale, stacked, axis=0)))
+        else:
+            stale = np.zeros(0, dtype=np.bool_)
         if len(near) and len(world):  # moved on: next to a point the new scan sees through
             moving |= _near_any(world, near, self.radius)
-        return moving, flags
+        return moving, stale
 
     def _stacked(self, map_points: list[NDArray[np.float64]]) -> NDArray[np.float64]:
-        """``map_points`` concatenated (C-contiguous float64): the last concatenation again for
-        the same arrays (a scan is classified up to three times against the same map)."""
+        """``map_points`` concatenated (C-contiguous float64, (0, 2) for none): the last
+        concatenation again for the same arrays (a scan is classified up to three times
+        against the same map)."""
         last, stacked = self._last_map
         if len(last) != len(map_points) or any(
                 a is not b for a, b in zip(last, map_points, strict=True)):
-            stacked = np.ascontiguousarray(np.concatenate(map_points), dtype=np.float64)
+            stacked = np.ascontiguousarray(np.concatenate([np.zeros((0, 2)), *map_points]),
+                                           dtype=np.float64)
             self._last_map = (list(map_points), stacked)
         return stacked
 
@@ -272,7 +281,7 @@ class MovingPointFilter:
         if not np.any(moving) or self.map_clearance <= 0:
             return keep
         near = _near_any(world, np.ascontiguousarray(world[moving]), self.map_clearance)
-        known = np.ascontiguousarray(np.concatenate([np.zeros((0, 2)), *map_points]))
+        known = self._stacked(map_points)
         if np.any(near & keep) and self.map_support > 0 and len(known):
             near &= ~_near_any(world, known, self.map_support)
         return keep & ~near

@@ -11,6 +11,7 @@ documentation's design page. Distances [m]; points (n, 2).
 from __future__ import annotations
 
 import inspect
+import itertools
 import numbers
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -98,15 +99,19 @@ class MovingPointRejection:
     def _static_points(self, points: FloatArray, guess: FloatArray, scans: Scans) -> FloatArray:
         """``points`` less those on moving things; the map loses its stale points."""
         assert self._moving is not None
-        moving, stale = self._moving.classify(points, guess, scans,
-                                              [world for _, world in self._keyframes])
-        if sum(np.count_nonzero(mask) for mask in stale) >= MIN_MOVING_POINTS:
-            self._keyframes = deque([(key_pose, world[~mask]) for (key_pose, world), mask
-                                     in zip(self._keyframes, stale, strict=True)],
+        maps = [world for _, world in self._keyframes]
+        moving, stale = self._moving.classify_stacked(points, guess, scans, maps)
+        if np.count_nonzero(stale) >= MIN_MOVING_POINTS:
+            kept = ~stale
+            ends = itertools.accumulate(len(world) for world in maps)
+            self._keyframes = deque([(key_pose, world[kept[end - len(world):end]])
+                                     for (key_pose, world), end
+                                     in zip(self._keyframes, ends, strict=True)],
                                     maxlen=self.n_keyframes)
             self._build_reference()
         self._moving_mask = moving
-        return points[~moving] if np.count_nonzero(~moving) >= 3 else points
+        static = ~moving
+        return points[static] if np.count_nonzero(static) >= 3 else points
 
     def _map_points(self, pose: FloatArray, seen: FloatArray,
                     registered: FloatArray) -> FloatArray:
