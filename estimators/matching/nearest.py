@@ -266,7 +266,9 @@ def search_near(
     where there is none, lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept
     points hold the answer (:func:`kept_answer`): their distances are computed as
     :func:`search` computes them, so it is bit-identical. Else the query is searched again,
-    seeded with them. ``points`` (N, 2) are the tree's points in their original order."""
+    seeded with them, or, never searched before, with row ``row - 1``'s (a scan's
+    consecutive points lie close). ``points`` (N, 2) are the tree's points in their original
+    order."""
     n = tree_points.shape[0]
     best0, at0, best1, at1, best2, at2, holds = kept_answer(kept, near, row, qx, qy, k, bound,
                                                             n)
