@@ -51,9 +51,13 @@ class Health:
         clock_jumps: time steps over ``CLOCK_JUMP_FACTOR`` x the median period (a clock jump,
             or scans lost).
         blind_stretches: runs of at least ``BLIND_STRETCH`` skipped observations in a row.
+        lost_scans: observations after which the estimator lost its place: no placement on
+            its map explained enough of the scan (after a long blind stretch, the car facing
+            what the map never saw), so the motion model's pose was kept.
         skipped: the indices of the skipped observations.
         stretches: ``(first, last)`` observation indices of each blind stretch.
         jumps: the observation indices at which the clock jumped.
+        lost: the indices of the observations counted in ``lost_scans``.
     """
 
     skipped_scans: int = 0
@@ -63,6 +67,14 @@ class Health:
     skipped: list[int] = field(default_factory=list)
     stretches: list[tuple[int, int]] = field(default_factory=list)
     jumps: list[int] = field(default_factory=list)
+    lost_scans: int = 0
+    lost: list[int] = field(default_factory=list)
+
+    def note_lost(self, index: int) -> None:
+        """Count observation ``index`` as one where the estimator lost its place (it kept
+        the motion model's pose)."""
+        self.lost_scans += 1
+        self.lost.append(index)
 
     def note_unusable(self, index: int) -> None:
         """Count observation ``index`` as skipped where the estimator found it unusable

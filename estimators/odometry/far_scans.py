@@ -36,25 +36,28 @@ and *flagged*: the scan's index goes to the estimator's ``poor_matches``. Whiche
 placed it (or where it explains less than ``CHECKED_BELOW`` of the scan), the match is then
 checked against the scan's match to the previous scan
 (:mod:`estimators.odometry.scan_check`): the widest windows are where a wrong pose explains a
-few points more than the right one.
+few points more than the right one. After a long blind stretch the match is placed anew
+along the direction it pins least, or the guess is kept and the scan flagged lost
+(:mod:`estimators.odometry.blind_resume`).
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sized
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.health import CLOCK_JUMP_FACTOR, intervals_since_used
+from estimators.health import BLIND_STRETCH, CLOCK_JUMP_FACTOR, Health, intervals_since_used
 from estimators.matching.branch_and_bound import Match
 from estimators.matching.correlative import correlative_search
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
 from estimators.matching.window_search import search_in_box, thinned_for_search
+from estimators.odometry.blind_resume import resumed_match
 from estimators.odometry.motion_prior import ScanClock, constant_velocity_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
@@ -264,6 +267,8 @@ class FarScanMatching:
     _moving: MovingPointFilter | None
     _velocity: FloatArray  # car frame, per scan or per second (use_timestamps)
     use_timestamps: bool
+    health: Health
+    _observations: Sized  # the observations so far (the next one's index: its length)
 
     def _checked_against_scan(self, result: MatchResult, points: FloatArray, guess: FloatArray,
                               predicted: FloatArray, searched: bool) -> MatchResult:
@@ -350,6 +355,13 @@ class FarScanMatching:
                                   self.match_information, seen_free, self.min_quality,
                                   starts)
                 result = retry if retry.quality > result.quality else result
+            if self.skipped_before >= BLIND_STRETCH:  # the guess holds no direction
+                self.match_information = np.zeros(3)
+                result, lost = resumed_match(self._global_search(), self._reference, points,
+                                             guess, result, window.linear, self.params,
+                                             self.min_quality)
+                if lost:
+                    self.health.note_lost(len(self._observations))
         else:
             self.match_information = self._prediction_information()
             result = register(self._reference, points, guess, self.params, guess,

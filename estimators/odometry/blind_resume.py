@@ -1,0 +1,126 @@
+"""Where ``lidar_odometry`` puts the car when its scans come back after a long blind stretch.
+
+After :data:`~estimators.health.BLIND_STRETCH` scans or more skipped in a row, the
+constant-velocity guess is worth next to nothing (a car weaving down a corridor for 10 s is
+metres off it), and the far-apart search (:mod:`estimators.odometry.far_scans`) places the
+scan wherever the local map explains most of it. Two things can go wrong there:
+
+* **A free axis.** Down a corridor the map explains the scan about as well anywhere along its
+  axis, where the far-apart match follows the guess. Only one place along it agrees with
+  what the new scan sees, though: placed short of where the car is, the scan's beams pass
+  through walls the map holds (the last metres of the corridor it has driven out of).
+  :func:`along_least_pinned` moves the match along the direction it pins least, to where
+  the scan sees through the fewest map points (:func:`seen_through_count`), and of those
+  places to the one whose points score highest on the map's likelihood field (the ray
+  consistency test of occupancy-grid scan matching: a beam ending beyond a mapped surface
+  says the surface is not where the pose puts it).
+* **No place explains the scan.** Where the best placement explains less than the front
+  end's ``min_quality``, the car faces what the map never saw (it turned towards it while
+  blind), and the best of the placements is as likely metres off as right: the motion
+  model's pose is kept (:func:`keeps_guess`) and the scan is flagged lost
+  (``Health.lost``), so a back end can look for the pose in its whole map.
+
+Frames: map points in the world frame, scan points in the car frame. Distances [m], angles
+[rad].
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.icp import ICPParams, MatchResult, register
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.matching.scan_matching import LikelihoodField
+from lidar_env.core.se2 import inverse, transform_points
+
+if TYPE_CHECKING:
+    from estimators.odometry.far_scans import GlobalSearch
+
+FloatArray = NDArray[np.float64]
+
+#: [m] a map point counts as seen through where the scan's return along its bearing lies at
+#: least this far behind it (a few voxels: the map's and the scan's noise, and the car-frame
+#: origin standing in for each Lidar's mount).
+SEEN_THROUGH_MARGIN = 0.3
+#: [rad] bearing bins the scan's returns are grouped in (two 1-degree beams).
+BEARING_BIN = np.radians(2.0)
+#: [m] map points nearer the car than this are not judged (a Lidar's mount a few decimetres
+#: off the car's origin turns their bearings by tens of degrees).
+NEAREST_JUDGED = 1.0
+
+
+def seen_through_count(map_points: FloatArray, points: FloatArray, pose: FloatArray,
+                       margin: float = SEEN_THROUGH_MARGIN) -> int:
+    """How many world ``map_points`` (N, 2) the scan's car-frame ``points`` (M, 2) see
+    through with the car at ``pose`` (3,): map points at least :data:`NEAREST_JUDGED` from
+    the car whose bearing bin (:data:`BEARING_BIN`) holds returns all farther than the map
+    point by ``margin``. Bearings without a return (no echo) judge nothing."""
+    bins = int(round(2.0 * np.pi / BEARING_BIN))
+    scan_range = np.hypot(points[:, 0], points[:, 1])
+    scan_bin = ((np.arctan2(points[:, 1], points[:, 0]) + np.pi) / BEARING_BIN).astype(int) % bins
+    nearest = np.full(bins, np.inf)
+    np.minimum.at(nearest, scan_bin, scan_range)
+    local = transform_points(inverse(pose), map_points)
+    map_range = np.hypot(local[:, 0], local[:, 1])
+    map_bin = ((np.arctan2(local[:, 1], local[:, 0]) + np.pi) / BEARING_BIN).astype(int) % bins
+    behind = nearest[map_bin]
+    return int(np.count_nonzero((map_range >= NEAREST_JUDGED) & np.isfinite(behind)
+                                & (behind > map_range + margin)))
+
+
+def least_pinned_direction(information: FloatArray | None) -> FloatArray:
+    """The unit translation direction (2,) the match's information (3, 3) pins least
+    (world frame); the x axis where it is unknown."""
+    if information is None or not np.any(information[:2, :2]):
+        return np.array([1.0, 0.0])
+    _, vectors = np.linalg.eigh(information[:2, :2])
+    return vectors[:, 0]
+
+
+def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: FloatArray,
+                       match: MatchResult, reach: float, step: float) -> FloatArray:
+    """The pose (3,) on the line through ``match.pose`` along its least pinned direction,
+    within ``reach`` [m] either side in ``step`` [m] steps, where the scan's ``points``
+    (M, 2, car frame) see through the fewest ``map_points`` (N, 2, world), and of those
+    the one whose points score highest on ``field`` (the mean score, within its standard
+    error: of such ties, the nearest)."""
+    direction = least_pinned_direction(match.information)
+    offsets = np.arange(-np.floor(reach / step), np.floor(reach / step) + 1) * step
+    poses = np.repeat(match.pose[None], len(offsets), axis=0)
+    poses[:, :2] += offsets[:, None] * direction
+    counts = np.array([seen_through_count(map_points, points, pose) for pose in poses])
+    scores = np.array([float(field.score(transform_points(pose, points)).mean())
+                       for pose in poses])
+    consistent = counts == counts.min()
+    best = float(scores[consistent].max())
+    # scores within the mean's standard error tie (along a bare corridor the field's noise
+    # alone ranks them); ties go to the smallest move
+    tie = max(np.sqrt(best * max(1.0 - best, 0.0) / len(points)), 1.0 / len(points))
+    tied = np.flatnonzero(consistent & (scores >= best - tie))
+    return poses[tied[np.argmin(np.abs(offsets[tied]))]]
+
+
+def keeps_guess(match: MatchResult, min_quality: float) -> bool:
+    """Whether, after a long blind stretch, the motion model's pose is kept instead of
+    ``match``: no placement explained ``min_quality`` of the scan."""
+    return match.quality < min_quality
+
+
+def resumed_match(search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
+                  guess: FloatArray, match: MatchResult, reach: float, params: ICPParams,
+                  min_quality: float) -> tuple[MatchResult, bool]:
+    """The far-apart ``match`` of ``points`` (M, 2, car frame) after a long blind stretch,
+    and whether the scan is lost: ICP from it on the map alone (the guess held it), then
+    either the ``guess`` (3,) kept where that explains less than ``min_quality``, or ICP
+    from :func:`along_least_pinned` within ``reach`` [m] (in two search cells' steps), held
+    by nothing in the directions the scan leaves free."""
+    unheld = np.zeros(3)
+    match = register(reference, points, match.pose, params, match.pose, unheld)
+    if keeps_guess(match, min_quality):
+        return MatchResult(guess.copy(), match.quality, match.rmse, 0, False, None), True
+    start = along_least_pinned(search.field, search.map_points, points, match, reach,
+                               2.0 * search.resolution)
+    return register(reference, points, start, params, start, unheld), False

@@ -1,0 +1,82 @@
+"""After a long blind stretch: ``lidar_odometry`` finds the place along a corridor's axis that
+the scan does not see through, and keeps the motion model's pose (flagged lost) where no
+placement explains the scan."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimators.health import Health
+from estimators.matching.icp import MatchResult
+from estimators.matching.scan_matching import LikelihoodField
+from estimators.odometry.blind_resume import (
+    along_least_pinned,
+    keeps_guess,
+    least_pinned_direction,
+    seen_through_count,
+)
+from estimators.odometry.local_map import LocalMapOdometry
+from tests.benchmarks.bench_modules import load
+
+bench = load("bench_faults")
+
+
+def corridor(end: float) -> np.ndarray:
+    """World points (N, 2) of two walls at y = +-2 from x = 0 to ``end``, 5 cm apart."""
+    x = np.arange(0.0, end, 0.05)
+    return np.concatenate([np.column_stack([x, np.full_like(x, 2.0)]),
+                           np.column_stack([x, np.full_like(x, -2.0)])])
+
+
+def scan_at(x: float, end: float) -> np.ndarray:
+    """Car-frame scan (M, 2) from (x, 0), heading 0: the corridor's walls up to ``end`` and a
+    wall across at ``end + 6`` beyond its open end."""
+    y = np.arange(-8.0, 8.0, 0.05)
+    seen = np.concatenate([corridor(end), np.column_stack([np.full_like(y, end + 6.0), y])])
+    return seen - [x, 0.0]
+
+
+def test_a_scan_placed_short_of_the_corridors_end_sees_through_its_walls() -> None:
+    scan = scan_at(8.0, 10.0)  # the car at x = 8, the walls ending at x = 10
+    walls = corridor(14.0)  # the map: walls on to x = 14
+    assert seen_through_count(walls[walls[:, 0] < 10.0], scan, np.array([8.0, 0, 0])) == 0
+    assert seen_through_count(walls, scan, np.array([8.0, 0, 0])) > 20
+    assert seen_through_count(walls, scan, np.array([12.0, 0, 0])) <= 3
+
+
+def test_along_the_axis_the_place_the_scan_does_not_see_through_wins() -> None:
+    """Scan of a corridor ending 2 m ahead; the map has the corridor end at x = 10 (its walls
+    on to x = 10, nothing beyond). Every place short of x = 8 explains the whole scan."""
+    scan = scan_at(8.0, 10.0)
+    walls = corridor(10.0)
+    field = LikelihoodField(walls, resolution=0.05)
+    information = np.diag([0.0, 500.0, 1e4])  # y and heading pinned, x free
+    match = MatchResult(np.array([5.0, 0.0, 0.0]), 1.0, 0.01, 5, True, information)
+    assert np.allclose(least_pinned_direction(information), [1.0, 0.0]) or np.allclose(
+        least_pinned_direction(information), [-1.0, 0.0])
+    pose = along_least_pinned(field, walls, scan, match, reach=6.0, step=0.1)
+    assert abs(pose[0] - 8.0) <= 0.3 and pose[1] == 0.0
+
+
+def test_no_placement_explaining_enough_keeps_the_guess() -> None:
+    poor = MatchResult(np.zeros(3), 0.3, 0.05, 5, True, None)
+    assert keeps_guess(poor, 0.5) and not keeps_guess(MatchResult(np.zeros(3), 0.6, 0.05, 5,
+                                                                   True, None), 0.5)
+    health = Health()
+    health.note_lost(160)
+    assert health.lost_scans == 1 and health.lost == [160]
+    assert health.counts() == Health().counts()  # the four fault counts stay as they were
+
+
+def test_after_100_blind_scans_leaving_the_corridor_the_place_is_found_again() -> None:
+    """closed_to_open: the car drives out of the corridor while blind; placed where the local
+    map explains most, the scan fits anywhere along the axis (4 m off)."""
+    recording = bench.record_drive("closed_to_open/zigzag")
+    faulted = bench.with_faults(recording, bench.faults_for(0.1, 2)["blind_100"](), seed=0)
+    estimator = LocalMapOdometry()
+    estimator.reset(recording.setup, recording.truth[0])
+    for observation, t in zip(faulted.observations(), faulted.times, strict=True):
+        estimator.update(observation, float(t))
+    assert estimator.health.blind_stretches == 1 and estimator.health.lost_scans == 0
+    error = np.hypot(*(estimator.trajectory[-1, :2] - recording.truth[-1, :2]))
+    assert error < 0.2  # (clean: 0.02 m)
