@@ -37,7 +37,7 @@ from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
 from lidar_env.sensors.ray_casting import scan_loop
 from lidar_env.vector.draws import fill_standard_normals, fill_uniforms, words_at
-from lidar_env.vector.unowned import unowned, unowned_grid
+from lidar_env.vector.unowned import unowned, unowned_scene
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
@@ -92,15 +92,12 @@ def observe_envs(
     positions, radius, movers = unowned(crowd[0]), crowd[7][0], unowned(crowd[8][0])
     if envs.shape[0] == 0:
         return
-    last = envs[0]  # the env whose world arrays are held
-    circles, segments, grid, _, _, _ = items[last]
-    env_circles, env_segments, env_grid = unowned(circles), unowned(segments), unowned_grid(grid)
+    last = envs[0]  # the env whose world arrays are viewed (the typed list holds them)
+    circles, segments, grid, _, _ = unowned_scene(items[last])
     for i in envs:
         if world_key[i] != world_key[last]:
-            last = i  # the typed list holds its arrays
-            circles, segments, grid, _, _, _ = items[i]
-            env_circles, env_segments, env_grid = unowned(circles), unowned(segments), \
-                unowned_grid(grid)
+            last = i
+            circles, segments, grid, _, _ = unowned_scene(items[i])
         mount_poses(pose[i], mounts, sensor_poses[i])
         cast_from[:] = sensor_poses[i]
         if world_aligned:
@@ -111,7 +108,7 @@ def observe_envs(
         words = words_at(addresses[i])
         fill_standard_normals(words, gaussians)
         fill_uniforms(words, uniforms)
-        exact = cast_packed(env_circles, env_segments, first_edge[i], env_grid, cast_from,
+        exact = cast_packed(circles, segments, first_edge[i], grid, cast_from,
                             beams, params, movers, no_car, (circle_seen, segment_seen),
                             stamp[0], no_facing)
         stamp[0] += k
@@ -211,34 +208,31 @@ def step_envs(
     # the arrays used per env as unowned views (see observe_envs), the crowd's step aside
     car_pose, seen = unowned(pose), (unowned(work[2]), unowned(work[3]))
     stamp, near = unowned(work[4]), (unowned(work[5]), unowned(work[6]))
-    held = envs[0]  # the env whose world and trace arrays are held
-    env_circles, env_segments, env_grid, waypoints, trace_arc, _ = items[held]
-    circles, segments, grid = unowned(env_circles), unowned(env_segments), unowned_grid(env_grid)
-    env_waypoints, env_arc = unowned(waypoints), unowned(trace_arc)
+    held = envs[0]  # the env whose world and trace arrays are viewed (the typed list holds them)
+    item = items[held]
+    circles, segments, grid, waypoints, trace_arc = unowned_scene(item)
     for i in envs:
         if world_key[i] != world_key[held] or trace_key[i] != trace_key[held]:
-            held = i  # the typed list holds its arrays
-            env_circles, env_segments, env_grid, waypoints, trace_arc, _ = items[i]
-            circles, segments = unowned(env_circles), unowned(env_segments)
-            grid, env_waypoints, env_arc = unowned_grid(env_grid), unowned(waypoints), \
-                unowned(trace_arc)
+            held = i
+            item = items[i]
+            circles, segments, grid, waypoints, trace_arc = unowned_scene(item)
         reach = abs(speed[i]) * dt + half_diagonal + REACH_MARGIN
         near_circles, near_segments = obstacles_within(
-            pose[i, 0], pose[i, 1], reach, circles, segments, grid, seen, stamp, near[0], near[1])
+            car_pose[i, 0], car_pose[i, 1], reach, circles, segments, grid, seen, stamp, near[0],
+            near[1])
         if crowd[0].shape[1] == 0:
             hit = drive_arc(car_pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
         else:  # movers first (their waypoint draws), then the car among them
-            start = step_crowd(i, pose[i], half_length, half_width, dt, crowd,
-                               words_at(scene[6][i]),
-                               env_circles, env_segments, env_grid)
-            hit = drive_arc_among_movers(pose[i], speed[i], yaw_rate[i], dt, checks[i],
+            start = step_crowd(i, car_pose[i], half_length, half_width, dt, crowd,
+                               words_at(scene[6][i]), item[0], item[1], item[2])
+            hit = drive_arc_among_movers(car_pose[i], speed[i], yaw_rate[i], dt, checks[i],
                                          half_length, half_width, near_circles, near_segments,
                                          start, crowd[1][i])
         time[i] += dt
         previous = arc[i]
-        position, error = project_onto_polyline(env_waypoints, env_arc, pose[i, 0],
-                                                pose[i, 1], previous, window, closed[i])
+        position, error = project_onto_polyline(waypoints, trace_arc, car_pose[i, 0],
+                                                car_pose[i, 1], previous, window, closed[i])
         arc[i] = position
         progress[i] = position / length[i]
         cross_track[i] = error

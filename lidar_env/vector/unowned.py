@@ -41,3 +41,12 @@ def unowned_grid(grid: tuple) -> tuple:
     its four arrays :func:`unowned`."""
     return (grid[0], grid[1], grid[2], grid[3], grid[4], unowned(grid[5]), unowned(grid[6]),
             unowned(grid[7]), unowned(grid[8]))
+
+
+@njit(cache=True, inline="always")
+def unowned_scene(item: tuple) -> tuple:
+    """One env's scene item (:attr:`lidar_env.vector.slots.SceneSlots.scene`'s ``items[i]``)
+    as unowned views: ``(circles, segments, grid, waypoints, trace_arc)``, the grid as
+    :func:`unowned_grid`'s tuple."""
+    return (unowned(item[0]), unowned(item[1]), unowned_grid(item[2]), unowned(item[3]),
+            unowned(item[4]))
