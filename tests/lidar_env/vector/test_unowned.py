@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from lidar_env.vector.unowned import unowned, unowned_grid
+from lidar_env.vector.unowned import unowned, unowned_grid, unowned_scene
 from lidar_env.world.primitive_grid import build_grid
 
 
@@ -44,3 +44,23 @@ def test_an_unowned_grid_holds_the_grids_fields() -> None:
     grid = build_grid(circles, segments)
     for got, expected in zip(_grid_fields(tuple(grid)), grid, strict=True):
         assert np.array_equal(got, expected)
+
+
+@njit(cache=True)
+def _scene_fields(item: tuple) -> tuple:
+    circles, segments, grid, waypoints, trace_arc = unowned_scene(item)
+    return circles.copy(), segments.copy(), grid[5].copy(), waypoints.copy(), trace_arc.copy()
+
+
+def test_an_unowned_scene_item_is_its_world_and_trace() -> None:
+    rng = np.random.default_rng(1)
+    circles = np.column_stack([rng.uniform(0, 10, (5, 2)), np.full(5, 0.3)])
+    segments = rng.uniform(0, 10, (4, 4))
+    grid = build_grid(circles, segments)
+    waypoints = rng.uniform(0, 10, (6, 2))
+    trace_arc = np.cumsum(rng.uniform(0, 1, 6))
+    item = (circles, segments, grid, waypoints, trace_arc, np.zeros(4, np.uint64))
+    got = _scene_fields(item)
+    for array, expected in zip(got, (circles, segments, grid[5], waypoints, trace_arc),
+                               strict=True):
+        assert np.array_equal(array, expected)
