@@ -10,15 +10,17 @@ replaced by an all-heading match of the two keyframes when that explains more. E
 keyframe looks for old keyframes it may revisit (at least ``min_loop_separation`` of path
 behind it) or whose view it shares (at least ``min_overlap_separation`` behind, beyond the
 front end's own window), within ``overlap_radius`` plus the drift since then of its current
-estimate, ranked by place descriptor; each candidate is
-verified by a correlative scan match plus ICP against the old keyframe and its neighbours
+estimate, ranked by place descriptor; each candidate is verified by a correlative scan match
+plus ICP against the old keyframe and its neighbours
 (:func:`estimators.slam.loop_closure.verify_loop`) and, if accepted and reachable from the graph's
 estimate (within ``loop_gate`` Mahalanobis distance under the front end's drift model since
 the old keyframe: a symmetric corridor's far end seen turned around passes every scan test but
 not this one), becomes a loop edge. After new loop edges the graph is optimised
 (Levenberg–Marquardt, a Cauchy kernel on loop edges); loop edges it still cannot reconcile
 (Mahalanobis error above ``max_loop_sigma``) are dropped and the graph optimised again: a
-false loop must not bend the map.
+false loop must not bend the map. Where the front end lost its place (after a long blind
+stretch), the keyframes after are searched in the map before (:mod:`estimators.slam.
+relocalization`).
 
 Poses: ``update`` returns the online estimate (the latest keyframe's pose as optimised so
 far, plus the front end's motion since it); :attr:`GraphSlam.trajectory` returns the smoothed
@@ -46,6 +48,7 @@ from estimators.slam.loop_closure import LoopClosureParams, LoopVerification, Pl
 from estimators.slam.outputs import SlamOutputs
 from estimators.slam.place_descriptor import range_histogram
 from estimators.slam.pose_graph import PoseGraph
+from estimators.slam.relocalization import Relocalization
 from estimators.slam.smoothing import blend_on_keyframes
 from estimators.slam.solver import EliminationOrdering, optimize
 from lidar_env.core import ConfigError, EstimatorInputError
@@ -53,7 +56,7 @@ from lidar_env.core.se2 import compose, relative
 
 
 @dataclass
-class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
+class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
     """Front end + loop closure + pose-graph optimisation. Distances [m], angles [rad].
     Defaults are for 2D Lidars indoors driven at walking speed, not tuned to one log:
 
@@ -114,6 +117,10 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             another query within this many keyframes, implies the same correction (10; within
             ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
             place is common indoors, two consistent ones in a row rarely are.
+        lost_sigma: where the front end lost its place (``Health.lost``), the odometry edge
+            across is a place unknown within this [m] (10) and of any heading, and the
+            keyframes after are searched in the map before until two matches confirm the
+            place (:mod:`estimators.slam.relocalization`).
         min_range: readings at or below this [m] are "no return".
         match_odometry: add the covariance of a keyframe-to-keyframe match Hessian to the
             distance model of each odometry edge (True: the edge is weak where the scene
@@ -167,6 +174,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     global_ambiguity_ratio: float = 0.8
     consistency_distance: float = 0.3
     consistency_angle: float = np.radians(3.0)
+    lost_sigma: float = 10.0
     min_range: float = DEFAULT_MIN_RANGE
     match_odometry: bool = True
     check_steps: bool = True
@@ -177,7 +185,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
     def __post_init__(self) -> None:
         positive = ("keyframe_distance", "keyframe_angle", "odometry_sigma",
                     "odometry_sigma_rotation", "loop_radius", "max_search_window", "loss_scale",
-                    "loop_gate", "max_loop_sigma", "overlap_radius")
+                    "loop_gate", "max_loop_sigma", "overlap_radius", "lost_sigma")
         lowest = {**dict.fromkeys(("odometry_drift", "odometry_drift_rotation", "loop_drift",
                                    "min_loop_separation", "min_overlap_separation",
                                    "global_every", "submap_neighbours", "place_tolerance"), 0),
@@ -220,6 +228,7 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self.dropped_loops: list[tuple[int, int]] = []
         self._pending: list[tuple[int, int, LoopVerification]] = []
         self._last_loop = -(10**9)
+        self._reset_relocalization()
         # (keyframe, front-end step's inlier share, the all-heading match) of checked steps
         self.step_checks: list[tuple[int, float, LoopVerification]] = []
         # a checked step's match must be unambiguous and explain more than the step's
@@ -239,8 +248,9 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
         self._frontend.update(scans, t)  # skipped there too: it sizes its search by the stretch
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
-        poor = len(getattr(self._frontend, "poor_matches", ()))
+        poor, lost = len(getattr(self._frontend, "poor_matches", ())), self._lost_scans()
         odometry = np.asarray(self._frontend.update(scans, t), dtype=np.float64)
+        self._note_lost_since(lost, len(self._observations))
         self._drift.add(float(odometry[2]))
         # a scan the front end could not match (not even by its searches) seeds no loop
         # closure and no keyframe check: on noise those searches cost seconds and find nothing
@@ -316,14 +326,17 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             drift = self._odometry_information(step)
             information = (self._matched_information(reference, points, step, drift)
                            if self.match_odometry and reference is not None else drift)
-            self.graph.add_edge(index - 1, index, step, information)
             error = self._odometry_error(step, np.linalg.inv(information) if poor else None,
                                          measured)
+            information, error = self._unless_lost(index, information, error)
+            self.graph.add_edge(index - 1, index, step, information)
         self.keyframes.append(keyframe)
         self._table.append(keyframe, *error)
         self._since_optimized += 1
         index = len(self.keyframes) - 1
-        if not poor and self._close_loops(index):
+        if self.lost_from is not None and not poor:  # no other loop until the place is found
+            self._relocalize(index)
+        elif self.lost_from is None and not poor and self._close_loops(index):
             self._last_loop = index
         elif (not poor and self.global_every and index % self.global_every == 0
               and index - self._last_loop > self.global_confirmation):
@@ -366,13 +379,6 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             self.optimize()
         return self._observations.all_poses(self.anchored_trajectory(self.graph.poses))
 
-    @property
-    def keyframe_scans(self) -> NDArray[np.int64]:
-        """``(K,)`` index of the observation each keyframe was taken from."""
-        # every keyframe is taken from a scan, the first that hangs from it
-        return np.searchsorted(self._scan_keyframe, np.arange(len(self.keyframes))).astype(
-            np.int64)
-
     def anchored_trajectory(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(N, 3)`` car poses of every scan placed on the given keyframe poses (K, 3),
         blended between its two keyframes (:func:`estimators.slam.smoothing.blend_on_keyframes`):
@@ -391,8 +397,3 @@ class GraphSlam(KeyframeMatching, SlamOutputs, Estimator):
             np.array(self._scan_keyframe, dtype=np.int64),
             self.keyframe_distance / self.keyframe_angle,
         )
-
-    @property
-    def odometry_trajectory(self) -> NDArray[np.float64]:
-        """``(N, 3)`` the front end's own poses, without loop closure."""
-        return np.array(self._scan_odometry).reshape(-1, 3)

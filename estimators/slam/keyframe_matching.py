@@ -219,25 +219,37 @@ class KeyframeMatching:
         return revisited
 
     def _close_global_loops(self, index: int) -> None:
-        """Match keyframe ``index`` over all headings against look-alike old keyframes; add
-        loop edges once two matches of different queries agree on the correction (then
-        optimise at once, trusting them: the robust kernel would otherwise refuse a correction
-        of many metres). Two candidates of one query (neighbouring old keyframes, whose places
-        share most points) are one piece of evidence: the look-alike fits both alike."""
+        """Match keyframe ``index`` over all headings against look-alike old keyframes (at
+        least ``min_loop_separation`` of path behind it) (:meth:`_match_globally`)."""
         current = self.keyframes[index]
         path = self._table.path_lengths[:index]
         old = np.flatnonzero(current.path_length - path >= self.min_loop_separation)
+        self._match_globally(index, old, self.global_submap_keyframes)
+
+    def _match_globally(self, index: int, old: NDArray[np.int64], query_keyframes: int,
+                        last_placed: int | None = None) -> bool:
+        """Match keyframe ``index`` with the ``query_keyframes`` before it over all headings
+        against the look-alikes among keyframes ``old`` (K,), each with up to
+        ``global_submap_keyframes`` on either side (none past ``last_placed``, the last
+        keyframe the graph places relative to them, where given); add loop edges once two matches
+        of different queries agree on the correction (then optimise at once, trusting them:
+        the robust kernel would otherwise refuse a correction of many metres) and return
+        whether they did. Two candidates of one query (neighbouring old keyframes, whose
+        places share most points) are one piece of evidence: the look-alike fits both alike."""
         if len(old) == 0:
-            return
+            return False
+        current = self.keyframes[index]
         distance = descriptor_distances(current.descriptor, self._table.descriptors[old])
         order = np.argsort(distance, kind="stable")[: self.global_candidates]
         self._pending = [p for p in self._pending if index - p[1] <= self.global_confirmation]
         poses = self.graph.poses
         # A few keyframes of the recent path on both sides: more walls, fewer look-alikes.
-        query = self._submap(index, self.global_submap_keyframes, 0)
+        query = self._submap(index, query_keyframes, 0)
         for k in old[order][distance[order] <= self.max_descriptor_distance]:
+            neighbours = (self.global_submap_keyframes if last_placed is None
+                          else min(self.global_submap_keyframes, last_placed - int(k)))
             result = self._gate(int(k), index, verify_loop(
-                self._place(int(k), self.global_submap_keyframes), query, np.zeros(3),
+                self._place(int(k), neighbours), query, np.zeros(3),
                 self.global_window, self._global_params, measure_rejected=False))
             self.loop_attempts.append((int(k), index, result))
             if not result.accepted:
@@ -259,8 +271,9 @@ class KeyframeMatching:
                     self.optimize(trusted=trusted)
                     self._pending.clear()
                     self._last_loop = index
-                    return
+                    return True
             self._pending.append((int(k), index, result))
+        return False
 
     def add_loop_closure(self, old: int, new: int, pose: NDArray[np.float64],
                          information: NDArray[np.float64]) -> None:

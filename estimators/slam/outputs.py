@@ -1,5 +1,6 @@
 """What a :class:`~estimators.slam.graph_slam.GraphSlam` run hands out besides its trajectory:
-the corrected map, the keyframe graph as g2o, and a picture (a mixin)."""
+the scan each keyframe was taken from, the front end's own poses, the corrected map, the
+keyframe graph as g2o, and a picture (a mixin)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,21 @@ class SlamOutputs:
     graph: PoseGraph
     keyframes: list[Any]
     _dirty: bool
+    _scan_keyframe: list[int]
+    _scan_odometry: list[NDArray[np.float64]]
     optimize: Callable[[], None]
+
+    @property
+    def keyframe_scans(self) -> NDArray[np.int64]:
+        """``(K,)`` index of the observation each keyframe was taken from."""
+        # every keyframe is taken from a scan, the first that hangs from it
+        return np.searchsorted(self._scan_keyframe, np.arange(len(self.keyframes))).astype(
+            np.int64)
+
+    @property
+    def odometry_trajectory(self) -> NDArray[np.float64]:
+        """``(N, 3)`` the front end's own poses, without loop closure."""
+        return np.array(self._scan_odometry).reshape(-1, 3)
 
     def corrected_map(self) -> NDArray[np.float64]:
         """``(M, 2)`` every keyframe's points in the world frame at its optimised pose [m]."""
