@@ -266,19 +266,12 @@ def search_near(
     where there is none, lies closer than that (by ``REUSE_MARGIN`` for rounding), the kept
     points hold the answer (:func:`kept_answer`): their distances are computed as
     :func:`search` computes them, so it is bit-identical. Else the query is searched again,
-    seeded with them, or, never searched before, with row ``row - 1``'s (a scan's
-    consecutive points lie close). ``points`` (N, 2) are the tree's points in their original
-    order."""
+    seeded with them. ``points`` (N, 2) are the tree's points in their original order."""
     n = tree_points.shape[0]
     best0, at0, best1, at1, best2, at2, holds = kept_answer(kept, near, row, qx, qy, k, bound,
                                                             n)
     if holds:
         return best0, at0, best1, at1, best2, at2
-    if row > 0 and np.isnan(kept[row, 2]) and not np.isnan(kept[row - 1, 2]):
-        # never searched: seeded by the previous query's kept points instead (a scan's
-        # consecutive points lie close), which bound the search as well as a first leaf
-        best0, at0, best1, at1, best2, at2 = kept_answer(kept, near, row - 1, qx, qy, k, bound,
-                                                         n)[:6]
     # seeded by the kept points (none before the first search): most of the tree is skipped;
     # not cut at the bound, so that a query with fewer than three points within it keeps a
     # reach past it (a reach capped at the bound fails the test after any move, and a tenth

@@ -73,8 +73,7 @@ def point_to_line_system(
     filled with each query point's residual [m], NaN where it has no pair. ``kept`` and
     ``near`` are the query points' neighbours from the previous iterations
     (:func:`estimators.matching.nearest.search_near`; :func:`fresh_neighbours` before the
-    first, when each query's search starts from the previous query's neighbours), updated
-    where they are searched again.
+    first), updated where they are searched again.
     """
     n = points.shape[0]
     c, s = np.cos(pose[2]), np.sin(pose[2])
