@@ -5,13 +5,15 @@ seconds for the ray caster on a 2-core machine) and writes the machine code besi
 in ``__pycache__``; later processes load it in milliseconds. ``scripts/setup.sh`` runs
 :func:`main` (``python scripts/compile_kernels.py``) as its last step, so the first
 ``gym.make`` + ``reset`` + ``step`` and the leaderboard's first run load instead of compiling.
-The work is three tasks on two processes (:data:`TASKS`): the simulator's kernels (the single
-and the batched env, walkers, map scoring), then the kernels of the estimators in two families
-that share none (the ICP family and the paper's phase correlation), each over a recorded drive
-that revisits a place. A marker keyed by the source digest skips it all once this source has
-been compiled. numba keys a cached kernel by its own file only, so a kernel whose callee in
-another file changed would load stale code: a compile for a new source first deletes the
-packages' numba cache files, so every kernel is rebuilt from the current source.
+The work is five tasks on two processes (:func:`tasks`): the single env's kernels beside the
+batched env's, then the kernels of the estimators in two families that share none (the ICP
+family and the paper's phase correlation), each over a recorded drive that revisits a place,
+and the mapper's and walkers'. Every task after the first needs the single env's kernels:
+started after it, they load them instead of compiling them a second time. A marker keyed by the
+source digest skips it all once this source has been compiled. numba keys a cached kernel by
+its own file only, so a kernel whose callee in another file changed would load stale code: a
+compile for a new source first deletes the packages' numba cache files, so every kernel is
+rebuilt from the current source.
 
 Before compiling, one line says so and how long it took the last time on this machine (or the
 range it takes on a 2-core machine); on a terminal a bar of elapsed against expected seconds
@@ -85,17 +87,28 @@ def timing_path() -> Path:
     return marker_path().parent / "warm-seconds.json"
 
 
-def warm_env_and_mapping() -> None:
-    """Compile the simulator's and the mapper's kernels (ray casting, car, map reference and
-    scores, the movers' scores), the batched env's and the correlative search (raises if a
-    stage failed)."""
+def warm_drive() -> None:
+    """Compile the single env's kernels (ray casting, the car) by recording the drive the
+    estimators' tasks replay."""
+    with _env_notice_off():
+        record(WARMUP_REVISIT)
+
+
+def warm_batched() -> None:
+    """Compile the batched env's kernels and the odometry fallback's correlative search."""
+    with _env_notice_off():
+        _step_batched()
+    _search_exhaustively()
+
+
+def warm_mapping() -> None:
+    """Compile the mapper's and the movers' kernels (map reference and scores, circle fits,
+    walkers) on :data:`WARMUP_SCENARIOS` (raises if a stage failed)."""
     with _env_notice_off():
         for scenario in WARMUP_SCENARIOS:
             outcome = run_scenario_task(ScenarioTask(scenario, (EstimatorSpec("zero"),)))
             if outcome.failures:
                 raise DualLidarError(f"warm-up on {scenario.label} failed: {outcome.failures}")
-        _step_batched()
-    _search_exhaustively()
 
 
 def warm_estimators(names: tuple[str, ...]) -> None:
@@ -137,10 +150,13 @@ def estimator_families(names: Iterable[str]) -> list[tuple[str, ...]]:
 
 
 def tasks(estimators: Iterable[str]) -> list[tuple[Callable[..., None], tuple[Any, ...]]]:
-    """The warm-up's tasks in the order to submit them to two workers: the simulator's and
-    each estimator family's (:func:`estimator_families`), the longest first."""
-    return [(warm_env_and_mapping, ())] + [
-        (warm_estimators, (group,)) for group in estimator_families(estimators)]
+    """The warm-up's tasks in the order two workers take them: the single env's (the shortest,
+    whose kernels every later task needs) beside the batched env's, then each estimator
+    family's (:func:`estimator_families`) and the mapper's, which find the single env's
+    kernels cached by the time they start."""
+    return ([(warm_drive, ()), (warm_batched, ())]
+            + [(warm_estimators, (group,)) for group in estimator_families(estimators)]
+            + [(warm_mapping, ())])
 
 
 def drop_numba_caches(root: Path = PROJECT_ROOT) -> int:

@@ -55,8 +55,8 @@ def marker(tmp_path, monkeypatch, dropped):
 def test_a_cold_source_is_warmed_by_parallel_tasks_then_marked(marker, dropped) -> None:
     pool = RecordingPool()
     warmup.warm_up(pool, ("icp", "pc"), progress=False, stream=io.StringIO())
-    assert pool.submitted == [warmup.warm_env_and_mapping, warmup.warm_estimators,
-                              warmup.warm_estimators]
+    assert pool.submitted == [warmup.warm_drive, warmup.warm_batched, warmup.warm_estimators,
+                              warmup.warm_estimators, warmup.warm_mapping]
     assert marker.exists() and dropped == [True]
     again = RecordingPool()
     assert warmup.warm_up(again, ("icp",)) == 0.0 and again.submitted == []
@@ -109,7 +109,8 @@ def test_the_estimators_split_into_families_that_share_no_kernels() -> None:
     assert warmup.estimator_families(names) == [
         ("icp", "lidar_odometry", "slam", "zero"), ("pc", "pc_fusion")]
     assert warmup.estimator_families(("pc",)) == [("pc",)]
-    assert [task for task, _ in warmup.tasks(())] == [warmup.warm_env_and_mapping]
+    assert [task for task, _ in warmup.tasks(())] == [
+        warmup.warm_drive, warmup.warm_batched, warmup.warm_mapping]
 
 
 def test_only_the_packages_numba_cache_files_are_dropped(tmp_path) -> None:
@@ -170,7 +171,8 @@ def test_the_warm_up_reaches_the_map_scoring_kernels(monkeypatch: pytest.MonkeyP
                             lambda *args, kernel=kernel, seen=seen: seen.append(args)
                             or kernel(*args))
     worlds.built_in_layout.cache_clear()  # built once per process: maybe by an earlier test
-    warmup.warm_env_and_mapping()
+    warmup.warm_mapping()
+    warmup.warm_batched()
     # building the closed area's world asks for the clearance of writable points
     assert any(args[0].flags.writeable for args in calls["point_queries"])
     assert calls["_shifted_scores"]
