@@ -15,10 +15,12 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   consistency test of occupancy-grid scan matching: a beam ending beyond a mapped surface
   says the surface is not where the pose puts it).
 * **No place explains the scan.** Where the best placement explains less than the front
-  end's ``min_quality``, the car faces what the map never saw (it turned towards it while
-  blind), and the best of the placements is as likely metres off as right: the motion
-  model's pose is kept (:func:`keeps_guess`) and the scan is flagged lost
-  (``Health.lost``), so a back end can look for the pose in its whole map.
+  end's ``min_quality`` and the scan still sees through map points there, the car faces
+  what the map never saw (it turned towards it while blind) and the placement is as likely
+  metres off as right: the motion model's pose is kept and the scan is flagged lost
+  (``Health.lost``), so a back end can look for the pose in its whole map. (A scan of a
+  place half new, driven into while blind, explains as little, 15-35 %, but its placement
+  sees through none of the map.)
 
 Frames: map points in the world frame, scan points in the car frame. Distances [m], angles
 [rad].
@@ -47,6 +49,14 @@ FloatArray = NDArray[np.float64]
 SEEN_THROUGH_MARGIN = 0.3
 #: [rad] bearing bins the scan's returns are grouped in (two 1-degree beams).
 BEARING_BIN = np.radians(2.0)
+#: Places along the line compete on seen-through map points where their points score at
+#: least this share of the best place's on the likelihood field (a place the scan sees
+#: through nothing of, only because its points fall beyond the map, is no candidate; the
+#: true place past a corridor's mapped end scores ~0.9 of the places short of it).
+NEAR_BEST = 0.8
+#: Seen-through map points the match may have over the fewest of the line and still stand
+#: (a thin post between two beams, a Lidar's mount off the car's origin).
+SEEN_THROUGH_SLACK = 3
 #: [m] map points nearer the car than this are not judged (a Lidar's mount a few decimetres
 #: off the car's origin turns their bearings by tens of degrees).
 NEAREST_JUDGED = 1.0
@@ -84,9 +94,11 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
                        match: MatchResult, reach: float, step: float) -> FloatArray:
     """The pose (3,) on the line through ``match.pose`` along its least pinned direction,
     within ``reach`` [m] either side in ``step`` [m] steps, where the scan's ``points``
-    (M, 2, car frame) see through the fewest ``map_points`` (N, 2, world), and of those
-    the one whose points score highest on ``field`` (the mean score, within its standard
-    error: of such ties, the nearest)."""
+    (M, 2, car frame) see through the fewest ``map_points`` (N, 2, world) of the places
+    scoring at least :data:`NEAR_BEST` of the best on ``field``, and of those the one
+    scoring highest (the mean score, within its standard error: of such ties, the nearest).
+    Only a contradiction moves the match: ``match.pose`` itself where the scan sees through
+    at most :data:`SEEN_THROUGH_SLACK` map points more there."""
     direction = least_pinned_direction(match.information)
     offsets = np.arange(-np.floor(reach / step), np.floor(reach / step) + 1) * step
     poses = np.repeat(match.pose[None], len(offsets), axis=0)
@@ -94,7 +106,11 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     counts = np.array([seen_through_count(map_points, points, pose) for pose in poses])
     scores = np.array([float(field.score(transform_points(pose, points)).mean())
                        for pose in poses])
-    consistent = counts == counts.min()
+    candidates = scores >= NEAR_BEST * scores.max()
+    fewest = counts[candidates].min()
+    if counts[offsets == 0.0][0] <= fewest + SEEN_THROUGH_SLACK:  # the match stands
+        return match.pose.copy()
+    consistent = candidates & (counts == fewest)
     best = float(scores[consistent].max())
     # scores within the mean's standard error tie (along a bare corridor the field's noise
     # alone ranks them); ties go to the smallest move
@@ -103,24 +119,22 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     return poses[tied[np.argmin(np.abs(offsets[tied]))]]
 
 
-def keeps_guess(match: MatchResult, min_quality: float) -> bool:
-    """Whether, after a long blind stretch, the motion model's pose is kept instead of
-    ``match``: no placement explained ``min_quality`` of the scan."""
-    return match.quality < min_quality
-
-
 def resumed_match(search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
                   guess: FloatArray, match: MatchResult, reach: float, params: ICPParams,
-                  min_quality: float) -> tuple[MatchResult, bool]:
+                  min_quality: float) -> tuple[MatchResult | None, bool]:
     """The far-apart ``match`` of ``points`` (M, 2, car frame) after a long blind stretch,
-    and whether the scan is lost: ICP from it on the map alone (the guess held it), then
-    either the ``guess`` (3,) kept where that explains less than ``min_quality``, or ICP
-    from :func:`along_least_pinned` within ``reach`` [m] (in two search cells' steps), held
-    by nothing in the directions the scan leaves free."""
-    unheld = np.zeros(3)
-    match = register(reference, points, match.pose, params, match.pose, unheld)
-    if keeps_guess(match, min_quality):
-        return MatchResult(guess.copy(), match.quality, match.rmse, 0, False, None), True
-    start = along_least_pinned(search.field, search.map_points, points, match, reach,
+    and whether the scan is lost. None where the match stands: along the least pinned
+    direction of its ICP on the map alone (the guess held it), within ``reach`` [m] (in two
+    search cells' steps), no place is better (:func:`along_least_pinned`). Else ICP from
+    that place, held by nothing in the directions the scan leaves free; or, where the
+    placement explains less than ``min_quality`` of the scan and the scan still sees
+    through map points there, the ``guess`` (3,), lost."""
+    unheld = register(reference, points, match.pose, params, match.pose, np.zeros(3))
+    start = along_least_pinned(search.field, search.map_points, points, unheld, reach,
                                2.0 * search.resolution)
-    return register(reference, points, start, params, start, unheld), False
+    moved = not np.array_equal(start, unheld.pose)
+    placed = register(reference, points, start, params, start, np.zeros(3)) if moved else match
+    if placed.quality < min_quality and seen_through_count(search.map_points, points,
+                                                           placed.pose) > 0:
+        return MatchResult(guess.copy(), placed.quality, placed.rmse, 0, False, None), True
+    return (placed if moved else None), False

@@ -355,11 +355,12 @@ class FarScanMatching:
                                   self.match_information, seen_free, self.min_quality,
                                   starts)
                 result = retry if retry.quality > result.quality else result
-            if self.skipped_before >= BLIND_STRETCH:  # the guess holds no direction
-                self.match_information = np.zeros(3)
-                result, lost = resumed_match(self._global_search(), self._reference, points,
-                                             guess, result, window.linear, self.params,
-                                             self.min_quality)
+            if self.skipped_before >= BLIND_STRETCH:
+                resumed, lost = resumed_match(self._global_search(), self._reference, points,
+                                              guess, result, window.linear, self.params,
+                                              self.min_quality)
+                if resumed is not None:  # placed anew: the guess holds no direction
+                    self.match_information, result = np.zeros(3), resumed
                 if lost:
                     self.health.note_lost(len(self._observations))
         else:

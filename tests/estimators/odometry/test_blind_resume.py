@@ -11,7 +11,6 @@ from estimators.matching.icp import MatchResult
 from estimators.matching.scan_matching import LikelihoodField
 from estimators.odometry.blind_resume import (
     along_least_pinned,
-    keeps_guess,
     least_pinned_direction,
     seen_through_count,
 )
@@ -56,12 +55,12 @@ def test_along_the_axis_the_place_the_scan_does_not_see_through_wins() -> None:
         least_pinned_direction(information), [-1.0, 0.0])
     pose = along_least_pinned(field, walls, scan, match, reach=6.0, step=0.1)
     assert abs(pose[0] - 8.0) <= 0.3 and pose[1] == 0.0
+    # a match the scan does not contradict stands, though places farther on score as well
+    at_end = MatchResult(np.array([8.05, 0.0, 0.0]), 1.0, 0.01, 5, True, information)
+    assert np.array_equal(along_least_pinned(field, walls, scan, at_end, 6.0, 0.1), at_end.pose)
 
 
-def test_no_placement_explaining_enough_keeps_the_guess() -> None:
-    poor = MatchResult(np.zeros(3), 0.3, 0.05, 5, True, None)
-    assert keeps_guess(poor, 0.5) and not keeps_guess(MatchResult(np.zeros(3), 0.6, 0.05, 5,
-                                                                   True, None), 0.5)
+def test_a_lost_scan_is_counted_apart_from_the_fault_counts() -> None:
     health = Health()
     health.note_lost(160)
     assert health.lost_scans == 1 and health.lost == [160]
@@ -79,4 +78,4 @@ def test_after_100_blind_scans_leaving_the_corridor_the_place_is_found_again() -
         estimator.update(observation, float(t))
     assert estimator.health.blind_stretches == 1 and estimator.health.lost_scans == 0
     error = np.hypot(*(estimator.trajectory[-1, :2] - recording.truth[-1, :2]))
-    assert error < 0.2  # (clean: 0.02 m)
+    assert error < 0.15  # (clean: 0.02 m)
