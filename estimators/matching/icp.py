@@ -20,7 +20,7 @@ same pairs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,9 +43,8 @@ from estimators.matching.point_to_line import (
 )
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.matching.scan_recovery import (
-    LOST_SCANS_MARGIN,
     MIN_SEARCH_POINTS,
-    lost_scan_surprise,
+    most_likely_match,
     one_turn_guess,
     search_start,
 )
@@ -264,37 +263,31 @@ def match_scans(
     return register(reference, np.asarray(query_points, dtype=np.float64), initial_guess, params)
 
 
-def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float64]],
-                      spans: list[float], step: float, points: int) -> int:
-    """Index of the match in ``results`` to keep, each judged against the constant-velocity
-    ``guesses[k]`` (3,) over ``spans[k]`` scan intervals: of those explaining within
-    :data:`LOST_SCANS_MARGIN` of the largest share of the scan's ``points`` (or within that
-    share's standard error, where a scan of few points leaves it noisy), the one the motion
-    model finds least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the
-    first on a tie)."""
-    top = max(result.quality for result in results)
-    margin = max(LOST_SCANS_MARGIN, math.sqrt(top * (1.0 - top) / max(points, 1)))
-    surprise = [lost_scan_surprise(r.pose, g, n, step) if r.quality >= top - margin
-                else math.inf for r, g, n in zip(results, guesses, spans, strict=True)]
-    return int(np.argmin(surprise))
-
-
 @dataclass
 class ICPEstimator(Estimator):
-    """Scan-to-previous-scan PL-ICP (no odometry): the baseline a user would pick. Both
-    Lidars' points are merged in the car frame first.
+    """Scan-to-previous-scan point-to-line ICP (no odometry): the baseline a user would pick.
+    Both Lidars' points are merged in the car frame first.
 
     Each match starts from the last increment (a constant-velocity guess, as KISS-ICP and
     rf2o seed theirs) rather than from the identity: ICP's nearest-point pairs pull towards
     its starting pose, most where a corridor leaves its axis to a few points, and from the
-    identity it needs about twice the iterations. The price: in a U-turn at a corridor's end,
-    where the scan leaves a direction nearly free, a wrong sideways step of a few cm is carried
-    into the next guesses and kept for several scans rather than reset.
+    identity it needs about twice the iterations.
+
+    The previous scan's lines are the curves fitted through each point's
+    ``normal_neighbours`` (grown up to ``max_normal_neighbours`` along a noisy wall;
+    :meth:`PointToLineReference.with_estimated_normals`, denoised): a line through two
+    neighbouring returns of a wall seen at a grazing angle tilts with their range noise, and
+    the tilted lines pass for information along a corridor's axis that pulls the match off
+    it. Directions the pairs pin down with less than ``min_information`` fully weighted
+    points follow the constant-velocity guess alone (:func:`register`'s ``min_information``),
+    held by a weak prior (``prior_sigma_*`` against ``noise_sigma``, widening with the scan
+    intervals it spans), where the guess spans only observations that came (a clock gap may
+    be a stamp that jumped alone).
 
     After skipped or lost scans the match also starts from the translation extrapolated with
     one interval's turn and from a correlative search on the last scan's likelihood grid
     (:mod:`estimators.matching.scan_recovery`); of the matches explaining within
-    :data:`LOST_SCANS_MARGIN` of the most points, the least surprising one is kept.
+    ``scan_recovery.LOST_SCANS_MARGIN`` of the most points, the least surprising is kept.
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """
@@ -305,6 +298,12 @@ class ICPEstimator(Estimator):
     loss_scale: float = 0.1
     trim_ratio: float = 1.0
     min_range: float = DEFAULT_MIN_RANGE
+    normal_neighbours: int = 9
+    max_normal_neighbours: int = 72
+    min_information: float = 2.0
+    noise_sigma: float = 0.02
+    prior_sigma_translation: float = 0.03
+    prior_sigma_rotation: float = 0.1
 
     def __post_init__(self) -> None:
         self.params = ICPParams(
@@ -314,6 +313,11 @@ class ICPEstimator(Estimator):
             loss_scale=self.loss_scale,
             trim_ratio=self.trim_ratio,
         )
+        self._held_params = replace(self.params, min_information=self.min_information)
+        # [1/m^2, 1/m^2, 1/rad^2] in units of fully weighted points (cost over noise_sigma^2)
+        self._prior_information = (self.noise_sigma / np.array(
+            [self.prior_sigma_translation, self.prior_sigma_translation,
+             self.prior_sigma_rotation])) ** 2
 
     def _reset_state(self) -> None:
         self._previous: NDArray[np.float64] | None = None
@@ -369,8 +373,14 @@ class ICPEstimator(Estimator):
                     starts.append(start)
                     guesses.append(guess)
                     spans.append(span)
-            results = [match_scans(self._previous, current, start, self.params)
-                       for start in starts]
+            reference = PointToLineReference.with_estimated_normals(
+                self._previous, self.normal_neighbours, True, self.max_normal_neighbours)
+            # free directions follow a guess over observations that came (not a clock gap's,
+            # whose stamp may have jumped alone, nor the search's); priors weaken with the span
+            results = [register(reference, current, start, self._held_params if (
+                start is guess and span <= observations) else self.params, guess,
+                                self._prior_information / span**2)
+                       for start, guess, span in zip(starts, guesses, spans, strict=True)]
             best = most_likely_match(results, guesses, spans,
                                      float(np.hypot(*self._increment[:2])), len(current))
             increment = results[best].pose

@@ -8,7 +8,7 @@ translation extrapolated with one interval's turn, and the exact best pose of a 
 resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the new scan
 on the likelihood grid of the last one used, over every pose the car can have reached
 (:func:`reach`) turned at most :data:`MAX_SEARCH_TURN` from the guess. Of the matches from
-all starts, :func:`estimators.matching.icp.most_likely_match` keeps the one explaining clearly
+all starts, :func:`most_likely_match` keeps the one explaining clearly
 more of the scan, else the one the motion model finds least surprising
 (:func:`lost_scan_surprise`). Poses are in the last used scan's car frame: x [m] forward,
 y [m] left, heading [rad].
@@ -17,11 +17,15 @@ y [m] left, heading [rad].
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimators.matching.window_search import search_in_box, thinned_for_search
+
+if TYPE_CHECKING:
+    from estimators.matching.icp import MatchResult
 
 FloatArray = NDArray[np.float64]
 
@@ -102,3 +106,18 @@ def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], in
 #: Lidar fit anywhere: TurtleBot drives through sparse halls, 10-30 returns a scan, drifted
 #: 1.6 -> 23 % with it, ``benchmarks/bench_sparse_halls.py``).
 MIN_SEARCH_POINTS = 50
+
+
+def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float64]],
+                      spans: list[float], step: float, points: int) -> int:
+    """Index of the match in ``results`` to keep, each judged against the constant-velocity
+    ``guesses[k]`` (3,) over ``spans[k]`` scan intervals: of those explaining within
+    :data:`LOST_SCANS_MARGIN` of the largest share of the scan's ``points`` (or within that
+    share's standard error, where a scan of few points leaves it noisy), the one the motion
+    model finds least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the
+    first on a tie)."""
+    top = max(result.quality for result in results)
+    margin = max(LOST_SCANS_MARGIN, math.sqrt(top * (1.0 - top) / max(points, 1)))
+    surprise = [lost_scan_surprise(r.pose, g, n, step) if r.quality >= top - margin
+                else math.inf for r, g, n in zip(results, guesses, spans, strict=True)]
+    return int(np.argmin(surprise))

@@ -254,13 +254,14 @@ def test_icp_estimator_starts_each_match_from_the_last_increment(monkeypatch):
 
     guesses, results = [], []
 
-    def spy(reference, query, initial_guess, params):
+    def spy(reference, query, initial_guess, params, prior_pose, prior_information):
         guesses.append(np.array(initial_guess, dtype=float))
-        results.append(real_match(reference, query, initial_guess, params).pose)
+        results.append(real_register(reference, query, initial_guess, params, prior_pose,
+                                     prior_information).pose)
         return icp.MatchResult(results[-1], 1.0, 0.0, 1, True)
 
-    real_match = icp.match_scans
-    monkeypatch.setattr(icp, "match_scans", spy)
+    real_register = icp.register
+    monkeypatch.setattr(icp, "register", spy)
     estimator = make("icp")
     pose = np.array([-3.0, -2.0, 0.6])
     estimator.reset(SensorSetup(np.zeros((1, 3)), ANGLES, 20.0), pose)
