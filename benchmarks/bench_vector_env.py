@@ -32,17 +32,20 @@ Targets: >= 200,000 env steps/s at N = 256 on this 2-core machine, >= 8x ``SyncV
 at N = 256, and the batched env at N = 1 at least as fast as the single env.
 
 Run: ``python benchmarks/bench_vector_env.py [--seconds 2] [--sizes 1 16 64 256]
-[--moving-obstacles 10] [--mover-model yielding|waypoints]``
+[--moving-obstacles 10] [--mover-model yielding|waypoints] [--json OUT]`` (``--json`` writes
+every figure and each target's verdict; ``python benchmarks/publish.py vector`` publishes them)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import time
 import tracemalloc
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -227,34 +230,26 @@ def own_bytes_per_env(env: Any) -> float:
             ) / env.num_envs
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=2.0, help="CPU seconds per figure")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 16, 64, 256])
-    parser.add_argument("--moving-obstacles", type=int, default=0, help="movers per env")
-    parser.add_argument("--mover-model", choices=MOVER_MODELS,
-                        default="yielding")
-    args = parser.parse_args(argv)
-    BASE.clear()
-    if args.moving_obstacles:
-        BASE.update(moving_obstacles=args.moving_obstacles, mover_model=args.mover_model)
-        print(f"every env: {args.moving_obstacles} {args.mover_model} moving obstacles")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"{platform.python_implementation()} {platform.python_version()}, "
-          f"gymnasium {gym.__version__}")
+def speeds(sizes: list[int], seconds: float) -> dict[str, Any]:
+    """Batched and sync steps/s at each N, and the single env against the batched env at N = 1,
+    printed as measured."""
     print(f"{'N':>5} {'batched steps/s':>16} {'sync steps/s':>13} {'ratio':>6}")
-    rates, ratios = {}, {}
-    for n in args.sizes:
+    by_size = {}
+    for n in sizes:
         batched, sync = cpu_steps_per_second(vector_stepper(make("vector_entry_point", n)),
-                                             vector_stepper(make("sync", n)), seconds=args.seconds)
-        rates[n], ratios[n] = batched, batched / sync
+                                             vector_stepper(make("sync", n)), seconds=seconds)
+        by_size[str(n)] = {"batched": batched, "sync": sync, "ratio": batched / sync}
         print(f"{n:>5} {batched:>16,.0f} {sync:>13,.0f} {batched / sync:>5.1f}x")
     single, one = cpu_steps_per_second(single_stepper(),
                                        vector_stepper(make("vector_entry_point", 1)),
-                                       seconds=args.seconds)
+                                       seconds=seconds)
     print(f"single env (gym.make): {single:,.0f} steps/s; the batched env at N = 1: {one:,.0f} "
           f"steps/s, {one / single:.2f}x")
-    n = max(args.sizes)
+    return {"sizes": by_size, "single": {"single": single, "batched": one, "ratio": one / single}}
+
+
+def split(n: int, seconds: float) -> dict[str, float]:
+    """Where a batched env step goes at N = ``n`` [us of CPU per env step], printed."""
     scans = [scan_call(make("vector_entry_point", n, config, **kwargs).unwrapped)
              for config, kwargs in ((None, {}), (NOISELESS, {}), (FEW_BEAMS, {}),
                                     (FEW_BEAMS, EMPTY_WORLD))]
@@ -264,21 +259,26 @@ def main(argv: list[str] | None = None) -> None:
         draw_call(make("vector_entry_point", n).unwrapped),
         python_call(make("vector_entry_point", n).unwrapped),
         vector_stepper(make("vector_entry_point", n, NOISELESS)),
-        vector_stepper(make("vector_entry_point", n, FEW_BEAMS)), seconds=args.seconds)
+        vector_stepper(make("vector_entry_point", n, FEW_BEAMS)), seconds=seconds)
     full_us, full_scan, noiseless_scan, few_scan, call_scan, draws, python = (
         1e6 / rate for rate in rates_split[:7])
     noiseless, few = rates_split[7:]
+    figures = {"step": full_us, "noise_draws": draws,
+               "noise_rest": full_scan - noiseless_scan - draws,
+               "exact_rays": noiseless_scan - few_scan, "obstacles": few_scan - call_scan,
+               "scan_call": call_scan, "compiled_rest": full_us - full_scan - python,
+               "python": python}
     print(f"\nper batched env step at N = {n} [us of CPU]: {full_us:.2f} in all =\n"
           f"  {draws:5.2f} the 720 Gaussian draws of the range noise alone (compiled PCG64 "
           "ziggurat over each sub-env's generator state)\n"
-          f"  {full_scan - noiseless_scan - draws:5.2f} the rest of the noise (adding it; the "
+          f"  {figures['noise_rest']:5.2f} the rest of the noise (adding it; the "
           "draws in the scan beyond a bare loop of them)\n"
-          f"  {noiseless_scan - few_scan:5.2f} the other 704 exact rays and their readings\n"
-          f"  {few_scan - call_scan:5.2f} the scan's obstacles (2 Lidars x 8 beams: the circles and"
-          " edges in range, their bearings, the inside-a-polygon test)\n"
+          f"  {figures['exact_rays']:5.2f} the other 704 exact rays and their readings\n"
+          f"  {figures['obstacles']:5.2f} the scan's obstacles (2 Lidars x 8 beams: the circles "
+          "and edges in range, their bearings, the inside-a-polygon test)\n"
           f"  {call_scan:5.2f} the scan call per env (2 Lidars x 8 beams, no obstacles: beam "
           "directions, grid bounds, readings)\n"
-          f"  {full_us - full_scan - python:5.2f} action check, motion, collision, progress, "
+          f"  {figures['compiled_rest']:5.2f} action check, motion, collision, progress, "
           "reward (compiled)"
           + (" (the crowd's step and the scans' movers included)" if BASE else "") + "\n"
           f"  {python:5.2f} Python: the action conversion, observation copies, infos\n"
@@ -291,26 +291,74 @@ def main(argv: list[str] | None = None) -> None:
     if BASE:
         still, = cpu_steps_per_second(
             vector_stepper(make("vector_entry_point", n, {"moving_obstacles": 0})),
-            seconds=args.seconds)
-        print(f"  of which the crowd: {full_us - 1e6 / still:5.2f} (without movers: {still:,.0f}"
+            seconds=seconds)
+        figures["crowd"] = full_us - 1e6 / still
+        print(f"  of which the crowd: {figures['crowd']:5.2f} (without movers: {still:,.0f}"
               " steps/s)")
     cluttered, = cpu_steps_per_second(
-        vector_stepper(make("vector_entry_point", n, **cluttered_world(2000))),
-        seconds=args.seconds)
+        vector_stepper(make("vector_entry_point", n, **cluttered_world(2000))), seconds=seconds)
     print(f"  in a 60 m square of 2,000 short walls: {cluttered:,.0f} steps/s")
+    return figures
+
+
+def targets(speed: dict[str, Any], n: int) -> list[dict[str, Any]]:
+    """Each target with the figure measured for it (at the largest N run) and whether it is met,
+    printed."""
+    at_n = speed["sizes"][str(n)]
+    found = [{"target": f"batched steps/s at N = 256 >= {TARGET_STEPS_PER_SECOND:,}",
+              "n": n, "value": at_n["batched"], "threshold": TARGET_STEPS_PER_SECOND},
+             {"target": f"batched / SyncVectorEnv at N = 256 >= {TARGET_RATIO:g}",
+              "n": n, "value": at_n["ratio"], "threshold": TARGET_RATIO},
+             {"target": f"batched at N = 1 / single env >= {TARGET_SINGLE_RATIO:g}",
+              "n": 1, "value": speed["single"]["ratio"], "threshold": TARGET_SINGLE_RATIO}]
+    for target in found:
+        target["met"] = bool(target["value"] >= target["threshold"])
+        print(f"target {target['target']}: {target['value']:,.2f} at N = {target['n']} "
+              f"{'meets' if target['met'] else 'misses'} it")
+    return found
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=2.0, help="CPU seconds per figure")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 16, 64, 256],
+                        help="the N of the batched and sync envs compared")
+    parser.add_argument("--moving-obstacles", type=int, default=0, help="movers per env")
+    parser.add_argument("--mover-model", choices=MOVER_MODELS, default="yielding")
+    parser.add_argument("--json", type=Path, default=None,
+                        help="also write every figure here (steps/s, split, memory, targets)")
+    args = parser.parse_args(argv)
+    if args.seconds <= 0:
+        parser.error(f"--seconds: expected a positive duration, got {args.seconds}")
+    if min(args.sizes) < 1:
+        parser.error(f"--sizes: expected counts >= 1, got {min(args.sizes)}")
+    BASE.clear()
+    if args.moving_obstacles:
+        BASE.update(moving_obstacles=args.moving_obstacles, mover_model=args.mover_model)
+        print(f"every env: {args.moving_obstacles} {args.mover_model} moving obstacles")
+    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+               f"{platform.python_implementation()} {platform.python_version()}, "
+               f"gymnasium {gym.__version__}")
+    print(f"machine: {machine}")
+    speed = speeds(args.sizes, args.seconds)
+    n = max(args.sizes)
+    step_split = split(n, args.seconds)
     env = make("vector_entry_point", n)
     env.reset(seed=0)
-    print(f"\nmemory per env at N = {n}: batched env arrays {own_bytes_per_env(env.unwrapped):,.0f}"
-          f" B; traced by tracemalloc: batched {traced_bytes_per_env('vector_entry_point', n):,.0f}"
-          f" B, sync {traced_bytes_per_env('sync', n):,.0f} B")
-    for name, value, target in (("steps/s", rates[n], TARGET_STEPS_PER_SECOND),
-                                ("ratio to sync", ratios[n], TARGET_RATIO)):
-        verdict = "meets" if value >= target else "misses"
-        print(f"target {name} >= {target:,g} at N = 256: {value:,.1f} at N = {n} {verdict} it")
-    verdict = "meets" if one / single >= TARGET_SINGLE_RATIO else "misses"
-    print(f"target batched at N = 1 / single env >= {TARGET_SINGLE_RATIO:g}: {one / single:.2f} "
-          f"{verdict} it")
+    memory = {"batched_arrays": own_bytes_per_env(env.unwrapped),
+              "traced_batched": traced_bytes_per_env("vector_entry_point", n),
+              "traced_sync": traced_bytes_per_env("sync", n)}
+    print(f"\nmemory per env at N = {n}: batched env arrays {memory['batched_arrays']:,.0f} B; "
+          f"traced by tracemalloc: batched {memory['traced_batched']:,.0f} B, sync "
+          f"{memory['traced_sync']:,.0f} B")
+    report = {"machine": machine, "seconds": args.seconds, "config": dict(BASE), **speed,
+              "split_us_per_step": step_split, "bytes_per_env": memory,
+              "targets": targets(speed, n)}
+    if args.json is not None:
+        args.json.write_text(json.dumps(report, indent=1) + "\n")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -1,7 +1,10 @@
 """Run a benchmark and publish its figures as a results file in ``docs/results/``.
 
-    python benchmarks/publish.py peers            # bench_peers.py -> docs/results/peers.json
-    python benchmarks/publish.py faults           # bench_faults.py -> docs/results/faults.json
+    python benchmarks/publish.py peers        # bench_peers.py -> docs/results/peers.json
+    python benchmarks/publish.py faults       # bench_faults.py -> docs/results/faults.json
+    python benchmarks/publish.py vector       # bench_vector_env.py -> docs/results/vector.json
+    python benchmarks/publish.py cold_start   # bench_cold_start.py -> docs/results/cold_start.json
+    python benchmarks/publish.py vector --bench-args="--seconds 0.2"  # recorded in the file
 
 The benchmark runs in this process, so the code version the results file records
 (:func:`estimators.leaderboard.records.package_version`) is the code that made the figures;
@@ -15,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shlex
 import sys
 import tempfile
 from collections.abc import Callable
@@ -86,6 +90,60 @@ def faults_tables(raw: list[dict[str, Any]]) -> dict[str, Any]:
     return {"passes": {"columns": ["fault", *names], "rows": rows}}
 
 
+def _met(target: dict[str, Any]) -> str:
+    return "yes" if target["met"] else "no"
+
+
+def vector_tables(raw: dict[str, Any]) -> dict[str, Any]:
+    """Steps/s of the batched env and of SyncVectorEnv per N with their ratio, and each target
+    with the figure measured for it."""
+    speed = {"columns": ["N", "batched [steps/s]", "SyncVectorEnv [steps/s]",
+                         "batched / SyncVectorEnv"],
+             "rows": [[n, f"{figures['batched']:,.0f}", f"{figures['sync']:,.0f}",
+                       f"{figures['ratio']:.2f}"] for n, figures in raw["sizes"].items()]}
+    single = raw["single"]
+    rows = []
+    for target in raw["targets"]:
+        value = target["value"]
+        shown = f"{value:,.0f}" if target["threshold"] >= 1000 else f"{value:.2f}"
+        if "single env" in target["target"]:
+            shown += f" ({single['batched']:,.0f} / {single['single']:,.0f} steps/s)"
+        rows.append([target["target"], str(target["n"]), shown, _met(target)])
+    return {"speed": speed,
+            "targets": {"columns": ["target", "measured at N", "measured", "met"], "rows": rows}}
+
+
+#: The cold-start probe's phases as the table names them.
+SHOWN_PHASES = {"first step": "import to first step, in all"}
+
+
+def cold_start_tables(raw: dict[str, Any]) -> dict[str, Any]:
+    """Wall and CPU seconds of each phase of a fresh process (and against an empty numba cache,
+    with the ratios, when it ran), and each target with the figure measured for it."""
+    cold = raw["empty_cache"]
+    columns = ["phase", "wall [s]", "CPU [s]"]
+    if cold is not None:
+        columns += ["empty cache wall [s]", "empty cache CPU [s]", "empty / this cache wall",
+                    "empty / this cache CPU"]
+    rows = []
+    for phase, (wall, cpu) in raw["cached"]["phases"].items():
+        row = [SHOWN_PHASES.get(phase, phase), f"{wall:.2f}", f"{cpu:.2f}"]
+        if cold is not None:
+            cold_wall, cold_cpu = cold["phases"][phase]
+            ratio_wall, ratio_cpu = raw["ratios"][phase]
+            row += [f"{cold_wall:.2f}", f"{cold_cpu:.2f}", f"{ratio_wall:.1f}",
+                    f"{ratio_cpu:.1f}"]
+        rows.append(row)
+    compiled = ["numba kernels compiled", str(raw["cached"]["compiled"]), ""]
+    if cold is not None:
+        compiled += [str(cold["compiled"]), "", "", ""]
+    rows.append(compiled)
+    targets = [[target["target"], f"{target['value']:.2f}" if isinstance(target["value"], float)
+                else str(target["value"]), _met(target)] for target in raw["targets"]]
+    return {"phases": {"columns": columns, "rows": rows},
+            "targets": {"columns": ["target", "measured", "met"], "rows": targets}}
+
+
 #: name -> (benchmark module, its arguments, what it measures, tables from its JSON)
 PUBLISHED: dict[str, tuple[str, list[str], str, Callable[[Any], dict[str, Any]]]] = {
     "peers": ("bench_peers", [], "lidar_odometry, slam and icp beside KISS-ICP on the same "
@@ -97,17 +155,32 @@ PUBLISHED: dict[str, tuple[str, list[str], str, Callable[[Any], dict[str, Any]]]
                "three paper groups and the first scans of ACES: runs whose worst step is at "
                "most 0.3 m beyond the clean run's and whose final error is at most 2x the "
                "clean one + 0.1 m", faults_tables),
+    "vector": ("bench_vector_env", ["--sizes", "1", "32", "256"], "env steps per CPU second "
+               "of the batched DualLidar-v0 (make_vec, vector_entry_point) and of SyncVectorEnv "
+               "over N single envs, default config, random actions, autoresets included, timed "
+               "in alternating 50 ms slices of one process; the single env "
+               "(gym.make) against the batched env at N = 1 the same way", vector_tables),
+    "cold_start": ("bench_cold_start", ["--empty-cache"], "a fresh Python process's first "
+                   "import lidar_env + gym.make + reset + step, then make_vec(32) + reset + "
+                   "step, wall and CPU seconds timed inside it, with this clone's numba cache "
+                   "(as after scripts/setup.sh) and with an empty one; numba compile events "
+                   "counted", cold_start_tables),
 }
 
 
-def publish(name: str) -> Path:
+def publish(name: str, bench_args: list[str] | None = None) -> Path:
+    """Run benchmark ``name`` (with ``bench_args`` in place of its published arguments, if
+    given) and write its results file; returns its path."""
     module, argv, what, tables = PUBLISHED[name]
     version = package_version()
-    raw = _run(module, argv)
+    raw = _run(module, argv if bench_args is None else bench_args)
+    command = f"python benchmarks/publish.py {name}"
+    if bench_args is not None:
+        command += f" --bench-args={shlex.quote(shlex.join(bench_args))}"
     out = RESULTS / f"{name}.json"
     out.write_text(json.dumps({
         "what": what,
-        "command": f"python benchmarks/publish.py {name}",
+        "command": command,
         "hardware": raw.get("machine", _machine()) if isinstance(raw, dict) else _machine(),
         "python": f"CPython {platform.python_version()}",
         "source_version": version,
@@ -123,9 +196,15 @@ def main(argv: list[str] | None = None) -> int:
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("names", nargs="+", choices=sorted(PUBLISHED),
                         help="the results to regenerate")
+    parser.add_argument("--bench-args", metavar="ARGS", default=None,
+                        help="the benchmark's arguments in place of the published ones (one "
+                        "name only; the results file records them in its command)")
     args = parser.parse_args(argv)
+    if args.bench_args is not None and len(args.names) != 1:
+        parser.error(f"--bench-args: expected one name, got {len(args.names)}")
+    bench_args = None if args.bench_args is None else shlex.split(args.bench_args)
     for name in args.names:
-        print(f"wrote {publish(name)}")
+        print(f"wrote {publish(name, bench_args)}")
     return 0
 
 
