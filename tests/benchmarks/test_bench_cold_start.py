@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from tests.benchmarks.bench_modules import load
@@ -24,3 +26,21 @@ def test_a_second_process_loads_what_the_first_compiled(tmp_path) -> None:
     assert set(second["phases"]) == {"import", "make", "reset", "step", "first step"}
     assert all(wall > 0 and cpu > 0 for wall, cpu in second["phases"].values()
                if wall > 0.05)
+
+
+def test_each_target_is_met_or_missed_by_its_own_figure() -> None:
+    phases = {"first step": [4.0, 3.0], bench.vector_phase(32): [9.0, 8.0]}
+    found = bench.targets({"phases": phases, "compiled": 2}, 32)
+    assert [(target["value"], target["met"]) for target in found] == [
+        (4.0, True), (9.0, False), (2, False)]
+    assert len(bench.targets({"phases": phases, "compiled": 0}, 0)) == 2
+
+
+def test_json_holds_the_phases_compiles_and_targets(tmp_path, monkeypatch) -> None:
+    result = {"phases": {"first step": [1.0, 1.0]}, "compiled": 0}
+    monkeypatch.setattr(bench, "probe", lambda num_envs, cache_dir: result)
+    out = tmp_path / "cold.json"
+    assert bench.main(["--vector", "0", "--json", str(out)]) == 0
+    written = json.loads(out.read_text())
+    assert written["cached"] == result and written["empty_cache"] is None
+    assert [target["met"] for target in written["targets"]] == [True, True]
