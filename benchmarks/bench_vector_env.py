@@ -14,9 +14,9 @@ Prints, in one run on this machine:
   does) and the rest; the step's remainder split into its Python (the action conversion,
   observation copies, infos) and the compiled action check, motion, collision, progress and
   reward (every figure of the split, the whole step included, timed in one run of
-  alternating slices, so their differences see the same load); what 200,000 steps/s leaves
-  per step against what the draws and the noiseless scan alone take; and the batched env in
-  a large map (2,000 walls);
+  alternating slices, so their differences see the same load); the whole step against what
+  the draws and the noiseless scan alone take; and the batched env in a large map (2,000
+  walls);
 * memory per env: the batched env's own arrays (``nbytes``) and what ``tracemalloc`` sees
   allocated by building and resetting each kind of vector env, divided by N.
 
@@ -28,8 +28,8 @@ circles in the scans).
 Also the single env (``gym.make``, its default wrappers, reset when an episode ends) against
 the batched env at N = 1, measured the same way.
 
-Targets: >= 200,000 env steps/s at N = 256 on this 2-core machine, >= 8x ``SyncVectorEnv``
-at N = 256, and the batched env at N = 1 at least as fast as the single env.
+Targets, each a ratio measured in the same run: >= 8x ``SyncVectorEnv`` at N = 256, and the
+batched env at N = 1 at least as fast as the single env.
 
 Run: ``python benchmarks/bench_vector_env.py [--seconds 2] [--sizes 1 16 64 256]
 [--moving-obstacles 10] [--mover-model yielding|waypoints] [--json OUT]`` (``--json`` writes
@@ -58,7 +58,6 @@ from lidar_env.config import MOVER_MODELS
 from lidar_env.vector.draws import fill_standard_normals
 from lidar_env.world.world import World
 
-TARGET_STEPS_PER_SECOND = 200_000
 TARGET_RATIO = 8.0
 #: The batched env at N = 1 against the single env.
 TARGET_SINGLE_RATIO = 1.0
@@ -284,9 +283,8 @@ def split(n: int, seconds: float) -> dict[str, float]:
           f"  {python:5.2f} Python: the action conversion, observation copies, infos\n"
           "  (the scan figures are the scan call alone, 50 random steps into the episodes; the "
           "rest the step's)")
-    print(f"  {TARGET_STEPS_PER_SECOND:,} steps/s leaves {1e6 / TARGET_STEPS_PER_SECOND:.2f} us "
-          f"per env step; the draws and the noiseless scan alone take {draws:.2f} + "
-          f"{noiseless_scan:.2f} = {draws + noiseless_scan:.2f} us")
+    print(f"  the step's {full_us:.2f} us against the draws and the noiseless scan alone: "
+          f"{draws:.2f} + {noiseless_scan:.2f} = {draws + noiseless_scan:.2f} us")
     print(f"  noiseless: {noiseless:,.0f} steps/s; 8-beam Lidars, noiseless: {few:,.0f} steps/s")
     if BASE:
         still, = cpu_steps_per_second(
@@ -305,9 +303,7 @@ def targets(speed: dict[str, Any], n: int) -> list[dict[str, Any]]:
     """Each target with the figure measured for it (at the largest N run) and whether it is met,
     printed."""
     at_n = speed["sizes"][str(n)]
-    found = [{"target": f"batched steps/s at N = 256 >= {TARGET_STEPS_PER_SECOND:,}",
-              "n": n, "value": at_n["batched"], "threshold": TARGET_STEPS_PER_SECOND},
-             {"target": f"batched / SyncVectorEnv at N = 256 >= {TARGET_RATIO:g}",
+    found = [{"target": f"batched / SyncVectorEnv at N = 256 >= {TARGET_RATIO:g}",
               "n": n, "value": at_n["ratio"], "threshold": TARGET_RATIO},
              {"target": f"batched at N = 1 / single env >= {TARGET_SINGLE_RATIO:g}",
               "n": 1, "value": speed["single"]["ratio"], "threshold": TARGET_SINGLE_RATIO}]
