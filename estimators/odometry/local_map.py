@@ -70,7 +70,6 @@ from estimators.matching.scan_matching import (
     voxel_downsample,
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
-from estimators.odometry.motion_prior import constant_velocity_increment
 from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
@@ -318,7 +317,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         dt = self._time_step(t)
         if not self.use_timestamps:  # scans skipped as unusable count (Estimator.update)
             dt += self.skipped_before
-        predicted = constant_velocity_increment(self._velocity, dt)
+        predicted = self._predicted(dt, self.skipped_before)
         guess = compose(self.pose, predicted)
         points = seen = self._points(scans)
         if self._reference is None or len(points) < 3:

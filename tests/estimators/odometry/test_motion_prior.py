@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from estimators.health import BLIND_STRETCH
 from estimators.odometry.local_map import LocalMapOdometry
 from estimators.odometry.motion_prior import (
     MIN_PREDICTION_SIGMA,
@@ -156,3 +157,17 @@ def test_the_speed_hold_s_eigendecomposition_is_numpy_s_bit_for_bit(entries) -> 
     expected_values, expected_vectors = np.linalg.eigh(matrix)
     np.testing.assert_array_equal(values, expected_values)
     np.testing.assert_array_equal(vectors, expected_vectors)
+
+
+@pytest.mark.parametrize("skipped", [0, BLIND_STRETCH - 1, BLIND_STRETCH, 80])
+def test_after_a_long_blind_stretch_the_guess_turns_the_car_once(skipped: int) -> None:
+    # Driving at 0.05 m and turning 0.0117 rad per scan (one noisy match's heading change),
+    # then ``skipped`` scans without returns: a short gap extrapolates the turn over every
+    # interval, a long blind stretch turns the car by one interval's turn only.
+    model = LocalMapOdometry()
+    model._velocity = np.array([0.05, 0.0, -0.0117])
+    dt = 1.0 + skipped
+    predicted = model._predicted(dt, skipped)
+    turn = -0.0117 if skipped >= BLIND_STRETCH else -0.0117 * dt
+    assert predicted[2] == pytest.approx(turn, abs=1e-12)
+    assert np.hypot(predicted[0], predicted[1]) == pytest.approx(0.05 * dt, rel=1e-3)
