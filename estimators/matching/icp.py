@@ -48,6 +48,7 @@ from estimators.matching.scan_recovery import (
     one_turn_guess,
     search_start,
 )
+from estimators.matching.surface_fits import surface_reference
 from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import compose, transform_points, wrap_angle
@@ -274,15 +275,14 @@ class ICPEstimator(Estimator):
     identity it needs about twice the iterations.
 
     The previous scan's lines are the curves fitted through each point's
-    ``normal_neighbours`` (grown up to ``max_normal_neighbours`` along a noisy wall;
-    :meth:`PointToLineReference.with_estimated_normals`, denoised): a line through two
-    neighbouring returns of a wall seen at a grazing angle tilts with their range noise, and
-    the tilted lines pass for information along a corridor's axis that pulls the match off
-    it. Directions the pairs pin down with less than ``min_information`` fully weighted
-    points follow the constant-velocity guess alone (:func:`register`'s ``min_information``),
-    held by a weak prior (``prior_sigma_*`` against ``noise_sigma``, widening with the scan
-    intervals it spans), where the guess spans only observations that came (a clock gap may
-    be a stamp that jumped alone).
+    ``normal_neighbours`` (up to ``max_normal_neighbours`` along a noisy wall), with their
+    midpoints where they bend (:mod:`estimators.matching.surface_fits`): a line through two
+    returns of a wall at a grazing angle tilts with their noise and pulls the match off a
+    corridor's axis. Directions the pairs pin down with less than ``min_information`` fully
+    weighted points follow the constant-velocity guess alone (:func:`register`'s
+    ``min_information``), held by a weak prior (``prior_sigma_*`` against ``noise_sigma``,
+    widening with the scan intervals it spans), where the guess spans only observations that
+    came (a clock gap may be a stamp that jumped alone).
 
     After skipped or lost scans the match also starts from the translation extrapolated with
     one interval's turn and from a correlative search on the last scan's likelihood grid
@@ -373,8 +373,8 @@ class ICPEstimator(Estimator):
                     starts.append(start)
                     guesses.append(guess)
                     spans.append(span)
-            reference = PointToLineReference.with_estimated_normals(
-                self._previous, self.normal_neighbours, True, self.max_normal_neighbours)
+            reference = surface_reference(self._previous, self.normal_neighbours,
+                                          self.max_normal_neighbours)
             # free directions follow a guess over observations that came (not a clock gap's,
             # whose stamp may have jumped alone, nor the search's); priors weaken with the span
             results = [register(reference, current, start, self._held_params if (
