@@ -154,7 +154,8 @@ def far_match(
     """ICP of ``points`` from the guess and from the branch-and-bound's best pose in
     ``window`` around it, both held by the weak prior ``prior_information`` (3,) at ``guess``.
 
-    The result explaining the larger share of the points wins (a tie: the search's). Keeping
+    The result explaining the larger share of the points wins (a tie: the search's; where
+    neither explains a point, the guess's). Keeping
     the guess's result unless the search's explained more by the count's own noise (one
     standard error of the share), on the grounds that along a corridor's axis every pose
     scores about the same, is worse: the guess is as lost as the search there once one step
@@ -178,6 +179,8 @@ def far_match(
     if not found.found:
         return from_guess
     from_search = register(reference, points, found.pose, params, guess, prior_information)
+    if from_search.quality == from_guess.quality == 0.0:
+        return from_guess  # a handful of returns beyond the map: every pose scores nothing
     best = from_search if from_search.quality >= from_guess.quality else from_guess
     if abs(wrap_angle(found.pose[2] - guess[2])) <= 0.5 * window.angular:
         return best

@@ -18,6 +18,7 @@ from estimators.odometry.far_scans import (
     SearchWindow,
     fallback_match,
     far_apart,
+    far_match,
     one_turn_start,
     reach_window,
 )
@@ -192,3 +193,18 @@ def test_the_fallback_turns_the_car_only_as_far_as_it_can_turn() -> None:
     found = fallback_match(search, reference, scan, guess, near, np.pi, None, ICPParams(), 0.5)
     assert found.quality > 0.9
     assert abs(wrap_angle(found.pose[2] - true_pose[2])) < np.radians(1.0)
+
+
+def test_a_far_match_no_pose_explains_keeps_the_guess() -> None:
+    # a map of one wall and three returns 10 m beyond it (a 3.5 m Lidar back from a blind
+    # stretch among far pillars): every pose of the 7 m window explains none of them, and the
+    # search's best pose is any; the guess is kept, not a placement metres away
+    world_points = np.column_stack([np.linspace(-2.0, 2.0, 41), np.full(41, 2.0)])
+    reference = PointToLineReference(world_points)
+    search = GlobalSearch(world_points, 0.05)
+    scan = np.array([[12.0, -1.0], [12.2, -1.1], [12.4, -0.9]])
+    guess = np.array([0.5, 0.2, 0.1])
+    window = SearchWindow(7.0, np.pi)
+    result = far_match(search, reference, scan, guess, window, ICPParams(), np.zeros(3))
+    assert result.quality == 0.0
+    np.testing.assert_allclose(result.pose, guess, atol=1e-9)
