@@ -287,7 +287,8 @@ _README_MARKER = re.compile(r"^<!-- results: docs/results/([\w.\-]+\.json) (.+?)
 
 def refresh_readme(readme: Path) -> bool:
     """Write the README's results table (a choice of rows and columns of a results table,
-    rows named by their estimator) afresh from the results file; True if it changed."""
+    rows named by their estimator, in its order) afresh from the results file; True if it
+    changed."""
     text = readme.read_text()
     lines, i = text.splitlines(), 0
     while i < len(lines):
@@ -299,15 +300,19 @@ def refresh_readme(readme: Path) -> bool:
         named = table["columns"].index("estimator")
         by_name = {row[named]: dict(zip(table["columns"], row, strict=True))
                    for row in table["rows"]}
+        order = list(by_name)
         columns = [c.strip() for c in lines[i].strip().strip("|").split("|")]
         i += 2
+        first, rows = i, []
         while i < len(lines) and lines[i].startswith("|"):
             cells = [c.strip() for c in lines[i].strip().strip("|").split("|")]
-            held = by_name[cells[columns.index("estimator")].split()[0]]
+            name = cells[columns.index("estimator")].split()[0]
+            held = by_name[name]
             cells = [held[column] if column in held and column != "estimator" else cell
                      for column, cell in zip(columns, cells, strict=True)]
-            lines[i] = "| " + " | ".join(cells) + " |"
+            rows.append((order.index(name), "| " + " | ".join(cells) + " |"))
             i += 1
+        lines[first:i] = [row for _, row in sorted(rows)]  # in the results table's order
     fresh = "\n".join(lines) + "\n"
     if fresh != text:
         readme.write_text(fresh)

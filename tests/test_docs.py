@@ -78,6 +78,9 @@ def test_every_readme_results_table_comes_from_a_results_file() -> None:
                     assert value == held[estimator][column], (estimator, column, value)
                 missing = numbers(value) - every_number
                 assert not missing, f"README {estimator} {column}: {missing} not in {path.name}"
+        order = list(held)
+        shown = [order.index(row[columns.index("estimator")].split()[0]) for row in rows]
+        assert shown == sorted(shown), f"the README's rows are not in {path.name}'s order"
 
 
 def test_results_files_name_their_command_hardware_and_files() -> None:
