@@ -32,6 +32,7 @@ from estimators.health import (
     evident_time_step,
     intervals_since_used,
 )
+from estimators.matching.match_result import MatchResult
 from estimators.matching.normal_equations import register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
@@ -88,22 +89,6 @@ class ICPParams:
             raise ConfigError(f"trim_ratio: expected a share in (0, 1], got {self.trim_ratio}")
         if self.loss not in LOSSES:
             raise ConfigError(f"unknown loss {self.loss!r}: expected one of {', '.join(LOSSES)}")
-
-
-@dataclass(frozen=True)
-class MatchResult:
-    """A registration: ``pose`` (3,) of the query frame in the reference frame; ``quality`` is
-    the share of query points within ``inlier_distance`` of their line (0 = no overlap,
-    1 = every point explained); ``rmse`` [m] over those inliers; ``information`` (3, 3) the
-    points' ``J^T W J`` at ``pose`` over those pairs (x, y [m], heading [rad]; one point squarely
-    facing a direction adds 1 to it), None where not computed."""
-
-    pose: NDArray[np.float64]
-    quality: float
-    rmse: float
-    iterations: int
-    converged: bool
-    information: NDArray[np.float64] | None = None
 
 
 def register(

@@ -17,15 +17,12 @@ y [m] left, heading [rad].
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.matching.match_result import MatchResult
 from estimators.matching.window_search import search_in_box, thinned_for_search
-
-if TYPE_CHECKING:
-    from estimators.matching.icp import MatchResult
 
 FloatArray = NDArray[np.float64]
 

@@ -28,18 +28,14 @@ Frames: map points in the world frame, scan points in the car frame. Distances [
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
+from estimators.odometry.global_search import GlobalSearch
 from lidar_env.core.se2 import inverse, transform_points
-
-if TYPE_CHECKING:
-    from estimators.odometry.far_scans import GlobalSearch
 
 FloatArray = NDArray[np.float64]
 

@@ -45,19 +45,16 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Sized
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from estimators.health import BLIND_STRETCH, CLOCK_JUMP_FACTOR, Health, intervals_since_used
-from estimators.matching.branch_and_bound import Match
 from estimators.matching.correlative import correlative_search
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
-from estimators.matching.scan_matching import LikelihoodField
-from estimators.matching.window_search import search_in_box, thinned_for_search
 from estimators.odometry.blind_resume import resumed_match
+from estimators.odometry.global_search import GlobalSearch, SearchWindow
 from estimators.odometry.motion_prior import ScanClock, constant_velocity_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
@@ -74,14 +71,6 @@ SeenFree = Callable[[FloatArray, FloatArray], float]
 #: and the fast-turn drives (``benchmarks/bench_fast_turns.py``) it replaced no match at all,
 #: and checking every scan took a quarter of the CPU.
 CHECKED_BELOW = 0.9
-
-@dataclass(frozen=True)
-class SearchWindow:
-    """Where the car can be: ``linear`` [m] around the guess, ``angular`` [rad] either side."""
-
-    linear: float
-    angular: float
-
 
 def reach_window(max_speed: float, max_turn_rate: float, interval: float,
                  typical: float) -> SearchWindow:
@@ -109,40 +98,6 @@ def far_apart(increment: FloatArray, keyframe_distance: float, turn_window: floa
     turns up to 20 deg per scan, which ICP from the guess follows.)"""
     return bool(np.hypot(increment[0], increment[1]) >= keyframe_distance
                 or abs(increment[2]) >= turn_window)
-
-
-class GlobalSearch:
-    """The correlative searches on one map: its likelihood field (``resolution`` cells, 0.1 m
-    wide) for the exhaustive search, built once when first needed, and for each
-    branch-and-bound search a grid and pyramid over the part of the map the scan can reach."""
-
-    def __init__(self, map_points: FloatArray, resolution: float) -> None:
-        self.map_points = map_points
-        self.resolution = resolution
-        self._field: LikelihoodField | None = None
-
-    @property
-    def field(self) -> LikelihoodField:
-        """The likelihood field of the whole map (built once)."""
-        if self._field is None:
-            self._field = LikelihoodField(self.map_points, resolution=self.resolution)
-        return self._field
-
-    def search(self, points: FloatArray, guess: FloatArray, window: SearchWindow) -> Match:
-        """Exact best pose of ``points`` (M, 2, car frame) within ``window`` of ``guess``."""
-        thinned = thinned_for_search(points)
-        scan_reach = float(np.hypot(thinned[:, 0], thinned[:, 1]).max())
-        # no shift beyond where the scan still touches the map counts: a clock gap of minutes
-        # must not size the search (memory and time) by max_speed x the gap
-        corners = np.array([self.map_points.min(axis=0), self.map_points.max(axis=0)])
-        farthest = float(np.hypot(np.abs(corners[:, 0] - guess[0]).max(),
-                                  np.abs(corners[:, 1] - guess[1]).max()))
-        window = SearchWindow(min(window.linear, farthest + scan_reach), window.angular)
-        reach = window.linear + scan_reach + 0.5
-        low = np.maximum(self.map_points.min(axis=0), guess[:2] - reach) - 0.5
-        high = np.minimum(self.map_points.max(axis=0), guess[:2] + reach) + 0.5
-        return search_in_box(self.map_points, low, high, thinned, guess, window.linear,
-                             window.angular, self.resolution)
 
 
 def far_match(
