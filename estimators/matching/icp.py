@@ -33,7 +33,8 @@ from estimators.health import (
     intervals_since_used,
 )
 from estimators.matching.match_result import MatchResult
-from estimators.matching.normal_equations import register_loop
+from estimators.matching.neighbourhood_fits import check_neighbours
+from estimators.matching.normal_equations import prior_information, register_loop
 from estimators.matching.point_to_line import (
     LOSSES,
     PointToLineReference,
@@ -89,6 +90,9 @@ class ICPParams:
             raise ConfigError(f"trim_ratio: expected a share in (0, 1], got {self.trim_ratio}")
         if self.loss not in LOSSES:
             raise ConfigError(f"unknown loss {self.loss!r}: expected one of {', '.join(LOSSES)}")
+        if not self.min_information >= 0:
+            raise ConfigError(f"min_information: expected a number of points >= 0, got "
+                              f"{self.min_information}")
 
 
 def register(
@@ -298,11 +302,13 @@ class ICPEstimator(Estimator):
             loss_scale=self.loss_scale,
             trim_ratio=self.trim_ratio,
         )
+        for name in ("noise_sigma", "prior_sigma_translation", "prior_sigma_rotation"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        check_neighbours(self.normal_neighbours, self.max_normal_neighbours)
         self._held_params = replace(self.params, min_information=self.min_information)
-        # [1/m^2, 1/m^2, 1/rad^2] in units of fully weighted points (cost over noise_sigma^2)
-        self._prior_information = (self.noise_sigma / np.array(
-            [self.prior_sigma_translation, self.prior_sigma_translation,
-             self.prior_sigma_rotation])) ** 2
+        self._prior_information = prior_information(
+            self.noise_sigma, self.prior_sigma_translation, self.prior_sigma_rotation)
 
     def _reset_state(self) -> None:
         self._previous: NDArray[np.float64] | None = None

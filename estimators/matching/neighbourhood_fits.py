@@ -335,3 +335,14 @@ def local_fits(
                        min(max_k or k, len(points)), float(max_radius), curves, normals,
                        valid, anchors)
     return normals, valid, anchors
+
+
+def check_neighbours(normal_neighbours: int, max_normal_neighbours: int) -> None:
+    """Raise :class:`ConfigError` unless a line fit's neighbours are an integer >= 3 and its
+    most an integer >= them."""
+    for name, value, least in (("normal_neighbours", normal_neighbours, 3),
+                               ("max_normal_neighbours", max_normal_neighbours,
+                                normal_neighbours)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+            said = f"{least} (normal_neighbours)" if name == "max_normal_neighbours" else least
+            raise ConfigError(f"{name}: expected an integer >= {said}, got {value!r}")

@@ -247,3 +247,10 @@ def register_loop(
         order, tree_points, start, end, child, box, points, normals, valid, anchors,
         has_normals, query, pose, inlier_distance, loss, scale, residuals, kept, near)[0]
     return pose, iterations, converged, residuals, hessian
+
+
+def prior_information(noise_sigma: float, sigma_translation: float,
+                      sigma_rotation: float) -> NDArray[np.float64]:
+    """A motion prior's diagonal information (3,) [1/m^2, 1/m^2, 1/rad^2] in units of fully
+    weighted points (the cost over ``noise_sigma^2`` [m]), from its sigmas [m, m, rad]."""
+    return (noise_sigma / np.array([sigma_translation, sigma_translation, sigma_rotation])) ** 2

@@ -58,20 +58,31 @@ SEEN_THROUGH_SLACK = 3
 NEAREST_JUDGED = 1.0
 
 
-def seen_through_count(map_points: FloatArray, points: FloatArray, pose: FloatArray,
-                       margin: float = SEEN_THROUGH_MARGIN) -> int:
-    """How many world ``map_points`` (N, 2) the scan's car-frame ``points`` (M, 2) see
-    through with the car at ``pose`` (3,): map points at least :data:`NEAREST_JUDGED` from
-    the car whose bearing bin (:data:`BEARING_BIN`) holds returns all farther than the map
-    point by ``margin``. Bearings without a return (no echo) judge nothing."""
+def nearest_by_bearing(points: FloatArray) -> FloatArray:
+    """The nearest range [m] of the car-frame ``points`` (M, 2) in each bearing bin
+    (:data:`BEARING_BIN`), inf where a bin holds none."""
     bins = int(round(2.0 * np.pi / BEARING_BIN))
     scan_range = np.hypot(points[:, 0], points[:, 1])
     scan_bin = ((np.arctan2(points[:, 1], points[:, 0]) + np.pi) / BEARING_BIN).astype(int) % bins
     nearest = np.full(bins, np.inf)
     np.minimum.at(nearest, scan_bin, scan_range)
+    return nearest
+
+
+def seen_through_count(map_points: FloatArray, points: FloatArray, pose: FloatArray,
+                       margin: float = SEEN_THROUGH_MARGIN,
+                       nearest: FloatArray | None = None) -> int:
+    """How many world ``map_points`` (N, 2) the scan's car-frame ``points`` (M, 2) see
+    through with the car at ``pose`` (3,): map points at least :data:`NEAREST_JUDGED` from
+    the car whose bearing bin (:data:`BEARING_BIN`) holds returns all farther than the map
+    point by ``margin``. Bearings without a return (no echo) judge nothing. ``nearest``:
+    :func:`nearest_by_bearing` of ``points``, where already taken."""
+    if nearest is None:
+        nearest = nearest_by_bearing(points)
     local = transform_points(inverse(pose), map_points)
     map_range = np.hypot(local[:, 0], local[:, 1])
-    map_bin = ((np.arctan2(local[:, 1], local[:, 0]) + np.pi) / BEARING_BIN).astype(int) % bins
+    map_bin = ((np.arctan2(local[:, 1], local[:, 0]) + np.pi) / BEARING_BIN).astype(int) \
+        % len(nearest)
     behind = nearest[map_bin]
     return int(np.count_nonzero((map_range >= NEAREST_JUDGED) & np.isfinite(behind)
                                 & (behind > map_range + margin)))
@@ -99,7 +110,9 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     offsets = np.arange(-np.floor(reach / step), np.floor(reach / step) + 1) * step
     poses = np.repeat(match.pose[None], len(offsets), axis=0)
     poses[:, :2] += offsets[:, None] * direction
-    counts = np.array([seen_through_count(map_points, points, pose) for pose in poses])
+    nearest = nearest_by_bearing(points)  # the scan's, the same at every place
+    counts = np.array([seen_through_count(map_points, points, pose, nearest=nearest)
+                       for pose in poses])
     scores = np.array([float(field.score(transform_points(pose, points)).mean())
                        for pose in poses])
     candidates = scores >= NEAR_BEST * scores.max()

@@ -55,7 +55,7 @@ from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.odometry.blind_resume import resumed_match
 from estimators.odometry.global_search import GlobalSearch, SearchWindow
-from estimators.odometry.motion_prior import ScanClock, constant_velocity_increment
+from estimators.odometry.motion_prior import ScanClock, one_turn_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
 from lidar_env.core.se2 import compose, relative, wrap_angle
@@ -86,8 +86,7 @@ def one_turn_start(pose: FloatArray, step: FloatArray, intervals: float) -> Floa
     ``pose`` (3,) if it kept the speed and direction of its last per-interval ``step`` (3,)
     but turned only once: over a gap the extrapolated turn is the least known part of the
     guess (a car weaving down a corridor has turned back by the time the scans return)."""
-    return compose(pose, constant_velocity_increment([step[0], step[1], step[2] / intervals],
-                                                     intervals))
+    return compose(pose, one_turn_increment(step, intervals))
 
 
 def far_apart(increment: FloatArray, keyframe_distance: float, turn_window: float) -> bool:

@@ -63,6 +63,8 @@ from numpy.typing import NDArray
 from estimators.base import Estimator
 from estimators.health import evident_time_step, intervals_since_used
 from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
+from estimators.matching.neighbourhood_fits import check_neighbours
+from estimators.matching.normal_equations import prior_information
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import (
     DEFAULT_MIN_RANGE,
@@ -74,13 +76,7 @@ from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointR
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.core import ConfigError
-from lidar_env.core.se2 import (
-    compose,
-    compose_floats,
-    inverse_floats,
-    transform_points,
-    wrap_float,
-)
+from lidar_env.core.se2 import compose, relative_floats, transform_points, wrap_float
 
 
 @dataclass
@@ -246,14 +242,13 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
-        lowest = {"normal_neighbours": 3, "max_normal_neighbours": self.normal_neighbours,
-                  "velocity_window": 1, "start_speed_scans": 1, "max_start_replay": 0,
+        check_neighbours(self.normal_neighbours, self.max_normal_neighbours)
+        lowest = {"velocity_window": 1, "start_speed_scans": 1, "max_start_replay": 0,
                   "n_keyframes": 1}
         for name, least in lowest.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
-                said = f"{least} (normal_neighbours)" if name == "max_normal_neighbours" else least
-                raise ConfigError(f"{name}: expected an integer >= {said}, got {value!r}")
+                raise ConfigError(f"{name}: expected an integer >= {least}, got {value!r}")
         if not 0 <= self.min_quality <= 1:
             raise ConfigError(f"min_quality: expected a share in [0, 1], got {self.min_quality}")
         self._check_moving_filter()
@@ -261,10 +256,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             max_iterations=self.max_iterations,
             max_correspondence_distance=self.max_correspondence_distance, loss=self.loss,
             loss_scale=self.loss_scale, trim_ratio=1.0, min_information=self.min_information)
-        # Prior information in the units of the point residuals (cost scaled by noise_sigma^2).
-        self._prior_information = (self.noise_sigma / np.array(
-            [self.prior_sigma_translation, self.prior_sigma_translation,
-             self.prior_sigma_rotation])) ** 2
+        self._prior_information = prior_information(
+            self.noise_sigma, self.prior_sigma_translation, self.prior_sigma_rotation)
 
     def _reset_state(self) -> None:
         self._keyframes: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque(
@@ -343,9 +336,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self.scan_information = (np.zeros((3, 3)) if result.information is None
                                  else result.information)
         floats = pose.tolist()  # relative()'s operations on Python floats, bit for bit
-        miss = compose_floats(inverse_floats(guess.tolist()), floats)
+        miss = relative_floats(guess.tolist(), floats)
         self._misses.append(float(np.hypot(miss[0], miss[1])))
-        increment = np.array(compose_floats(inverse_floats(self.pose.tolist()), floats))
+        increment = np.array(relative_floats(self.pose.tolist(), floats))
         if self.clock_jumped and not self.use_timestamps:  # lost scans, or a jumping stamp:
             # the scan intervals the increment spans at the speed the car held
             typical = self._clock.typical_step if self._clock.steps else interval
@@ -359,7 +352,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         self._velocity = self._updated_velocity(increment, dt,
                                                 None if resumed else result.information)
         self._remember(pose, scans, seen, self._misses[-1])
-        step = compose_floats(inverse_floats(self._keyframes[-1][0].tolist()), floats)
+        step = relative_floats(self._keyframes[-1][0].tolist(), floats)
         if (
             np.hypot(step[0], step[1]) >= self.keyframe_distance
             or abs(wrap_float(step[2])) >= self.keyframe_angle

@@ -234,6 +234,16 @@ def constant_velocity_increment(velocity: ArrayLike, dt: float = 1.0) -> FloatAr
     return np.array([c * x - s * y, s * x + c * y, turn])
 
 
+def one_turn_increment(velocity: ArrayLike, dt: float, interval: float = 1.0) -> FloatArray:
+    """:func:`constant_velocity_increment` over ``dt`` with the translation of ``velocity``
+    (3,) but one ``interval``'s turn only (``velocity[2] * interval``, in ``dt``'s unit): over
+    a gap of many intervals the extrapolated turn is the least known part of the guess (one
+    noisy match's heading change; a car weaving down a corridor has turned back by the time
+    the scans return)."""
+    return constant_velocity_increment([velocity[0], velocity[1], velocity[2] * interval / dt],
+                                       dt)
+
+
 def mean_translation(translations: Sequence[FloatArray]) -> tuple[float, float]:
     """``np.mean(translations, axis=0)`` of a few translations (2,) [m], bit for bit (the
     rows summed in order, then divided by their number), on Python floats."""

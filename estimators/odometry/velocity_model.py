@@ -84,11 +84,10 @@ class ConstantVelocityModel:
         it; extrapolated over many intervals it is the least known part of the guess (a
         TurtleBot3 driving straight among pillars, blind for 16 s, was guessed 54 degrees
         turned from a 0.7-degree step)."""
-        velocity = self._velocity
-        if skipped >= BLIND_STRETCH:
-            one = self._clock.typical_step if self.use_timestamps and self._clock.steps else 1.0
-            velocity = np.array([velocity[0], velocity[1], velocity[2] * one / dt])
-        return constant_velocity_increment(velocity, dt)
+        if skipped < BLIND_STRETCH:
+            return constant_velocity_increment(self._velocity, dt)
+        one = self._clock.typical_step if self.use_timestamps and self._clock.steps else 1.0
+        return motion_prior.one_turn_increment(self._velocity, dt, one)
 
     def _prediction_information(self) -> FloatArray:
         """The motion prior's information (3, 3): none while the start velocity is unknown."""

@@ -57,6 +57,12 @@ def inverse_floats(a: Sequence[float]) -> PoseFloats:
     return -c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_float(-a[2])
 
 
+def relative_floats(a: Sequence[float], b: Sequence[float]) -> PoseFloats:
+    """:func:`relative` of two poses of three Python floats, bit for bit (as
+    :func:`compose_floats`): pose ``b`` in the frame of pose ``a``."""
+    return compose_floats(inverse_floats(a), b)
+
+
 def inverse(a: ArrayLike) -> Pose:
     """``a⁻¹``: the pose of the parent frame seen from frame ``a``."""
     a = np.asarray(a, dtype=np.float64)

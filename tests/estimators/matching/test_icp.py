@@ -16,6 +16,7 @@ from estimators.matching.point_to_line import (
     robust_weights,
 )
 from estimators.matching.scan_matching import scan_to_points, voxel_downsample
+from lidar_env.core import ConfigError
 from lidar_env.core.se2 import compose, inverse, relative, transform_points, wrap_angle
 
 #: An L-shaped room with a pillar-like box: walls as segments (x1, y1, x2, y2) [m].
@@ -290,3 +291,18 @@ def test_bad_input_is_named():
         match_scans(np.arange(10.0).reshape(5, 2), np.arange(10.0).reshape(5, 2), (0.0, 0.0))
     with pytest.raises(ValueError, match="unknown loss"):
         robust_weights(np.zeros(3), "tukey", 1.0)
+
+
+@pytest.mark.parametrize(("settings", "message"), [
+    ({"noise_sigma": 0.0}, "noise_sigma: expected a positive value"),
+    ({"prior_sigma_translation": -0.1}, "prior_sigma_translation: expected a positive"),
+    ({"prior_sigma_rotation": float("nan")}, "prior_sigma_rotation: expected a positive"),
+    ({"normal_neighbours": 2}, "normal_neighbours: expected an integer >= 3"),
+    ({"normal_neighbours": 9.5}, "normal_neighbours: expected an integer >= 3"),
+    ({"max_normal_neighbours": 5}, r"max_normal_neighbours: expected an integer >= 9"),
+    ({"min_information": -1.0}, "min_information: expected a number of points >= 0"),
+    ({"min_information": float("nan")}, "min_information: expected a number of points >= 0"),
+])
+def test_icp_settings_out_of_range_are_named_config_errors(settings: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        make("icp", **settings)

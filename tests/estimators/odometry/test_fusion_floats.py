@@ -9,7 +9,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lidar_env.core.se2 import compose, compose_floats, inverse, inverse_floats, relative
+from lidar_env.core.se2 import (
+    compose,
+    compose_floats,
+    inverse,
+    inverse_floats,
+    relative,
+    relative_floats,
+)
 
 coordinates = st.floats(-100.0, 100.0, allow_nan=False)
 poses = st.tuples(coordinates, coordinates, st.floats(-10.0, 10.0, allow_nan=False))
@@ -24,6 +31,8 @@ def test_compose_floats_is_se2_compose_bit_for_bit(
     assert np.array_equal(np.array(compose_floats(a, b)), expected)
     # and a relative pose, as the estimator chains them
     assert np.array_equal(np.array(compose_floats(inverse_floats(a), b)),
+                          relative(np.array([a]), np.array([b]))[0])
+    assert np.array_equal(np.array(relative_floats(a, b)),
                           relative(np.array([a]), np.array([b]))[0])
 
 

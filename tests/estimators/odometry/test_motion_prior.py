@@ -17,6 +17,7 @@ from estimators.odometry.motion_prior import (
     midpoint_velocity,
     missed_sigma,
     no_sideslip_information,
+    one_turn_increment,
     prediction_sigma,
 )
 from estimators.odometry.velocity_model import _symmetric_eigh
@@ -171,3 +172,12 @@ def test_after_a_long_blind_stretch_the_guess_turns_the_car_once(skipped: int) -
     turn = -0.0117 if skipped >= BLIND_STRETCH else -0.0117 * dt
     assert predicted[2] == pytest.approx(turn, abs=1e-12)
     assert np.hypot(predicted[0], predicted[1]) == pytest.approx(0.05 * dt, rel=1e-3)
+
+
+def test_one_turn_increment_keeps_the_translation_and_turns_once() -> None:
+    # 20 intervals at 0.05 m and 0.01 rad an interval: the translation of 20 intervals along
+    # the chord of one interval's turn
+    increment = one_turn_increment(np.array([0.05, 0.0, 0.01]), 20.0)
+    assert increment[2] == pytest.approx(0.01, abs=1e-15)
+    assert np.hypot(increment[0], increment[1]) == pytest.approx(1.0, rel=1e-12)
+    assert np.array_equal(increment, constant_velocity_increment([0.05, 0.0, 0.01 / 20.0], 20.0))
