@@ -104,8 +104,7 @@ def vector_tables(raw: dict[str, Any]) -> dict[str, Any]:
     single = raw["single"]
     rows = []
     for target in raw["targets"]:
-        value = target["value"]
-        shown = f"{value:,.0f}" if target["threshold"] >= 1000 else f"{value:.2f}"
+        shown = f"{target['value']:.2f}"  # every target is a ratio
         if "single env" in target["target"]:
             shown += f" ({single['batched']:,.0f} / {single['single']:,.0f} steps/s)"
         rows.append([target["target"], str(target["n"]), shown, _met(target)])
