@@ -82,6 +82,13 @@ def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
     return out
 
 
+def split_like(stacked: NDArray[np.bool_], parts: list[NDArray[np.float64]]
+               ) -> list[NDArray[np.bool_]]:
+    """``stacked`` (a mask over ``parts`` concatenated in order) cut into one mask per part."""
+    ends = itertools.accumulate(len(part) for part in parts)
+    return [stacked[end - len(part):end] for part, end in zip(parts, ends, strict=True)]
+
+
 class MovingPointFilter:
     """Tells which points of each new scan lie on moving things, and which map points are
     trails of things that moved away, from the scans alone.
@@ -213,8 +220,7 @@ class MovingPointFilter:
         """``(moving (n,), stale masks)`` for the new scan's car-frame ``points`` (n, 2) at
         (estimated) car ``pose`` and each world ``map_points`` array."""
         moving, stale = self.classify_stacked(points, pose, scans, map_points)
-        ends = itertools.accumulate(len(p) for p in map_points)
-        return moving, [stale[end - len(p):end] for p, end in zip(map_points, ends, strict=True)]
+        return moving, split_like(stale, map_points)
 
     def classify_stacked(
         self, points: NDArray[np.float64], pose: NDArray[np.float64],

@@ -11,7 +11,6 @@ documentation's design page. Distances [m]; points (n, 2).
 from __future__ import annotations
 
 import inspect
-import itertools
 import numbers
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -21,7 +20,7 @@ from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
 from estimators.odometry.motion_prior import ScanClock
-from estimators.odometry.moving_points import MovingPointFilter
+from estimators.odometry.moving_points import MovingPointFilter, split_like
 from lidar_env.core import ConfigError
 from lidar_env.core.se2 import transform_points
 
@@ -102,11 +101,9 @@ class MovingPointRejection:
         maps = [world for _, world in self._keyframes]
         moving, stale = self._moving.classify_stacked(points, guess, scans, maps)
         if np.count_nonzero(stale) >= MIN_MOVING_POINTS:
-            kept = ~stale
-            ends = itertools.accumulate(len(world) for world in maps)
-            self._keyframes = deque([(key_pose, world[kept[end - len(world):end]])
-                                     for (key_pose, world), end
-                                     in zip(self._keyframes, ends, strict=True)],
+            self._keyframes = deque([(key_pose, world[kept]) for (key_pose, world), kept
+                                     in zip(self._keyframes, split_like(~stale, maps),
+                                            strict=True)],
                                     maxlen=self.n_keyframes)
             self._build_reference()
         self._moving_mask = moving
