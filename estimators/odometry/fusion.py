@@ -36,7 +36,7 @@ from estimators.matching.rotation_pc import (
     require_sensor_frame,
 )
 from estimators.odometry.edge_consensus import fuse_from_consensus
-from estimators.odometry.fusion_recovery import recovered, searched_motion
+from estimators.odometry.fusion_recovery import BlindScans, recovered
 from estimators.odometry.motion_prior import (
     ScanClock,
     midpoint_velocity,
@@ -271,14 +271,14 @@ class FusionEstimator(Estimator):
             # (estimators.odometry.fusion_recovery)
             longer = (self._velocity * (intervals * typical[0])).tolist()
             longer[2] = step[2]
-            search = None if not self.skipped_before else lambda: searched_motion(
+            blind = None if not self.skipped_before else BlindScans.of(
                 self._mounts, latest.scans, current, np.array(compose_floats(inverse_floats(
                     latest.pose.tolist()), compose_floats(previous, longer))), intervals, dt)
             from_latest, edges, score = recovered(
                 lambda guess: self._solve(latest, current, previous, guess, information),
                 (from_latest, edges, score), longer, bool(self.skipped_before),
                 lambda motion: list(compose_floats(inverse_floats(previous), compose_floats(
-                    latest.pose.tolist(), motion.tolist()))), search)
+                    latest.pose.tolist(), motion.tolist()))), blind)
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance

@@ -12,7 +12,7 @@ which prove the time passed.
 
 After skipped scans (a blinded Lidar) where both scans hold enough points, a third start is
 the exact best pose of a branch-and-bound search of the new scan on the latest keyframe's
-points over the poses the car can have reached (:func:`searched_motion`, the ``icp``
+points over the poses the car can have reached (:meth:`BlindScans.searched`, the ``icp``
 estimator's :func:`~estimators.matching.scan_recovery.search_start`): the car may have turned
 or stopped while blind, out of reach of either guess. It runs where neither guess's matches
 explain half of the scans, and is kept where its matches explain clearly more.
@@ -26,12 +26,20 @@ iterations from there stop short of the fit. So the kept motion is matched again
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.scan_recovery import MIN_SEARCH_POINTS, search_start
+from estimators.matching.scan_recovery import (
+    MIN_SEARCH_POINTS,
+    SEEN_THROUGH_SLACK,
+    least_seen_through_place,
+    reach,
+    search_start,
+    seen_through_counts,
+)
 from lidar_env.core.se2 import transform_points
 
 #: A car motion (3,) from the latest keyframe, its edges and their mean share explained.
@@ -50,46 +58,96 @@ POLISH_ROUNDS = 5
 #: corridor finds a place along it that explains a little more because the keyframe saw
 #: more of it.
 POOR_SCORE = 0.5
+#: [m] reach and grid step of the place search that settles a match off a contradiction:
+#: along a corridor a scan fits as well a few decimetres short, where it still sees
+#: through the last walls it passed.
+SETTLE_REACH, SETTLE_STEP = 1.0, 0.05
 
 
-def searched_motion(mounts: Sequence[NDArray[np.float64]], keyframe_scans: Sequence[Any],
-                    scans: Sequence[Any], guess: NDArray[np.float64], intervals: float,
-                    seconds: float) -> NDArray[np.float64] | None:
-    """The car motion (3,) from the latest keyframe that the search finds for the new scans
-    after a gap of ``intervals`` scan intervals and ``seconds`` [s] around ``guess`` (3,, the
-    same frame), or None (too few points on either side, or nothing found). Each sensor's
-    ``keyframe_scans`` and ``scans`` (``PreparedScan``: ``points`` in the sensor frame) are
-    moved onto the car by its mount."""
-    reference, query = (np.concatenate([transform_points(mount, scan.points) for mount, scan
-                                        in zip(mounts, prepared, strict=True)])
-                        for prepared in (keyframe_scans, scans))
-    if min(len(reference), len(query)) < MIN_SEARCH_POINTS:
-        return None
-    return search_start(reference, query, guess, intervals, seconds)
+@dataclass
+class BlindScans:
+    """The points (N, 2) and (M, 2) of the latest keyframe's and the new scans on the car
+    (each sensor's ``PreparedScan.points`` moved by its mount; the keyframe's car frame and
+    the new one's), after a gap of ``intervals`` scan intervals and ``seconds`` [s] in which
+    the car is guessed to have moved ``guess`` (3,, from the keyframe)."""
+
+    reference: NDArray[np.float64]
+    query: NDArray[np.float64]
+    guess: NDArray[np.float64]
+    intervals: float
+    seconds: float
+
+    @classmethod
+    def of(cls, mounts: Sequence[NDArray[np.float64]], keyframe_scans: Sequence[Any],
+           scans: Sequence[Any], guess: NDArray[np.float64], intervals: float,
+           seconds: float) -> BlindScans:
+        reference, query = (np.concatenate([transform_points(mount, scan.points) for mount, scan
+                                            in zip(mounts, prepared, strict=True)])
+                            for prepared in (keyframe_scans, scans))
+        return cls(reference, query, guess, intervals, seconds)
+
+    def searched(self) -> NDArray[np.float64] | None:
+        """The car motion (3,) from the keyframe the search finds around the guess, or None
+        (too few points on either side, or nothing found)."""
+        if min(len(self.reference), len(self.query)) < MIN_SEARCH_POINTS:
+            return None
+        return search_start(self.reference, self.query, self.guess, self.intervals,
+                            self.seconds)
+
+    def seen_through(self, motion: NDArray[np.float64]) -> int:
+        """Keyframe points the new scans see through with the car moved ``motion`` (3,)."""
+        return int(seen_through_counts(self.reference, self.query, motion[None])[0])
+
+    def free_place(self, motion: NDArray[np.float64], near: bool = False
+                   ) -> NDArray[np.float64]:
+        """The place at ``motion``'s heading, within the search's reach of it (``near``:
+        within :data:`SETTLE_REACH`, on a finer grid, the fewest exactly), where the new
+        scans see through the fewest keyframe points and fit them best
+        (:func:`~estimators.matching.scan_recovery.least_seen_through_place`)."""
+        if near:
+            return least_seen_through_place(self.reference, self.query, motion, SETTLE_REACH,
+                                            SETTLE_STEP, 0)
+        linear, _ = reach(self.guess, self.intervals, self.seconds)
+        return least_seen_through_place(self.reference, self.query, motion, linear)
 
 
 def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer: list[float],
               skipped: bool, step_to: Callable[[NDArray[np.float64]], list[float]],
-              search: Callable[[], NDArray[np.float64] | None] | None = None) -> Solution:
+              blind: BlindScans | None = None) -> Solution:
     """The motion found after scans lost or skipped: ``found`` (matched from the one-interval
     guess) or the match from the ``longer`` guess (car frame, from the last pose used) where
     it explains more of the scans, or as much after ``skipped`` scans; where neither explains
-    :data:`POOR_SCORE` of the scans, the match from the motion ``search`` finds (from the
-    keyframe; None: nothing found) where it explains clearly more. Then matched again from
-    itself (``step_to``: a motion from the keyframe as a guess from the last pose used) while
-    that explains more. ``solve``: the matches from a guess."""
+    :data:`POOR_SCORE` of the scans, the match from the motion the ``blind`` scans' search
+    finds (None: no search) where it explains clearly more. Where the new scans see through
+    keyframe points from there (placed short of the car, the walls it drove past), the match
+    from the place that sees through fewest (:meth:`BlindScans.free_place`) where its match
+    sees through clearly fewer. Then matched again from itself (``step_to``: a motion from
+    the keyframe as a guess from the last pose used) while that explains more and sees
+    through no more. ``solve``: the matches from a guess."""
     other = solve(longer)
     if other[2] > found[2] + SCORE_TOLERANCE or (
             skipped and other[2] >= found[2] - SCORE_TOLERANCE):
         found = other
-    searched = None if search is None or found[2] >= POOR_SCORE else search()
+    searched = None if blind is None or found[2] >= POOR_SCORE else blind.searched()
     if searched is not None:
         other = solve(step_to(searched))
         if other[2] > found[2] + SCORE_TOLERANCE:
             found = other
+    seen = 0 if blind is None else blind.seen_through(found[0])
+    if blind is not None and seen > SEEN_THROUGH_SLACK:
+        other = solve(step_to(blind.free_place(found[0])))
+        fewer = blind.seen_through(other[0])
+        if fewer + SEEN_THROUGH_SLACK < seen:
+            found, seen = other, fewer
+            if seen > 0:
+                other = solve(step_to(blind.free_place(found[0], near=True)))
+                fewer = blind.seen_through(other[0])
+                if fewer < seen:
+                    found, seen = other, fewer
     for _ in range(POLISH_ROUNDS):
         again = solve(step_to(found[0]))
-        if not again[2] > found[2]:
+        if not again[2] > found[2] or (
+                blind is not None and blind.seen_through(again[0]) > seen):
             break
         found = again
     return found

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from estimators.odometry.fusion_recovery import POOR_SCORE, recovered, searched_motion
+from estimators.odometry.fusion_recovery import POOR_SCORE, BlindScans, recovered
 from lidar_env.core.se2 import compose
 from tests.estimators.room_scans import scan_points
 
@@ -24,6 +24,11 @@ def same(motion: np.ndarray) -> list[float]:
     return motion.tolist()
 
 
+def blind(search) -> SimpleNamespace:
+    """Blind scans whose search is ``search`` and that see through nothing anywhere."""
+    return SimpleNamespace(searched=search, seen_through=lambda motion: 0)
+
+
 def test_the_search_runs_only_where_neither_guess_fits() -> None:
     searched = []
 
@@ -32,20 +37,20 @@ def test_the_search_runs_only_where_neither_guess_fits() -> None:
         return np.array([3.0, 0.0, 0.0])
 
     fitting = solver({1.0: 0.9, 2.0: 0.8, 3.0: 0.95})
-    found = recovered(fitting, fitting([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, search)
+    found = recovered(fitting, fitting([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, blind(search))
     assert not searched and found[0][0] == 1.0
     poor = solver({1.0: POOR_SCORE - 0.1, 2.0: 0.2, 3.0: 0.9})
-    found = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, search)
+    found = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, blind(search))
     assert searched and found[0][0] == 3.0
 
 
 def test_a_search_that_explains_no_more_is_not_taken() -> None:
     poor = solver({1.0: 0.3, 2.0: 0.2, 3.0: 0.31})
     found = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], False, same,
-                      lambda: np.array([3.0, 0.0, 0.0]))
+                      blind(lambda: np.array([3.0, 0.0, 0.0])))
     assert found[0][0] == 1.0
     nothing = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], False, same,
-                        lambda: None)
+                        blind(lambda: None))
     assert nothing[0][0] == 1.0
 
 
@@ -57,8 +62,8 @@ def test_the_search_finds_the_car_on_the_keyframe_and_needs_enough_points() -> N
     scan = [SimpleNamespace(points=scan_points(compose(start, motion), rng))]
     mounts = [np.zeros(3)]
     # guessed as no motion at all: 0.85 m and 50 degrees off, past any ICP basin
-    found = searched_motion(mounts, keyframe, scan, np.zeros(3), 10.0, 1.0)
+    found = BlindScans.of(mounts, keyframe, scan, np.zeros(3), 10.0, 1.0).searched()
     assert found is not None
     assert np.hypot(*(found[:2] - motion[:2])) < 0.1 and abs(found[2] - motion[2]) < 0.05
     few = [SimpleNamespace(points=scan[0].points[:20])]  # under MIN_SEARCH_POINTS
-    assert searched_motion(mounts, keyframe, few, np.zeros(3), 10.0, 1.0) is None
+    assert BlindScans.of(mounts, keyframe, few, np.zeros(3), 10.0, 1.0).searched() is None
