@@ -1,5 +1,6 @@
 """Fast turns at 4 Hz (``benchmarks/bench_fast_turns.py``): a car that starts down a corridor
-its 180-degree front Lidar sees only the walls of is placed by the speed it shows later."""
+its 180-degree front Lidar sees only the walls of is placed by the speed it shows later; a
+thinned log is scored on relations between its pseudo truth's consecutive keyframes."""
 
 from __future__ import annotations
 
@@ -19,3 +20,13 @@ def test_a_4_hz_start_down_a_bare_corridor_is_matched_again() -> None:
     truth = case.payload[3]
     assert np.hypot(*(poses[-1, :2] - truth[-1, :2])) < 1.0
     assert bench.score(case, times, poses)["fail_share"] < 0.02
+
+
+def test_thinned_log_relations_do_not_bridge_a_dropped_keyframe() -> None:
+    # keyframes 1 s apart; the thinning kept the scans of all but the one at 2 s
+    stamps = np.arange(5.0)
+    poses = np.column_stack([stamps, np.zeros(5), np.zeros(5)])
+    relations = bench.keyframe_relations(stamps, poses, np.array([0.0, 1.0, 3.0, 4.0]), 1e-3)
+    np.testing.assert_array_equal(relations.t1, [0.0, 3.0])
+    np.testing.assert_array_equal(relations.t2, [1.0, 4.0])
+    np.testing.assert_allclose(relations.poses, [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
