@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from estimators.base import Estimator
 from estimators.health import (
+    BLIND_STRETCH,
     CLOCK_HISTORY,
     CLOCK_JUMP_FACTOR,
     evident_time_step,
@@ -47,7 +48,9 @@ from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
     most_likely_match,
+    off_seen_through,
     one_turn_guess,
+    reach,
     search_start,
 )
 from estimators.matching.surface_fits import surface_reference
@@ -274,9 +277,9 @@ class ICPEstimator(Estimator):
     came (a clock gap may be a stamp that jumped alone).
 
     After skipped or lost scans the match also starts from the translation extrapolated with
-    one interval's turn and from a correlative search on the last scan's likelihood grid
-    (:mod:`estimators.matching.scan_recovery`); of the matches explaining within
-    ``scan_recovery.LOST_SCANS_MARGIN`` of the most points, the least surprising is kept.
+    one interval's turn and from a correlative search on the last scan; of the matches
+    explaining nearly the most points the least surprising is kept, after skipped ones moved
+    off where it sees through the last scan (:mod:`estimators.matching.scan_recovery`).
 
     Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
     """
@@ -375,6 +378,12 @@ class ICPEstimator(Estimator):
             best = most_likely_match(results, guesses, spans,
                                      float(np.hypot(*self._increment[:2])), len(current))
             increment = results[best].pose
+            if observations > BLIND_STRETCH:
+                kept, _, place = off_seen_through(lambda start: register(  # a blind stretch
+                    reference, current, start, self.params, start, self._prior_information
+                    / span**2), results[best], lambda match: match.pose, self._previous,
+                    current, reach(guesses[best], span, t - self._times[-1])[0])
+                increment, starts = kept.pose, starts + ([] if place is None else [place])
             if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the

@@ -10,13 +10,18 @@ on the likelihood grid of the last one used, over every pose the car can have re
 (:func:`reach`) turned at most :data:`MAX_SEARCH_TURN` from the guess. Of the matches from
 all starts, :func:`most_likely_match` keeps the one explaining clearly
 more of the scan, else the one the motion model finds least surprising
-(:func:`lost_scan_surprise`). Poses are in the last used scan's car frame: x [m] forward,
-y [m] left, heading [rad].
+(:func:`lost_scan_surprise`). After skipped scans, where the kept match has the new scan
+see through the last one's points (placed short of the car along a corridor, which fits its
+walls as well, it sees through the walls the car drove past), it is matched again from the
+place that sees through the fewest (:func:`off_seen_through`). Poses are in the last used
+scan's car frame: x [m] forward, y [m] left, heading [rad].
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -135,6 +140,10 @@ NEAREST_JUDGED = 1.0
 SEEN_THROUGH_SLACK = 3
 #: [m] grid step of :func:`least_seen_through_place`: well inside a refinement's basin.
 PLACE_STEP = 0.2
+#: [m] reach and grid step of the place search that settles a match off a contradiction:
+#: along a corridor a scan fits as well a few decimetres short of the car, where it still
+#: sees through the last walls it passed.
+SETTLE_REACH, SETTLE_STEP = 1.0, 0.05
 #: Poses judged at once by :func:`seen_through_counts` (bounds its arrays to a few MB).
 COUNT_CHUNK = 256
 
@@ -194,3 +203,42 @@ def least_seen_through_place(reference_points: FloatArray, query_points: FloatAr
     placed = np.stack([free[:, :1] + c[:, None] * x - s[:, None] * y,
                        free[:, 1:2] + s[:, None] * x + c[:, None] * y], axis=-1)
     return free[int(np.argmax(field.score(placed).mean(axis=1)))].copy()
+
+
+Match = TypeVar("Match")
+
+
+def off_seen_through(match_from: Callable[[FloatArray], Match], found: Match,
+                     pose_of: Callable[[Match], FloatArray], reference_points: FloatArray,
+                     query_points: FloatArray, linear: float
+                     ) -> tuple[Match, int, FloatArray | None]:
+    """``found`` or, where its place (``pose_of``, 3,) has ``query_points`` (M, 2) see
+    through more than :data:`SEEN_THROUGH_SLACK` ``reference_points`` (N, 2), the match
+    (``match_from`` a start pose) from :func:`least_seen_through_place` within ``linear``
+    [m] where that sees through clearly fewer, settled from the place within
+    :data:`SETTLE_REACH` that sees through the fewest exactly where that sees through fewer
+    still; with the count its place sees through and the start it was matched from (None:
+    ``found``); ``found`` where either side holds under :data:`MIN_SEARCH_POINTS`. A scan
+    placed short of the car along a corridor fits its walls as well as at the car, and
+    better where the reference saw more of them, but sees through the walls it has passed."""
+    def seen(match: Match) -> int:
+        return int(seen_through_counts(reference_points, query_points, pose_of(match)[None])[0])
+
+    if min(len(reference_points), len(query_points)) < MIN_SEARCH_POINTS:
+        return found, 0, None
+    count = seen(found)
+    if count <= SEEN_THROUGH_SLACK:
+        return found, count, None
+    start = least_seen_through_place(reference_points, query_points, pose_of(found), linear)
+    other = match_from(start)
+    fewer = seen(other)
+    if fewer + SEEN_THROUGH_SLACK >= count:
+        return found, count, None
+    if fewer > 0:
+        near = least_seen_through_place(reference_points, query_points, pose_of(other),
+                                        SETTLE_REACH, SETTLE_STEP, 0)
+        settled = match_from(near)
+        least = seen(settled)
+        if least < fewer:
+            return settled, least, near
+    return other, fewer, start

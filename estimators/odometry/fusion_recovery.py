@@ -32,10 +32,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from estimators.health import BLIND_STRETCH
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
-    SEEN_THROUGH_SLACK,
-    least_seen_through_place,
+    off_seen_through,
     reach,
     search_start,
     seen_through_counts,
@@ -58,10 +58,6 @@ POLISH_ROUNDS = 5
 #: corridor finds a place along it that explains a little more because the keyframe saw
 #: more of it.
 POOR_SCORE = 0.5
-#: [m] reach and grid step of the place search that settles a match off a contradiction:
-#: along a corridor a scan fits as well a few decimetres short, where it still sees
-#: through the last walls it passed.
-SETTLE_REACH, SETTLE_STEP = 1.0, 0.05
 
 
 @dataclass
@@ -98,17 +94,14 @@ class BlindScans:
         """Keyframe points the new scans see through with the car moved ``motion`` (3,)."""
         return int(seen_through_counts(self.reference, self.query, motion[None])[0])
 
-    def free_place(self, motion: NDArray[np.float64], near: bool = False
-                   ) -> NDArray[np.float64]:
-        """The place at ``motion``'s heading, within the search's reach of it (``near``:
-        within :data:`SETTLE_REACH`, on a finer grid, the fewest exactly), where the new
-        scans see through the fewest keyframe points and fit them best
-        (:func:`~estimators.matching.scan_recovery.least_seen_through_place`)."""
-        if near:
-            return least_seen_through_place(self.reference, self.query, motion, SETTLE_REACH,
-                                            SETTLE_STEP, 0)
+    def off_seen_through(self, match_from: Callable[[NDArray[np.float64]], Solution],
+                         found: Solution) -> tuple[Solution, int]:
+        """``found`` or the match from a place whose new scans see through fewer keyframe
+        points, within the search's reach
+        (:func:`~estimators.matching.scan_recovery.off_seen_through`), and the count."""
         linear, _ = reach(self.guess, self.intervals, self.seconds)
-        return least_seen_through_place(self.reference, self.query, motion, linear)
+        return off_seen_through(match_from, found, lambda solution: solution[0],
+                                self.reference, self.query, linear)[:2]
 
 
 def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer: list[float],
@@ -118,12 +111,13 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer:
     guess) or the match from the ``longer`` guess (car frame, from the last pose used) where
     it explains more of the scans, or as much after ``skipped`` scans; where neither explains
     :data:`POOR_SCORE` of the scans, the match from the motion the ``blind`` scans' search
-    finds (None: no search) where it explains clearly more. Where the new scans see through
-    keyframe points from there (placed short of the car, the walls it drove past), the match
-    from the place that sees through fewest (:meth:`BlindScans.free_place`) where its match
-    sees through clearly fewer. Then matched again from itself (``step_to``: a motion from
-    the keyframe as a guess from the last pose used) while that explains more and sees
-    through no more. ``solve``: the matches from a guess."""
+    finds (None: no search) where it explains clearly more. After a blind stretch (more
+    than :data:`~estimators.health.BLIND_STRETCH` intervals), where the new scans see
+    through keyframe points from there (placed short of the car, the walls it drove past),
+    the match from a place that sees through fewer (:meth:`BlindScans.off_seen_through`).
+    Then matched again from itself (``step_to``: a motion from the keyframe as a guess from
+    the last pose used) while that explains more and sees through no more. ``solve``: the
+    matches from a guess."""
     other = solve(longer)
     if other[2] > found[2] + SCORE_TOLERANCE or (
             skipped and other[2] >= found[2] - SCORE_TOLERANCE):
@@ -133,17 +127,9 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer:
         other = solve(step_to(searched))
         if other[2] > found[2] + SCORE_TOLERANCE:
             found = other
-    seen = 0 if blind is None else blind.seen_through(found[0])
-    if blind is not None and seen > SEEN_THROUGH_SLACK:
-        other = solve(step_to(blind.free_place(found[0])))
-        fewer = blind.seen_through(other[0])
-        if fewer + SEEN_THROUGH_SLACK < seen:
-            found, seen = other, fewer
-            if seen > 0:
-                other = solve(step_to(blind.free_place(found[0], near=True)))
-                fewer = blind.seen_through(other[0])
-                if fewer < seen:
-                    found, seen = other, fewer
+    seen = 0
+    if blind is not None and blind.intervals > BLIND_STRETCH:
+        found, seen = blind.off_seen_through(lambda place: solve(step_to(place)), found)
     for _ in range(POLISH_ROUNDS):
         again = solve(step_to(found[0]))
         if not again[2] > found[2] or (

@@ -26,7 +26,7 @@ def same(motion: np.ndarray) -> list[float]:
 
 def blind(search) -> SimpleNamespace:
     """Blind scans whose search is ``search`` and that see through nothing anywhere."""
-    return SimpleNamespace(searched=search, seen_through=lambda motion: 0)
+    return SimpleNamespace(searched=search, seen_through=lambda motion: 0, intervals=2.0)
 
 
 def test_the_search_runs_only_where_neither_guess_fits() -> None:
