@@ -34,6 +34,7 @@ from lidar_env.sensors.lidar_config import (
     END,
     FIRST,
     HOUSING,
+    IN_ORDER,
     MAX_RANGE,
     MIN_RANGE,
     NOISE,
@@ -134,7 +135,7 @@ def cast_packed(
                               rows[4 * total + a:4 * total + b], rows[5 * total + a:5 * total + b])
         ranges = exact[a:b]
         cast_sensor(ranges, pose, circles, segments, first_polygon_edge, grid, seen,
-                    first_stamp + k, own, max_range, facing)
+                    first_stamp + k, own, max_range, facing, params[k, IN_ORDER] > 0.0)
         if movers.shape[0] > 0:
             cast_movers(ranges, pose[0], pose[1], pose[2] % (2.0 * math.pi), movers, own,
                         max_range)

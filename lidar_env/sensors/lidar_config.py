@@ -189,10 +189,13 @@ def check_lidars(value: Any, reach: float) -> tuple[LidarConfig, ...]:
 #: Columns of the ``params`` rows of :func:`pack_sensors`: packed beam positions ``[first,
 #: end)``, uniform step [rad] (0: not uniform), angle of beam 0 from forward [rad], max range
 #: [m], the largest float32 below it, noise std [m], dropout probability, housing radius [m]
-#: (negative: no self-occlusion), min range [m].
-FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING, MIN_RANGE = range(10)
+#: (negative: no self-occlusion), min range [m], 1.0 when the sensor's beams are in the order of
+#: their wrapped angles (``order`` 0, 1, 2, ...: the caster's loops over beams then run over
+#: contiguous rows, which the compiler vectorises), else 0.0.
+FIRST, END, STEP, OFFSET, MAX_RANGE, BELOW_MAX, NOISE, DROPOUT, HOUSING, MIN_RANGE, IN_ORDER = (
+    range(11))
 #: Number of those columns.
-PARAM_COLUMNS = 10
+PARAM_COLUMNS = 11
 
 
 @njit(cache=True, fastmath=False)
@@ -249,7 +252,7 @@ def pack_sensors(
     params = np.array([
         (end - size, end, part[2], offset, max_range,
          float(np.nextafter(np.float32(max_range), np.float32(0.0))), noise, drop, housing,
-         min_range)
+         min_range, float(np.array_equal(part[1], np.arange(size))))
         for part, size, end, (offset, max_range, noise, drop, housing, min_range)
         in zip(parts, sizes, ends, rows, strict=True)], dtype=np.float64)
     return (table, order), params

@@ -57,7 +57,23 @@ def box_touches_obstacles(
     ``circles`` (N, 3) rows cx, cy, r; ``segments`` (M, 4) rows x1, y1, x2, y2 (zero thickness).
     Touching (distance 0) counts as a collision.
     """
-    c, s = math.cos(heading), math.sin(heading)
+    return turned_box_touches_obstacles(x, y, math.cos(heading), math.sin(heading), half_length,
+                                        half_width, circles, segments)
+
+
+@numba.njit(cache=True)
+def turned_box_touches_obstacles(
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    half_length: float,
+    half_width: float,
+    circles: np.ndarray,
+    segments: np.ndarray,
+) -> bool:
+    """:func:`box_touches_obstacles` for a heading given by its cosine ``c`` and sine ``s``
+    (the substeps of :func:`drive_arc` have them from :func:`arc_pose`)."""
     for i in range(circles.shape[0]):
         dx, dy = circles[i, 0] - x, circles[i, 1] - y
         # the circle centre in the car frame, then its distance to the box
@@ -100,15 +116,17 @@ def box_touches_obstacles(
 
 
 @numba.njit(cache=True)
-def arc_pose(x0: float, y0: float, h0: float, speed: float, yaw_rate: float,
-             t: float) -> tuple[float, float, float]:
-    """The pose (x [m], y [m], unwrapped heading [rad]) ``t`` [s] along the unicycle arc from
-    ``(x0, y0, h0)`` at ``speed`` [m/s] and ``yaw_rate`` [rad/s] (a line below 1e-9 rad/s)."""
+def arc_pose(x0: float, y0: float, h0: float, cos0: float, sin0: float, speed: float,
+             yaw_rate: float, t: float) -> tuple[float, float, float, float, float]:
+    """The pose (x [m], y [m], unwrapped heading h [rad]) ``t`` [s] along the unicycle arc from
+    ``(x0, y0, h0)`` at ``speed`` [m/s] and ``yaw_rate`` [rad/s] (a line below 1e-9 rad/s), then
+    cos h and sin h; ``cos0``, ``sin0`` are cos h0 and sin h0 (a caller's substeps share them)."""
     h = h0 + yaw_rate * t
+    c, s = math.cos(h), math.sin(h)
     if abs(yaw_rate) < 1e-9:
-        return x0 + speed * t * math.cos(h0), y0 + speed * t * math.sin(h0), h
+        return x0 + speed * t * cos0, y0 + speed * t * sin0, h, c, s
     radius = speed / yaw_rate
-    return x0 + radius * (math.sin(h) - math.sin(h0)), y0 - radius * (math.cos(h) - math.cos(h0)), h
+    return x0 + radius * (s - sin0), y0 - radius * (c - cos0), h, c, s
 
 
 @numba.njit(cache=True)
@@ -129,14 +147,16 @@ def drive_arc(
     one that touches an obstacle the pose stays at the previous free one and True is returned.
     """
     x0, y0, h0 = pose[0], pose[1], pose[2]
+    cos0, sin0 = math.cos(h0), math.sin(h0)
+    free = 0  # the last free substep
+    free_pose = (x0, y0, h0)
     for k in range(1, substeps + 1):
         t = duration * k / substeps
-        x, y, h = arc_pose(x0, y0, h0, speed, yaw_rate, t)
-        if box_touches_obstacles(x, y, h, half_length, half_width, circles, segments):
-            return True
-        pose[0], pose[1] = x, y
-        pose[2] = (h + math.pi) % (2.0 * math.pi) - math.pi
-    return False
+        x, y, h, c, s = arc_pose(x0, y0, h0, cos0, sin0, speed, yaw_rate, t)
+        if turned_box_touches_obstacles(x, y, c, s, half_length, half_width, circles, segments):
+            break
+        free, free_pose = k, (x, y, h)
+    return _moved_to(pose, free, free_pose, substeps)
 
 
 @numba.njit(cache=True)
@@ -157,21 +177,35 @@ def drive_arc_among_movers(
     start of the move, each going at ``mover_velocities`` (M, 2) [m/s] during it; at each
     substep the box is tested against the statics and the movers where they are then."""
     x0, y0, h0 = pose[0], pose[1], pose[2]
+    cos0, sin0 = math.cos(h0), math.sin(h0)
     moved = movers.copy()
     no_segments = np.empty((0, 4))
+    free = 0
+    free_pose = (x0, y0, h0)
     for k in range(1, substeps + 1):
         t = duration * k / substeps
-        x, y, h = arc_pose(x0, y0, h0, speed, yaw_rate, t)
+        x, y, h, c, s = arc_pose(x0, y0, h0, cos0, sin0, speed, yaw_rate, t)
         for i in range(movers.shape[0]):
             moved[i, 0] = movers[i, 0] + mover_velocities[i, 0] * t
             moved[i, 1] = movers[i, 1] + mover_velocities[i, 1] * t
-        if (box_touches_obstacles(x, y, h, half_length, half_width, circles, segments)
-                or box_touches_obstacles(x, y, h, half_length, half_width, moved,
-                                         no_segments)):
-            return True
-        pose[0], pose[1] = x, y
-        pose[2] = (h + math.pi) % (2.0 * math.pi) - math.pi
-    return False
+        if (turned_box_touches_obstacles(x, y, c, s, half_length, half_width, circles, segments)
+                or turned_box_touches_obstacles(x, y, c, s, half_length, half_width, moved,
+                                                no_segments)):
+            break
+        free, free_pose = k, (x, y, h)
+    return _moved_to(pose, free, free_pose, substeps)
+
+
+@numba.njit(cache=True)
+def _moved_to(pose: np.ndarray, free: int, free_pose: tuple[float, float, float],
+              substeps: int) -> bool:
+    """``pose`` set to the last free substep's ``free_pose`` (heading wrapped to [-pi, pi);
+    left as it is when the first substep touched, ``free`` = 0); True (a hit) when a substep
+    before the last touched. The drives wrap the heading once, not at every substep."""
+    if free > 0:
+        pose[0], pose[1] = free_pose[0], free_pose[1]
+        pose[2] = (free_pose[2] + math.pi) % (2.0 * math.pi) - math.pi
+    return free < substeps
 
 
 @numba.njit(cache=True)
