@@ -29,6 +29,7 @@ drives; ``slam`` never worse than its front end.
 
     python benchmarks/bench_fast_turns.py [--estimators icp lidar_odometry slam]
         [--drives hallway_5hz ...] [--logs aces intel] [--limit 1000] [--json out.json]
+        [--set sideslip_sigma=6e-4 ...]   # parameters of every estimator but icp
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from bench_layouts import parameter
 from numpy.typing import NDArray
 
 import estimators
@@ -227,9 +229,11 @@ def log_case(name: str, k: int, limit: int | None) -> Case:
                 (log, clock, tolerance))
 
 
-def replay(case: Case, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Times, poses and CPU seconds per scan of estimator ``name`` over ``case``."""
-    estimator = estimators.make(name)
+def replay(case: Case, name: str, params: dict[str, Any] | None = None
+           ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Times, poses and CPU seconds per scan of estimator ``name`` (with ``params`` over its
+    defaults) over ``case``."""
+    estimator = estimators.make(name, **(params or {}))
     start = time.process_time()
     if case.kind == "sim":
         setup, observations, times, poses = case.payload
@@ -266,7 +270,12 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=1000,
                         help="thinned scans of each log (default 1000; 0: all)")
     parser.add_argument("--json", default=None, help="write the results to this file")
+    parser.add_argument("--set", nargs="+", type=parameter, default=[], metavar="NAME=VALUE",
+                        help=f"parameters of every estimator but {REFERENCE}, over their "
+                             "defaults (e.g. sideslip_sigma=6e-4: the simulated car's frame "
+                             "does not slip sideways)")
     args = parser.parse_args()
+    params = dict(args.set)
     names = [REFERENCE] + [n for n in args.estimators if n != REFERENCE]
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}; relations > {FAILURE} m fail; ratios to {REFERENCE}")
@@ -282,7 +291,7 @@ def main() -> None:
         reference: dict[str, float] | None = None
         results[case.name] = {}
         for name in names:
-            times, poses, cpu = replay(case, name)
+            times, poses, cpu = replay(case, name, None if name == REFERENCE else params)
             row = score(case, times, poses) | {"cpu_ms_per_scan": 1e3 * cpu}
             results[case.name][name] = row
             reference = row if name == REFERENCE else reference
