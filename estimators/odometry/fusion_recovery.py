@@ -25,6 +25,7 @@ iterations from there stop short of the fit. So the kept motion is matched again
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -90,6 +91,11 @@ class BlindScans:
         return search_start(self.reference, self.query, self.guess, self.intervals,
                             self.seconds)
 
+    def share_error(self, share: float) -> float:
+        """The standard error of a ``share`` of the new scans' points explained, at least
+        :data:`SCORE_TOLERANCE`: two matches explaining shares within it fit alike."""
+        return max(SCORE_TOLERANCE, math.sqrt(share * (1.0 - share) / max(len(self.query), 1)))
+
     def seen_through(self, motion: NDArray[np.float64]) -> int:
         """Keyframe points the new scans see through with the car moved ``motion`` (3,)."""
         return int(seen_through_counts(self.reference, self.query, motion[None])[0])
@@ -119,8 +125,8 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer:
     the last pose used) while that explains more and sees through no more. ``solve``: the
     matches from a guess."""
     other = solve(longer)
-    if other[2] > found[2] + SCORE_TOLERANCE or (
-            skipped and other[2] >= found[2] - SCORE_TOLERANCE):
+    tie = SCORE_TOLERANCE if blind is None else blind.share_error(found[2])
+    if other[2] > found[2] + SCORE_TOLERANCE or (skipped and other[2] >= found[2] - tie):
         found = other
     searched = None if blind is None or found[2] >= POOR_SCORE else blind.searched()
     if searched is not None:
