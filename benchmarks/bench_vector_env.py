@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 
 import lidar_env  # registers DualLidar-v0
 from lidar_env.config import MOVER_MODELS
-from lidar_env.vector.draws import fill_standard_normals
+from lidar_env.vector.draws import fill_standard_normal_pair, fill_standard_normals
 from lidar_env.world.world import World
 
 TARGET_RATIO = 8.0
@@ -169,12 +169,17 @@ def scan_call(env: Any, warmup_steps: int = 50) -> Callable[[], int]:
 
 
 @njit(cache=True)
-def draw_standard_normals(items: Any, out: NDArray[np.float64]) -> None:
-    """``out`` (n,) overwritten with n standard normals from each sub-env's generator (its state
-    words, the last of its item in ``items``, :attr:`lidar_env.vector.slots.SceneSlots.scene`'s
-    typed list) in turn, drawn as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
-    for i in range(len(items)):
-        fill_standard_normals(items[i][5], out)
+def draw_standard_normals(items: Any, out: NDArray[np.float64],
+                          other_out: NDArray[np.float64]) -> None:
+    """``out`` and ``other_out`` (n,) overwritten with n standard normals from each sub-env's
+    generator (its state words, the last of its item in ``items``,
+    :attr:`lidar_env.vector.slots.SceneSlots.scene`'s typed list), two sub-envs at a time, drawn
+    as :func:`lidar_env.vector.kernel.observe_envs` draws them."""
+    count = len(items)
+    for i in range(0, count - 1, 2):
+        fill_standard_normal_pair(items[i][5], out, items[i + 1][5], other_out)
+    if count % 2:
+        fill_standard_normals(items[count - 1][5], out)
 
 
 def draw_call(env: Any) -> Callable[[], int]:
@@ -182,11 +187,11 @@ def draw_call(env: Any) -> Callable[[], int]:
     generator, as the batched scan draws them (compiled PCG64 draws, bit-identical to numpy's
     ``Generator.standard_normal``); returns N."""
     env.reset(seed=0)
-    out = np.empty(env._scans.shape[1])  # one draw per beam of every Lidar
-    draw_standard_normals(env._slots.scene[0], out)
+    out = np.empty(env._scans.shape[1]), np.empty(env._scans.shape[1])  # one per beam
+    draw_standard_normals(env._slots.scene[0], *out)
 
     def draw() -> int:
-        draw_standard_normals(env._slots.scene[0], out)
+        draw_standard_normals(env._slots.scene[0], *out)
         return env.num_envs
 
     return draw

@@ -6,12 +6,12 @@ generator through a function pointer per draw).
 :func:`state_words` views a ``numpy.random.Generator``'s 128-bit PCG64 state and increment as
 four ``uint64`` words in the generator's own memory (:func:`state_address` and :func:`words_at`
 the same words by address, for a kernel taking many generators' states in one array);
-:func:`fill_standard_normals` and
-:func:`fill_uniforms` draw a block into an array, holding the state in registers and writing it
-back once. The step is PCG64's (O'Neill 2014, "PCG: A family of simple fast space-efficient
-statistically good algorithms for random number generation", the 128-bit LCG with the XSL-RR
-output); the normals are numpy's ziggurat (``random_standard_normal`` of numpy's
-``distributions.c``, Marsaglia and Tsang 2000) with numpy's tables.
+:func:`fill_standard_normals` and :func:`fill_uniforms` draw a block into an array, holding the
+state in registers and writing it back once (:func:`fill_standard_normal_pair` two generators'
+blocks, interleaved). The step is PCG64's (O'Neill 2014, "PCG: A family of simple fast
+space-efficient statistically good algorithms for random number generation", the 128-bit LCG
+with the XSL-RR output); the normals are numpy's ziggurat (``random_standard_normal`` of
+numpy's ``distributions.c``, Marsaglia and Tsang 2000) with numpy's tables.
 """
 
 from __future__ import annotations
@@ -186,27 +186,55 @@ def _finish_normal(
         r, low, high = _next_uint64(low, high, inc_low, inc_high)
 
 
+@njit(cache=True, inline="always")
+def _standard_normal(
+    low: np.uint64, high: np.uint64, inc_low: np.uint64, inc_high: np.uint64
+) -> tuple[float, np.uint64, np.uint64]:
+    """numpy's next standard normal of the PCG64 state ``(low, high)`` and the new state
+    ``(value, low, high)``.
+
+    The 1% of draws not accepted at their first output finish in :func:`_finish_normal`, a
+    call, so a loop of draws holds no call of its own (``exp``, ``log1p``) and keeps its values
+    in registers (about 2.9 against 3.1 ns a draw)."""
+    r, low, high = _next_uint64(low, high, inc_low, inc_high)
+    idx = r & _LOW_BYTE
+    rest = r >> _U8
+    rabs = (rest >> _U1) & _MANTISSA
+    # the sign by a product, not a branch: a branch on a fair coin mispredicts half the
+    # time, which costs more than the rest of the draw; x * -1.0 is -x bit for bit
+    x = np.float64(np.int64(rabs)) * wi_double[idx] * _SIGNS[rest & _U1]
+    if rabs >= ki_double[idx]:  # 0.7% of draws
+        x, low, high = _finish_normal(r, low, high, inc_low, inc_high)
+    return x, low, high
+
+
 @njit(cache=True)
 def fill_standard_normals(words: NDArray[np.uint64], out: NDArray[np.float64]) -> None:
     """``out`` (n,) overwritten with n standard normals of the PCG64 state ``words``
-    (:func:`state_words`), which it advances: ``rng.standard_normal(n)`` bit for bit.
-
-    The 1% of draws not accepted at their first output finish in :func:`_finish_normal`, a
-    call, so the loop holds no call of its own (``exp``, ``log1p``) and keeps its values in
-    registers (about 2.9 against 3.1 ns a draw)."""
+    (:func:`state_words`), which it advances: ``rng.standard_normal(n)`` bit for bit."""
     low, high, inc_low, inc_high = words[0], words[1], words[2], words[3]
     for j in range(out.shape[0]):
-        r, low, high = _next_uint64(low, high, inc_low, inc_high)
-        idx = r & _LOW_BYTE
-        rest = r >> _U8
-        rabs = (rest >> _U1) & _MANTISSA
-        # the sign by a product, not a branch: a branch on a fair coin mispredicts half the
-        # time, which costs more than the rest of the draw; x * -1.0 is -x bit for bit
-        x = np.float64(np.int64(rabs)) * wi_double[idx] * _SIGNS[rest & _U1]
-        if rabs >= ki_double[idx]:  # 0.7% of draws
-            x, low, high = _finish_normal(r, low, high, inc_low, inc_high)
-        out[j] = x
+        out[j], low, high = _standard_normal(low, high, inc_low, inc_high)
     words[0], words[1] = low, high
+
+
+@njit(cache=True)
+def fill_standard_normal_pair(words: NDArray[np.uint64], out: NDArray[np.float64],
+                              other_words: NDArray[np.uint64],
+                              other_out: NDArray[np.float64]) -> None:
+    """:func:`fill_standard_normals` of two generators' states at once (``out`` and
+    ``other_out`` of one length; the states must be two generators' own): the same values,
+    with the two generators' independent steps interleaved, so one's 128-bit multiply runs
+    while the other's waits."""
+    low, high, inc_low, inc_high = words[0], words[1], words[2], words[3]
+    other_low, other_high = other_words[0], other_words[1]
+    other_inc_low, other_inc_high = other_words[2], other_words[3]
+    for j in range(out.shape[0]):
+        out[j], low, high = _standard_normal(low, high, inc_low, inc_high)
+        other_out[j], other_low, other_high = _standard_normal(other_low, other_high,
+                                                               other_inc_low, other_inc_high)
+    words[0], words[1] = low, high
+    other_words[0], other_words[1] = other_low, other_high
 
 
 @njit(cache=True)

@@ -21,7 +21,8 @@ from lidar_env.env import PROGRESS_WINDOW, DualLidarEnv
 from lidar_env.routes.trace_geometry import Trace, project_onto_polyline
 from lidar_env.scenes import SceneCache, check_reset_options
 from lidar_env.vector.crowds import CrowdSlots
-from lidar_env.vector.kernel import EntryPoint, observe_envs, step_batch
+from lidar_env.vector.entry_point import EntryPoint
+from lidar_env.vector.kernel import observe_envs, step_batch
 from lidar_env.vector.slots import SceneSlots
 from lidar_env.vehicle.car import MAX_STEP_FRACTION, MAX_SUBSTEPS, Car
 from lidar_env.world.world import World
@@ -140,7 +141,7 @@ class DualLidarVectorEnv(VectorEnv):
         self._scans = np.zeros((n, int(ends[-1])), dtype=np.float32)
         self._scan_views = self._views()
         self._cast_from = np.zeros((k, 3))  # the scans' scratch: sensor poses [m, rad], draws
-        self._draws = np.zeros(2 * int(ends[-1]))
+        self._draws = np.zeros(4 * int(ends[-1]))
         self._rewards = np.zeros(n)
         self._terminations = np.zeros(n, dtype=np.bool_)
         self._truncations = np.zeros(n, dtype=np.bool_)
@@ -273,7 +274,7 @@ class DualLidarVectorEnv(VectorEnv):
                                self._slots.scene, self._sensors, self._work(), self._crowds.kernel)
 
     def _work(self) -> tuple:
-        """The kernels' scratch: ``(sensor poses (K, 3), draws (2 total beams,), circle and
+        """The kernels' scratch: ``(sensor poses (K, 3), draws (4 total beams,), circle and
         segment seen marks, next stamp (1,), near circles, near segments)`` (see
         :class:`~lidar_env.vector.slots.SceneSlots`); :func:`~lidar_env.vector.kernel.
         observe_envs` uses the first five."""

@@ -22,9 +22,7 @@ Units: metres, radians, seconds; poses are ``(x, y, heading)`` in the world fram
 
 from __future__ import annotations
 
-import importlib
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -36,7 +34,12 @@ from lidar_env.movers.kernels import advance_crowd
 from lidar_env.routes.trace_geometry import project_onto_polyline
 from lidar_env.sensors.layout_kernels import cast_packed, readings
 from lidar_env.sensors.ray_casting import scan_loop
-from lidar_env.vector.draws import fill_standard_normals, fill_uniforms, words_at
+from lidar_env.vector.draws import (
+    fill_standard_normal_pair,
+    fill_standard_normals,
+    fill_uniforms,
+    words_at,
+)
 from lidar_env.vector.unowned import unowned, unowned_scene
 from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
@@ -74,7 +77,8 @@ def observe_envs(
     allocated per env); ``crowd`` :attr:`lidar_env.vector.crowds.CrowdSlots.kernel`, whose
     movers the Lidars see (none when M = 0). Draws per env: a standard normal per beam if any
     Lidar is noisy, then a uniform per beam if any drops out (the order of
-    :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), as numpy's array draws.
+    :meth:`lidar_env.sensors.lidar_layout.LidarLayout.scan`), as numpy's array draws; the envs
+    at places 2 m and 2 m + 1 of ``envs`` draw together, each from its own generator.
     """
     # every array used per env is an unowned view (of the arguments, held by the caller)
     items, first_edge, world_key, addresses = scene[0], unowned(scene[1]), unowned(scene[4]), \
@@ -86,18 +90,32 @@ def observe_envs(
     cast_from, draws, circle_seen, segment_seen, stamp = unowned(work[0]), unowned(work[1]), \
         unowned(work[2]), unowned(work[3]), unowned(work[4])
     total, k = scans.shape[1], mounts.shape[0]
+    # the draws of an env at an even place of envs, then of the env after it
     gaussians = draws[:total] if noisy else draws[:0]
-    uniforms = draws[total:2 * total] if dropping else draws[:0]
+    next_gaussians = draws[total:2 * total] if noisy else draws[:0]
+    uniforms = draws[2 * total:3 * total] if dropping else draws[:0]
+    next_uniforms = draws[3 * total:4 * total] if dropping else draws[:0]
     no_car, no_facing = np.empty(0), np.empty(0, dtype=np.int64)
     positions, radius, movers = unowned(crowd[0]), crowd[7][0], unowned(crowd[8][0])
     if envs.shape[0] == 0:
         return
     last = envs[0]  # the env whose world arrays are viewed (the typed list holds them)
     circles, segments, grid, _, _ = unowned_scene(items[last])
-    for i in envs:
+    count = envs.shape[0]
+    for q in range(count):
+        i = envs[q]
         if world_key[i] != world_key[last]:
             last = i
             circles, segments, grid, _, _ = unowned_scene(items[i])
+        if q % 2 == 0:  # this env's draws and the next one's, two generators interleaved
+            words = words_at(addresses[i])
+            if q + 1 < count:
+                other = words_at(addresses[envs[q + 1]])
+                fill_standard_normal_pair(words, gaussians, other, next_gaussians)
+                fill_uniforms(other, next_uniforms)
+            else:
+                fill_standard_normals(words, gaussians)
+            fill_uniforms(words, uniforms)
         mount_poses(pose[i], mounts, sensor_poses[i])
         cast_from[:] = sensor_poses[i]
         if world_aligned:
@@ -105,14 +123,14 @@ def observe_envs(
         for j in range(movers.shape[0]):  # Crowd.circles
             movers[j, 0], movers[j, 1], movers[j, 2] = positions[i, j, 0], positions[i, j, 1], \
                 radius
-        words = words_at(addresses[i])
-        fill_standard_normals(words, gaussians)
-        fill_uniforms(words, uniforms)
         exact = cast_packed(circles, segments, first_edge[i], grid, cast_from,
                             beams, params, movers, no_car, (circle_seen, segment_seen),
                             stamp[0], no_facing)
         stamp[0] += k
-        readings(exact, params, gaussians, uniforms, scans[i])
+        if q % 2 == 0:
+            readings(exact, params, gaussians, uniforms, scans[i])
+        else:
+            readings(exact, params, next_gaussians, next_uniforms, scans[i])
 
 
 @njit(cache=True)
@@ -352,38 +370,3 @@ def step_batch(
         return code, 0
     return code, step_envs(envs, speed, yaw_rate, checks, state, outcome, scene, sensors, work,
                            constants, crowd)
-
-
-class EntryPoint:
-    """Calls a numba dispatcher through the machine code of the one signature it is first
-    called with.
-
-    The dispatcher resolves the argument types at every call, and for the nested typed lists
-    and tuples of the kernels above that costs ~160 us per call (hashing the types), against
-    ~10 us for the call itself; the arguments' types never change for one env, so they are
-    resolved once. Every later call must pass arguments of the same types.
-    """
-
-    def __init__(self, dispatcher: Any) -> None:
-        self.dispatcher = dispatcher
-        self._entry: Callable[..., Any] | None = None
-
-    def __getstate__(self) -> dict[str, str]:
-        # by name: the machine code is resolved again (from numba's cache) at the first call
-        return {"module": self.dispatcher.py_func.__module__,
-                "name": self.dispatcher.py_func.__name__}
-
-    def __setstate__(self, state: dict[str, str]) -> None:
-        module = importlib.import_module(state["module"])
-        self.__init__(getattr(module, state["name"]))
-
-    def resolve(self, *args: Any) -> Callable[..., Any]:
-        """The machine code for the types of ``args`` (those of the first call), to call with
-        arguments of those types directly."""
-        if self._entry is None:
-            signature = tuple(self.dispatcher.typeof_pyval(a) for a in args)
-            self._entry = self.dispatcher.compile(signature)
-        return self._entry
-
-    def __call__(self, *args: Any) -> Any:
-        return self.resolve(*args)(*args)

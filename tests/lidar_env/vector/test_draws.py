@@ -12,6 +12,7 @@ from numba import njit
 
 from lidar_env.core.errors import ArgumentTypeError
 from lidar_env.vector.draws import (
+    fill_standard_normal_pair,
     fill_standard_normals,
     fill_uniforms,
     state_address,
@@ -47,6 +48,20 @@ def test_the_tail_and_the_wedges_of_the_ziggurat_are_drawn_as_numpy_draws_them()
     fill_standard_normals(state_words(compiled_rng), got)
     assert np.count_nonzero(np.abs(expected) > 3.6541528853610088) > 100
     assert got.tobytes() == expected.tobytes()
+
+
+@pytest.mark.parametrize("count", [0, 1, 720, 1_000_000])
+def test_paired_draws_are_each_generators_own(count: int) -> None:
+    # two generators drawn interleaved: each block is numpy's for its generator, the tail and
+    # wedge rejections (which take each stream its own number of outputs) included
+    numpy_rngs = np.random.default_rng(21), np.random.default_rng(22)
+    compiled_rngs = np.random.default_rng(21), np.random.default_rng(22)
+    got = np.empty(count), np.empty(count)
+    fill_standard_normal_pair(state_words(compiled_rngs[0]), got[0],
+                              state_words(compiled_rngs[1]), got[1])
+    for numpy_rng, compiled_rng, values in zip(numpy_rngs, compiled_rngs, got, strict=True):
+        assert values.tobytes() == numpy_rng.standard_normal(count).tobytes()
+        assert compiled_rng.bit_generator.state == numpy_rng.bit_generator.state
 
 
 def test_the_words_keep_their_generator_alive() -> None:
