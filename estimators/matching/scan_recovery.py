@@ -216,11 +216,13 @@ def off_seen_through(match_from: Callable[[FloatArray], Match], found: Match,
     through more than :data:`SEEN_THROUGH_SLACK` ``reference_points`` (N, 2), the match
     (``match_from`` a start pose) from :func:`least_seen_through_place` within ``linear``
     [m] where that sees through clearly fewer, settled from the place within
-    :data:`SETTLE_REACH` that sees through the fewest exactly where that sees through fewer
-    still; with the count its place sees through and the start it was matched from (None:
-    ``found``); ``found`` where either side holds under :data:`MIN_SEARCH_POINTS`. A scan
-    placed short of the car along a corridor fits its walls as well as at the car, and
-    better where the reference saw more of them, but sees through the walls it has passed."""
+    :data:`SETTLE_REACH` that sees through the fewest exactly, on a finer grid, where that
+    sees through no more (the coarse grid's place, held along a corridor by the weak prior,
+    lands up to a step off); with the count its place sees through and the start it was
+    matched from (None: ``found``); ``found`` where either side holds under
+    :data:`MIN_SEARCH_POINTS`. A scan placed short of the car along a corridor fits its
+    walls as well as at the car, and better where the reference saw more of them, but sees
+    through the walls it has passed."""
     def seen(match: Match) -> int:
         return int(seen_through_counts(reference_points, query_points, pose_of(match)[None])[0])
 
@@ -234,11 +236,8 @@ def off_seen_through(match_from: Callable[[FloatArray], Match], found: Match,
     fewer = seen(other)
     if fewer + SEEN_THROUGH_SLACK >= count:
         return found, count, None
-    if fewer > 0:
-        near = least_seen_through_place(reference_points, query_points, pose_of(other),
-                                        SETTLE_REACH, SETTLE_STEP, 0)
-        settled = match_from(near)
-        least = seen(settled)
-        if least < fewer:
-            return settled, least, near
-    return other, fewer, start
+    near = least_seen_through_place(reference_points, query_points, pose_of(other),
+                                    SETTLE_REACH, SETTLE_STEP, 0)
+    settled = match_from(near)
+    least = seen(settled)
+    return (settled, least, near) if least <= fewer else (other, fewer, start)
