@@ -63,6 +63,7 @@ from numpy.typing import NDArray
 from estimators.base import Estimator
 from estimators.health import evident_time_step, intervals_since_used
 from estimators.matching.icp import ICPParams, leaves_a_direction_free, register
+from estimators.matching.match_result import MatchResult
 from estimators.matching.neighbourhood_fits import check_neighbours
 from estimators.matching.normal_equations import prior_information
 from estimators.matching.point_to_line import PointToLineReference
@@ -72,6 +73,7 @@ from estimators.matching.scan_matching import (
     voxel_downsample,
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
+from estimators.odometry.motion_prior import no_sideslip_prior
 from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
@@ -165,7 +167,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             :class:`~estimators.odometry.moving_points.MovingPointFilter`); its margin is
             ``dynamic_margin``, its ``min_range`` ours.
         sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
-            scan leaves a direction free (``motion_prior.no_sideslip_information``); inf, the
+            scan leaves a direction free: there the match is run again under that constraint,
+            linearised at the match (``motion_prior.no_sideslip_prior``: at the guess, a
+            turn rate that jumps between two scans tilts it by half a turn); inf, the
             default, for none of it (a holonomic base, or a car frame away from the wheels'
             no-slip point, as a CARMEN log's laser frame). 6e-4 suits the simulated car.
             Finite, the constant-velocity model also keeps no sideways velocity.
@@ -304,6 +308,21 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         return (self._watched_step if self._kept is not None else self._odometry_step)(scans, t)
 
+    def _no_sideslip_match(self, result: MatchResult, points: NDArray[np.float64],
+                           guess: NDArray[np.float64]) -> MatchResult:
+        """``result`` matched again under the no-sideslip constraint of the step to it, held
+        with ``sideslip_sigma`` and linearised at the match (twice: at the first match, then
+        at the second), with the motion prior it was held by
+        (:func:`~estimators.odometry.motion_prior.no_sideslip_prior`)."""
+        assert self._reference is not None
+        information = np.asarray(self.match_information, dtype=np.float64)
+        diagonal = np.diag(information) if information.ndim == 2 else information
+        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2
+        for _ in range(2):
+            centre, held = no_sideslip_prior(diagonal, guess, self.pose, result.pose, sideways)
+            result = register(self._reference, points, result.pose, self.params, centre, held)
+        return result
+
     def _odometry_step(self, scans: dict[str, NDArray[np.float64]],
                        t: float) -> NDArray[np.float64]:
         interval = t - self._last_time
@@ -332,6 +351,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             points = static
             result = register(self._reference, points, result.pose, self.params, guess,
                               self.match_information)
+        if self._degenerate:
+            result = self._no_sideslip_match(result, points, guess)
         pose = result.pose
         self.scan_information = (np.zeros((3, 3)) if result.information is None
                                  else result.information)

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
 from estimators.matching.prediction import median, prediction_horizon, within_prediction_horizon
 from lidar_env.core import EstimatorInputError
+from lidar_env.core.se2 import wrap_float
 
 FloatArray = NDArray[np.float64]
 
@@ -49,6 +50,7 @@ __all__ = [
     "mean_translation",
     "midpoint_velocity",
     "no_sideslip_information",
+    "no_sideslip_prior",
     "prediction_horizon",
     "prediction_information",
     "prediction_sigma",
@@ -281,3 +283,39 @@ def no_sideslip_information(
         return np.diag(information)  # the same as adding 0 times the outer product
     jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
     return np.diag(information) + sideslip_information * np.outer(jacobian, jacobian)
+
+
+def no_sideslip_prior(
+    diagonal: ArrayLike, guess: ArrayLike, previous: ArrayLike, pose: ArrayLike,
+    sideslip_information: float,
+) -> tuple[FloatArray, FloatArray]:
+    """The motion prior ``diag(diagonal)`` (3,) at ``guess`` (3,) plus the no-sideslip
+    constraint of the step from ``previous`` to ``pose`` (3,) (world frame; its translation
+    along the midpoint heading, :func:`no_sideslip_information`) linearised at ``pose``, as
+    one quadratic: its centre (3,) and information (3, 3).
+
+    Linearised at the matched pose rather than at the constant-velocity guess: where the turn
+    rate jumps between two scans (a robot that stops to turn), the guess's heading is a whole
+    interval's turn off, and so is the direction the constraint holds still; the match's
+    heading is what the scans show. The constraint ``c(x) ~ c(pose) + J (x - pose)`` and the
+    prior combine as ``(x - m)^T H (x - m)`` with ``H = D + s J J^T`` and
+    ``m = guess + H^-1 s J (J (pose - guess) - c(pose))``."""
+    diagonal = np.asarray(diagonal, dtype=np.float64)
+    guess, previous, pose = (np.asarray(v, dtype=np.float64) for v in (guess, previous, pose))
+    if diagonal.shape != (3,) or not sideslip_information >= 0:
+        raise EstimatorInputError(
+            f"diagonal, sideslip_information: expected shape (3,) and a value >= 0, got "
+            f"{diagonal.shape} and {sideslip_information}")
+    heading = previous[2] + 0.5 * wrap_float(float(pose[2] - previous[2]))
+    step = pose[:2] - previous[:2]
+    normal = np.array([-math.sin(heading), math.cos(heading)])
+    forward = float(step @ np.array([math.cos(heading), math.sin(heading)]))
+    jacobian = np.array([normal[0], normal[1], -0.5 * forward])
+    information = no_sideslip_information(diagonal, heading, forward, sideslip_information)
+    offset = pose - guess
+    offset[2] = wrap_float(float(offset[2]))
+    pull = sideslip_information * jacobian * (jacobian @ offset - float(normal @ step))
+    centre = guess + np.linalg.lstsq(information, pull, rcond=None)[0]  # D = 0: any point
+    # on the constraint's line
+    centre[2] = wrap_float(float(centre[2]))
+    return centre, information

@@ -94,15 +94,13 @@ class ConstantVelocityModel:
         return np.zeros((3, 3)) if self.speed_unknown else self._model_information()
 
     def _model_information(self) -> FloatArray:
-        """Information (3, 3) of the constant-velocity guess and the no-sideslip prior, in the
-        point residuals' units. The guess misses by ``prediction_acceleration * dt^2`` over a
+        """Information (3, 3, diagonal) of the constant-velocity guess, in the point
+        residuals' units. The guess misses by ``prediction_acceleration * dt^2`` over a
         typical scan interval ``dt`` plus, counting scans, speed times the interval's typical
         jitter (a late scan has moved further); clipped to [``motion_prior.MIN_PREDICTION_
         SIGMA``, ``prior_sigma_translation``], which also holds until the clock has been seen
-        for a few scans or when it does not run forward. Where the scan leaves a direction
-        free, sideways motion is held to ``sideslip_sigma`` (an assumption, the car frame at
-        the wheels' no-slip point, so only where the scan cannot overrule it: held on every scan,
-        it costs accuracy on real logs whose motion does slip)."""
+        for a few scans or when it does not run forward. (The no-sideslip constraint is added
+        after the match, linearised at it: ``LocalMapOdometry._no_sideslip_match``.)"""
         information = self._prior_information.copy()
         typical = self._clock.median if self._clock.settled else 0.0
         step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
@@ -112,9 +110,7 @@ class ConstantVelocityModel:
                                      self.prior_sigma_translation)
             sigma = missed_sigma(sigma, self._misses, self.prior_sigma_translation)
             information[:2] = (self.noise_sigma / sigma) ** 2
-        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2 if self._degenerate else 0.0
-        return motion_prior.no_sideslip_information(information, self.pose[2] + 0.5 * step[2],
-                                                    step[0], sideways)
+        return np.diag(information)
 
     def _updated_velocity(self, increment: FloatArray, dt: float,
                           information: FloatArray | None = None) -> FloatArray:
