@@ -8,14 +8,20 @@ one whose matches explain more of the scans is kept (the longer guess turns the 
 interval's turn only: over seconds the extrapolated turn is the least known part of it, and
 the correlation measures the turn); where the scans cannot tell them apart
 (a corridor's axis, which the prior decides), the longer guess wins only after skipped scans,
-which prove the time passed.
+which prove the time passed: then it wins where its matches explain the scans within the
+share's standard error of the other's (down a corridor the keyframe saw more of near itself,
+a stopped car's match explains a few percent more).
 
 After skipped scans (a blinded Lidar) where both scans hold enough points, a third start is
 the exact best pose of a branch-and-bound search of the new scan on the latest keyframe's
 points over the poses the car can have reached (:meth:`BlindScans.searched`, the ``icp``
 estimator's :func:`~estimators.matching.scan_recovery.search_start`): the car may have turned
 or stopped while blind, out of reach of either guess. It runs where neither guess's matches
-explain half of the scans, and is kept where its matches explain clearly more.
+explain half of the scans, and is kept where its matches explain clearly more. After a blind
+stretch the kept match is judged by the space the new scans see free: placed short of the car
+along a corridor, whose walls it fits as well or better, they see through the walls the car
+drove past, and the match starts again from the place that sees through the fewest
+(:func:`~estimators.matching.scan_recovery.off_seen_through`).
 
 Either guess may be a metre or more from the car after a turn, and the correlation that seeds
 the matches is ambiguous across such a gap (it may land a metre off too); a few ICP
