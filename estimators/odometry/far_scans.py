@@ -43,6 +43,7 @@ along the direction it pins least, or the guess is kept and the scan flagged los
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Sized
 
@@ -58,7 +59,7 @@ from estimators.odometry.global_search import GlobalSearch, SearchWindow
 from estimators.odometry.motion_prior import ScanClock, one_turn_increment
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.odometry.scan_check import check_against_scan
-from lidar_env.core.se2 import compose, relative, wrap_angle
+from lidar_env.core.se2 import compose, relative_floats, wrap_angle
 
 FloatArray = NDArray[np.float64]
 #: The share of car-frame points (M, 2) that a car pose (3,) puts in space the last scans saw
@@ -77,7 +78,8 @@ def reach_window(max_speed: float, max_turn_rate: float, interval: float,
     """Every pose reachable since the last scan: ``max_speed`` [m/s] and ``max_turn_rate``
     [rad/s] times the larger of the scan ``interval`` and the ``typical`` one [s] (a stamp
     that glitches short must not shrink the window; a non-finite one counts as typical)."""
-    dt = max(interval if np.isfinite(interval) else 0.0, typical if np.isfinite(typical) else 0.0)
+    dt = max(interval if math.isfinite(interval) else 0.0,
+             typical if math.isfinite(typical) else 0.0)
     return SearchWindow(max_speed * dt, min(max_turn_rate * dt, np.pi))
 
 
@@ -339,6 +341,6 @@ class FarScanMatching:
         result = self._checked_against_scan(result, points, guess, predicted, searched)
         if result.quality < self.min_quality:
             self.poor_matches.append(len(self._poses))
-        step = relative(self._poses[-1], result.pose)
-        self._far_steps.append((float(np.hypot(step[0], step[1])), abs(float(step[2]))))
+        step = relative_floats(self._poses[-1].tolist(), result.pose.tolist())
+        self._far_steps.append((float(np.hypot(step[0], step[1])), abs(step[2])))
         return result

@@ -111,7 +111,7 @@ class ScanClock:
 
     def add(self, dt: float) -> None:
         """One more interval ``dt`` [s]; a non-finite one is ignored."""
-        if np.isfinite(dt):
+        if math.isfinite(dt):
             self._push(self.intervals, self._sorted_intervals, dt)
             if dt > 0:
                 self._push(self.steps, self._sorted_steps, dt)

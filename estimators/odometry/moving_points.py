@@ -199,18 +199,19 @@ class MovingPointFilter:
         them as read-only), the reach for the same scans at any pose (a scan is classified at
         up to two poses, then remembered at the last)."""
         car = np.asarray(pose, dtype=np.float64)
+        stamp = car.tobytes()
         arrays = [scans[key] for key in self._keys]
         last = self._last_scan
         same_scans = last is not None and all(
             a is b for a, b in zip(arrays, last[2], strict=True))
-        if last is not None and same_scans and points is last[1] and car.tobytes() == last[0]:
+        if last is not None and same_scans and points is last[1] and stamp == last[0]:
             return last[3], last[4], last[5]
         free = (last[5] if last is not None and same_scans else
                 self._beams.free(self._beams.pack(arrays, self.min_range), self.min_range))
         world = np.ascontiguousarray(transform_points(car, points), dtype=np.float64)
         floats = car.tolist()
         sensor_poses = np.array([compose_floats(floats, mount) for mount in self._mounts])
-        self._last_scan = (car.tobytes(), points, arrays, world, sensor_poses, free)
+        self._last_scan = (stamp, points, arrays, world, sensor_poses, free)
         return world, sensor_poses, free
 
     def classify(
@@ -236,13 +237,13 @@ class MovingPointFilter:
         else:
             moving = np.zeros(len(points), dtype=np.bool_)
         stacked = self._stacked(map_points)
-        near = np.compress(self._beams.judge_free(  # the recent scans'
+        near = self._anchors.compress(self._beams.judge_free(  # the recent scans'
             self._anchors, sensor_poses, free, self.margin, self.min_range,
-            self._anchor_resolution), self._anchors, axis=0)
+            self._anchor_resolution), axis=0)
         if len(stacked):  # stale: map points it sees through, where its beams are dense
             stale = self._beams.judge_free(stacked, sensor_poses, free, self.margin,
                                            self.min_range, self.stale_resolution)
-            near = np.concatenate((near, np.compress(stale, stacked, axis=0)))
+            near = np.concatenate((near, stacked.compress(stale, axis=0)))
         else:
             stale = np.zeros(0, dtype=np.bool_)
         if len(near) and len(world):  # moved on: next to a point the new scan sees through

@@ -74,7 +74,7 @@ class ConstantVelocityModel:
         if not self.use_timestamps or not self._clock.steps:
             return 1.0  # count in scans
         typical = self._clock.typical_step
-        return float(np.clip(dt, 0.5 * typical, 2.0 * typical)) if dt > 0 else typical
+        return min(max(dt, 0.5 * typical), 2.0 * typical) if dt > 0 else typical
 
     def _predicted(self, dt: float, skipped: int) -> FloatArray:
         """The constant-velocity increment (3,) over ``dt`` (scans, or seconds with
@@ -103,9 +103,9 @@ class ConstantVelocityModel:
         after the match, linearised at it: ``LocalMapOdometry._no_sideslip_match``.)"""
         information = self._prior_information.copy()
         typical = self._clock.median if self._clock.settled else 0.0
-        step = self._velocity * (typical if self.use_timestamps else 1.0)  # over one interval
-        if typical > 0:
-            sigma = prediction_sigma(typical, np.hypot(step[0], step[1]) / typical,
+        if typical > 0:  # the step over one interval, its speed [m/s]
+            x, y = (self._velocity[:2] * (typical if self.use_timestamps else 1.0)).tolist()
+            sigma = prediction_sigma(typical, float(np.hypot(x, y)) / typical,
                                      self._clock.jitter, self.prediction_acceleration,
                                      self.prior_sigma_translation)
             sigma = missed_sigma(sigma, self._misses, self.prior_sigma_translation)
@@ -131,7 +131,7 @@ class ConstantVelocityModel:
         if information is not None and self._translations and not self.speed_unknown:
             translation = self._weakly_seen_held(translation, information[:2, :2],
                                                  float(self.pose[2] + 0.5 * increment[2]))
-        if np.isfinite(self.sideslip_sigma):
+        if math.isfinite(self.sideslip_sigma):
             translation[1] = 0.0
         self._translations.append(translation)
         return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
@@ -154,6 +154,7 @@ class ConstantVelocityModel:
         c, s = math.cos(heading), math.sin(heading)
         rotation = np.array([[c, -s], [s, c]])
         values, vectors = _symmetric_eigh(rotation.T @ information @ rotation)
-        gains = np.maximum(values, 0.0) / (np.maximum(values, 0.0) + self.speed_information)
+        values = np.maximum(values, 0.0)
+        gains = values / (values + self.speed_information)
         held = self._velocity[:2]
         return held + vectors @ (gains * (vectors.T @ (translation - held)))
