@@ -19,6 +19,7 @@ from estimators.odometry.motion_prior import (
     no_sideslip_information,
     one_turn_increment,
     prediction_sigma,
+    sorted_median_deviation,
 )
 from estimators.odometry.velocity_model import _symmetric_eigh
 from lidar_env.core.se2 import rotate
@@ -99,6 +100,31 @@ def test_scan_clock_medians_stay_numpys_over_many_repeated_intervals() -> None:
         steps = [value for value in seen if value > 0][-5:]
         assert clock.median == float(np.median(seen[-10:]))
         assert clock.typical_step == float(np.median(steps))
+
+
+@settings(max_examples=200, deadline=None)
+@given(values=st.lists(st.floats(-1e3, 1e3) | st.sampled_from([0.0, -0.0, 0.1, 0.1, 0.2]),
+                       min_size=1, max_size=60),
+       centre=st.none() | st.floats(-1e3, 1e3) | st.sampled_from([0.0, 0.1]))
+def test_sorted_median_deviation_is_clock_jitter_bit_for_bit(values: list[float],
+                                                            centre: float | None) -> None:
+    """The jitter a ``ScanClock`` reads off its sorted intervals is :func:`clock_jitter`'s
+    partition of all of them, bit for bit: odd and even counts, repeated values, a centre
+    off the median or outside the values."""
+    centre = float(np.median(values)) if centre is None else centre
+    assert sorted_median_deviation(sorted(values), centre) == clock_jitter(values, centre)
+
+
+def test_scan_clock_jitter_stays_clock_jitters_over_a_sliding_window() -> None:
+    """Quantised stamps coming and falling out of the window: the cached jitter is always
+    :func:`clock_jitter` of the last intervals."""
+    rng = np.random.default_rng(2)
+    clock = ScanClock(max_intervals=9)
+    seen: list[float] = []
+    for dt in rng.choice([0.0, 0.1, 0.1, 0.1, 0.2, 0.25, -0.1, 0.3], 300):
+        clock.add(float(dt))
+        seen.append(float(dt))
+        assert clock.jitter == clock_jitter(seen[-9:])
 
 
 @settings(max_examples=80, deadline=None)
