@@ -112,7 +112,7 @@ class CarPoints:
                     f"{ranges.shape}")
             points = _beam_points(ranges, cos, sin, max_range, self.min_range)
             merged.append(points @ rotation.T + translation)
-        return np.concatenate(merged)
+        return merged[0] if len(merged) == 1 else np.concatenate(merged)
 
 
 @njit(cache=True)
@@ -161,7 +161,7 @@ def voxel_downsample(points: NDArray[np.float64], voxel_size: float,
         raise ConfigError(f"voxel_size: expected a positive size [m], got {voxel_size}")
     if compiled:
         first = first_in_each_cell(np.ascontiguousarray(points, np.float64), voxel_size)
-        return np.compress(first, points, axis=0)
+        return np.asarray(points).compress(first, axis=0)
     cells = np.floor(points / voxel_size).astype(np.int64)
     # One integer key per cell (a 1-D unique is far faster than np.unique(axis=0)); cells
     # within +-2^31 voxels of the origin never collide.
