@@ -69,14 +69,14 @@ def _near_any(points: NDArray[np.float64], anchors: NDArray[np.float64],
     for i in range(points.shape[0]):
         cx = np.int64(math.floor(points[i, 0] / cell))
         cy = np.int64(math.floor(points[i, 1] / cell))
-        for row in (cx - 1, cx, cx + 1):
-            lo = np.searchsorted(keys, (row << 32) + cy - 1)
-            hi = np.searchsorted(keys, (row << 32) + cy + 1, side="right")
-            for j in range(lo, hi):
+        for row in (cx - 1, cx, cx + 1):  # the row's three cells: one run of keys
+            j, last = np.searchsorted(keys, (row << 32) + cy - 1), (row << 32) + cy + 1
+            while j < len(keys) and keys[j] <= last:
                 dx, dy = points[i, 0] - near[j, 0], points[i, 1] - near[j, 1]
                 if dx * dx + dy * dy < limit:
                     out[i] = True
                     break
+                j += 1
             if out[i]:
                 break
     return out
