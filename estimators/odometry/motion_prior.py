@@ -30,7 +30,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -78,41 +78,32 @@ def sorted_median(ordered: Sequence[float]) -> float:
     return (float(ordered[half - 1]) + float(ordered[half])) / 2
 
 
-def _kth_smallest_of_two(first: Callable[[int], float], n_first: int,
-                         second: Callable[[int], float], n_second: int, k: int) -> float:
-    """The ``k``-th smallest (from 0) of two ascending runs, ``first(i)`` for ``i <
-    n_first`` and ``second(j)`` for ``j < n_second``, by bisection on how many of the ``k +
-    1`` smallest the first run holds."""
-    lo, hi = max(0, k + 1 - n_second), min(n_first, k + 1)
-    while lo < hi:  # the fewest i with first(i) >= second(k - i): then those k + 1 are smallest
+def _kth_deviation(ordered: Sequence[float], split: int, centre: float, k: int) -> float:
+    """The ``k``-th smallest (from 0) of the deviations ``|x - centre|`` of sorted ``ordered``
+    with the values before ``split`` below ``centre`` and the rest not: two runs that rise
+    outward from ``split``, bisected on how many of the ``k + 1`` smallest lie below it."""
+    lo, hi = max(0, k + 1 - (len(ordered) - split)), min(split, k + 1)
+    while lo < hi:  # the fewest i below with the i-th's deviation >= the (k - i)-th's above
         i = (lo + hi) // 2
-        if first(i) < second(k - i):
+        if abs(ordered[split - 1 - i] - centre) < abs(ordered[split + k - i] - centre):
             lo = i + 1
         else:
             hi = i
-    return max(first(lo - 1) if lo > 0 else -math.inf,
-               second(k - lo) if k - lo >= 0 else -math.inf)
+    return max(abs(ordered[split - lo] - centre) if lo > 0 else -math.inf,
+               abs(ordered[split + k - lo] - centre) if k >= lo else -math.inf)
 
 
 def sorted_median_deviation(ordered: Sequence[float], centre: float) -> float:
     """:func:`clock_jitter` of values already sorted (not empty, no NaN) about ``centre``, bit
-    for bit: the deviations ``|x - centre|`` rise outward from ``centre`` on either side, so
-    the middle ones are read off the two runs by bisection, a few dozen float operations where
-    a partition of a few hundred intervals took several numpy calls."""
+    for bit: the deviations rise outward from ``centre`` on either side, so the middle ones
+    are read off the two runs by bisection (:func:`_kth_deviation`), a few dozen float
+    operations where a partition of a few hundred intervals took several numpy calls."""
     split = bisect.bisect_left(ordered, centre)
-    below, above = split, len(ordered) - split
-
-    def inward(i: int) -> float:
-        return abs(ordered[split - 1 - i] - centre)
-
-    def outward(j: int) -> float:
-        return abs(ordered[split + j] - centre)
-
     half = len(ordered) // 2
-    upper = _kth_smallest_of_two(inward, below, outward, above, half)
+    upper = _kth_deviation(ordered, split, centre, half)
     if len(ordered) % 2:
         return upper
-    return (_kth_smallest_of_two(inward, below, outward, above, half - 1) + upper) / 2
+    return (_kth_deviation(ordered, split, centre, half - 1) + upper) / 2
 
 
 #: Intervals a clock must have shown before its median stands for it.
