@@ -13,10 +13,12 @@ action), :mod:`.movers` (pedestrians), :mod:`.rendering`; above them the env its
 """
 
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 
 import gymnasium
 
 from lidar_env.config import EnvConfig, lidars_with_noise
+from lidar_env.core.kernel_cache import drop_stale_caches
 from lidar_env.env import DualLidarEnv
 from lidar_env.moved_modules import install as _install_moved_modules
 from lidar_env.routes import TRACE_NAMES, Trace, make_trace
@@ -24,6 +26,7 @@ from lidar_env.sensors import LidarConfig
 from lidar_env.world import WORLD_NAMES, World, make_world, save_ros_map
 
 _install_moved_modules()
+drop_stale_caches(Path(__file__).resolve().parent.parent, "lidar_env", ("lidar_env",))
 
 try:
     __version__ = version("duallidar")

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from estimators.base import SensorSetup
 from estimators.paths import PROJECT_ROOT
-from lidar_env.core import DatabaseError
+from lidar_env.core import DatabaseError, kernel_cache
 
 #: The packages whose code makes a trace (hashed into :func:`package_version`).
 SOURCE_PACKAGES = ("agents", "estimators", "lidar_env")
@@ -49,12 +49,7 @@ def source_digest(root: Path, packages: tuple[str, ...] = SOURCE_PACKAGES) -> st
     """SHA-256 (first 12 hex digits) of the paths and contents of the ``*.py`` files of
     ``packages`` under ``root``, read once per process (worker processes forked later inherit
     it, so one run has one version)."""
-    digest = hashlib.sha256()
-    for package in packages:
-        for path in sorted((root / package).rglob("*.py")):
-            digest.update(path.relative_to(root).as_posix().encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()[:12]
+    return kernel_cache.source_digest(root, packages)
 
 
 @lru_cache(maxsize=4)

@@ -46,7 +46,7 @@ from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 from estimators.odometry.moving_points import MovingPointFilter
 from estimators.paths import PROJECT_ROOT
-from lidar_env.core import DualLidarError
+from lidar_env.core import DualLidarError, kernel_cache
 
 #: Short drives through the map scoring a worker runs (:func:`run_scenario_task`, with the
 #: cheapest estimator): past cylinders, where from 2 s on the detector cuts a round arc out of
@@ -164,13 +164,7 @@ def drop_numba_caches(root: Path = PROJECT_ROOT) -> int:
     packages under ``root``; returns how many. numba keys a cached kernel by its own source
     file, not its callees', so after a source change only a full rebuild is sure to be
     current."""
-    removed = 0
-    for package in KERNEL_PACKAGES:
-        for pattern in ("*.nbi", "*.nbc"):
-            for path in (root / package).rglob(f"__pycache__/{pattern}"):
-                path.unlink(missing_ok=True)
-                removed += 1
-    return removed
+    return sum(kernel_cache.drop_numba_caches(root / package) for package in KERNEL_PACKAGES)
 
 
 def last_seconds() -> float | None:

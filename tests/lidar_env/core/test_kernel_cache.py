@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import logging
+import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -91,3 +92,73 @@ def test_the_envs_check_their_kernels_when_made(make, monkeypatch) -> None:
     assert whats[-1] == ("DualLidar-v0's first reset" if make == "single"
                          else "the batched DualLidar-v0's first reset")
     assert all(hasattr(kernel, "py_func") for kernel in checked[-1][1])
+
+
+CALLER = '''
+from numba import njit
+
+from callee_pkg.callee import value
+
+
+@njit(cache=True)
+def read():
+    return value()
+'''
+CALLEE = '''
+from numba import njit
+
+
+@njit(cache=True)
+def value():
+    return {}
+'''
+RUN = '''
+import sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from lidar_env.core.kernel_cache import drop_stale_caches
+if sys.argv[2] == "guarded":
+    drop_stale_caches(Path(sys.argv[1]), "caller_pkg", ("caller_pkg", "callee_pkg"))
+from caller_pkg.caller import read
+print(read())
+'''
+
+
+def read_in_new_process(root: Path, mode: str) -> str:
+    """What the cached caller returns in a fresh interpreter (``mode``: guarded or bare)."""
+    completed = subprocess.run([sys.executable, "-c", RUN, str(root), mode], check=True,
+                               capture_output=True, text=True)
+    return completed.stdout.strip()
+
+
+def write_packages(root: Path, value: float) -> None:
+    for package, source in (("caller_pkg", CALLER), ("callee_pkg", CALLEE.format(value))):
+        (root / package).mkdir(exist_ok=True)
+        (root / package / "__init__.py").write_text("")
+        module = package.removesuffix("_pkg")
+        (root / package / f"{module}.py").write_text(source)
+
+
+def test_a_changed_callee_reaches_a_cached_caller_once_stale_caches_are_dropped(tmp_path) -> None:
+    write_packages(tmp_path, 1.0)
+    assert read_in_new_process(tmp_path, "guarded") == "1.0"
+    write_packages(tmp_path, 2.0)  # the callee's file changes, the caller's does not
+    assert read_in_new_process(tmp_path, "bare") == "1.0"  # numba's cache: the old callee
+    assert read_in_new_process(tmp_path, "guarded") == "2.0"
+
+
+def test_stale_caches_are_dropped_once_per_source(tmp_path) -> None:
+    write_packages(tmp_path, 1.0)
+    cache = tmp_path / "caller_pkg" / "__pycache__"
+    cache.mkdir()
+    (cache / "caller.read-5.py311.nbi").write_bytes(b"index")
+    sources = ("caller_pkg", "callee_pkg")
+    assert kernel_cache.drop_stale_caches(tmp_path, "caller_pkg", sources)
+    assert not (cache / "caller.read-5.py311.nbi").exists()
+    (cache / "caller.read-5.py311.nbi").write_bytes(b"index")  # compiled for these sources
+    assert not kernel_cache.drop_stale_caches(tmp_path, "caller_pkg", sources)
+    assert (cache / "caller.read-5.py311.nbi").exists()
+    write_packages(tmp_path, 3.0)
+    assert kernel_cache.drop_stale_caches(tmp_path, "caller_pkg", sources)
+    assert not (cache / "caller.read-5.py311.nbi").exists()
+    assert len(list(cache.glob("numba-sources-*"))) == 1
