@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from estimators.matching.match_result import MatchResult
 from estimators.matching.scan_matching import LikelihoodField
+from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_counts
 from estimators.matching.window_search import search_in_box, thinned_for_search
 
 FloatArray = NDArray[np.float64]
@@ -126,58 +127,12 @@ def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float
     return int(np.argmin(surprise))
 
 
-#: [rad] bearing bins a scan's nearest returns are taken over (two 1-degree beams).
-BEARING_BIN = math.radians(2.0)
-#: [m] a reference point counts as seen through where every return of the scan in its
-#: bearing bin lies at least this far behind it (the scans' noise and the Lidars' mounts off
-#: the car's centre).
-SEEN_THROUGH_MARGIN = 0.3
-#: [m] reference points nearer the car than this are not judged (a mount a few decimetres
-#: off the car's centre turns their bearings by tens of degrees).
-NEAREST_JUDGED = 1.0
-#: Seen-through reference points a place may have over the fewest and still count as free
-#: of contradiction (a thin post between two beams, a stray return).
-SEEN_THROUGH_SLACK = 3
 #: [m] grid step of :func:`least_seen_through_place`: well inside a refinement's basin.
 PLACE_STEP = 0.2
 #: [m] reach and grid step of the place search that settles a match off a contradiction:
 #: along a corridor a scan fits as well a few decimetres short of the car, where it still
 #: sees through the last walls it passed.
 SETTLE_REACH, SETTLE_STEP = 1.0, 0.05
-#: Poses judged at once by :func:`seen_through_counts` (bounds its arrays to a few MB).
-COUNT_CHUNK = 256
-
-
-def seen_through_counts(reference_points: FloatArray, query_points: FloatArray,
-                        poses: FloatArray) -> NDArray[np.int64]:
-    """(P,) how many ``reference_points`` (N, 2, the reference car frame) the scan's
-    ``query_points`` (M, 2, their car frame) see through with the car at each of ``poses``
-    (P, 3, the reference frame): points at least :data:`NEAREST_JUDGED` from the car whose
-    bearing bin holds returns, all at least :data:`SEEN_THROUGH_MARGIN` farther. A scan
-    placed short of where it was taken sees through the walls it has driven past; bearings
-    without a return judge nothing."""
-    bins = int(round(2.0 * math.pi / BEARING_BIN))
-    nearest = np.full(bins, np.inf)
-    np.minimum.at(nearest, _bearing_bins(query_points, bins), np.hypot(*query_points.T))
-    counts = np.zeros(len(poses), dtype=np.int64)
-    for first in range(0, len(poses), COUNT_CHUNK):
-        chunk = poses[first:first + COUNT_CHUNK]
-        c, s = np.cos(chunk[:, 2:]), np.sin(chunk[:, 2:])
-        dx = reference_points[None, :, 0] - chunk[:, :1]
-        dy = reference_points[None, :, 1] - chunk[:, 1:2]
-        local = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
-        distance = np.hypot(local[..., 0], local[..., 1])
-        behind = nearest[_bearing_bins(local, bins)]
-        counts[first:first + COUNT_CHUNK] = np.count_nonzero(
-            (distance >= NEAREST_JUDGED) & np.isfinite(behind)
-            & (behind > distance + SEEN_THROUGH_MARGIN), axis=1)
-    return counts
-
-
-def _bearing_bins(points: FloatArray, bins: int) -> NDArray[np.int64]:
-    """The :data:`BEARING_BIN` index of each car-frame point (..., 2)."""
-    return ((np.arctan2(points[..., 1], points[..., 0]) + math.pi) / BEARING_BIN).astype(
-        np.int64) % bins
 
 
 def least_seen_through_place(reference_points: FloatArray, query_points: FloatArray,

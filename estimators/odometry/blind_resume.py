@@ -10,10 +10,11 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   what the new scan sees, though: placed short of where the car is, the scan's beams pass
   through walls the map holds (the last metres of the corridor it has driven out of).
   :func:`along_least_pinned` moves the match along the direction it pins least, to where
-  the scan sees through the fewest map points (:func:`seen_through_count`), and of those
-  places to the one whose points score highest on the map's likelihood field (the ray
-  consistency test of occupancy-grid scan matching: a beam ending beyond a mapped surface
-  says the surface is not where the pose puts it).
+  the scan sees through the fewest map points
+  (:func:`~estimators.matching.seen_through.seen_through_counts`), and of those places to
+  the one whose points score highest on the map's likelihood field (the ray consistency
+  test of occupancy-grid scan matching: a beam ending beyond a mapped surface says the
+  surface is not where the pose puts it).
 * **No place explains the scan.** Where the best placement explains less than the front
   end's ``min_quality`` and the scan still sees through map points there, the car faces
   what the map never saw (it turned towards it while blind) and the placement is as likely
@@ -34,58 +35,17 @@ from numpy.typing import NDArray
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
+from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_counts
 from estimators.odometry.global_search import GlobalSearch
-from lidar_env.core.se2 import inverse, transform_points
+from lidar_env.core.se2 import transform_points
 
 FloatArray = NDArray[np.float64]
 
-#: [m] a map point counts as seen through where the scan's return along its bearing lies at
-#: least this far behind it (a few voxels: the map's and the scan's noise, and the car-frame
-#: origin standing in for each Lidar's mount).
-SEEN_THROUGH_MARGIN = 0.3
-#: [rad] bearing bins the scan's returns are grouped in (two 1-degree beams).
-BEARING_BIN = np.radians(2.0)
 #: Places along the line compete on seen-through map points where their points score at
 #: least this share of the best place's on the likelihood field (a place the scan sees
 #: through nothing of, only because its points fall beyond the map, is no candidate; the
 #: true place past a corridor's mapped end scores ~0.9 of the places short of it).
 NEAR_BEST = 0.8
-#: Seen-through map points the match may have over the fewest of the line and still stand
-#: (a thin post between two beams, a Lidar's mount off the car's origin).
-SEEN_THROUGH_SLACK = 3
-#: [m] map points nearer the car than this are not judged (a Lidar's mount a few decimetres
-#: off the car's origin turns their bearings by tens of degrees).
-NEAREST_JUDGED = 1.0
-
-
-def nearest_by_bearing(points: FloatArray) -> FloatArray:
-    """The nearest range [m] of the car-frame ``points`` (M, 2) in each bearing bin
-    (:data:`BEARING_BIN`), inf where a bin holds none."""
-    bins = int(round(2.0 * np.pi / BEARING_BIN))
-    scan_range = np.hypot(points[:, 0], points[:, 1])
-    scan_bin = ((np.arctan2(points[:, 1], points[:, 0]) + np.pi) / BEARING_BIN).astype(int) % bins
-    nearest = np.full(bins, np.inf)
-    np.minimum.at(nearest, scan_bin, scan_range)
-    return nearest
-
-
-def seen_through_count(map_points: FloatArray, points: FloatArray, pose: FloatArray,
-                       margin: float = SEEN_THROUGH_MARGIN,
-                       nearest: FloatArray | None = None) -> int:
-    """How many world ``map_points`` (N, 2) the scan's car-frame ``points`` (M, 2) see
-    through with the car at ``pose`` (3,): map points at least :data:`NEAREST_JUDGED` from
-    the car whose bearing bin (:data:`BEARING_BIN`) holds returns all farther than the map
-    point by ``margin``. Bearings without a return (no echo) judge nothing. ``nearest``:
-    :func:`nearest_by_bearing` of ``points``, where already taken."""
-    if nearest is None:
-        nearest = nearest_by_bearing(points)
-    local = transform_points(inverse(pose), map_points)
-    map_range = np.hypot(local[:, 0], local[:, 1])
-    map_bin = ((np.arctan2(local[:, 1], local[:, 0]) + np.pi) / BEARING_BIN).astype(int) \
-        % len(nearest)
-    behind = nearest[map_bin]
-    return int(np.count_nonzero((map_range >= NEAREST_JUDGED) & np.isfinite(behind)
-                                & (behind > map_range + margin)))
 
 
 def least_pinned_direction(information: FloatArray | None) -> FloatArray:
@@ -110,9 +70,7 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     offsets = np.arange(-np.floor(reach / step), np.floor(reach / step) + 1) * step
     poses = np.repeat(match.pose[None], len(offsets), axis=0)
     poses[:, :2] += offsets[:, None] * direction
-    nearest = nearest_by_bearing(points)  # the scan's, the same at every place
-    counts = np.array([seen_through_count(map_points, points, pose, nearest=nearest)
-                       for pose in poses])
+    counts = seen_through_counts(map_points, points, poses)
     scores = np.array([float(field.score(transform_points(pose, points)).mean())
                        for pose in poses])
     candidates = scores >= NEAR_BEST * scores.max()
@@ -143,7 +101,7 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
                                2.0 * search.resolution)
     moved = not np.array_equal(start, unheld.pose)
     placed = register(reference, points, start, params, start, np.zeros(3)) if moved else match
-    if placed.quality < min_quality and seen_through_count(search.map_points, points,
-                                                           placed.pose) > 0:
+    if placed.quality < min_quality and seen_through_counts(search.map_points, points,
+                                                            placed.pose[None])[0] > 0:
         return MatchResult(guess.copy(), placed.quality, placed.rmse, 0, False, None), True
     return (placed if moved else None), False

@@ -7,7 +7,8 @@ import numpy as np
 
 import estimators
 from estimators.matching.match_result import MatchResult
-from estimators.matching.scan_recovery import SEEN_THROUGH_SLACK, off_seen_through
+from estimators.matching.scan_recovery import off_seen_through
+from estimators.matching.seen_through import SEEN_THROUGH_SLACK
 from tests.benchmarks.bench_modules import load
 from tests.estimators.odometry.test_fusion_blind import corridor, scan_at
 

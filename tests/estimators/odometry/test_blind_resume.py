@@ -12,35 +12,12 @@ from estimators.matching.scan_matching import LikelihoodField
 from estimators.odometry.blind_resume import (
     along_least_pinned,
     least_pinned_direction,
-    seen_through_count,
 )
 from estimators.odometry.local_map import LocalMapOdometry
 from tests.benchmarks.bench_modules import load
+from tests.estimators.corridor_scans import corridor, scan_at
 
 bench = load("bench_faults")
-
-
-def corridor(end: float) -> np.ndarray:
-    """World points (N, 2) of two walls at y = +-2 from x = 0 to ``end``, 5 cm apart."""
-    x = np.arange(0.0, end, 0.05)
-    return np.concatenate([np.column_stack([x, np.full_like(x, 2.0)]),
-                           np.column_stack([x, np.full_like(x, -2.0)])])
-
-
-def scan_at(x: float, end: float) -> np.ndarray:
-    """Car-frame scan (M, 2) from (x, 0), heading 0: the corridor's walls up to ``end`` and a
-    wall across at ``end + 6`` beyond its open end."""
-    y = np.arange(-8.0, 8.0, 0.05)
-    seen = np.concatenate([corridor(end), np.column_stack([np.full_like(y, end + 6.0), y])])
-    return seen - [x, 0.0]
-
-
-def test_a_scan_placed_short_of_the_corridors_end_sees_through_its_walls() -> None:
-    scan = scan_at(8.0, 10.0)  # the car at x = 8, the walls ending at x = 10
-    walls = corridor(14.0)  # the map: walls on to x = 14
-    assert seen_through_count(walls[walls[:, 0] < 10.0], scan, np.array([8.0, 0, 0])) == 0
-    assert seen_through_count(walls, scan, np.array([8.0, 0, 0])) > 20
-    assert seen_through_count(walls, scan, np.array([12.0, 0, 0])) <= 3
 
 
 def test_along_the_axis_the_place_the_scan_does_not_see_through_wins() -> None:

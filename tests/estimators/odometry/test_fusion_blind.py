@@ -6,36 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 import estimators
-from estimators.matching.scan_recovery import least_seen_through_place, seen_through_counts
+from estimators.matching.scan_recovery import least_seen_through_place
 from tests.benchmarks.bench_modules import load
+from tests.estimators.corridor_scans import corridor, scan_at
 
 bench = load("bench_faults")
-
-
-def corridor(end: float) -> np.ndarray:
-    """Points (N, 2) of two walls at y = +-2 from x = 0 to ``end``, 5 cm apart."""
-    x = np.arange(0.0, end, 0.05)
-    return np.concatenate([np.column_stack([x, np.full_like(x, 2.0)]),
-                           np.column_stack([x, np.full_like(x, -2.0)])])
-
-
-def scan_at(x: float, end: float) -> np.ndarray:
-    """Car-frame scan (M, 2) from (x, 0), heading 0: the corridor's walls up to ``end`` and a
-    wall across at ``end + 6`` beyond its open end."""
-    y = np.arange(-8.0, 8.0, 0.05)
-    seen = np.concatenate([corridor(end), np.column_stack([np.full_like(y, end + 6.0), y])])
-    return seen - [x, 0.0]
-
-
-def test_a_scan_placed_short_of_where_it_was_taken_sees_through_the_walls_passed() -> None:
-    scan = scan_at(8.0, 10.0)  # the car at x = 8, the walls ending at x = 10
-    walls = corridor(14.0)  # the keyframe saw them on to x = 14
-    counts = seen_through_counts(walls, scan, np.array([[8.0, 0, 0], [12.0, 0, 0],
-                                                        [4.0, 0, 0]]))
-    assert counts[0] > 20 and counts[1] <= 3  # placed 4 m on: the walls lie behind
-    walls = corridor(10.0)
-    assert seen_through_counts(walls, scan, np.array([[8.0, 0, 0]]))[0] == 0
-    assert seen_through_counts(walls, scan, np.array([[4.0, 0, 0]]))[0] > 20
 
 
 def test_the_place_found_sees_through_nothing_where_every_place_short_fits() -> None:
