@@ -19,8 +19,9 @@ that scale their prediction by time guard it.
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +37,44 @@ BLIND_STRETCH: int = 10
 CLOCK_JUMP_FACTOR: float = 5.0
 #: Recent time steps the median period is taken over.
 CLOCK_HISTORY: int = 50
+
+
+def sorted_median(ordered: Sequence[float]) -> float:
+    """``np.median`` of values already sorted (not empty, no NaN): the middle one, or the mean
+    of the middle two, bit for bit."""
+    half = len(ordered) // 2
+    if len(ordered) % 2:
+        return float(ordered[half])
+    return (float(ordered[half - 1]) + float(ordered[half])) / 2
+
+
+class SortedWindow:
+    """The last ``size`` values pushed (no NaN), in arrival order and kept sorted
+    (``ordered``), so that their median and extremes are read off rather than computed: a
+    median of a few dozen values by numpy costs several microseconds, and estimators consult
+    their windows every scan. Iterates in arrival order."""
+
+    def __init__(self, size: int) -> None:
+        self._values: deque[float] = deque(maxlen=size)
+        self.ordered: list[float] = []
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __iter__(self) -> Iterator[float]:
+        return iter(self._values)
+
+    def push(self, value: float) -> None:
+        """Append ``value``; the oldest value falls out of a full window."""
+        if len(self._values) == self._values.maxlen:
+            del self.ordered[bisect.bisect_left(self.ordered, self._values[0])]
+        self._values.append(value)
+        bisect.insort(self.ordered, value)
+
+    @property
+    def median(self) -> float:
+        """:func:`sorted_median` of the window (needs one value)."""
+        return sorted_median(self.ordered)
 
 
 @dataclass
@@ -109,18 +148,19 @@ class ScanScreen:
         self.min_returns = min_returns
         self.health = Health()
         self._previous: list[NDArray[np.float64] | None] = [None] * len(self.max_ranges)
-        self._steps: deque[float] = deque(maxlen=CLOCK_HISTORY)
+        self._steps = SortedWindow(CLOCK_HISTORY)
         self._run = 0  # skipped observations in a row
 
     def watch_clock(self, index: int, dt: float) -> bool:
-        """Take the time step ``dt`` [s] before observation ``index``; whether it is a jump."""
-        jump = (len(self._steps) >= 3 and dt > CLOCK_JUMP_FACTOR * min(self._steps)  # cheap first
-                and dt > CLOCK_JUMP_FACTOR * float(np.median(self._steps)))
+        """Take the (finite) time step ``dt`` [s] before observation ``index``; whether it is a
+        jump."""
+        jump = (len(self._steps) >= 3 and dt > CLOCK_JUMP_FACTOR * self._steps.ordered[0]
+                and dt > CLOCK_JUMP_FACTOR * self._steps.median)
         if jump:
             self.health.clock_jumps += 1
             self.health.jumps.append(index)
         else:
-            self._steps.append(dt)
+            self._steps.push(dt)
         return jump
 
     def screen(self, scans: list[NDArray[np.float64]],

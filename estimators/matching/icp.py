@@ -58,6 +58,10 @@ from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import compose, transform_points, wrap_angle
 
+#: The kernel's prior pose (3,) and information (3, 3) when there is no prior (read only).
+_NO_PRIOR = np.zeros(3)
+_NO_INFORMATION = np.zeros((3, 3))
+
 
 @dataclass(frozen=True)
 class ICPParams:
@@ -120,7 +124,7 @@ def register(
     query_points = np.asarray(query_points, dtype=np.float64)
     if query_points.ndim != 2 or query_points.shape[1] != 2:
         raise EstimatorInputError(f"query points: expected shape (M, 2), got {query_points.shape}")
-    pose = np.asarray(initial_guess, dtype=np.float64).copy()
+    pose = np.array(initial_guess, dtype=np.float64)
     if pose.shape != (3,):
         raise EstimatorInputError(
             f"initial_guess: expected a pose (x, y, heading), got shape {pose.shape}")
@@ -132,19 +136,14 @@ def register(
         information = np.diag(information)
     prior = None if prior_pose is None else np.asarray(prior_pose, dtype=np.float64)
     if compiled and params.trim_ratio >= 1.0 and (information is None) == (prior is None):
-        has_normals = reference.normals is not None
-        pose, iterations, converged, residuals, hessian = register_loop(
-            *reference.search_tree.arrays, reference.points,
-            np.ascontiguousarray(reference.normals if has_normals else reference.points,
-                                 dtype=np.float64),
-            reference.valid_normals if has_normals else np.ones(len(reference.points), bool),
-            np.ascontiguousarray(reference.anchors), has_normals,
-            np.ascontiguousarray(query_points), pose, params.max_iterations,
-            params.max_correspondence_distance, LOSSES.index(params.loss), params.loss_scale,
-            prior is not None, np.zeros(3) if prior is None else prior,
-            np.zeros((3, 3)) if information is None else information, params.min_information,
+        pose, iterations, converged, squares, hessian = register_loop(
+            *reference.kernel_arrays, np.ascontiguousarray(query_points), pose,
+            params.max_iterations, params.max_correspondence_distance,
+            LOSSES.index(params.loss), params.loss_scale, prior is not None,
+            _NO_PRIOR if prior is None else prior,
+            _NO_INFORMATION if information is None else information, params.min_information,
             params.tolerance_translation, params.tolerance_rotation, params.inlier_distance)
-        return _assess(residuals, pose, params, iterations, converged, hessian)
+        return _assess(squares, len(query_points), pose, iterations, converged, hessian)
     converged = False
     iterations = 0
     while iterations < params.max_iterations:
@@ -170,7 +169,9 @@ def register(
             break
     hessian, *_, residuals = reference.normal_equations(
         query_points, pose, params.inlier_distance, params.loss, params.loss_scale)
-    return _assess(residuals, pose, params, iterations, converged, hessian)
+    magnitudes = np.abs(residuals)
+    inliers = magnitudes[magnitudes < params.inlier_distance]  # NaN (no pair) is never below
+    return _assess(inliers * inliers, len(residuals), pose, iterations, converged, hessian)
 
 
 def leaves_a_direction_free(reference: PointToLineReference, query_points: NDArray[np.float64],
@@ -218,15 +219,13 @@ def _trimmed_step(
                              _prior_offset(pose, information, prior), params.min_information)
 
 
-def _assess(residuals: NDArray[np.float64], pose: NDArray[np.float64], params: ICPParams,
+def _assess(squares: NDArray[np.float64], points: int, pose: NDArray[np.float64],
             iterations: int, converged: bool, information: NDArray[np.float64]) -> MatchResult:
-    """The match at ``pose`` from each query point's residual [m] against its pair within
-    ``params.inlier_distance`` (NaN for none) and those pairs' ``information`` (3, 3)."""
-    magnitudes = np.abs(residuals)
-    inliers = magnitudes[magnitudes < params.inlier_distance]  # NaN (no pair) is never below
-    quality = len(inliers) / max(len(residuals), 1)
+    """The match at ``pose`` of ``points`` query points from the squared residuals [m^2] of
+    those within ``inlier_distance`` of their pair and those pairs' ``information`` (3, 3)."""
+    quality = len(squares) / max(points, 1)
     # np.mean's sum and division, without its checks
-    rmse = math.sqrt(np.add.reduce(inliers * inliers) / len(inliers)) if len(inliers) else math.inf
+    rmse = math.sqrt(np.add.reduce(squares) / len(squares)) if len(squares) else math.inf
     return MatchResult(pose, quality, rmse, iterations, converged, information)
 
 

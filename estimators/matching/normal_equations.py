@@ -217,10 +217,10 @@ def register_loop(
     tolerance_translation: float, tolerance_rotation: float, inlier_distance: float,
 ) -> tuple[NDArray[np.float64], int, bool, NDArray[np.float64], NDArray[np.float64]]:
     """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
-    run, whether the step fell below the tolerances, each query point's residual [m] at that
-    pose against its pair within ``inlier_distance`` (NaN for none), which the match is
-    assessed on, and those pairs' ``J^T W J`` (3, 3), the points' information at the pose.
-    ``prior_information`` is (3, 3)."""
+    run, whether the step fell below the tolerances, the squared residuals [m^2] at that pose
+    of the query points whose residual against their pair within ``inlier_distance`` is
+    below it (in query order), which the match is assessed on, and those pairs' ``J^T W J``
+    (3, 3), the points' information at the pose. ``prior_information`` is (3, 3)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
     kept, near = fresh_neighbours(query.shape[0])
@@ -246,7 +246,13 @@ def register_loop(
     hessian = point_to_line_system(
         order, tree_points, start, end, child, box, points, normals, valid, anchors,
         has_normals, query, pose, inlier_distance, loss, scale, residuals, kept, near)[0]
-    return pose, iterations, converged, residuals, hessian
+    squares = np.empty(query.shape[0])
+    inliers = 0
+    for residual in residuals:
+        if abs(residual) < inlier_distance:  # NaN (no pair) is never below
+            squares[inliers] = residual * residual
+            inliers += 1
+    return pose, iterations, converged, squares[:inliers], hessian
 
 
 def prior_information(noise_sigma: float, sigma_translation: float,

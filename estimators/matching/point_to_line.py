@@ -153,6 +153,52 @@ class PointToLineReference:
                 f"{self.anchors.shape}"
             )
 
+    @property
+    def normals(self) -> NDArray[np.float64] | None:
+        """Unit normals (N, 2) of the reference points, None for Censi's two-point lines."""
+        return self._normals
+
+    @normals.setter
+    def normals(self, normals: NDArray[np.float64] | None) -> None:
+        self._normals = normals
+        self._kernel_arrays: tuple[object, ...] | None = None
+
+    @property
+    def valid_normals(self) -> NDArray[np.bool_] | None:
+        """Which stored normals (N,) hold (None without normals)."""
+        return self._valid_normals
+
+    @valid_normals.setter
+    def valid_normals(self, valid: NDArray[np.bool_] | None) -> None:
+        self._valid_normals = valid
+        self._kernel_arrays = None
+
+    @property
+    def anchors(self) -> NDArray[np.float64]:
+        """The points (N, 2) the lines pass through (the reference points unless denoised)."""
+        return self._anchors
+
+    @anchors.setter
+    def anchors(self, anchors: NDArray[np.float64]) -> None:
+        self._anchors = anchors
+        self._kernel_arrays = None
+
+    @property
+    def kernel_arrays(self) -> tuple[object, ...]:
+        """The reference as the kernels of :mod:`estimators.matching.normal_equations` take
+        it, built once: the k-d tree's arrays, the points, the contiguous normals (the points
+        where none are stored), the valid flags, the contiguous anchors and whether normals
+        are stored."""
+        if self._kernel_arrays is None:
+            has_normals = self.normals is not None
+            self._kernel_arrays = (
+                *self.search_tree.arrays, self.points,
+                np.ascontiguousarray(self.normals if has_normals else self.points,
+                                     dtype=np.float64),
+                self.valid_normals if has_normals else np.ones(len(self.points), bool),
+                np.ascontiguousarray(self.anchors), has_normals)
+        return self._kernel_arrays
+
     @classmethod
     def with_estimated_normals(
         cls, points: ArrayLike, k: int = 5, denoise: bool = False, max_k: int | None = None
@@ -234,13 +280,8 @@ class PointToLineReference:
         point's residual [m] (NaN where unpaired)
         (:func:`estimators.matching.normal_equations.point_to_line_system`)."""
         residuals = np.empty(len(query_points))
-        has_normals = self.normals is not None
-        normals = self.normals if has_normals else self.points
-        valid = self.valid_normals if has_normals else np.ones(len(self.points), bool)
         hessian, gradient, count, rotation_squares = point_to_line_system(
-            *self.search_tree.arrays, self.points, np.ascontiguousarray(normals, dtype=np.float64),
-            valid, np.ascontiguousarray(self.anchors), has_normals,
-            np.ascontiguousarray(query_points, dtype=np.float64),
+            *self.kernel_arrays, np.ascontiguousarray(query_points, dtype=np.float64),
             np.asarray(pose, dtype=np.float64), float(max_distance), LOSSES.index(loss),
             float(scale), residuals, *fresh_neighbours(len(query_points)),
         )

@@ -29,12 +29,12 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections import deque
 from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from estimators.health import SortedWindow
 from estimators.matching.curve_refinement import PRIOR_SIGMA, RANGE_NOISE
 from estimators.matching.prediction import median, prediction_horizon, within_prediction_horizon
 from lidar_env.core import EstimatorInputError
@@ -67,15 +67,6 @@ def clock_jitter(intervals: ArrayLike, centre: float | None = None) -> float:
     their median (robust to glitching stamps); ``centre``: that median [s], when known."""
     intervals = np.asarray(intervals, dtype=np.float64)
     return median(np.abs(intervals - (median(intervals) if centre is None else centre)))
-
-
-def sorted_median(ordered: Sequence[float]) -> float:
-    """:func:`~estimators.matching.prediction.median` of values already sorted (not empty, no
-    NaN): the middle one, or the mean of the middle two, bit for bit."""
-    half = len(ordered) // 2
-    if len(ordered) % 2:
-        return float(ordered[half])
-    return (float(ordered[half - 1]) + float(ordered[half])) / 2
 
 
 def _kth_deviation(ordered: Sequence[float], split: int, centre: float, k: int) -> float:
@@ -114,7 +105,8 @@ class ScanClock:
     """The last scan intervals [s] of a logged clock and their robust statistics, each
     computed once per new interval (a median of a few hundred stamps costs tens of
     microseconds, and a scan of ``lidar_odometry`` asks for them several times); the
-    intervals and steps are also kept sorted, so that their medians are read, not computed.
+    intervals and steps are kept in sorted windows
+    (:class:`~estimators.health.SortedWindow`), so that their medians are read, not computed.
 
     ``intervals`` holds the last ``max_intervals`` finite ones, ``steps`` the last
     ``max_steps`` positive ones (a glitching clock's zero or negative stamps are no step);
@@ -122,33 +114,22 @@ class ScanClock:
     """
 
     def __init__(self, max_intervals: int = 201, max_steps: int = 21) -> None:
-        self.intervals: deque[float] = deque(maxlen=max_intervals)
-        self.steps: deque[float] = deque(maxlen=max_steps)
-        self._sorted_intervals: list[float] = []
-        self._sorted_steps: list[float] = []
+        self.intervals = SortedWindow(max_intervals)
+        self.steps = SortedWindow(max_steps)
         self._statistics: dict[str, float] = {}
-
-    @staticmethod
-    def _push(values: deque[float], ordered: list[float], value: float) -> None:
-        """Append ``value`` to ``values`` and to their sorted copy ``ordered``, the value that
-        falls out of a full ``values`` out of both."""
-        if len(values) == values.maxlen:
-            del ordered[bisect.bisect_left(ordered, values[0])]
-        values.append(value)
-        bisect.insort(ordered, value)
 
     def add(self, dt: float) -> None:
         """One more interval ``dt`` [s]; a non-finite one is ignored."""
         if math.isfinite(dt):
-            self._push(self.intervals, self._sorted_intervals, dt)
+            self.intervals.push(dt)
             if dt > 0:
-                self._push(self.steps, self._sorted_steps, dt)
+                self.steps.push(dt)
             self._statistics.clear()
 
     def extend(self, intervals: Iterable[float]) -> None:
         """More finite intervals [s], as the clock's history only (not as steps)."""
         for dt in intervals:
-            self._push(self.intervals, self._sorted_intervals, dt)
+            self.intervals.push(dt)
         self._statistics.clear()
 
     @property
@@ -159,21 +140,21 @@ class ScanClock:
     @property
     def median(self) -> float:
         """The median interval [s] (needs one)."""
-        return sorted_median(self._sorted_intervals)
+        return self.intervals.median
 
     @property
     def jitter(self) -> float:
-        """:func:`clock_jitter` of the intervals [s], read off their sorted copy
+        """:func:`clock_jitter` of the intervals [s], read off their sorted window
         (:func:`sorted_median_deviation`) once per new interval."""
         if "jitter" not in self._statistics:
-            self._statistics["jitter"] = sorted_median_deviation(self._sorted_intervals,
+            self._statistics["jitter"] = sorted_median_deviation(self.intervals.ordered,
                                                                  self.median)
         return self._statistics["jitter"]
 
     @property
     def typical_step(self) -> float:
         """The median step [s] (needs one)."""
-        return sorted_median(self._sorted_steps)
+        return self.steps.median
 
 
 def prediction_sigma(

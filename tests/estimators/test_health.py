@@ -16,9 +16,12 @@ from agents import PurePursuitDriver
 from estimators import SensorSetup
 from estimators.base import Sensor
 from estimators.health import (
+    CLOCK_HISTORY,
+    CLOCK_JUMP_FACTOR,
     MIN_RETURNS,
     Health,
     ScanScreen,
+    SortedWindow,
     evident_time_step,
     intervals_since_used,
 )
@@ -195,3 +198,33 @@ def test_intervals_count_skipped_scans_and_clock_gaps() -> None:
     assert intervals_since_used(30, False, 3.1, 0.1) == 31.0
     assert intervals_since_used(0, True, 1.1, 0.1) == pytest.approx(11.0)
     assert intervals_since_used(2, True, 0.2, 0.0) == 3.0  # no typical step known yet
+
+
+def test_a_clock_jump_is_five_times_numpys_median_of_the_last_steps() -> None:
+    """A step is a jump exactly when it exceeds ``CLOCK_JUMP_FACTOR`` times the smallest and
+    ``np.median`` of the last ``CLOCK_HISTORY`` steps that were not jumps (bursty stamps)."""
+    rng = np.random.default_rng(4)
+    screen = ScanScreen([10.0], [0])
+    kept: list[float] = []
+    steps = rng.choice([0.001, 0.01, 0.013, 0.1, 0.1, 0.2, 1.0, 3.0], 600) * rng.uniform(
+        0.99, 1.01, 600)
+    for index, dt in enumerate(steps.tolist()):
+        recent = kept[-CLOCK_HISTORY:]
+        expected = len(recent) >= 3 and dt > CLOCK_JUMP_FACTOR * max(
+            min(recent), float(np.median(recent)))
+        assert screen.watch_clock(index, dt) == expected
+        if not expected:
+            kept.append(dt)
+    assert 0 < screen.health.clock_jumps < len(steps)
+
+
+def test_a_sorted_window_keeps_its_last_values_and_numpys_median() -> None:
+    rng = np.random.default_rng(5)
+    window = SortedWindow(6)
+    seen: list[float] = []
+    for value in rng.choice([0.1, 0.1, 0.2, 0.3, -1.0, 2.5], 200).tolist():
+        window.push(value)
+        seen.append(value)
+        assert list(window) == seen[-6:]
+        assert window.ordered == sorted(seen[-6:])
+        assert window.median == np.median(seen[-6:])

@@ -178,6 +178,36 @@ def test_pairs_anchor_on_the_given_anchors_along_the_stored_normals():
     np.testing.assert_array_equal(pairs.normals, normals[[3, 7]])
 
 
+def test_compiled_and_python_registrations_assess_the_same_inliers():
+    """The compiled loop's quality and RMSE come from the same inliers as the Python steps'."""
+    rng = np.random.default_rng(3)
+    reference = PointToLineReference.with_estimated_normals(
+        points_at(np.array([-2.0, 0.5, 0.3]), noise=0.01, rng=rng), 9, True)
+    query = points_at(np.array([-1.9, 0.55, 0.35]), noise=0.01, rng=rng)
+    guess = np.array([0.05, 0.0, 0.0])
+    compiled = register(reference, query, guess, ICPParams())
+    stepped = register(reference, query, guess, ICPParams(), compiled=False)
+    assert 0.5 < compiled.quality == stepped.quality
+    assert compiled.rmse == pytest.approx(stepped.rmse, rel=1e-9)
+
+
+def test_normals_set_after_a_registration_are_the_ones_paired_on():
+    """Normals, flags and anchors assigned to a reference after it was matched against are
+    what the next match pairs on (as on a reference built with them)."""
+    points = points_at(np.array([-2.0, 0.5, 0.3]))
+    query = points_at(np.array([-1.9, 0.55, 0.35]))
+    fitted = PointToLineReference.with_estimated_normals(points, 9, True)
+    reference = PointToLineReference(points)
+    register(reference, query, np.zeros(3))
+    reference.normals, reference.valid_normals, reference.anchors = (
+        fitted.normals, fitted.valid_normals, fitted.anchors)
+    again = register(reference, query, np.zeros(3))
+    expected = register(PointToLineReference(points, fitted.normals, fitted.valid_normals,
+                                             fitted.anchors), query, np.zeros(3))
+    np.testing.assert_array_equal(again.pose, expected.pose)
+    assert again.rmse == expected.rmse
+
+
 def test_quality_drops_without_overlap():
     reference = points_at(np.array([-2.0, 0.5, 0.3]))
     unrelated = np.column_stack([np.linspace(20, 25, 100), np.linspace(-5, 5, 100)])
