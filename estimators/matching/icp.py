@@ -58,7 +58,7 @@ from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import compose, transform_points, wrap_angle
 
-#: The kernel's prior pose (3,) and information (3, 3) when there is no prior (read only).
+#: The prior pose (3,) and information (3, 3) register_loop reads when there is no prior.
 _NO_PRIOR = np.zeros(3)
 _NO_INFORMATION = np.zeros((3, 3))
 
