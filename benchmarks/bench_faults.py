@@ -73,6 +73,10 @@ def faults_for(period: float, n_lidars: int) -> dict[str, Callable[[], list[Faul
     }
 
 
+#: The matrix's faults, in its order.
+FAULT_NAMES = tuple(faults_for(1.0, 1))
+
+
 def record_drive(group: str, seed: int = 0) -> Recording:
     """A pure-pursuit drive of ``world/trace`` as a recording with ground truth."""
     world, trace = group.split("/")
@@ -149,28 +153,43 @@ def steps_of(recording: Recording, faulted: Recording) -> np.ndarray:
     return steps
 
 
+def start_of(truth: np.ndarray) -> np.ndarray:
+    """The pose (3,) a run starts from: the first truth, the origin where it is unknown."""
+    return truth[0] if np.all(np.isfinite(truth[0])) else np.zeros(3)
+
+
+def faulted_score(name: str, recording: Recording, fault: str,
+                  reference: np.ndarray | None = None) -> tuple[float, float, dict, float]:
+    """Worst step error and final error [m] (:func:`score`), health counts and CPU seconds
+    of ``name`` on ``recording`` with the matrix's ``fault`` (seed 0); steps against
+    ``reference`` (the clean run where truth comes at keyframes only; default the truth)."""
+    period = float(np.median(np.diff(recording.times)))
+    faulted = with_faults(recording, faults_for(period, recording.setup.n_lidars)[fault](),
+                          seed=0)
+    truth = recording.truth
+    poses, health, seconds = run(name, faulted, start_of(truth))
+    kept = steps_of(recording, faulted)
+    jump, final = score(poses, (truth if reference is None else reference)[kept], truth[kept])
+    return jump, final, health, seconds
+
+
 def matrix(drives: dict[str, Recording], names: list[str], selected: list[str] | None,
            results: list[dict]) -> None:
     for group, recording in drives.items():
-        period = float(np.median(np.diff(recording.times)))
-        faults = faults_for(period, recording.setup.n_lidars)
         for name in names:
             truth = recording.truth
             if truth is None:
                 raise ValueError(f"{group}: the matrix needs truth, per scan or at keyframes")
-            start = truth[0] if np.all(np.isfinite(truth[0])) else np.zeros(3)
-            clean, health, seconds = run(name, recording, start)
+            clean, health, seconds = run(name, recording, start_of(truth))
             reference = truth if np.all(np.isfinite(truth)) else clean
             clean_jump, clean_final = score(clean, reference, truth)
             print(f"{group:28s} {name:15s} {'clean':18s} jump {clean_jump:6.3f} final "
                   f"{clean_final:6.3f}  {seconds:6.1f} s  {health}", flush=True)
-            for fault_name, build in faults.items():
+            for fault_name in FAULT_NAMES:
                 if selected and fault_name not in selected:
                     continue
-                faulted = with_faults(recording, build(), seed=0)
-                poses, health, seconds = run(name, faulted, start)
-                kept = steps_of(recording, faulted)
-                jump, final = score(poses, reference[kept], truth[kept])
+                jump, final, health, seconds = faulted_score(name, recording, fault_name,
+                                                             reference)
                 ok = (jump - clean_jump <= JUMP_MARGIN
                       and final <= FINAL_FACTOR * clean_final + FINAL_MARGIN)
                 results.append({"drive": group, "estimator": name, "fault": fault_name,

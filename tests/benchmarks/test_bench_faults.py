@@ -59,12 +59,7 @@ def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> 
     recording = drives[group]
     clean, _, _ = bench.run(name, recording, recording.truth[0])
     clean_jump, clean_final = bench.score(clean, recording.truth, recording.truth)
-    period = float(np.median(np.diff(recording.times)))
-    faulted = with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
-                          seed=0)
-    poses, health, _ = bench.run(name, faulted, recording.truth[0])
-    kept = recording.truth[bench.steps_of(recording, faulted)]
-    jump, final = bench.score(poses, kept, kept)
+    jump, final, health, _ = bench.faulted_score(name, recording, fault)
     assert jump - clean_jump <= bench.JUMP_MARGIN, (jump, clean_jump)
     assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
     if fault.startswith("blind"):

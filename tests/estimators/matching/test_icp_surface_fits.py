@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimators.datasets.faults import with_faults
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.surface_fits import MAX_SAGITTA, surface_reference
 from tests.benchmarks.bench_modules import load
@@ -59,13 +58,7 @@ def test_the_midpoints_lie_on_the_cylinders() -> None:
 
 def faulted_final(recording, fault: str) -> float:
     """[m] the end-point error of ``icp`` on ``recording`` with the matrix's ``fault``."""
-    period = float(np.median(np.diff(recording.times)))
-    faulted = with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
-                          seed=0)
-    start = recording.truth[0] if np.all(np.isfinite(recording.truth[0])) else np.zeros(3)
-    poses, _, _ = bench.run("icp", faulted, start)
-    kept = recording.truth[bench.steps_of(recording, faulted)]
-    return bench.score(poses, kept, kept)[1]
+    return bench.faulted_score("icp", recording, fault)[1]
 
 
 @pytest.mark.parametrize(("fault", "limit"), [("dropout_half", 0.44), ("frozen", 0.2)])
