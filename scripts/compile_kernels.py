@@ -10,23 +10,29 @@ the packages that hold kernels.
 
 from __future__ import annotations
 
-import hashlib
+import importlib.util
 import sys
 from pathlib import Path
+from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The packages whose sources key the marker (``estimators.leaderboard.warmup``'s).
 PACKAGES = ("estimators", "lidar_env")
 
 
+def _kernel_cache() -> ModuleType:
+    """``lidar_env.core.kernel_cache`` loaded from its file (standard library only), without
+    importing ``lidar_env`` (gymnasium, numpy, numba)."""
+    path = ROOT / "lidar_env" / "core" / "kernel_cache.py"
+    spec = importlib.util.spec_from_file_location("_kernel_cache", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def source_digest(root: Path = ROOT) -> str:
     """SHA-256 (first 12 hex digits) of the paths and contents of the packages' ``*.py``."""
-    digest = hashlib.sha256()
-    for package in PACKAGES:
-        for path in sorted((root / package).rglob("*.py")):
-            digest.update(path.relative_to(root).as_posix().encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()[:12]
+    return _kernel_cache().source_digest(root, PACKAGES)
 
 
 def main() -> int:
