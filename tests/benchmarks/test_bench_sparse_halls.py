@@ -66,8 +66,12 @@ def test_turn_in_place_driver_stops_to_turn() -> None:
 def test_the_seed_sweep_scores_a_drive_kind_rebuilt_from_another_seed() -> None:
     sweep = load("bench_sparse_hall_seeds")
     results = sweep.main(["--seeds", "10", "--drives", "hall_20x15_burger",
-                          "--estimators", "icp"])
+                          "--estimators", "icp", "zero"])
     row = results["hall_20x15_burger"]
-    assert row["failed_seeds"] == [] and len(row["icp"]) == 1
+    assert row["failed_seeds"] == [] and len(row["icp"]["drift_percent"]) == 1
     rebuilt = bench.record(dataclasses.replace(bench.DRIVES["hall_20x15_burger"], seed=10))
-    assert row["icp"][0] == bench.score(rebuilt, bench.replay(rebuilt, "icp")[0])["drift_percent"]
+    scores = bench.score(rebuilt, bench.replay(rebuilt, "icp")[0])
+    assert row["icp"]["drift_percent"] == [scores["drift_percent"]]
+    assert row["icp"]["ate_m"] == [scores["ate_m"]]
+    # an estimator that never moves ends worse than icp on the seed, by both measures
+    assert row["worse_than_first"] == {"zero": {"drift_percent": 1, "ate_m": 1}}
