@@ -12,6 +12,7 @@ closure.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -153,51 +154,27 @@ class PointToLineReference:
                 f"{self.anchors.shape}"
             )
 
-    @property
-    def normals(self) -> NDArray[np.float64] | None:
-        """Unit normals (N, 2) of the reference points, None for Censi's two-point lines."""
-        return self._normals
+    #: The attributes :attr:`kernel_arrays` holds that may be set after construction (the
+    #: curve fits set them on a built reference).
+    _KERNEL_INPUTS = frozenset({"normals", "valid_normals", "anchors"})
 
-    @normals.setter
-    def normals(self, normals: NDArray[np.float64] | None) -> None:
-        self._normals = normals
-        self._kernel_arrays: tuple[object, ...] | None = None
+    def __setattr__(self, name: str, value: object) -> None:
+        super().__setattr__(name, value)
+        if name in self._KERNEL_INPUTS:
+            self.__dict__.pop("kernel_arrays", None)  # built again at its next use
 
-    @property
-    def valid_normals(self) -> NDArray[np.bool_] | None:
-        """Which stored normals (N,) hold (None without normals)."""
-        return self._valid_normals
-
-    @valid_normals.setter
-    def valid_normals(self, valid: NDArray[np.bool_] | None) -> None:
-        self._valid_normals = valid
-        self._kernel_arrays = None
-
-    @property
-    def anchors(self) -> NDArray[np.float64]:
-        """The points (N, 2) the lines pass through (the reference points unless denoised)."""
-        return self._anchors
-
-    @anchors.setter
-    def anchors(self, anchors: NDArray[np.float64]) -> None:
-        self._anchors = anchors
-        self._kernel_arrays = None
-
-    @property
+    @cached_property
     def kernel_arrays(self) -> tuple[object, ...]:
         """The reference as the kernels of :mod:`estimators.matching.normal_equations` take
-        it, built once: the k-d tree's arrays, the points, the contiguous normals (the points
-        where none are stored), the valid flags, the contiguous anchors and whether normals
-        are stored."""
-        if self._kernel_arrays is None:
-            has_normals = self.normals is not None
-            self._kernel_arrays = (
-                *self.search_tree.arrays, self.points,
+        it, built once (again after ``normals``, ``valid_normals`` or ``anchors`` are set):
+        the k-d tree's arrays, the points, the contiguous normals (the points where none are
+        stored), the valid flags, the contiguous anchors and whether normals are stored."""
+        has_normals = self.normals is not None
+        return (*self.search_tree.arrays, self.points,
                 np.ascontiguousarray(self.normals if has_normals else self.points,
                                      dtype=np.float64),
                 self.valid_normals if has_normals else np.ones(len(self.points), bool),
                 np.ascontiguousarray(self.anchors), has_normals)
-        return self._kernel_arrays
 
     @classmethod
     def with_estimated_normals(
