@@ -116,7 +116,7 @@ class ScanClock:
     def __init__(self, max_intervals: int = 201, max_steps: int = 21) -> None:
         self.intervals = SortedWindow(max_intervals)
         self.steps = SortedWindow(max_steps)
-        self._statistics: dict[str, float] = {}
+        self._jitter: float | None = None  # of the intervals, until they change
 
     def add(self, dt: float) -> None:
         """One more interval ``dt`` [s]; a non-finite one is ignored."""
@@ -124,13 +124,13 @@ class ScanClock:
             self.intervals.push(dt)
             if dt > 0:
                 self.steps.push(dt)
-            self._statistics.clear()
+            self._jitter = None
 
     def extend(self, intervals: Iterable[float]) -> None:
         """More finite intervals [s], as the clock's history only (not as steps)."""
         for dt in intervals:
             self.intervals.push(dt)
-        self._statistics.clear()
+        self._jitter = None
 
     @property
     def settled(self) -> bool:
@@ -146,10 +146,9 @@ class ScanClock:
     def jitter(self) -> float:
         """:func:`clock_jitter` of the intervals [s], read off their sorted window
         (:func:`sorted_median_deviation`) once per new interval."""
-        if "jitter" not in self._statistics:
-            self._statistics["jitter"] = sorted_median_deviation(self.intervals.ordered,
-                                                                 self.median)
-        return self._statistics["jitter"]
+        if self._jitter is None:
+            self._jitter = sorted_median_deviation(self.intervals.ordered, self.median)
+        return self._jitter
 
     @property
     def typical_step(self) -> float:
