@@ -28,7 +28,11 @@ from numpy.typing import NDArray
 
 from estimators.matching.match_result import MatchResult
 from estimators.matching.scan_matching import LikelihoodField
-from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_counts
+from estimators.matching.seen_through import (
+    SEEN_THROUGH_SLACK,
+    seen_through_count,
+    seen_through_counts,
+)
 from estimators.matching.window_search import search_in_box, thinned_for_search
 
 FloatArray = NDArray[np.float64]
@@ -179,7 +183,7 @@ def off_seen_through(match_from: Callable[[FloatArray], Match], found: Match,
     walls as well as at the car, and better where the reference saw more of them, but sees
     through the walls it has passed."""
     def seen(match: Match) -> int:
-        return int(seen_through_counts(reference_points, query_points, pose_of(match)[None])[0])
+        return seen_through_count(reference_points, query_points, pose_of(match))
 
     if min(len(reference_points), len(query_points)) < MIN_SEARCH_POINTS:
         return found, 0, None

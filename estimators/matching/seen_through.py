@@ -73,3 +73,9 @@ def seen_through_counts(reference_points: FloatArray, query_points: FloatArray,
             (distance >= NEAREST_JUDGED) & np.isfinite(behind)
             & (behind > distance + SEEN_THROUGH_MARGIN), axis=1)
     return counts
+
+
+def seen_through_count(reference_points: FloatArray, query_points: FloatArray,
+                       pose: FloatArray) -> int:
+    """:func:`seen_through_counts` at one ``pose`` (3,)."""
+    return int(seen_through_counts(reference_points, query_points, pose[None])[0])

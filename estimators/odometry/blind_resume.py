@@ -35,7 +35,11 @@ from numpy.typing import NDArray
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_matching import LikelihoodField
-from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_counts
+from estimators.matching.seen_through import (
+    SEEN_THROUGH_SLACK,
+    seen_through_count,
+    seen_through_counts,
+)
 from estimators.odometry.global_search import GlobalSearch
 from lidar_env.core.se2 import transform_points
 
@@ -101,7 +105,7 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
                                2.0 * search.resolution)
     moved = not np.array_equal(start, unheld.pose)
     placed = register(reference, points, start, params, start, np.zeros(3)) if moved else match
-    if placed.quality < min_quality and seen_through_counts(search.map_points, points,
-                                                            placed.pose[None])[0] > 0:
+    if placed.quality < min_quality and seen_through_count(search.map_points, points,
+                                                           placed.pose) > 0:
         return MatchResult(guess.copy(), placed.quality, placed.rmse, 0, False, None), True
     return (placed if moved else None), False

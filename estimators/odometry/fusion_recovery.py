@@ -45,8 +45,8 @@ from estimators.matching.scan_recovery import (
     off_seen_through,
     reach,
     search_start,
-    seen_through_counts,
 )
+from estimators.matching.seen_through import seen_through_count
 from lidar_env.core.se2 import transform_points
 
 #: A car motion (3,) from the latest keyframe, its edges and their mean share explained.
@@ -104,7 +104,7 @@ class BlindScans:
 
     def seen_through(self, motion: NDArray[np.float64]) -> int:
         """Keyframe points the new scans see through with the car moved ``motion`` (3,)."""
-        return int(seen_through_counts(self.reference, self.query, motion[None])[0])
+        return seen_through_count(self.reference, self.query, motion)
 
     def off_seen_through(self, match_from: Callable[[NDArray[np.float64]], Solution],
                          found: Solution) -> tuple[Solution, int]:
