@@ -341,7 +341,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             if len(points) >= 2:
                 self._add_keyframe(guess, self._map_points(guess, seen, points))
             return guess
-        self._degenerate = math.isfinite(self.sideslip_sigma) and leaves_a_direction_free(
+        # the scan at the guess leaves a direction free: the no-sideslip constraint holds it
+        degenerate = math.isfinite(self.sideslip_sigma) and leaves_a_direction_free(
             self._reference, points, guess, self.params)
         result = self._match(points, guess, predicted, interval)
         for _ in range(2 if self._moving is not None else 0):  # (module docstring)
@@ -351,7 +352,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             points = static
             result = register(self._reference, points, result.pose, self.params, guess,
                               self.match_information)
-        if self._degenerate:
+        if degenerate:
             result = self._no_sideslip_match(result, points, guess)
         pose = result.pose
         self.scan_information = (np.zeros((3, 3)) if result.information is None

@@ -41,8 +41,7 @@ class ConstantVelocityModel:
     ``noise_sigma``, ``prior_sigma_translation``, ``prediction_acceleration``,
     ``sideslip_sigma``, ``speed_information``), ``_prior_information``, ``pose`` and
     ``speed_unknown``, and keeps ``_velocity``, ``_seen_translation``, ``_translations``,
-    ``_misses``, ``_clock``, ``_last_time`` and ``_degenerate`` (set by the matching step: the
-    scan at the guess leaves a direction free)."""
+    ``_misses``, ``_clock`` and ``_last_time``."""
 
     use_timestamps: bool
     velocity_window: int
@@ -61,7 +60,6 @@ class ConstantVelocityModel:
         self._seen_translation = np.zeros(2)  # the last increment's, midpoint frame
         self._translations: deque[FloatArray] = deque(maxlen=self.velocity_window)
         self._misses: deque[float] = deque(maxlen=self.velocity_window)
-        self._degenerate = False  # the scan at the guess leaves a direction free
         self._last_time = 0.0
         self._clock = ScanClock()
 
