@@ -11,6 +11,7 @@ from estimators.matching.seen_through import (
     BEARING_BIN,
     NEAREST_JUDGED,
     nearest_by_bearing,
+    seen_through_count,
     seen_through_counts,
 )
 from tests.estimators.corridor_scans import corridor, scan_at
@@ -22,6 +23,7 @@ def test_a_scan_placed_short_of_where_it_was_taken_sees_through_the_walls_passed
     counts = seen_through_counts(walls, scan, np.array([[8.0, 0, 0], [12.0, 0, 0],
                                                         [4.0, 0, 0]]))
     assert counts[0] > 20 and counts[1] <= 3  # placed 4 m on: the walls lie behind
+    assert seen_through_count(walls, scan, np.array([12.0, 0, 0])) == counts[1]
     walls = corridor(10.0)
     assert seen_through_counts(walls, scan, np.array([[8.0, 0, 0]]))[0] == 0
     assert seen_through_counts(walls, scan, np.array([[4.0, 0, 0]]))[0] > 20
