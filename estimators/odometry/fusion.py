@@ -276,7 +276,7 @@ class FusionEstimator(Estimator):
                     latest.pose.tolist()), compose_floats(previous, longer))), intervals, dt)
             from_latest, edges, score = recovered(
                 lambda guess: self._solve(latest, current, previous, guess, information),
-                (from_latest, edges, score), longer, bool(self.skipped_before),
+                (from_latest, edges, score), step, longer, intervals, bool(self.skipped_before),
                 lambda motion: list(compose_floats(inverse_floats(previous), compose_floats(
                     latest.pose.tolist(), motion.tolist()))), blind)
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))

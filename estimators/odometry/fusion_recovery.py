@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from estimators.health import BLIND_STRETCH
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
+    lost_scan_surprise,
     off_seen_through,
     reach,
     search_start,
@@ -116,12 +117,29 @@ class BlindScans:
                                 self.reference, self.query, linear)[:2]
 
 
-def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer: list[float],
-              skipped: bool, step_to: Callable[[NDArray[np.float64]], list[float]],
+def likelier_longer(found: Solution, other: Solution, guess: list[float], longer: list[float],
+                    intervals: float, step_to: Callable[[NDArray[np.float64]], list[float]]
+                    ) -> bool:
+    """Whether ``other``, matched from the ``longer`` guess over ``intervals`` scan intervals,
+    is likelier than ``found``, matched from the one-interval ``guess`` (both car frame, from
+    the last pose used; ``step_to`` turns a solution's motion into one), where they explain
+    the scans alike: its guess predicted it better
+    (:func:`~estimators.matching.scan_recovery.lost_scan_surprise` in units of the guess's
+    step). Along a direction the scans leave free (a corridor's axis) each match stays at its
+    guess; the directions they pin tell lost scans from a stamp that jumped alone."""
+    step = math.hypot(guess[0], guess[1])
+    return (lost_scan_surprise(np.array(step_to(other[0])), np.array(longer), intervals, step)
+            < lost_scan_surprise(np.array(step_to(found[0])), np.array(guess), 1.0, step))
+
+
+def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: list[float],
+              longer: list[float], intervals: float, skipped: bool,
+              step_to: Callable[[NDArray[np.float64]], list[float]],
               blind: BlindScans | None = None) -> Solution:
     """The motion found after scans lost or skipped: ``found`` (matched from the one-interval
-    guess) or the match from the ``longer`` guess (car frame, from the last pose used) where
-    it explains more of the scans, or as much after ``skipped`` scans; where neither explains
+    ``guess``) or the match from the ``longer`` guess over ``intervals`` (car frame, from the
+    last pose used) where it explains more of the scans, or as much after ``skipped`` scans
+    or where its guess predicted it better (:func:`likelier_longer`); where neither explains
     :data:`POOR_SCORE` of the scans, the match from the motion the ``blind`` scans' search
     finds (None: no search) where it explains clearly more. After a blind stretch (more
     than :data:`~estimators.health.BLIND_STRETCH` intervals), where the new scans see
@@ -132,7 +150,8 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, longer:
     matches from a guess."""
     other = solve(longer)
     tie = SCORE_TOLERANCE if blind is None else blind.share_error(found[2])
-    if other[2] > found[2] + SCORE_TOLERANCE or (skipped and other[2] >= found[2] - tie):
+    if other[2] > found[2] + SCORE_TOLERANCE or (other[2] >= found[2] - tie and (
+            skipped or likelier_longer(found, other, guess, longer, intervals, step_to))):
         found = other
     searched = None if blind is None or found[2] >= POOR_SCORE else blind.searched()
     if searched is not None:

@@ -1,0 +1,40 @@
+"""Where ``lidar_odometry`` puts the car after a clock gap: scans lost on the way, or only the
+stamp jumped.
+
+The scans alone cannot tell the two apart along a direction they leave free (a featureless
+corridor's axis): matched from the one-interval guess (the stamp jumped alone) the car stays
+there along the axis, matched from the guess over every interval of the gap (scans lost while
+it drove on) it stays there instead, and both explain the scan alike. The directions the scans
+pin do tell them apart: a car weaving down the corridor for eleven intervals has crossed it by
+eleven intervals' sideways motion, where one interval moves it by a tenth of that. So the scan
+is matched from both guesses, each held by the same weak prior at its guess, and of two
+matches that explain the scan alike the one its guess predicted better is kept
+(:func:`~estimators.matching.scan_recovery.most_likely_match`, the ``icp`` estimator's test of
+a lost scan): its pinned directions agree with it, and along the free one the guess that
+agrees is the best there is. Poses in the world frame: x, y [m], heading [rad].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.icp import ICPParams, MatchResult, register
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.matching.scan_recovery import most_likely_match
+
+FloatArray = NDArray[np.float64]
+
+
+def across_gap(reference: PointToLineReference, points: FloatArray, found: MatchResult,
+               guess: FloatArray, longer: FloatArray, intervals: float, step: float,
+               params: ICPParams, prior_information: FloatArray) -> MatchResult:
+    """``found``, the match of ``points`` (M, 2, car frame) from the one-interval ``guess``
+    (3,), or the match from the ``longer`` guess (3,) over ``intervals`` scan intervals (held
+    by ``prior_information`` at it, as ``found`` was at ``guess``) where it explains the scan
+    as well and its guess predicted it better, the last per-interval ``step`` [m] the unit of
+    a miss (module docstring)."""
+    other = register(reference, points, longer, params, longer, prior_information)
+    kept = most_likely_match([found, other], [guess, longer], [1.0, intervals], step,
+                             len(points))
+    return (found, other)[kept]
