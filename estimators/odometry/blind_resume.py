@@ -90,16 +90,52 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     return poses[tied[np.argmin(np.abs(offsets[tied]))]]
 
 
+def toward_guess(map_points: FloatArray, points: FloatArray, match: MatchResult,
+                 guess: FloatArray, min_information: float, step: float) -> FloatArray | None:
+    """``match.pose`` (3,) moved along its least pinned direction to the ``guess``'s (3,)
+    place on that line, where its ``information`` pins that direction less than
+    ``min_information`` points do (the directions ICP leaves to a prior), the move is at
+    least ``step`` [m] and the scan's ``points`` (M, 2, car frame) see through no more
+    ``map_points`` (N, 2, world) there (within :data:`SEEN_THROUGH_SLACK`); else None.
+    Along a direction the scan does not pin, the motion model's guess is the best there is;
+    a place that scores a little better on the map there is one the map saw more of (the
+    end of a corridor the car drove on past while blind), not evidence."""
+    direction = least_pinned_direction(match.information)
+    if match.information is None or float(
+            direction @ match.information[:2, :2] @ direction) >= min_information:
+        return None
+    offset = float(np.dot(guess[:2] - match.pose[:2], direction))
+    if abs(offset) < step:
+        return None
+    moved = match.pose.copy()
+    moved[:2] += offset * direction
+    if seen_through_count(map_points, points, moved) > (
+            seen_through_count(map_points, points, match.pose) + SEEN_THROUGH_SLACK):
+        return None
+    return moved
+
+
+def held_along(direction: FloatArray, information: FloatArray | None) -> FloatArray:
+    """Prior information (3, 3) holding a pose along ``direction`` (2,, unit) only, as
+    firmly as the match's ``information`` (3, 3) pins its best pinned direction (nothing
+    where that is unknown)."""
+    strength = 0.0 if information is None else float(np.linalg.eigvalsh(information[:2, :2])[-1])
+    held = np.zeros((3, 3))
+    held[:2, :2] = strength * np.outer(direction, direction)
+    return held
+
+
 def resumed_match(search: GlobalSearch, reference: PointToLineReference, points: FloatArray,
                   guess: FloatArray, match: MatchResult, reach: float, params: ICPParams,
                   min_quality: float) -> tuple[MatchResult | None, bool]:
     """The far-apart ``match`` of ``points`` (M, 2, car frame) after a long blind stretch,
     and whether the scan is lost. None where the match stands: along the least pinned
     direction of its ICP on the map alone (the guess held it), within ``reach`` [m] (in two
-    search cells' steps), no place is better (:func:`along_least_pinned`). Else ICP from
-    that place, held by nothing in the directions the scan leaves free; or, where the
-    placement explains less than ``min_quality`` of the scan and the scan still sees
-    through map points there, the ``guess`` (3,), lost."""
+    search cells' steps), no place is better (:func:`along_least_pinned`) and the scan
+    leaves the guess's (3,) place on that line open (:func:`toward_guess`). Else ICP from the better
+    place, held by nothing in the directions the scan leaves free, or from the guess's,
+    held there along the line; or, where the placement explains less than ``min_quality`` of
+    the scan and the scan still sees through map points there, the ``guess``, lost."""
     unheld = register(reference, points, match.pose, params, match.pose, np.zeros(3))
     start = along_least_pinned(search.field, search.map_points, points, unheld, reach,
                                2.0 * search.resolution)
@@ -108,4 +144,9 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
     if placed.quality < min_quality and seen_through_count(search.map_points, points,
                                                            placed.pose) > 0:
         return MatchResult(guess.copy(), placed.quality, placed.rmse, 0, False, None), True
+    guessed = toward_guess(search.map_points, points, placed if moved else unheld, guess,
+                           params.min_information, 2.0 * search.resolution)
+    if guessed is not None:
+        held = held_along(least_pinned_direction(unheld.information), unheld.information)
+        return register(reference, points, guessed, params, guessed, held), False
     return (placed if moved else None), False
