@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,41 +27,36 @@ from numpy.typing import NDArray
 
 from estimators.base import Estimator
 from estimators.health import evident_time_step, intervals_since_used
-from estimators.matching.curve_refinement import PRIOR_INFORMATION, PRIOR_SIGMA
+from estimators.matching.curve_refinement import PRIOR_SIGMA
 from estimators.matching.rotation_pc import (
     PreparedScan,
     ScanMatcher,
-    refinement_starts,
     require_sensor_frame,
 )
 from estimators.odometry.edge_consensus import fuse_from_consensus
+from estimators.odometry.fusion_keyframes import Keyframe, KeyframeMatching
+from estimators.odometry.fusion_motion import CLOCK_HISTORY, FusedVelocity
 from estimators.odometry.fusion_recovery import BlindScans, recovered
 from estimators.odometry.motion_prior import (
     ScanClock,
     midpoint_velocity,
-    prediction_information,
     within_prediction_horizon,
 )
-from estimators.odometry.sensor_graph import SensorEdge, optimize_poses
+from estimators.odometry.sensor_graph import SensorEdge
 from lidar_env.core import ConfigError, EstimatorInputError
-from lidar_env.core.se2 import PoseFloats, compose_floats, inverse, inverse_floats, wrap_float
+from lidar_env.core.se2 import (
+    PoseFloats,
+    compose_floats,
+    inverse,
+    inverse_floats,
+    relative_floats,
+    wrap_float,
+)
 
 FloatArray = NDArray[np.float64]
 
-#: Scan intervals the clock's typical jitter is taken over (20 s at 10 Hz).
-CLOCK_HISTORY = 200
-
-
 @dataclass
-class _Keyframe:
-    """A car pose [m, m, rad] in the trajectory frame and its scans prepared for matching."""
-
-    pose: FloatArray
-    scans: tuple[PreparedScan, ...]
-
-
-@dataclass
-class FusionEstimator(Estimator):
+class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
     """Both Lidars, all four same- and cross-sensor matches, fused on SE(2) over keyframes.
 
     Every scan pair is matched by :class:`estimators.matching.rotation_pc.ScanMatcher` against the
@@ -118,7 +112,7 @@ class FusionEstimator(Estimator):
     _mount_inverse_floats: list[PoseFloats] = field(
         default_factory=list, init=False, repr=False)
     _main_mount_inverse: PoseFloats = field(default=(0.0, 0.0, 0.0), init=False, repr=False)
-    _keyframes: list[_Keyframe] = field(default_factory=list, init=False, repr=False)
+    _keyframes: list[Keyframe] = field(default_factory=list, init=False, repr=False)
     _edges: list[tuple[int, int, SensorEdge]] = field(default_factory=list, init=False, repr=False)
     _n_keyframes: int = field(default=0, init=False, repr=False)
     _velocity: FloatArray = field(default_factory=lambda: np.zeros(3), init=False, repr=False)
@@ -176,69 +170,7 @@ class FusionEstimator(Estimator):
                      for key, sensor in zip(self.setup.keys, self.setup.sensors, strict=True))
 
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
-        self._add_keyframe(_Keyframe(self._initial_pose.copy(), self._prepare(scans)))
-
-    def _add_keyframe(self, keyframe: _Keyframe) -> None:
-        self._keyframes.append(keyframe)
-        self._n_keyframes += 1
-        if len(self._keyframes) > self.window:
-            self._keyframes.pop(0)
-        first = self._n_keyframes - len(self._keyframes)
-        self._edges = [(a, b, e) for a, b, e in self._edges if a >= first]
-
-    def _match_all(
-        self,
-        keyframe: _Keyframe,
-        scans: tuple[PreparedScan, ...],
-        motion_guess: Sequence[float],
-        seed: Sequence[float] | None = None,
-        prior_information: FloatArray = PRIOR_INFORMATION,
-    ) -> list[SensorEdge]:
-        """The matches of ``scans`` against ``keyframe`` (nodes 0 and 1) by refinement.
-        ``motion_guess``: predicted car motion between them, which each match gets as its prior
-        ``mount_i⁻¹ ⊕ guess ⊕ mount_j`` (held about the car's centre, with
-        ``prior_information``, see :func:`estimators.matching.rotation_pc.refine_on_curves`).
-
-        ``seed``: the car motion the main Lidar's phase correlation found (the correlation's
-        FFTs are the dearest part of a match; one finds the basin for all); then the main
-        pair is refined from it, and the other same- and cross-sensor pairs from that.
-        Without, every pair starts from the guess and only the same-sensor pairs are matched
-        (these are the extra edges to older keyframes, where the cross pairs would add cost,
-        not coverage). A refinement also starts from the prior where that disagrees with its
-        first start.
-        """
-        assert self._matcher is not None and self.setup is not None
-        mounts, mount_inverses = self._mount_floats, self._mount_inverse_floats
-        sensors = range(len(scans))
-        # guess ⊕ mount_j per target sensor j, shared by the pairs onto it
-        guess_at = [compose_floats(motion_guess, mount) for mount in mounts]
-        start_at = guess_at if seed is None else [compose_floats(seed, mount) for mount in mounts]
-        edges = []
-        for i, j in [(i, j) for i in sensors for j in sensors if seed is not None or i == j]:
-            # relative(mount_i, guess ⊕ mount_j), the mount's inverse made once
-            prior = np.array(compose_floats(mount_inverses[i], guess_at[j]))
-            start = prior if start_at is guess_at else np.array(
-                compose_floats(mount_inverses[i], start_at[j]))
-            match = self._matcher.refine(
-                keyframe.scans[i],
-                scans[j],
-                refinement_starts(start, prior),
-                prior,
-                self._mount_inverses[j][:2],
-                prior_information,
-            )
-            edges.append(SensorEdge(0, i, 1, j, match.pose, match.confidence))
-            if seed is not None and i == j == 0:
-                # The main pair, refined, is a closer start for the others than the correlation.
-                start_motion = self._motion_from_sensor_match(match.pose)
-                start_at = [compose_floats(start_motion, mount) for mount in mounts]
-        return edges
-
-    def _motion_from_sensor_match(self, sensor_motion: FloatArray) -> PoseFloats:
-        """:func:`estimators.matching.rotation_pc.motion_from_sensor_match` of the main Lidar,
-        on floats: the car motion ``mount ⊕ z ⊕ mount⁻¹`` from its match ``z``."""
-        return compose_floats(compose_floats(self._mount_floats[0], sensor_motion.tolist()),
-                              self._main_mount_inverse)
+        self._add_keyframe(Keyframe(self._initial_pose.copy(), self._prepare(scans)))
 
     def _weights(self) -> dict[str, float]:
         return {
@@ -272,20 +204,22 @@ class FusionEstimator(Estimator):
             longer = (self._velocity * (intervals * typical[0])).tolist()
             longer[2] = step[2]
             blind = None if not self.skipped_before else BlindScans.of(
-                self._mounts, latest.scans, current, np.array(compose_floats(inverse_floats(
-                    latest.pose.tolist()), compose_floats(previous, longer))), intervals, dt)
-            from_latest, edges, score = recovered(
+                self._mounts, latest.scans, current, np.array(relative_floats(
+                    latest.pose.tolist(), compose_floats(previous, longer))), intervals, dt)
+            (from_latest, edges, score), lost = recovered(
                 lambda guess: self._solve(latest, current, previous, guess, information),
                 (from_latest, edges, score), step, longer, intervals, bool(self.skipped_before),
-                lambda motion: list(compose_floats(inverse_floats(previous), compose_floats(
+                lambda motion: list(relative_floats(previous, compose_floats(
                     latest.pose.tolist(), motion.tolist()))), blind)
+            if lost:
+                self.health.note_lost(len(self._observations))
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
             pose = self._insert_keyframe(current, pose, edges)
-        motion = list(compose_floats(inverse_floats(previous), pose.tolist()))
+        motion = list(relative_floats(previous, pose.tolist()))
         if recovering:
             # a car turning over the gap moved along the chord of its turn: straight ahead
             # in the frame halfway through the turn, as it drives on from the end of it
@@ -296,7 +230,7 @@ class FusionEstimator(Estimator):
                                                         dt, typical_step))
         return pose
 
-    def _solve(self, latest: _Keyframe, current: tuple[PreparedScan, ...],
+    def _solve(self, latest: Keyframe, current: tuple[PreparedScan, ...],
                previous: list[float], step: list[float], information: FloatArray,
                hint: bool = True) -> tuple[FloatArray, list[SensorEdge], float]:
         """The car motion from ``latest`` to ``current`` (3,), its four edges and their mean
@@ -329,71 +263,3 @@ class FusionEstimator(Estimator):
         start = compose_floats(compose_floats(mounts[0], edges[0].pose.tolist()), mount_inverses[0])
         from_latest = fuse_from_consensus(self._mounts, edges, start, **self._weights())
         return from_latest, edges, sum(edge.confidence for edge in edges) / len(edges)
-
-    def _prediction_information(self, dt: float, predicted: bool = True) -> FloatArray:
-        """The prediction's information over ``dt`` [s]
-        (:func:`estimators.odometry.motion_prior.prediction_information`), with the clock's
-        jitter the median deviation of the last ``CLOCK_HISTORY`` intervals from their median;
-        the weak default prior when nothing was ``predicted`` (a clock gap)."""
-        if dt > 0:
-            self._clock.add(dt)
-        if not predicted or not dt > 0 or not self._clock.settled:
-            # Until a few intervals are seen, neither the clock nor the velocity is known (and
-            # a clock that does not run forward predicts nothing).
-            return PRIOR_INFORMATION
-        speed = float(np.hypot(self._velocity[0], self._velocity[1]))
-        return prediction_information(dt, speed, self._clock.jitter)
-
-    def _update_velocity(self, motion: list[float], dt: float) -> None:
-        """Keep the car's velocity [m/s, m/s, rad/s] (car frame) as the mean of the steps of
-        the last ``velocity_window`` [s].
-
-        The prediction it makes decides what the scans leave open (a featureless corridor's
-        axis): from one step, the match noise of that step (~1 mm at 1 cm range noise, i.e.
-        1 cm/s at 10 Hz) would be carried through the whole corridor; the window's mean carries
-        that of its two ends over its length. Steps inside such a corridor take their open
-        component from the prediction, so they keep the velocity the scans last measured.
-        """
-        self._recent.append((motion, dt))
-        span = sum(step_dt for _, step_dt in self._recent)
-        while len(self._recent) > 1 and span - self._recent[0][1] >= self.velocity_window:
-            span -= self._recent.popleft()[1]
-        if span > 0:
-            # the steps summed one by one as numpy summed the arrays, on floats
-            total = [0.0, 0.0, 0.0]
-            for step, _ in self._recent:
-                total = [total[0] + step[0], total[1] + step[1], total[2] + step[2]]
-            self._velocity = np.array(total) / span
-
-    def _insert_keyframe(
-        self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge]
-    ) -> FloatArray:
-        """Make ``scans`` a keyframe, match it to the older ones that stay in the window and
-        re-solve the window; return its solved pose."""
-        assert self.setup is not None
-        new_id = self._n_keyframes
-        # The oldest keyframe leaves a full window now: matching against it would be wasted.
-        leaving = max(len(self._keyframes) + 1 - self.window, 0)
-        first_staying = new_id - len(self._keyframes) + leaving
-        self._edges.extend((new_id - 1, new_id, e) for e in latest_edges)
-        older = self._keyframes[leaving:-1]
-        for offset, keyframe in enumerate(older):
-            guess = compose_floats(inverse_floats(keyframe.pose.tolist()), pose.tolist())
-            ids = (first_staying + offset, new_id)
-            self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
-        self._add_keyframe(_Keyframe(pose, scans))
-        if older:
-            # Without older edges, the window's graph is the four edges just fused: nothing to
-            # re-solve.
-            first = self._n_keyframes - len(self._keyframes)
-            graph = [
-                SensorEdge(
-                    a - first, e.source_sensor, b - first, e.target_sensor, e.pose, e.confidence
-                )
-                for a, b, e in self._edges
-            ]
-            start = np.array([k.pose for k in self._keyframes])
-            solved = optimize_poses(start, self.setup.mounts, graph, n_fixed=1, **self._weights())
-            for keyframe, solved_pose in zip(self._keyframes, solved, strict=True):
-                keyframe.pose = solved_pose
-        return self._keyframes[-1].pose.copy()

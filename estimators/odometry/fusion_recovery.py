@@ -47,7 +47,7 @@ from estimators.matching.scan_recovery import (
     reach,
     search_start,
 )
-from estimators.matching.seen_through import seen_through_count
+from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_count
 from lidar_env.core.se2 import transform_points
 
 #: A car motion (3,) from the latest keyframe, its edges and their mean share explained.
@@ -107,6 +107,14 @@ class BlindScans:
         """Keyframe points the new scans see through with the car moved ``motion`` (3,)."""
         return seen_through_count(self.reference, self.query, motion)
 
+    def lost(self, found: Solution) -> bool:
+        """Whether ``found`` leaves the car lost: its matches explain less than
+        :data:`POOR_SCORE` of the scans and the new scans see through more than
+        :data:`~estimators.matching.seen_through.SEEN_THROUGH_SLACK` keyframe points there
+        (the car faces what the keyframe never saw; a place driven into while blind explains
+        as little but contradicts nothing)."""
+        return found[2] < POOR_SCORE and self.seen_through(found[0]) > SEEN_THROUGH_SLACK
+
     def off_seen_through(self, match_from: Callable[[NDArray[np.float64]], Solution],
                          found: Solution) -> tuple[Solution, int]:
         """``found`` or the match from a place whose new scans see through fewer keyframe
@@ -135,7 +143,7 @@ def likelier_longer(found: Solution, other: Solution, guess: list[float], longer
 def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: list[float],
               longer: list[float], intervals: float, skipped: bool,
               step_to: Callable[[NDArray[np.float64]], list[float]],
-              blind: BlindScans | None = None) -> Solution:
+              blind: BlindScans | None = None) -> tuple[Solution, bool]:
     """The motion found after scans lost or skipped: ``found`` (matched from the one-interval
     ``guess``) or the match from the ``longer`` guess over ``intervals`` (car frame, from the
     last pose used) where it explains more of the scans, or as much after ``skipped`` scans
@@ -147,7 +155,8 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: 
     the match from a place that sees through fewer (:meth:`BlindScans.off_seen_through`).
     Then matched again from itself (``step_to``: a motion from the keyframe as a guess from
     the last pose used) while that explains more and sees through no more. ``solve``: the
-    matches from a guess."""
+    matches from a guess. Also whether the motion found after a blind stretch leaves the car
+    lost (:meth:`BlindScans.lost`): the best there is, flagged, not a place found again."""
     other = solve(longer)
     tie = SCORE_TOLERANCE if blind is None else blind.share_error(found[2])
     if other[2] > found[2] + SCORE_TOLERANCE or (other[2] >= found[2] - tie and (
@@ -167,4 +176,4 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: 
                 blind is not None and blind.seen_through(again[0]) > seen):
             break
         found = again
-    return found
+    return found, blind is not None and blind.intervals > BLIND_STRETCH and blind.lost(found)

@@ -12,6 +12,7 @@ from estimators.matching.scan_matching import LikelihoodField
 from estimators.odometry.blind_resume import (
     along_least_pinned,
     least_pinned_direction,
+    toward_guess,
 )
 from estimators.odometry.local_map import LocalMapOdometry
 from tests.benchmarks.bench_modules import load
@@ -35,6 +36,28 @@ def test_along_the_axis_the_place_the_scan_does_not_see_through_wins() -> None:
     # a match the scan does not contradict stands, though places farther on score as well
     at_end = MatchResult(np.array([8.05, 0.0, 0.0]), 1.0, 0.01, 5, True, information)
     assert np.array_equal(along_least_pinned(field, walls, scan, at_end, 6.0, 0.1), at_end.pose)
+
+
+def test_along_an_axis_the_scan_does_not_pin_the_guess_places_the_car() -> None:
+    """Down a corridor mapped to x = 20, the scan of bare walls from x = 6 fits anywhere
+    short of the map's end, and a place nearer its mapped part scores a little higher: the
+    match lands at x = 5.6, the motion model guessed x = 6. Where the scan would see through
+    more map points at the guess's place (of a wall across the corridor at x = 8, which its
+    walls reach past), it is no place for the car."""
+    y = np.arange(-6.0, 6.0, 0.05)
+    walls = corridor(20.0)
+    scan = np.concatenate([corridor(12.0), np.column_stack([np.full_like(y, 12.0), y])]) - [
+        6.0, 0.0]
+    scan = scan[np.abs(scan[:, 0]) < 5.0]  # the walls within 5 m: no end in sight
+    free = np.diag([0.5, 500.0, 1e4])  # under min_information (2 points) along x
+    match = MatchResult(np.array([5.6, 0.0, 0.0]), 1.0, 0.01, 5, True, free)
+    guess = np.array([6.0, 0.05, 0.02])
+    moved = toward_guess(walls, scan, match, guess, 2.0, 0.1)
+    assert moved is not None and np.allclose(moved, [6.0, 0.0, 0.0])
+    pinned = MatchResult(match.pose, 1.0, 0.01, 5, True, np.diag([50.0, 500.0, 1e4]))
+    assert toward_guess(walls, scan, pinned, guess, 2.0, 0.1) is None
+    across = np.concatenate([walls, np.column_stack([np.full_like(y, 8.0), y])])
+    assert toward_guess(across, scan, match, np.array([7.0, 0.0, 0.0]), 2.0, 0.1) is None
 
 
 def test_a_lost_scan_is_counted_apart_from_the_fault_counts() -> None:

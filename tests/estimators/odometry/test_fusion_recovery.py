@@ -20,6 +20,10 @@ def solver(scores: dict[float, float]):
     return solve
 
 
+#: The one-interval guess and the longer one of the stand-in solvers (the motion is the guess).
+ONE, LONGER = [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]
+
+
 def same(motion: np.ndarray) -> list[float]:
     return motion.tolist()
 
@@ -38,22 +42,20 @@ def test_the_search_runs_only_where_neither_guess_fits() -> None:
         return np.array([3.0, 0.0, 0.0])
 
     fitting = solver({1.0: 0.9, 2.0: 0.8, 3.0: 0.95})
-    found = recovered(fitting, fitting([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, blind(search))
+    found = recovered(fitting, fitting(ONE), ONE, LONGER, 2.0, True, same, blind(search))[0]
     assert not searched and found[0][0] == 1.0
     poor = solver({1.0: POOR_SCORE - 0.1, 2.0: 0.2, 3.0: 0.9})
-    found = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, blind(search))
+    found = recovered(poor, poor(ONE), ONE, LONGER, 2.0, True, same, blind(search))[0]
     assert searched and found[0][0] == 3.0
 
 
 def test_a_search_that_explains_no_more_is_not_taken() -> None:
     poor = solver({1.0: 0.3, 2.0: 0.2, 3.0: 0.31})
-    found = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], False, same,
-                      blind(lambda: np.array([3.0, 0.0, 0.0])))
+    found, _ = recovered(poor, poor(ONE), ONE, LONGER, 2.0, False, same,
+                         blind(lambda: np.array([3.0, 0.0, 0.0])))
     assert found[0][0] == 1.0
-    nothing = recovered(poor, poor([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], False, same,
-                        blind(lambda: None))
+    nothing, _ = recovered(poor, poor(ONE), ONE, LONGER, 2.0, False, same, blind(lambda: None))
     assert nothing[0][0] == 1.0
-
 
 
 def test_the_search_finds_the_car_on_the_keyframe_and_needs_enough_points() -> None:
@@ -78,5 +80,42 @@ def test_after_blind_scans_the_longer_guess_wins_within_the_shares_standard_erro
     scores = solver({1.0: 0.822, 2.0: 0.800})
     for points, kept in [(180, 2.0), (20_000, 1.0)]:
         scans = BlindScans(np.zeros((180, 2)), np.zeros((points, 2)), np.zeros(3), 20.0, 3.0)
-        found = recovered(scores, scores([1.0, 0.0, 0.0]), [2.0, 0.0, 0.0], True, same, scans)
+        found, _ = recovered(scores, scores(ONE), ONE, LONGER, 2.0, True, same, scans)
         assert found[0][0] == kept
+
+
+def corridor_solver(crossed: float):
+    """A stand-in for the matches down a corridor along x: the scans pin y at ``crossed``
+    [m] and leave x where the guess put it; every match explains 80 % of the scans."""
+    def solve(guess: list[float]):
+        return np.array([guess[0], crossed, 0.0]), None, 0.8
+    return solve
+
+
+def test_after_lost_scans_the_guess_the_pinned_directions_bear_out_is_kept() -> None:
+    """A car weaving down a corridor, 0.1 m along and 0.065 m across it per interval, then
+    11 intervals between two scans: lost scans (it crossed 0.72 m) or a stamp that jumped
+    alone (it crossed 0.065 m). Both guesses' matches explain the scans alike; the one whose
+    guess predicted the crossing keeps its place along the axis."""
+    one, longer = [0.1, 0.065, 0.0], [1.1, 0.715, 0.0]
+    for crossed, kept in [(0.72, 1.1), (0.065, 0.1)]:
+        solve = corridor_solver(crossed)
+        found, lost = recovered(solve, solve(one), one, longer, 11.0, False, same)
+        assert found[0][0] == kept and not lost
+
+
+def test_a_blind_stretch_that_leaves_the_car_facing_the_unseen_is_flagged() -> None:
+    """After a blind stretch, the best match explains under POOR_SCORE of the scans and they
+    see through keyframe points there: the car is lost (the match is kept, flagged)."""
+    def scans(seen: int) -> SimpleNamespace:
+        namespace = SimpleNamespace(
+            searched=lambda: None, seen_through=lambda motion: seen, intervals=101.0,
+            share_error=lambda share: 0.02,
+            off_seen_through=lambda match_from, found: (found, seen))
+        namespace.lost = lambda found: BlindScans.lost(namespace, found)
+        return namespace
+
+    poor = solver({1.0: 0.43, 2.0: 0.1})
+    for seen, flagged in [(40, True), (0, False)]:
+        found, lost = recovered(poor, poor(ONE), ONE, LONGER, 101.0, True, same, scans(seen))
+        assert found[0][0] == 1.0 and lost == flagged

@@ -1,0 +1,34 @@
+"""After a clock gap, ``lidar_odometry`` keeps the guess whose place across a corridor the scan
+bears out: lost scans (the car drove on) or a stamp that jumped alone (it did not)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimators.matching.icp import ICPParams, register
+from estimators.matching.point_to_line import PointToLineReference
+from estimators.odometry.gap_match import across_gap
+from tests.estimators.corridor_scans import corridor
+
+#: The corridor (walls at y = +-2 from x = 0 to 40) and a weak prior, as after a clock gap.
+WALLS = corridor(40.0)
+WEAK = np.full(3, 1e-4)
+
+
+def test_the_guess_that_predicted_the_crossing_keeps_its_place_along_the_axis() -> None:
+    """0.1 m along and 0.065 m across per interval from (10, -0.3): after 11 intervals the car
+    is at (11.1, 0.415) when scans were lost, at (10.1, -0.235) when only the stamp jumped.
+    The scan of bare walls pins y alone."""
+    reference = PointToLineReference(WALLS)
+    start, step = np.array([10.0, -0.3, 0.0]), np.array([0.1, 0.065, 0.0])
+    guess, longer = start + step, start + 11.0 * step
+    longer[2] = 0.0
+    params = ICPParams()
+    for car in (longer, guess):
+        x = np.arange(-6.0, 6.0, 0.05)
+        points = np.concatenate([np.column_stack([x, 2.0 - np.full_like(x, car[1])]),
+                                 np.column_stack([x, -2.0 - np.full_like(x, car[1])])])
+        found = register(reference, points, guess, params, guess, WEAK)
+        kept = across_gap(reference, points, found, guess, longer, 11.0, float(np.hypot(
+            step[0], step[1])), params, WEAK)
+        assert np.hypot(*(kept.pose[:2] - car[:2])) < 0.02
