@@ -21,7 +21,8 @@ with truth relative to the first one, which is the start on the simulated drives
 the worst step error beyond the clean run's. Targets (issue 43): ``jump+ <= 0.3 m`` and
 ``final <= 2 x clean final + 0.1 m``. The long blind stretch (``blind_100``) is shown against
 the same targets. ``health`` is the estimator's own report (skipped, frozen, clock jumps,
-blind stretches). CPU seconds per run are measured with ``time.process_time``.
+blind stretches, and ``lost_scans``: scans after which it lost its place). CPU seconds per
+run are measured with ``time.process_time``.
 """
 
 from __future__ import annotations
@@ -121,7 +122,8 @@ def run(name: str, recording: Recording, initial_pose: np.ndarray) -> tuple[np.n
         estimator.update(observation, float(t))
     seconds = time.process_time() - start
     health = getattr(estimator, "health", None)
-    return estimator.trajectory, ({} if health is None else health.counts()), seconds
+    counts = {} if health is None else {**health.counts(), "lost_scans": health.lost_scans}
+    return estimator.trajectory, counts, seconds
 
 
 def step_errors(poses: np.ndarray, truth: np.ndarray) -> np.ndarray:
