@@ -164,6 +164,21 @@ def least_seen_through_place(reference_points: FloatArray, query_points: FloatAr
     return free[int(np.argmax(field.score(placed).mean(axis=1)))].copy()
 
 
+#: Share of its scan the kept match after a blind stretch explains below which the car may
+#: be lost (``lidar_odometry``'s ``min_quality``).
+LOST_BELOW = 0.5
+
+
+def lost_after_blind(quality: float, seen: int) -> bool:
+    """Whether the match kept after a blind stretch leaves the car lost: it explains less
+    than :data:`LOST_BELOW` of the scan (``quality``) and the scan sees through more than
+    :data:`SEEN_THROUGH_SLACK` reference points there (``seen``): the car faces what the
+    reference never saw (it turned towards it while blind), and the best placement is as
+    likely metres off as right. A place driven into while blind explains as little but
+    contradicts nothing."""
+    return quality < LOST_BELOW and seen > SEEN_THROUGH_SLACK
+
+
 Match = TypeVar("Match")
 
 

@@ -42,12 +42,13 @@ from numpy.typing import NDArray
 from estimators.health import BLIND_STRETCH
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
+    lost_after_blind,
     lost_scan_surprise,
     off_seen_through,
     reach,
     search_start,
 )
-from estimators.matching.seen_through import SEEN_THROUGH_SLACK, seen_through_count
+from estimators.matching.seen_through import seen_through_count
 from lidar_env.core.se2 import transform_points
 
 #: A car motion (3,) from the latest keyframe, its edges and their mean share explained.
@@ -108,12 +109,10 @@ class BlindScans:
         return seen_through_count(self.reference, self.query, motion)
 
     def lost(self, found: Solution) -> bool:
-        """Whether ``found`` leaves the car lost: its matches explain less than
-        :data:`POOR_SCORE` of the scans and the new scans see through more than
-        :data:`~estimators.matching.seen_through.SEEN_THROUGH_SLACK` keyframe points there
-        (the car faces what the keyframe never saw; a place driven into while blind explains
-        as little but contradicts nothing)."""
-        return found[2] < POOR_SCORE and self.seen_through(found[0]) > SEEN_THROUGH_SLACK
+        """Whether ``found`` leaves the car lost
+        (:func:`~estimators.matching.scan_recovery.lost_after_blind` of its matches' mean
+        share and the keyframe points the new scans see through there)."""
+        return lost_after_blind(found[2], self.seen_through(found[0]))
 
     def off_seen_through(self, match_from: Callable[[NDArray[np.float64]], Solution],
                          found: Solution) -> tuple[Solution, int]:
