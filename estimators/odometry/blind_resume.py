@@ -61,6 +61,18 @@ def least_pinned_direction(information: FloatArray | None) -> FloatArray:
     return vectors[:, 0]
 
 
+def free_direction(information: FloatArray | None, min_information: float
+                   ) -> FloatArray | None:
+    """The match's least pinned translation direction (2,, unit; :func:`least_pinned_direction`)
+    where its ``information`` (3, 3) pins it less than ``min_information`` points squarely
+    facing it do (the directions ICP leaves to a prior: a corridor's axis); else None."""
+    if information is None:
+        return None
+    direction = least_pinned_direction(information)
+    return direction if float(direction @ information[:2, :2] @ direction) < (
+        min_information) else None
+
+
 def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: FloatArray,
                        match: MatchResult, reach: float, step: float) -> FloatArray:
     """The pose (3,) on the line through ``match.pose`` along its least pinned direction,
@@ -100,9 +112,8 @@ def toward_guess(map_points: FloatArray, points: FloatArray, match: MatchResult,
     Along a direction the scan does not pin, the motion model's guess is the best there is;
     a place that scores a little better on the map there is one the map saw more of (the
     end of a corridor the car drove on past while blind), not evidence."""
-    direction = least_pinned_direction(match.information)
-    if match.information is None or float(
-            direction @ match.information[:2, :2] @ direction) >= min_information:
+    direction = free_direction(match.information, min_information)
+    if direction is None:
         return None
     offset = float(np.dot(guess[:2] - match.pose[:2], direction))
     if abs(offset) < step:

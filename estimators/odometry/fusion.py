@@ -231,8 +231,8 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         return pose
 
     def _solve(self, latest: Keyframe, current: tuple[PreparedScan, ...],
-               previous: list[float], step: list[float], information: FloatArray,
-               hint: bool = True) -> tuple[FloatArray, list[SensorEdge], float]:
+               previous: list[float], step: list[float],
+               information: FloatArray) -> tuple[FloatArray, list[SensorEdge], float]:
         """The car motion from ``latest`` to ``current`` (3,), its four edges and their mean
         share of points explained, guessing the car moved ``step`` (car frame) from the
         ``previous`` pose, held by the prior ``information``."""
@@ -242,9 +242,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         guess = compose_floats(to_latest, compose_floats(previous, step))
         correlated = self._matcher.correlate(
             latest.scans[0], current[0],
-            np.array(compose_floats(mount_inverses[0], compose_floats(guess, mounts[0])))
-            if hint else None,
-        )
+            np.array(compose_floats(mount_inverses[0], compose_floats(guess, mounts[0]))))
         seed = self._motion_from_sensor_match(correlated.pose)
         # A constant twist moves the car along the chord of its turn: with the turn the
         # correlation measured (far better than the mean rate's), the predicted translation

@@ -6,12 +6,13 @@ corridor's axis): matched from the one-interval guess (the stamp jumped alone) t
 there along the axis, matched from the guess over every interval of the gap (scans lost while
 it drove on) it stays there instead, and both explain the scan alike. The directions the scans
 pin do tell them apart: a car weaving down the corridor for eleven intervals has crossed it by
-eleven intervals' sideways motion, where one interval moves it by a tenth of that. So the scan
-is matched from both guesses, each held by the same weak prior at its guess, and of two
-matches that explain the scan alike the one its guess predicted better is kept
-(:func:`~estimators.matching.scan_recovery.most_likely_match`, the ``icp`` estimator's test of
-a lost scan): its pinned directions agree with it, and along the free one the guess that
-agrees is the best there is. Poses in the world frame: x, y [m], heading [rad].
+eleven intervals' sideways motion, where one interval moves it by a tenth of that. So where
+the scan leaves a direction free the scan is matched from both guesses, each held by the same
+weak prior at its guess, and of two matches that explain the scan alike the one its guess
+predicted better is kept (:func:`~estimators.matching.scan_recovery.most_likely_match`, the
+``icp`` estimator's test of a lost scan): its pinned directions agree with it, and along the
+free one the guess that agrees is the best there is. Poses in the world frame: x, y [m],
+heading [rad].
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.matching.scan_recovery import most_likely_match
+from estimators.odometry.blind_resume import free_direction
 
 FloatArray = NDArray[np.float64]
 
@@ -33,7 +35,10 @@ def across_gap(reference: PointToLineReference, points: FloatArray, found: Match
     (3,), or the match from the ``longer`` guess (3,) over ``intervals`` scan intervals (held
     by ``prior_information`` at it, as ``found`` was at ``guess``) where it explains the scan
     as well and its guess predicted it better, the last per-interval ``step`` [m] the unit of
-    a miss (module docstring)."""
+    a miss (module docstring). ``found`` where the scan pins every direction (with
+    ``params.min_information`` points at least): the guesses' matches then agree."""
+    if free_direction(found.information, params.min_information) is None:
+        return found
     other = register(reference, points, longer, params, longer, prior_information)
     kept = most_likely_match([found, other], [guess, longer], [1.0, intervals], step,
                              len(points))

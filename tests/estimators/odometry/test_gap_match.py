@@ -23,7 +23,7 @@ def test_the_guess_that_predicted_the_crossing_keeps_its_place_along_the_axis() 
     start, step = np.array([10.0, -0.3, 0.0]), np.array([0.1, 0.065, 0.0])
     guess, longer = start + step, start + 11.0 * step
     longer[2] = 0.0
-    params = ICPParams()
+    params = ICPParams(min_information=2.0)  # lidar_odometry's
     for car in (longer, guess):
         x = np.arange(-6.0, 6.0, 0.05)
         points = np.concatenate([np.column_stack([x, 2.0 - np.full_like(x, car[1])]),
@@ -32,3 +32,16 @@ def test_the_guess_that_predicted_the_crossing_keeps_its_place_along_the_axis() 
         kept = across_gap(reference, points, found, guess, longer, 11.0, float(np.hypot(
             step[0], step[1])), params, WEAK)
         assert np.hypot(*(kept.pose[:2] - car[:2])) < 0.02
+
+
+def test_where_the_scan_pins_every_direction_the_guess_matches_stand() -> None:
+    """A wall across the corridor pins its axis too: no second match is made."""
+    y = np.arange(-2.0, 2.0, 0.05)
+    reference = PointToLineReference(np.concatenate([WALLS, np.column_stack(
+        [np.full_like(y, 16.0), y])]))
+    car = np.array([11.1, 0.4, 0.0])
+    points = reference.points[np.abs(reference.points[:, 0] - car[0]) < 6.0] - car[:2]
+    params = ICPParams(min_information=2.0)
+    found = register(reference, points, car, params, car, WEAK)
+    longer = car + [3.0, 0.0, 0.0]  # a match from here would land elsewhere, or not at all
+    assert across_gap(reference, points, found, car, longer, 11.0, 0.1, params, WEAK) is found
