@@ -6,11 +6,14 @@ than one over a single interval: the car may have kept its speed (scans lost or 
 drove on) or the stamp alone may have jumped (scans kept coming). Both are matched and the
 one whose matches explain more of the scans is kept (the longer guess turns the car by one
 interval's turn only: over seconds the extrapolated turn is the least known part of it, and
-the correlation measures the turn); where the scans cannot tell them apart
-(a corridor's axis, which the prior decides), the longer guess wins only after skipped scans,
-which prove the time passed: then it wins where its matches explain the scans within the
-share's standard error of the other's (down a corridor the keyframe saw more of near itself,
-a stopped car's match explains a few percent more).
+the correlation measures the turn). Where both explain the scans alike, each match stays at
+its guess along what the scans leave free (a corridor's axis, which the prior decides), and
+the directions they pin say which guess was right: after a clock jump the longer guess wins
+where it predicted its match better than the one-interval guess did its own (a car weaving
+down a corridor has crossed it by every interval's sideways motion;
+:func:`likelier_longer`). After skipped scans, which prove the time passed, it wins where its
+matches explain the scans within the share's standard error of the other's (down a corridor
+the keyframe saw more of near itself, a stopped car's match explains a few percent more).
 
 After skipped scans (a blinded Lidar) where both scans hold enough points, a third start is
 the exact best pose of a branch-and-bound search of the new scan on the latest keyframe's
