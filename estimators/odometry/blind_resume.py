@@ -14,7 +14,10 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   (:func:`~estimators.matching.seen_through.seen_through_counts`), and of those places to
   the one whose points score highest on the map's likelihood field (the ray consistency
   test of occupancy-grid scan matching: a beam ending beyond a mapped surface says the
-  surface is not where the pose puts it).
+  surface is not where the pose puts it). Where the scan pins that direction with less than
+  ``min_information`` points (a bare corridor), no place along it is evidence, though one
+  nearer the mapped part scores a little higher: :func:`toward_guess` puts the car at the
+  motion model's guess along it, where the scan sees through no more map points there.
 * **No place explains the scan.** Where the best placement explains less than the front
   end's ``min_quality`` and the scan still sees through map points there, the car faces
   what the map never saw (it turned towards it while blind) and the placement is as likely
