@@ -6,8 +6,9 @@ against the same drive without the fault.
     python benchmarks/bench_faults.py --aces-scans 0 --json faults.json
 
 Drives: the three paper groups (open_cylinders/right_turn, hallway/zigzag,
-closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and the first
-``--aces-scans`` scans of ACES (``../shared/data/radish``; skipped when absent), whose truth
+closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and
+``--aces-scans`` scans of ACES from its first scan with truth on (``../shared/data/radish``;
+skipped when absent), so every run starts on a known pose that no fault covers; its truth
 is pseudo truth at keyframes only: the poses of ``aces-corrected.log.gz`` (another SLAM
 system's output, keyframes 0.5-1 m apart) at the scans they were logged with (same logger stamps).
 Each drive is recorded once
@@ -101,15 +102,30 @@ def record_drive(group: str, seed: int = 0) -> Recording:
 
 
 def aces_recording(limit: int) -> Recording:
-    """The first ``limit`` scans of ACES (IPC clock), with the pseudo truth of
-    ``aces-corrected`` at its keyframes' scans (matched on the logger clock both logs carry)
-    and NaN rows elsewhere."""
+    """``limit`` scans of ACES (IPC clock) from its first scan with truth on, with the pseudo
+    truth of ``aces-corrected`` at its keyframes' scans (matched on the logger clock both logs
+    carry) and NaN rows elsewhere."""
     log = estimators.datasets.load_log(ACES)
-    recording = recording_from_log(log, limit=limit)
+    recording = recording_from_log(log)
     corrected = estimators.datasets.load_log(ACES_TRUTH)
-    match = match_truth(log.scan_times("logger")[: len(recording)],
-                        corrected.scan_times("logger"), corrected.logged_poses())
-    return dataclasses.replace(recording, truth=match.on_scans(len(recording)))
+    match = match_truth(log.scan_times("logger"), corrected.scan_times("logger"),
+                        corrected.logged_poses())
+    return from_first_truth(dataclasses.replace(recording, truth=match.on_scans(len(recording))),
+                            limit)
+
+
+def from_first_truth(recording: Recording, limit: int) -> Recording:
+    """``limit`` scans of ``recording`` from its first scan with truth on: every run starts
+    on a known pose and the faults' offsets count from it, so the final error's anchor (the
+    first truth) never lies inside a fault, as on the simulated drives."""
+    known = np.flatnonzero(np.isfinite(recording.truth[:, 0]))
+    if not len(known):
+        raise ValueError(f"{recording.source}: no scan has truth")
+    window = slice(int(known[0]), int(known[0]) + limit)
+    return dataclasses.replace(recording, times=recording.times[window],
+                               scans={key: scans[window]
+                                      for key, scans in recording.scans.items()},
+                               truth=recording.truth[window])
 
 
 def run(name: str, recording: Recording, initial_pose: np.ndarray) -> tuple[np.ndarray, dict,

@@ -92,6 +92,7 @@ def test_truth_at_keyframes_scores_the_end_between_the_first_and_last_of_them() 
                     reason="ACES and aces-corrected are absent from ../shared/data/radish")
 def test_aces_carries_the_corrected_keyframes_at_their_scans() -> None:
     recording = bench.aces_recording(600)
+    assert len(recording) == 600 and np.isfinite(recording.truth[0]).all()  # starts on truth
     known = np.flatnonzero(np.isfinite(recording.truth[:, 0]))
     assert 30 <= len(known) <= 60  # a keyframe every 0.5-1 m of ~40 m driven
     steps = np.linalg.norm(np.diff(recording.truth[known, :2], axis=0), axis=1)
