@@ -47,6 +47,7 @@ from estimators.matching.point_to_line import (
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
+    lost_after_blind,
     most_likely_match,
     off_seen_through,
     one_turn_guess,
@@ -357,9 +358,8 @@ class ICPEstimator(Estimator):
                 guesses.append(self._increment * lost)  # alone jumped (the scans ran on)
             spans = [float(observations), lost][:len(guesses)]
             starts = list(guesses)
-            # after skipped scans, or scans lost in a clock gap (a stamp that jumped alone is
-            # told apart by the matches), the turn is the least known part of the guess; a
-            # search tells places apart only from enough points
+            # after skipped or lost scans (told from a stamp that jumped alone by the matches)
+            # the turn is the least known part of the guess; a search needs enough points
             span = float(max(observations, lost))
             if span > 1 and min(len(current), len(self._previous)) >= MIN_SEARCH_POINTS:
                 for start, guess in self._recovery_starts(current, span, t - self._times[-1]):
@@ -378,11 +378,13 @@ class ICPEstimator(Estimator):
                                      float(np.hypot(*self._increment[:2])), len(current))
             increment = results[best].pose
             if observations > BLIND_STRETCH:
-                kept, _, place = off_seen_through(lambda start: register(  # a blind stretch
+                kept, seen, place = off_seen_through(lambda start: register(  # a blind stretch
                     reference, current, start, self.params, start, self._prior_information
                     / span**2), results[best], lambda match: match.pose, self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
                 increment, starts = kept.pose, starts + ([] if place is None else [place])
+                if lost_after_blind(kept.quality, seen):  # the best there is, flagged
+                    self.health.note_lost(len(self._observations))
             if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the

@@ -55,6 +55,7 @@ from estimators.matching.correlative import correlative_search
 from estimators.matching.icp import ICPParams, MatchResult, register
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.odometry.blind_resume import resumed_match
+from estimators.odometry.gap_match import across_gap
 from estimators.odometry.global_search import GlobalSearch, SearchWindow
 from estimators.odometry.motion_prior import ScanClock, one_turn_increment
 from estimators.odometry.moving_points import MovingPointFilter
@@ -314,6 +315,10 @@ class FarScanMatching:
                                   self.match_information, seen_free, self.min_quality,
                                   starts)
                 result = retry if retry.quality > result.quality else result
+            if lost and starts and not self.skipped_before:
+                result = across_gap(self._reference, points, result, guess, starts[0],
+                                    intervals, float(np.hypot(step[0], step[1])), self.params,
+                                    self.match_information)
             if self.skipped_before >= BLIND_STRETCH:
                 resumed, lost = resumed_match(self._global_search(), self._reference, points,
                                               guess, result, window.linear, self.params,

@@ -25,6 +25,7 @@ CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, 
     ("closed_to_open/zigzag", "dropout_half"),
     ("closed_to_open/zigzag", "gaps"),
     ("hallway/zigzag", "blind_3s"),  # along the corridor's axis the guess places the car
+    ("hallway/zigzag", "gaps"),  # lost scans told from a stamp that jumped alone
 )] + [
     # pc_fusion: scans lost or skipped; a turn while blind (the recovered motion is matched
     # again until it converges); half the beams dropped (a match fooled along the corridor does
