@@ -83,12 +83,16 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
             submap in range the same way). They tie each stretch of keyframes together over
             more than one step, so the front end's error stops adding up along it; 2.5 m is
             beyond a scan-to-map front end's own window (``lidar_odometry`` matches the last
-            ~2.5 m). Equal to
-            ``min_loop_separation``: revisits only.
-        max_candidates: verify at most 4 candidates per keyframe, revisits first, then best
-            descriptor first.
+            ~2.5 m). Equal to ``min_loop_separation``: revisits only.
+        max_candidates: verify at most 4 per keyframe, revisits first, best descriptor first.
         submap_neighbours: the old place is the candidate keyframe plus this many keyframes
             on each side (2: ~2 m of travel, enough walls to match a 180-degree scan).
+        min_query_points, loop_query_keyframes: a new keyframe with fewer than 100 points is
+            matched together with the keyframes before it, up to 4 (~2 m of travel, placed by
+            the graph; none of the old place's own), until they hold 100: a 3.5 m Lidar's scan
+            of two or three posts pins a loop edge's heading to only 1-2 deg, twice the front
+            end's own error over the same span, and the edge's error falls with the pairs it
+            rests on up to about 100 (``bench_loop_edges.py``).
         loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
         loop_gate: a verified match becomes a loop edge only if it is reachable from the
             graph's current estimate: its Mahalanobis distance from it, under the covariance
@@ -118,9 +122,8 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
             ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
             place is common indoors, two consistent ones in a row rarely are.
         lost_sigma: where the front end lost its place (``Health.lost``), the odometry edge
-            across is a place unknown within this [m] (10) and of any heading, and the
-            keyframes after are searched in the map before until two matches confirm the
-            place (:mod:`estimators.slam.relocalization`).
+            across is a place unknown within this [m] (10) and of any heading; the keyframes after
+            are sought in the map until two matches agree (:mod:`estimators.slam.relocalization`).
         min_range: readings at or below this [m] are "no return".
         match_odometry: add the covariance of a keyframe-to-keyframe match Hessian to the
             distance model of each odometry edge (True: the edge is weak where the scene
@@ -159,6 +162,8 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
     min_overlap_separation: float = 2.5
     max_candidates: int = 4
     submap_neighbours: int = 2
+    loop_query_keyframes: int = 4
+    min_query_points: int = 100
     loss_scale: float = 3.0
     loop_gate: float = 5.0
     max_loop_sigma: float = 5.0
@@ -187,8 +192,9 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
                     "odometry_sigma_rotation", "loop_radius", "max_search_window", "loss_scale",
                     "loop_gate", "max_loop_sigma", "overlap_radius", "lost_sigma")
         lowest = {**dict.fromkeys(("odometry_drift", "odometry_drift_rotation", "loop_drift",
-                                   "min_loop_separation", "min_overlap_separation",
-                                   "global_every", "submap_neighbours", "place_tolerance"), 0),
+                                   "min_loop_separation", "min_overlap_separation", "global_every",
+                                   "submap_neighbours", "loop_query_keyframes", "place_tolerance",
+                                   "min_query_points"), 0),
                   **dict.fromkeys(("max_candidates", "optimize_every", "global_candidates",
                                    "global_confirmation", "max_places"), 1)}
         for name in positive:

@@ -43,6 +43,23 @@ class KeyframeMatching:
         return self._placed_points(max(0, index - before),
                                    self._submap_poses(index, before, after))
 
+    def _query(self, index: int, old: int) -> NDArray[np.float64]:
+        """Points (M, 2) keyframe ``index`` is matched with against the place of keyframe
+        ``old`` (:meth:`_place`), in its frame: its own, and where they are fewer than
+        ``min_query_points``, those of the keyframes before it (up to
+        ``loop_query_keyframes``, none of the place's own) until they are not, placed by the
+        graph's current poses. A scan of walls pins a match by itself; a scan of a few posts
+        leaves its heading loose by a degree or two, which the posts passed just before fix.
+        A keyframe in both the query and the place would match itself: the edge would repeat
+        the graph's estimate instead of measuring it."""
+        last = max(0, index - self.loop_query_keyframes, old + self.submap_neighbours + 1)
+        first = index
+        count = len(self.keyframes[index].points)
+        while count < self.min_query_points and first > last:
+            first -= 1
+            count += len(self.keyframes[first].points)
+        return self._submap(index, index - first, 0)
+
     def _placed_points(self, first: int, poses: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points (M, 2) of keyframes ``first, first + 1, ...``, each placed at its row of
         ``poses`` (n, 3)."""
@@ -200,14 +217,15 @@ class KeyframeMatching:
                               f"{distance:.1f} > loop_gate {self.loop_gate}")
 
     def _close_loops(self, index: int) -> bool:
-        """Verify the candidates of keyframe ``index`` and add the accepted ones as loop edges;
-        return whether one of them is a revisit (at least ``min_loop_separation`` back)."""
+        """Verify the candidates of keyframe ``index`` (its points and, where they are few, the
+        keyframes' before it: :meth:`_query`) and add the accepted ones as loop edges; return
+        whether one of them is a revisit (at least ``min_loop_separation`` back)."""
         revisited = False
         poses = self.graph.poses
         for old, window in self.loop_candidates(index):
             guess = relative(poses[old], poses[index])
             result = self._gate(old, index, verify_loop(
-                self._place(old), self.keyframes[index].points, guess, window, self.loop_params,
+                self._place(old), self._query(index, old), guess, window, self.loop_params,
                 measure_rejected=False))
             self.loop_attempts.append((old, index, result))
             if result.accepted:
