@@ -1,0 +1,145 @@
+"""Where a wheeled robot does not slip sideways, found online from its own well-seen steps.
+
+A car or a differential-drive robot moves, at the point between its fixed wheels (its no-slip
+point), only along its heading. A frame ``offset`` [m] ahead of that point along the car's x
+axis (a CARMEN log's laser frame, a Lidar mounted ahead of the rear axle) moves sideways in a
+turn: over a step that turns by ``turn`` [rad] its translation, in the frame halfway through
+the turn (``motion_prior.midpoint_velocity``), is ``(chord, 2 offset sin(turn / 2))``.
+
+:class:`NoSlipCalibration` fits ``offset`` to the steps a scan pins down in every direction
+(lateral translation against ``2 sin(turn / 2)``, a line through the origin) by iteratively
+reweighted least squares with a Cauchy loss at the residuals' robust scale, so the rare wrong
+match does not drag it, and says whether the fit holds: a holonomic base that strafes, or a
+skid-steered one that slides in its turns, leaves sideways steps no offset explains. Only once
+the fit is confident does ``lidar_odometry`` hold the steps a scan cannot see (a corridor's
+axis) to the constraint (:func:`estimators.odometry.motion_prior.no_sideslip_prior`).
+Distances [m], angles [rad].
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: [points] a step joins the calibration where its match pins the direction across the car
+#: with at least this many points squarely facing it, the other directions free (a corridor's
+#: axis: a few at most).
+MIN_STEP_INFORMATION = 5.0
+#: Steps the fit is taken over: the latest ones (a few minutes at 5-10 Hz of driving).
+WINDOW = 400
+#: Fewest turning steps (``|2 sin(turn / 2)|`` over ``MIN_TURN``) the fit needs.
+MIN_TURNING_STEPS = 10
+#: [rad] a step turning less than this tells nothing of the offset.
+MIN_TURN = math.radians(2.0)
+#: [m] the largest offset's standard error the constraint is applied with.
+MAX_OFFSET_ERROR = 0.02
+#: The largest share of the steps' forward travel their residual sideways steps may have
+#: (robust scale over median forward step): registration noise is a few percent of a step;
+#: a strafing or sliding base's sideways steps, no offset explains, far more.
+MAX_SIDESLIP_SHARE = 0.05
+#: The largest share of steps whose residual exceeds ``OUTLIER`` robust scales (a matcher's
+#: rare wrong step, a walker dragging the match: up to ~3 % in the simulated drives): a base
+#: that strafes now and then, between straight runs that look like a car's, has more.
+MAX_OUTLIER_SHARE = 0.05
+OUTLIER = 5.0
+#: Cauchy loss scale in robust scales, and reweighting iterations.
+CAUCHY_SCALE = 2.0
+ITERATIONS = 5
+#: The fit is taken again every this many new steps (it moves little from one to the next).
+REFIT_EVERY = 5
+
+
+@dataclass(frozen=True)
+class NoSlipFit:
+    """A confident fit: the no-slip point ``offset`` [m] behind the frame along its x axis,
+    its standard error ``offset_error`` [m], and the robust scale of the residual sideways
+    steps ``residual`` [m]."""
+
+    offset: float
+    offset_error: float
+    residual: float
+
+    def lateral(self, turn: float) -> float:
+        """The sideways translation [m] (midpoint frame) of a step turning ``turn`` [rad]."""
+        return 0.0 if self.offset == 0 else 2.0 * self.offset * math.sin(0.5 * turn)
+
+    def sigma(self, turn: float, sideslip_sigma: float) -> float:
+        """[m] how far a step turning ``turn`` [rad] may miss :meth:`lateral`: the slip a
+        no-slip base allows, ``sideslip_sigma``, and the offset's error over that turn."""
+        return math.hypot(sideslip_sigma, 2.0 * self.offset_error * math.sin(0.5 * turn))
+
+
+class NoSlipCalibration:
+    """The offset of the no-slip point from the steps seen so far (module docstring):
+    :meth:`add` a matched step, read :attr:`fit` (None until confident and consistent)."""
+
+    def __init__(self) -> None:
+        self._steps: deque[tuple[float, float, float, float]] = deque(maxlen=WINDOW)  #
+        # forward, lateral [m] in the midpoint frame, 2 sin(turn / 2), lateral variance
+        self._new = 0
+        self.fit: NoSlipFit | None = None
+
+    def add(self, increment: FloatArray, heading: float, information: FloatArray | None
+            ) -> None:
+        """One step: its ``increment`` (3,) (x, y [m], heading [rad], frame of its start), the
+        world ``heading`` [rad] it starts from, and its match's ``information`` (3, 3, world
+        frame, in points), None for a step not matched from the last one (after skipped scans
+        or a jumping clock). Steps the match does not pin across the car are not used (a
+        corridor's axis lies across a car turned towards a wall)."""
+        if information is None:
+            return
+        x, y, turn = increment.tolist()
+        c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
+        variance = _sideways_variance(information, heading + 0.5 * turn)
+        if not 0 < variance <= 1.0 / MIN_STEP_INFORMATION:
+            return
+        self._steps.append((c * x + s * y, c * y - s * x, 2.0 * s, variance))
+        self._new += 1
+        if self._new >= REFIT_EVERY:
+            self._new = 0
+            self.fit = fitted(np.array(self._steps))
+
+
+def _sideways_variance(information: FloatArray, heading: float) -> float:
+    """The variance [1 / points] across ``heading`` [rad] of a pose with ``information`` (3,
+    3; world x, y, heading; in points), the other directions unknown; inf where singular."""
+    try:
+        covariance = np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        return math.inf
+    n = np.array([-math.sin(heading), math.cos(heading)])
+    return float(n @ covariance[:2, :2] @ n)
+
+
+def fitted(steps: FloatArray) -> NoSlipFit | None:
+    """The fit of ``steps`` (N, 4: forward [m], lateral [m], ``2 sin(turn / 2)``, the
+    lateral step's variance [1 / points]) when it is confident (enough turning steps,
+    ``MAX_OFFSET_ERROR``) and consistent (residuals within ``MAX_SIDESLIP_SHARE`` of the
+    forward steps, outliers within ``MAX_OUTLIER_SHARE``), else None. Each step weighs by the
+    inverse of its variance; the residuals are judged in units of their own spread."""
+    forward, lateral, chord, variance = steps.T
+    if np.count_nonzero(np.abs(chord) > 2.0 * math.sin(0.5 * MIN_TURN)) < MIN_TURNING_STEPS:
+        return None
+    precision = 1.0 / variance
+    weights = precision.copy()
+    offset = scale = 0.0
+    for _ in range(ITERATIONS):
+        offset = float(np.sum(weights * chord * lateral) / np.sum(weights * chord**2))
+        normalised = (lateral - offset * chord) * np.sqrt(precision)  # [m sqrt(points)]
+        scale = 1.4826 * float(np.median(np.abs(normalised)))
+        if scale <= 0:
+            return None
+        weights = precision / (1.0 + (normalised / (CAUCHY_SCALE * scale)) ** 2)
+    inliers = np.abs(normalised) <= OUTLIER * scale
+    error = scale / math.sqrt(float(np.sum(weights * chord**2)))
+    residual = scale * math.sqrt(float(np.median(variance)))  # [m] of a typical step
+    if (error > MAX_OFFSET_ERROR or residual > MAX_SIDESLIP_SHARE * float(np.median(
+            np.abs(forward))) or 1.0 - np.mean(inliers) > MAX_OUTLIER_SHARE):
+        return None
+    return NoSlipFit(offset, error, residual)
