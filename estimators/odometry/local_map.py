@@ -386,7 +386,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         resumed = self.skipped_before > 0 or self.clock_jumped
         self._velocity = self._updated_velocity(increment, dt,
                                                 None if resumed else result.information)
-        self._calibrate_no_slip(increment, None if resumed else result.information)
+        # a step held to the constraint satisfies it by construction: no evidence for it
+        self._calibrate_no_slip(increment, None if resumed or degenerate else result.information)
         self._remember(pose, scans, seen, self._misses[-1])
         step = relative_floats(self._keyframes[-1][0].tolist(), floats)
         if (

@@ -44,9 +44,10 @@ MAX_OFFSET_ERROR = 0.02
 #: a strafing or sliding base's sideways steps, no offset explains, far more.
 MAX_SIDESLIP_SHARE = 0.05
 #: The largest share of steps whose residual exceeds ``OUTLIER`` robust scales (a matcher's
-#: rare wrong step, a walker dragging the match: up to ~3 % in the simulated drives): a base
-#: that strafes now and then, between straight runs that look like a car's, has more.
-MAX_OUTLIER_SHARE = 0.05
+#: rare wrong step, a walker dragging the match: up to ~6 % in the simulated drives with
+#: walkers): a base that strafes now and then, between straight runs that look like a car's,
+#: has more.
+MAX_OUTLIER_SHARE = 0.1
 OUTLIER = 5.0
 #: Cauchy loss scale in robust scales, and reweighting iterations.
 CAUCHY_SCALE = 2.0
@@ -103,7 +104,16 @@ class NoSlipCalibration:
         self._new += 1
         if self._new >= REFIT_EVERY:
             self._new = 0
-            self.fit = fitted(np.array(self._steps))
+            steps = np.array(self._steps)
+            turning = np.count_nonzero(np.abs(steps[:, 2]) > 2.0 * math.sin(0.5 * MIN_TURN))
+            if turning >= MIN_TURNING_STEPS:  # else too few to judge: the last fit stands
+                self.fit = fitted(steps)
+
+    def restart(self) -> None:
+        """Forget the steps but keep the fit (the same robot, its steps about to be matched
+        again: ``lidar_odometry``'s start replay)."""
+        self._steps.clear()
+        self._new = 0
 
 
 def _sideways_variance(information: FloatArray, heading: float) -> float:
@@ -119,13 +129,11 @@ def _sideways_variance(information: FloatArray, heading: float) -> float:
 
 def fitted(steps: FloatArray) -> NoSlipFit | None:
     """The fit of ``steps`` (N, 4: forward [m], lateral [m], ``2 sin(turn / 2)``, the
-    lateral step's variance [1 / points]) when it is confident (enough turning steps,
-    ``MAX_OFFSET_ERROR``) and consistent (residuals within ``MAX_SIDESLIP_SHARE`` of the
+    lateral step's variance [1 / points]; some turning) when it is confident
+    (``MAX_OFFSET_ERROR``) and consistent (residuals within ``MAX_SIDESLIP_SHARE`` of the
     forward steps, outliers within ``MAX_OUTLIER_SHARE``), else None. Each step weighs by the
     inverse of its variance; the residuals are judged in units of their own spread."""
     forward, lateral, chord, variance = steps.T
-    if np.count_nonzero(np.abs(chord) > 2.0 * math.sin(0.5 * MIN_TURN)) < MIN_TURNING_STEPS:
-        return None
     precision = 1.0 / variance
     weights = precision.copy()
     offset = scale = 0.0
