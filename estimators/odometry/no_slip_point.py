@@ -6,13 +6,18 @@ axis (a CARMEN log's laser frame, a Lidar mounted ahead of the rear axle) moves 
 turn: over a step that turns by ``turn`` [rad] its translation, in the frame halfway through
 the turn (``motion_prior.midpoint_velocity``), is ``(chord, 2 offset sin(turn / 2))``.
 
-:class:`NoSlipCalibration` fits ``offset`` to the steps a scan pins down in every direction
-(lateral translation against ``2 sin(turn / 2)``, a line through the origin) by iteratively
-reweighted least squares with a Cauchy loss at the residuals' robust scale, so the rare wrong
-match does not drag it, and says whether the fit holds: a holonomic base that strafes, or a
-skid-steered one that slides in its turns, leaves sideways steps no offset explains. Only once
-the fit is confident does ``lidar_odometry`` hold the steps a scan cannot see (a corridor's
-axis) to the constraint (:func:`estimators.odometry.motion_prior.no_sideslip_prior`).
+:class:`NoSlipCalibration` fits ``offset`` to the steps a scan pins across the car (lateral
+translation against ``2 sin(turn / 2)``, a line through the origin, each step weighed by its
+match's information across the car) by iteratively reweighted least squares with a Cauchy loss
+at the residuals' robust scale, so the rare wrong match or a walker's pull does not drag it,
+and says whether the fit holds: a holonomic base that strafes, or a skid-steered one whose
+slide in the turns varies, leaves sideways steps no offset explains (a slide in proportion to
+the turn moves the no-slip point, and the fit places it there). Only while the fit is confident
+and consistent does ``lidar_odometry`` hold the steps a scan leaves free (a corridor's axis) to
+the constraint (:func:`estimators.odometry.motion_prior.no_sideslip_prior`); the steps it held
+are no evidence for it and do not join the fit. What it cannot tell: a base that strafes in
+fewer than ``MAX_OUTLIER_SHARE`` of its well-seen steps, or slides by less than
+``MAX_SIDESLIP_SHARE`` of its step, passes as a car.
 Distances [m], angles [rad].
 """
 
@@ -40,8 +45,8 @@ MIN_TURN = math.radians(2.0)
 #: [m] the largest offset's standard error the constraint is applied with.
 MAX_OFFSET_ERROR = 0.02
 #: The largest share of the steps' forward travel their residual sideways steps may have
-#: (robust scale over median forward step): registration noise is a few percent of a step;
-#: a strafing or sliding base's sideways steps, no offset explains, far more.
+#: (robust scale over the median forward step): registration noise is 1-3 % of a step
+#: (simulated drives at 4-5 Hz, Intel); a sliding base's sideways steps, more.
 MAX_SIDESLIP_SHARE = 0.05
 #: The largest share of steps whose residual exceeds ``OUTLIER`` robust scales (a matcher's
 #: rare wrong step, a walker dragging the match: up to ~6 % in the simulated drives with
@@ -135,6 +140,8 @@ def fitted(steps: FloatArray) -> NoSlipFit | None:
     inverse of its variance; the residuals are judged in units of their own spread."""
     forward, lateral, chord, variance = steps.T
     precision = 1.0 / variance
+    if not np.any(np.abs(chord) > 2.0 * math.sin(0.5 * MIN_TURN)):
+        return None
     weights = precision.copy()
     offset = scale = 0.0
     for _ in range(ITERATIONS):
@@ -146,7 +153,7 @@ def fitted(steps: FloatArray) -> NoSlipFit | None:
         weights = precision / (1.0 + (normalised / (CAUCHY_SCALE * scale)) ** 2)
     inliers = np.abs(normalised) <= OUTLIER * scale
     error = scale / math.sqrt(float(np.sum(weights * chord**2)))
-    residual = scale * math.sqrt(float(np.median(variance)))  # [m] of a typical step
+    residual = scale * math.sqrt(float(np.median(variance)))  # [m], a typical step
     if (error > MAX_OFFSET_ERROR or residual > MAX_SIDESLIP_SHARE * float(np.median(
             np.abs(forward))) or 1.0 - np.mean(inliers) > MAX_OUTLIER_SHARE):
         return None
