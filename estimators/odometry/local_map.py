@@ -24,7 +24,9 @@ follows the scan clock: a steady clock vouches for the constant-velocity guess, 
 step noise of every scan; a jittery one leaves it weak.
 
 A start down a bare corridor hides the start speed: measured later, the start is matched again
-(:mod:`estimators.odometry.unknown_start`).
+(:mod:`estimators.odometry.unknown_start`). Turned towards a wall, a car's steps along a corridor
+are tied to the seen ones by its wheels, once the point that does not slip is found
+(``calibrated_sideslip_sigma``).
 
 Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
 the car can have reached; a poor match gets correlative searches in ever wider windows, and
@@ -166,20 +168,17 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             ``anchor_break`` [m], ``map_clearance`` [m], ``map_support`` [m] (see
             :class:`~estimators.odometry.moving_points.MovingPointFilter`); its margin is
             ``dynamic_margin``, its ``min_range`` ours.
-        sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
-            scan leaves a direction free: there the match is run again under that constraint,
-            linearised at the match (``motion_prior.no_sideslip_prior``: at the guess, a
-            turn rate that jumps between two scans tilts it by half a turn); inf, the
-            default, for none of it (a holonomic base, or a car frame away from the wheels'
-            no-slip point, as a CARMEN log's laser frame, unless calibrated: below). 6e-4
-            suits the simulated car. Finite, the constant-velocity model also keeps no
-            sideways velocity.
-        calibrated_sideslip_sigma: [m] with ``sideslip_sigma`` inf, the slip the constraint
-            allows once the no-slip point is found online (6e-4; inf: never looked for): the
-            offset of the car frame ahead of it is fitted to the steps the scans pin down in
-            every direction, and the constraint holds only while that fit is confident and
-            explains their sideways steps (:mod:`estimators.odometry.no_slip_point`; a
-            holonomic or skidding base never qualifies), with the offset's error added.
+        sideslip_sigma: [m] how far a car frame at the wheels' no-slip point may slip
+            sideways over a scan interval where the scan leaves a direction free: there the
+            match is run again under that constraint, linearised at the match
+            (``motion_prior.no_sideslip_prior``: at the guess, a turn rate that jumps between
+            two scans tilts it by half a turn), from the first scan; inf, the default: the
+            no-slip point is not known (below). Finite, the velocity keeps no sideways part.
+        calibrated_sideslip_sigma: [m] with ``sideslip_sigma`` inf, the slip allowed once the
+            no-slip point is found online (6e-4, the simulated car's; inf: never looked for):
+            the car frame's offset ahead of it is fitted to the steps the scans pin across the
+            car; the constraint (plus the offset's error) holds while that fit is confident and
+            consistent (:mod:`estimators.odometry.no_slip_point`; a CARMEN laser frame may be).
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -353,7 +352,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                 self._add_keyframe(guess, self._map_points(guess, seen, points))
             return guess
         # the scan at the guess leaves a direction free: the no-sideslip constraint holds it
-        fit = self._no_slip_fit()
+        # (a step of one scan interval: over lost scans the car may have turned and back)
+        fit = None if self.skipped_before or self.clock_jumped else self._no_slip_fit()
         degenerate = fit is not None and leaves_a_direction_free(
             self._reference, points, guess, self.params)
         result = self._match(points, guess, predicted, interval)

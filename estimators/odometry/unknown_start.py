@@ -36,7 +36,9 @@ measured before anything left it unknown (the real logs, every built-in drive wi
 on the keyframes of ``intel-corrected.log.gz`` a replay held a speed over scans seconds
 apart, 2.2 -> 2.6 % of steps off by > 0.2 m). A 4 Hz Lidar's start is watched: down a
 corridor the far-apart search finds each scan where the last one was as readily as the
-prior does. The trajectory
+prior does. A no-slip point found online
+(:mod:`estimators.odometry.no_slip_point`) is the robot's, not the start's: its fit holds
+through the replay, which holds the steps the scans leave free to it. The trajectory
 (``Estimator.trajectory``) is revised by the replay; the poses ``update`` returned during the
 start were the guess of the time.
 """
