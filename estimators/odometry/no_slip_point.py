@@ -24,7 +24,6 @@ Distances [m], angles [rad].
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,10 +85,16 @@ class NoSlipCalibration:
     :meth:`add` a matched step, read :attr:`fit` (None until confident and consistent)."""
 
     def __init__(self) -> None:
-        self._steps: deque[tuple[float, float, float, float]] = deque(maxlen=WINDOW)  #
-        # forward, lateral [m] in the midpoint frame, 2 sin(turn / 2), lateral variance
-        self._new = 0
+        # the latest WINDOW steps, a ring: forward, lateral [m] in the midpoint frame,
+        # 2 sin(turn / 2), lateral variance [1 / points]
+        self._ring = np.empty((WINDOW, 4))
+        self._count = 0  # steps added since the start (or restart)
         self.fit: NoSlipFit | None = None
+
+    @property
+    def steps(self) -> FloatArray:
+        """The steps the fit is taken over (n, 4), in no particular order (a view)."""
+        return self._ring[:min(self._count, WINDOW)]
 
     def add(self, increment: FloatArray, heading: float, information: FloatArray | None
             ) -> None:
@@ -105,11 +110,10 @@ class NoSlipCalibration:
         variance = _sideways_variance(information, heading + 0.5 * turn)
         if not 0 < variance <= 1.0 / MIN_STEP_INFORMATION:
             return
-        self._steps.append((c * x + s * y, c * y - s * x, 2.0 * s, variance))
-        self._new += 1
-        if self._new >= REFIT_EVERY:
-            self._new = 0
-            steps = np.array(self._steps)
+        self._ring[self._count % WINDOW] = (c * x + s * y, c * y - s * x, 2.0 * s, variance)
+        self._count += 1
+        if self._count % REFIT_EVERY == 0:
+            steps = self.steps
             turning = np.count_nonzero(np.abs(steps[:, 2]) > 2.0 * math.sin(0.5 * MIN_TURN))
             if turning >= MIN_TURNING_STEPS:  # else too few to judge: the last fit stands
                 self.fit = fitted(steps)
@@ -117,8 +121,7 @@ class NoSlipCalibration:
     def restart(self) -> None:
         """Forget the steps but keep the fit (the same robot, its steps about to be matched
         again: ``lidar_odometry``'s start replay)."""
-        self._steps.clear()
-        self._new = 0
+        self._count = 0
 
 
 def _sideways_variance(information: FloatArray, heading: float) -> float:

@@ -71,7 +71,7 @@ def test_steps_the_scan_does_not_pin_across_the_car_are_not_used() -> None:
     calibration = NoSlipCalibration()
     for increment in increments:
         calibration.add(increment, math.radians(30.0), corridor)
-    assert calibration.fit is None and len(calibration._steps) == 0
+    assert calibration.fit is None and len(calibration.steps) == 0
     for increment in increments:  # heading along the axis: across the car is what it pins
         calibration.add(increment, 0.0, corridor)
     assert calibration.fit is not None
