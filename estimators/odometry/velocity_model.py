@@ -77,7 +77,8 @@ class ConstantVelocityModel:
 
     def _sideslip(self) -> float:
         """[m] the slip per step the no-slip constraint allows (``_no_slip_fit`` not None)."""
-        return min(self.sideslip_sigma, self.calibrated_sideslip_sigma)
+        known = math.isfinite(self.sideslip_sigma)
+        return self.sideslip_sigma if known else self.calibrated_sideslip_sigma
 
     def _calibrate_no_slip(self, increment: FloatArray, information: FloatArray | None) -> None:
         """One matched step for the no-slip calibration, where it runs (``_no_slip_fit``)."""

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from estimators.odometry.local_map import LocalMapOdometry
 from estimators.odometry.motion_prior import no_sideslip_prior
 from estimators.odometry.no_slip_point import MIN_TURNING_STEPS, NoSlipCalibration, fitted
 from lidar_env.core.se2 import compose, relative
@@ -118,3 +119,16 @@ def test_the_constraint_with_an_offset_holds_the_frame_to_its_sideways_step() ->
     assert abs(step[2] - 0.2) < 1e-3
     assert abs(lateral - 2.0 * offset * math.sin(0.5 * step[2])) < 1e-4
     assert abs(lateral) > 0.05  # 0.3 m ahead of the axle, 0.2 rad: 6 cm sideways
+
+
+def test_a_known_no_slip_point_keeps_its_own_slip() -> None:
+    known = LocalMapOdometry(sideslip_sigma=2e-3)
+    known._reset_motion_model()
+    fit = known._no_slip_fit()
+    assert fit is not None and fit.offset == 0.0 and fit.offset_error == 0.0
+    assert known._sideslip() == 2e-3
+    assert LocalMapOdometry()._sideslip() == 6e-4
+    off = LocalMapOdometry(calibrated_sideslip_sigma=float("inf"))
+    off._reset_motion_model()
+    off._no_slip.fit = _calibrated(0.1).fit  # found, but not to be used
+    assert off._no_slip_fit() is None
