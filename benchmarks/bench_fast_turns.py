@@ -30,6 +30,11 @@ drives; ``slam`` never worse than its front end.
     python benchmarks/bench_fast_turns.py [--estimators icp lidar_odometry slam]
         [--drives hallway_5hz ...] [--logs aces intel] [--limit 1000] [--json out.json]
         [--set sideslip_sigma=6e-4 ...]   # parameters of every estimator but icp
+
+``lidar_odometry`` finds its car frame's no-slip point online and then holds the steps a
+scan leaves free to the no-sideslip constraint (``calibrated_sideslip_sigma``);
+``--set calibrated_sideslip_sigma=inf`` runs it without, ``--set sideslip_sigma=6e-4`` with
+the point known from the first scan (the simulated car's frame is at it).
 """
 
 from __future__ import annotations

@@ -24,7 +24,9 @@ follows the scan clock: a steady clock vouches for the constant-velocity guess, 
 step noise of every scan; a jittery one leaves it weak.
 
 A start down a bare corridor hides the start speed: measured later, the start is matched again
-(:mod:`estimators.odometry.unknown_start`).
+(:mod:`estimators.odometry.unknown_start`). Turned towards a wall, a car's steps along a corridor
+are tied to the seen ones by its wheels, once the point that does not slip is found
+(``calibrated_sideslip_sigma``).
 
 Scans far apart (a metre or more) start ICP from a branch-and-bound search over every pose
 the car can have reached; a poor match gets correlative searches in ever wider windows, and
@@ -51,7 +53,6 @@ documentation's design page (``docs/design-choices.md``).
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -75,6 +76,7 @@ from estimators.matching.scan_matching import (
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.motion_prior import no_sideslip_prior
 from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
+from estimators.odometry.no_slip_point import NoSlipFit
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.core import ConfigError
@@ -166,13 +168,17 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             ``anchor_break`` [m], ``map_clearance`` [m], ``map_support`` [m] (see
             :class:`~estimators.odometry.moving_points.MovingPointFilter`); its margin is
             ``dynamic_margin``, its ``min_range`` ours.
-        sideslip_sigma: [m] how far the car may slip sideways over a scan interval where the
-            scan leaves a direction free: there the match is run again under that constraint,
-            linearised at the match (``motion_prior.no_sideslip_prior``: at the guess, a
-            turn rate that jumps between two scans tilts it by half a turn); inf, the
-            default, for none of it (a holonomic base, or a car frame away from the wheels'
-            no-slip point, as a CARMEN log's laser frame). 6e-4 suits the simulated car.
-            Finite, the constant-velocity model also keeps no sideways velocity.
+        sideslip_sigma: [m] how far a car frame at the wheels' no-slip point may slip
+            sideways over a scan interval where the scan leaves a direction free: there the
+            match is run again under that constraint, linearised at the match
+            (``motion_prior.no_sideslip_prior``: at the guess, a turn rate that jumps between
+            two scans tilts it by half a turn), from the first scan; inf, the default: the
+            no-slip point is not known (below). Finite, the velocity keeps no sideways part.
+        calibrated_sideslip_sigma: [m] with ``sideslip_sigma`` inf, the slip allowed once the
+            no-slip point is found online (6e-4, the simulated car's; inf: never looked for):
+            the car frame's offset ahead of it is fitted to the steps the scans pin across the
+            car; the constraint (plus the offset's error) holds while that fit is confident and
+            consistent (:mod:`estimators.odometry.no_slip_point`; a CARMEN laser frame may be).
         velocity_window: increments the constant-velocity translation is averaged over (5:
             0.25-1 s at 5-20 Hz, shorter than a robot's changes of speed, and it cuts the
             noise of one increment about fivefold).
@@ -231,6 +237,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
     max_speed: float = 1.5
     max_turn_rate: float = 1.5
     sideslip_sigma: float = np.inf
+    calibrated_sideslip_sigma: float = 6e-4
     start_speed_scans: int = 20
     max_start_replay: int = 300
     moving_filter: Mapping[str, float] | None = None
@@ -243,6 +250,7 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             "search_angular_window", "search_resolution", "prediction_acceleration",
             "speed_information",
             "dynamic_margin", "max_speed", "max_turn_rate", "sideslip_sigma",
+            "calibrated_sideslip_sigma",
         ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
@@ -309,17 +317,19 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         return (self._watched_step if self._kept is not None else self._odometry_step)(scans, t)
 
     def _no_sideslip_match(self, result: MatchResult, points: NDArray[np.float64],
-                           guess: NDArray[np.float64]) -> MatchResult:
-        """``result`` matched again under the no-sideslip constraint of the step to it, held
-        with ``sideslip_sigma`` and linearised at the match (twice: at the first match, then
-        at the second), with the motion prior it was held by
-        (:func:`~estimators.odometry.motion_prior.no_sideslip_prior`)."""
+                           guess: NDArray[np.float64], fit: NoSlipFit) -> MatchResult:
+        """``result`` matched again under the no-sideslip constraint of the step to it
+        (``fit``: where the no-slip point is, how well known), held with the slip it allows
+        and linearised at the match (twice: at the first match, then at the second), with the
+        motion prior it was held by (:func:`~estimators.odometry.motion_prior.
+        no_sideslip_prior`)."""
         assert self._reference is not None
         information = np.asarray(self.match_information, dtype=np.float64)
         diagonal = np.diag(information) if information.ndim == 2 else information
-        sideways = (self.noise_sigma / self.sideslip_sigma) ** 2
         for _ in range(2):
-            centre, held = no_sideslip_prior(diagonal, guess, self.pose, result.pose, sideways)
+            sigma = fit.sigma(wrap_float(float(result.pose[2] - self.pose[2])), self._sideslip())
+            centre, held = no_sideslip_prior(diagonal, guess, self.pose, result.pose,
+                                             (self.noise_sigma / sigma) ** 2, fit.offset)
             result = register(self._reference, points, result.pose, self.params, centre, held)
         return result
 
@@ -342,7 +352,9 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
                 self._add_keyframe(guess, self._map_points(guess, seen, points))
             return guess
         # the scan at the guess leaves a direction free: the no-sideslip constraint holds it
-        degenerate = math.isfinite(self.sideslip_sigma) and leaves_a_direction_free(
+        # (a step of one scan interval: over lost scans the car may have turned and back)
+        fit = None if self.skipped_before or self.clock_jumped else self._no_slip_fit()
+        degenerate = fit is not None and leaves_a_direction_free(
             self._reference, points, guess, self.params)
         result = self._match(points, guess, predicted, interval)
         for _ in range(2 if self._moving is not None else 0):  # (module docstring)
@@ -353,7 +365,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
             result = register(self._reference, points, result.pose, self.params, guess,
                               self.match_information)
         if degenerate:
-            result = self._no_sideslip_match(result, points, guess)
+            assert fit is not None
+            result = self._no_sideslip_match(result, points, guess, fit)
         pose = result.pose
         self.scan_information = (np.zeros((3, 3)) if result.information is None
                                  else result.information)
@@ -373,6 +386,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         resumed = self.skipped_before > 0 or self.clock_jumped
         self._velocity = self._updated_velocity(increment, dt,
                                                 None if resumed else result.information)
+        # a step held to the constraint satisfies it by construction: no evidence for it
+        self._calibrate_no_slip(increment, None if resumed or degenerate else result.information)
         self._remember(pose, scans, seen, self._misses[-1])
         step = relative_floats(self._keyframes[-1][0].tolist(), floats)
         if (

@@ -262,7 +262,8 @@ def mean_translation(translations: Sequence[FloatArray]) -> tuple[float, float]:
 
 
 def no_sideslip_information(
-    information: ArrayLike, heading: float, forward: float, sideslip_information: float
+    information: ArrayLike, heading: float, forward: float, sideslip_information: float,
+    offset: float = 0.0, turn: float = 0.0,
 ) -> FloatArray:
     """Information (3, 3) of a motion prior: ``diag(information)`` (3,) plus the linearised
     non-holonomic constraint of a wheeled car, which does not slip sideways (Dissanayake et al.
@@ -276,7 +277,10 @@ def no_sideslip_information(
     by half as much. Where the scan leaves one world direction free (a corridor's axis) and the
     car moves at an angle to it, this ties the free motion to the seen one: how fast the car
     closes on the walls and its heading say how far it went along them. 0 leaves the prior
-    diagonal (a holonomic base).
+    diagonal (a holonomic base). A frame ``offset`` [m] ahead of the no-slip point moves
+    sideways by ``2 offset sin(turn / 2)`` over a step turning ``turn`` [rad]
+    (:mod:`estimators.odometry.no_slip_point`), which adds ``-offset cos(turn / 2)`` to the
+    heading's term.
     """
     information = np.asarray(information, dtype=np.float64)
     if information.shape != (3,) or not sideslip_information >= 0:
@@ -285,18 +289,24 @@ def no_sideslip_information(
             f"{information.shape} and {sideslip_information}")
     if sideslip_information == 0 and math.isfinite(heading) and math.isfinite(forward):
         return np.diag(information)  # the same as adding 0 times the outer product
-    jacobian = np.array([-np.sin(heading), np.cos(heading), -0.5 * forward])
+    jacobian = np.array([-np.sin(heading), np.cos(heading), _heading_term(forward, offset, turn)])
     return np.diag(information) + sideslip_information * np.outer(jacobian, jacobian)
+
+
+def _heading_term(forward: float, offset: float, turn: float) -> float:
+    """The no-sideslip residual's derivative by the heading (:func:`no_sideslip_information`)."""
+    return -0.5 * forward if offset == 0 else -0.5 * forward - offset * math.cos(0.5 * turn)
 
 
 def no_sideslip_prior(
     diagonal: ArrayLike, guess: ArrayLike, previous: ArrayLike, pose: ArrayLike,
-    sideslip_information: float,
+    sideslip_information: float, offset: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """The motion prior ``diag(diagonal)`` (3,) at ``guess`` (3,) plus the no-sideslip
     constraint of the step from ``previous`` to ``pose`` (3,) (world frame; its translation
-    along the midpoint heading, :func:`no_sideslip_information`) linearised at ``pose``, as
-    one quadratic: its centre (3,) and information (3, 3).
+    along the midpoint heading, but for ``2 offset sin(turn / 2)`` across it with the frame
+    ``offset`` [m] ahead of the no-slip point, :func:`no_sideslip_information`) linearised at
+    ``pose``, as one quadratic: its centre (3,) and information (3, 3).
 
     Linearised at the matched pose rather than at the constant-velocity guess: where the turn
     rate jumps between two scans (a robot that stops to turn), the guess's heading is a whole
@@ -310,15 +320,18 @@ def no_sideslip_prior(
         raise EstimatorInputError(
             f"diagonal, sideslip_information: expected shape (3,) and a value >= 0, got "
             f"{diagonal.shape} and {sideslip_information}")
-    heading = previous[2] + 0.5 * wrap_float(float(pose[2] - previous[2]))
+    turn = wrap_float(float(pose[2] - previous[2]))
+    heading = previous[2] + 0.5 * turn
     step = pose[:2] - previous[:2]
     normal = np.array([-math.sin(heading), math.cos(heading)])
     forward = float(step @ np.array([math.cos(heading), math.sin(heading)]))
-    jacobian = np.array([normal[0], normal[1], -0.5 * forward])
-    information = no_sideslip_information(diagonal, heading, forward, sideslip_information)
-    offset = pose - guess
-    offset[2] = wrap_float(float(offset[2]))
-    pull = sideslip_information * jacobian * (jacobian @ offset - float(normal @ step))
+    jacobian = np.array([normal[0], normal[1], _heading_term(forward, offset, turn)])
+    information = no_sideslip_information(diagonal, heading, forward, sideslip_information,
+                                          offset, turn)
+    lateral = 0.0 if offset == 0 else 2.0 * offset * math.sin(0.5 * turn)
+    moved = pose - guess
+    moved[2] = wrap_float(float(moved[2]))
+    pull = sideslip_information * jacobian * (jacobian @ moved - (float(normal @ step) - lateral))
     centre = guess + np.linalg.lstsq(information, pull, rcond=None)[0]  # D = 0: any point
     # on the constraint's line
     centre[2] = wrap_float(float(centre[2]))

@@ -36,7 +36,9 @@ measured before anything left it unknown (the real logs, every built-in drive wi
 on the keyframes of ``intel-corrected.log.gz`` a replay held a speed over scans seconds
 apart, 2.2 -> 2.6 % of steps off by > 0.2 m). A 4 Hz Lidar's start is watched: down a
 corridor the far-apart search finds each scan where the last one was as readily as the
-prior does. The trajectory
+prior does. A no-slip point found online
+(:mod:`estimators.odometry.no_slip_point`) is the robot's, not the start's: its fit holds
+through the replay, which holds the steps the scans leave free to it. The trajectory
 (``Estimator.trajectory``) is revised by the replay; the poses ``update`` returned during the
 start were the guess of the time.
 """
@@ -53,6 +55,7 @@ from numpy.typing import NDArray
 from estimators.matching.icp import ICPParams, leaves_a_direction_free
 from estimators.matching.point_to_line import PointToLineReference
 from estimators.odometry.motion_prior import ScanClock
+from estimators.odometry.no_slip_point import NoSlipCalibration
 
 FloatArray = NDArray[np.float64]
 Scans = dict[str, FloatArray]
@@ -85,6 +88,7 @@ class UnknownStartSpeed:
     _seen_translation: FloatArray
     _clock: ScanClock
     _keyframes: deque[tuple[FloatArray, FloatArray]]
+    _no_slip: NoSlipCalibration
     _build_reference: Callable[[], None]
     _points: Callable[[Scans], FloatArray]
     _start: Callable[[Scans, float], None]
@@ -149,7 +153,10 @@ class UnknownStartSpeed:
         # scans whose speed the scans did not show
         unseen = self._unseen if replays > 1 else len(kept) - len(self._measured)
         del self._poses[1:]
+        calibration = self._no_slip  # the robot's, not the start's: its fit holds in the replay
         self._reset_state()
+        self._no_slip = calibration
+        calibration.restart()
         self._start(*kept[0])
         self._kept, self.speed_unknown, self.start_replays = None, False, replays
         self._velocity = velocity

@@ -25,6 +25,7 @@ from estimators.odometry.motion_prior import (
     missed_sigma,
     prediction_sigma,
 )
+from estimators.odometry.no_slip_point import NoSlipCalibration, NoSlipFit
 
 FloatArray = NDArray[np.float64]
 
@@ -39,9 +40,10 @@ class ConstantVelocityModel:
     """The motion model of :class:`~estimators.odometry.local_map.LocalMapOdometry`, a mixin:
     it reads the front end's settings (``use_timestamps``, ``velocity_window``,
     ``noise_sigma``, ``prior_sigma_translation``, ``prediction_acceleration``,
-    ``sideslip_sigma``, ``speed_information``), ``_prior_information``, ``pose`` and
-    ``speed_unknown``, and keeps ``_velocity``, ``_seen_translation``, ``_translations``,
-    ``_misses``, ``_clock`` and ``_last_time``."""
+    ``sideslip_sigma``, ``calibrated_sideslip_sigma``, ``speed_information``),
+    ``_prior_information``, ``pose`` and ``speed_unknown``, and keeps ``_velocity``,
+    ``_seen_translation``, ``_translations``, ``_misses``, ``_clock``, ``_last_time`` and
+    ``_no_slip`` (:class:`~estimators.odometry.no_slip_point.NoSlipCalibration`)."""
 
     use_timestamps: bool
     velocity_window: int
@@ -49,6 +51,7 @@ class ConstantVelocityModel:
     prior_sigma_translation: float
     prediction_acceleration: float
     sideslip_sigma: float
+    calibrated_sideslip_sigma: float
     speed_information: float
     speed_unknown: bool
     pose: FloatArray  # the estimator's current pose (``Estimator.pose``)
@@ -62,6 +65,26 @@ class ConstantVelocityModel:
         self._misses: deque[float] = deque(maxlen=self.velocity_window)
         self._last_time = 0.0
         self._clock = ScanClock()
+        self._no_slip = NoSlipCalibration()
+
+    def _no_slip_fit(self) -> NoSlipFit | None:
+        """Where the car frame does not slip sideways: at its origin with a finite
+        ``sideslip_sigma``; else, with a finite ``calibrated_sideslip_sigma``, the online
+        calibration's confident fit (None before, or where no offset explains the steps)."""
+        if math.isfinite(self.sideslip_sigma):
+            return NoSlipFit(0.0, 0.0, 0.0)
+        return self._no_slip.fit if math.isfinite(self.calibrated_sideslip_sigma) else None
+
+    def _sideslip(self) -> float:
+        """[m] the slip per step the no-slip constraint allows (``_no_slip_fit`` not None)."""
+        known = math.isfinite(self.sideslip_sigma)
+        return self.sideslip_sigma if known else self.calibrated_sideslip_sigma
+
+    def _calibrate_no_slip(self, increment: FloatArray, information: FloatArray | None) -> None:
+        """One matched step for the no-slip calibration, where it runs (``_no_slip_fit``)."""
+        if not math.isfinite(self.sideslip_sigma) and math.isfinite(
+                self.calibrated_sideslip_sigma):
+            self._no_slip.add(increment, float(self.pose[2]), information)
 
     def _time_step(self, t: float) -> float:
         """Scans since the last one (1), or with ``use_timestamps`` the time since it [s],
@@ -120,7 +143,9 @@ class ConstantVelocityModel:
         With a finite ``sideslip_sigma`` (the car frame at the wheels' no-slip point) the
         velocity has no sideways part: where the scan leaves an axis free, the increments'
         error along it shows up sideways in the car frame, and carried on in the guess it
-        drifted down a corridor while the car rocked back and forth (3.3 m). With the match's
+        drifted down a corridor while the car rocked back and forth (3.3 m); a frame ahead
+        of the no-slip point keeps the sideways velocity of its offset in the increment's turn
+        (:meth:`_no_slip_fit`). With the match's
         ``information`` (3, 3, world frame), a direction it pins weakly moves the velocity
         only in proportion (:meth:`_weakly_seen_held`), unless the speed is still unknown;
         ``_seen_translation`` keeps the increment's own."""
@@ -129,8 +154,9 @@ class ConstantVelocityModel:
         if information is not None and self._translations and not self.speed_unknown:
             translation = self._weakly_seen_held(translation, information[:2, :2],
                                                  float(self.pose[2] + 0.5 * increment[2]))
-        if math.isfinite(self.sideslip_sigma):
-            translation[1] = 0.0
+        fit = self._no_slip_fit()
+        if fit is not None:
+            translation[1] = fit.lateral(float(increment[2])) / dt
         self._translations.append(translation)
         return np.array([*motion_prior.mean_translation(self._translations), increment[2] / dt])
 

@@ -116,7 +116,9 @@ def test_a_car_that_does_not_slip_finds_its_speed_down_a_corridor_from_its_weavi
     truth = _zigzag(251)
     for seed in (0, 1):
         assert abs(_drive(world, truth, seed, sideslip_sigma=6e-4)[0]) < 0.5
-    assert abs(_drive(world, truth, 0)[0]) > 5.0  # the default: no sideslip term
+    # the default: the no-slip point is never found (turned from the axis, the car's steps
+    # across itself are not pinned), so no constraint
+    assert abs(_drive(world, truth, 0)[0]) > 5.0
 
 
 def test_a_zigzag_down_a_corridor_keeps_its_speed_along_the_unseen_axis() -> None:

@@ -1,0 +1,163 @@
+"""Where a wheeled robot does not slip sideways, found online from its own well-seen steps.
+
+A car or a differential-drive robot moves, at the point between its fixed wheels (its no-slip
+point), only along its heading. A frame ``offset`` [m] ahead of that point along the car's x
+axis (a CARMEN log's laser frame, a Lidar mounted ahead of the rear axle) moves sideways in a
+turn: over a step that turns by ``turn`` [rad] its translation, in the frame halfway through
+the turn (``motion_prior.midpoint_velocity``), is ``(chord, 2 offset sin(turn / 2))``.
+
+:class:`NoSlipCalibration` fits ``offset`` to the steps a scan pins across the car (lateral
+translation against ``2 sin(turn / 2)``, a line through the origin, each step weighed by its
+match's information across the car) by iteratively reweighted least squares with a Cauchy loss
+at the residuals' robust scale, so the rare wrong match or a walker's pull does not drag it,
+and says whether the fit holds: a holonomic base that strafes, or a skid-steered one whose
+slide in the turns varies, leaves sideways steps no offset explains (a slide in proportion to
+the turn moves the no-slip point, and the fit places it there). Only while the fit is confident
+and consistent does ``lidar_odometry`` hold the steps a scan leaves free (a corridor's axis) to
+the constraint (:func:`estimators.odometry.motion_prior.no_sideslip_prior`); the steps it held
+are no evidence for it and do not join the fit. What it cannot tell: a base that strafes in
+fewer than ``MAX_OUTLIER_SHARE`` of its well-seen steps, or slides by less than
+``MAX_SIDESLIP_SHARE`` of its step, passes as a car.
+Distances [m], angles [rad].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: [points] a step joins the calibration where its match pins the direction across the car
+#: with at least this many points squarely facing it, the other directions free (a corridor's
+#: axis: a few at most).
+MIN_STEP_INFORMATION = 5.0
+#: Steps the fit is taken over: the latest ones (a few minutes at 5-10 Hz of driving).
+WINDOW = 400
+#: Fewest turning steps (``|2 sin(turn / 2)|`` over ``MIN_TURN``) the fit needs.
+MIN_TURNING_STEPS = 10
+#: [rad] a step turning less than this tells nothing of the offset.
+MIN_TURN = math.radians(2.0)
+#: [m] the largest offset's standard error the constraint is applied with.
+MAX_OFFSET_ERROR = 0.02
+#: The largest share of the steps' forward travel their residual sideways steps may have
+#: (robust scale over the median forward step): registration noise is 1-3 % of a step
+#: (simulated drives at 4-5 Hz, Intel); a sliding base's sideways steps, more.
+MAX_SIDESLIP_SHARE = 0.05
+#: The largest share of steps whose residual exceeds ``OUTLIER`` robust scales (a matcher's
+#: rare wrong step, a walker dragging the match: up to ~6 % in the simulated drives with
+#: walkers): a base that strafes now and then, between straight runs that look like a car's,
+#: has more.
+MAX_OUTLIER_SHARE = 0.1
+OUTLIER = 5.0
+#: Cauchy loss scale in robust scales, and reweighting iterations.
+CAUCHY_SCALE = 2.0
+ITERATIONS = 5
+#: The fit is taken again every this many new steps (it moves little from one to the next).
+REFIT_EVERY = 5
+
+
+@dataclass(frozen=True)
+class NoSlipFit:
+    """A confident fit: the no-slip point ``offset`` [m] behind the frame along its x axis,
+    its standard error ``offset_error`` [m], and the robust scale of the residual sideways
+    steps ``residual`` [m]."""
+
+    offset: float
+    offset_error: float
+    residual: float
+
+    def lateral(self, turn: float) -> float:
+        """The sideways translation [m] (midpoint frame) of a step turning ``turn`` [rad]."""
+        return 0.0 if self.offset == 0 else 2.0 * self.offset * math.sin(0.5 * turn)
+
+    def sigma(self, turn: float, sideslip_sigma: float) -> float:
+        """[m] how far a step turning ``turn`` [rad] may miss :meth:`lateral`: the slip a
+        no-slip base allows, ``sideslip_sigma``, and the offset's error over that turn."""
+        return math.hypot(sideslip_sigma, 2.0 * self.offset_error * math.sin(0.5 * turn))
+
+
+class NoSlipCalibration:
+    """The offset of the no-slip point from the steps seen so far (module docstring):
+    :meth:`add` a matched step, read :attr:`fit` (None until confident and consistent)."""
+
+    def __init__(self) -> None:
+        # the latest WINDOW steps, a ring: forward, lateral [m] in the midpoint frame,
+        # 2 sin(turn / 2), lateral variance [1 / points]
+        self._ring = np.empty((WINDOW, 4))
+        self._count = 0  # steps added since the start (or restart)
+        self.fit: NoSlipFit | None = None
+
+    @property
+    def steps(self) -> FloatArray:
+        """The steps the fit is taken over (n, 4), in no particular order (a view)."""
+        return self._ring[:min(self._count, WINDOW)]
+
+    def add(self, increment: FloatArray, heading: float, information: FloatArray | None
+            ) -> None:
+        """One step: its ``increment`` (3,) (x, y [m], heading [rad], frame of its start), the
+        world ``heading`` [rad] it starts from, and its match's ``information`` (3, 3, world
+        frame, in points), None for a step not matched from the last one (after skipped scans
+        or a jumping clock). Steps the match does not pin across the car are not used (a
+        corridor's axis lies across a car turned towards a wall)."""
+        if information is None:
+            return
+        x, y, turn = increment.tolist()
+        c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
+        variance = _sideways_variance(information, heading + 0.5 * turn)
+        if not 0 < variance <= 1.0 / MIN_STEP_INFORMATION:
+            return
+        self._ring[self._count % WINDOW] = (c * x + s * y, c * y - s * x, 2.0 * s, variance)
+        self._count += 1
+        if self._count % REFIT_EVERY == 0:
+            steps = self.steps
+            turning = np.count_nonzero(np.abs(steps[:, 2]) > 2.0 * math.sin(0.5 * MIN_TURN))
+            if turning >= MIN_TURNING_STEPS:  # else too few to judge: the last fit stands
+                self.fit = fitted(steps)
+
+    def restart(self) -> None:
+        """Forget the steps but keep the fit (the same robot, its steps about to be matched
+        again: ``lidar_odometry``'s start replay)."""
+        self._count = 0
+
+
+def _sideways_variance(information: FloatArray, heading: float) -> float:
+    """The variance [1 / points] across ``heading`` [rad] of a pose with ``information`` (3,
+    3; world x, y, heading; in points), the other directions unknown; inf where singular."""
+    try:
+        covariance = np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        return math.inf
+    n = np.array([-math.sin(heading), math.cos(heading)])
+    return float(n @ covariance[:2, :2] @ n)
+
+
+def fitted(steps: FloatArray) -> NoSlipFit | None:
+    """The fit of ``steps`` (N, 4: forward [m], lateral [m], ``2 sin(turn / 2)``, the
+    lateral step's variance [1 / points]; some turning) when it is confident
+    (``MAX_OFFSET_ERROR``) and consistent (residuals within ``MAX_SIDESLIP_SHARE`` of the
+    forward steps, outliers within ``MAX_OUTLIER_SHARE``), else None. Each step weighs by the
+    inverse of its variance; the residuals are judged in units of their own spread."""
+    forward, lateral, chord, variance = steps.T
+    precision = 1.0 / variance
+    if not np.any(np.abs(chord) > 2.0 * math.sin(0.5 * MIN_TURN)):
+        return None
+    weights = precision.copy()
+    offset = scale = 0.0
+    for _ in range(ITERATIONS):
+        offset = float(np.sum(weights * chord * lateral) / np.sum(weights * chord**2))
+        normalised = (lateral - offset * chord) * np.sqrt(precision)  # [m sqrt(points)]
+        scale = 1.4826 * float(np.median(np.abs(normalised)))
+        if scale <= 0:
+            return None
+        weights = precision / (1.0 + (normalised / (CAUCHY_SCALE * scale)) ** 2)
+    inliers = np.abs(normalised) <= OUTLIER * scale
+    error = scale / math.sqrt(float(np.sum(weights * chord**2)))
+    residual = scale * math.sqrt(float(np.median(variance)))  # [m], a typical step
+    if (error > MAX_OFFSET_ERROR or residual > MAX_SIDESLIP_SHARE * float(np.median(
+            np.abs(forward))) or 1.0 - np.mean(inliers) > MAX_OUTLIER_SHARE):
+        return None
+    return NoSlipFit(offset, error, residual)
