@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from estimators.matching.linear_3x3 import solved
 from estimators.matching.nearest import KEPT, STACK, kept_answer, search, search_near
 
 #: Loss codes of the kernels, in the order of :data:`estimators.matching.point_to_line.LOSSES`.
@@ -190,7 +191,9 @@ def _solve_step(hessian: NDArray[np.float64], gradient: NDArray[np.float64], lev
                 has_prior: bool, prior_information: NDArray[np.float64],
                 prior_offset: NDArray[np.float64], min_information: float,
                 ) -> NDArray[np.float64]:
-    """``point_to_line.solve_normal_equations``, compiled; ``prior_information`` (3, 3)."""
+    """``point_to_line.solve_normal_equations``, compiled; ``prior_information`` (3, 3). The
+    3 x 3 system is summed and solved in place (:func:`~estimators.matching.linear_3x3.
+    solved`), in the order of the array form's operations."""
     if min_information > 0 and has_prior:
         scale = np.array([1.0, 1.0, lever if lever != 0 else 1.0])
         outer = np.outer(scale, scale)
@@ -199,10 +202,17 @@ def _solve_step(hessian: NDArray[np.float64], gradient: NDArray[np.float64], lev
         projection = kept @ kept.T
         hessian = outer * (projection @ (hessian / outer) @ projection)
         gradient = scale * (projection @ (gradient / scale))
-    if has_prior:
-        hessian = hessian + prior_information
-        gradient = gradient + prior_information @ prior_offset
-    return np.linalg.solve(hessian + 1e-9 * np.eye(3), gradient)
+    system = np.empty((3, 3))
+    step = np.empty(3)
+    for a in range(3):
+        pull = 0.0  # (prior_information @ prior_offset)[a]
+        for b in range(3):
+            system[a, b] = hessian[a, b] + prior_information[a, b] if has_prior else (
+                hessian[a, b])
+            pull += prior_information[a, b] * prior_offset[b]
+        system[a, a] += 1e-9
+        step[a] = gradient[a] + pull if has_prior else gradient[a]
+    return solved(system, step)
 
 
 @njit(cache=True)

@@ -1,8 +1,7 @@
 """The compiled point-to-curve refinement against its array form (``refine_pure``): the same
 pose to 1e-9 and the same quality, with and without a motion prior, about any pivot, in a
 room and in a featureless corridor (where the prior takes over the open direction); the
-compiled local quadratics of a scan against theirs (``chain_curves_pure``); and their 3 x 3
-solve against LAPACK's ``dgesv``."""
+compiled local quadratics of a scan against theirs (``chain_curves_pure``)."""
 
 from __future__ import annotations
 
@@ -10,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.linalg import lapack
 
 from estimators.matching.curve_refinement import (
     MAX_SURFACE_GAP,
@@ -20,7 +18,7 @@ from estimators.matching.curve_refinement import (
     refine_on_curves,
     refine_pure,
 )
-from estimators.matching.curve_refinement_kernel import chain_curves, solve_3x3
+from estimators.matching.curve_refinement_kernel import chain_curves
 
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
 
@@ -102,33 +100,3 @@ def test_compiled_chain_curves_match_the_array_form(seed: int, corridor: bool, f
     # where two returns fit a line: its tiny ridge leaves it ~1e-9 relative)
     for got, want in zip(found[3:], expected[3:], strict=True):
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9)
-
-
-@settings(max_examples=300, deadline=None)
-@given(seed=st.integers(0, 2**31), symmetric=st.booleans(), scale=st.floats(-6.0, 6.0))
-def test_solve_3x3_agrees_with_lapack_dgesv(seed: int, symmetric: bool, scale: float) -> None:
-    """Any pivot order (general matrices) and the local quadratics' Gram matrices, whose entries
-    span many magnitudes (1, u, u^2 summed), against scipy's dgesv, the OpenBLAS call the
-    kernel replaced. It performs dgesv's operations, so on this project's machines (x86-64
-    with FMA) the bits were equal on 896,256 systems of real drives; but OpenBLAS picks its
-    kernels per CPU, so the test asks for what holds on any: the same singular verdict and
-    a solution within rounding of the same LU (normwise, a few ulps times the condition)."""
-    rng = np.random.default_rng(seed)
-    if symmetric:
-        u = 10.0**scale * rng.standard_normal(rng.integers(2, 6))
-        basis = np.column_stack([np.ones_like(u), u, u * u])
-        matrix = basis.T @ basis
-        matrix[2, 2] += 1e-9 * np.ptp(u) ** 4
-    else:
-        matrix = rng.standard_normal((3, 3)) * 10.0 ** rng.uniform(-abs(scale), abs(scale), (3, 3))
-    rhs = rng.standard_normal(3)
-    _, _, expected, info = lapack.dgesv(matrix, rhs)
-    solution = rhs.copy()
-    assert solve_3x3(matrix.copy(), solution) == (info == 0)
-    if info == 0:
-        bound = 64 * np.finfo(float).eps * np.linalg.cond(matrix) * np.abs(expected).max()
-        assert np.abs(solution - expected).max() <= bound
-
-
-def test_solve_3x3_reports_a_singular_matrix() -> None:
-    assert not solve_3x3(np.ones((3, 3)), np.ones(3))
