@@ -212,33 +212,6 @@ def _segment_lower(dx: float, dy: float, v1x: float, v1y: float, ex: float, ey: 
     return t if hit else current
 
 
-# cast_sensor writes both sweeps out, guards odd_crossings and hands cell_block the grid's
-# scalars: each array handed to a call costs ~10 ns of reference counting (~40 ns a sweep).
-@njit(cache=True, fastmath=False)
-def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: float, cx: float,
-                 cy: float, r: float, sorted_angles: NDArray[np.float64],
-                 order: NDArray[np.int64], step: float, dir_x: NDArray[np.float64],
-                 dir_y: NDArray[np.float64], max_range: float) -> bool:
-    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
-    exact hits on the circle ``(cx, cy, r)`` [m], for the beams within the angle it subtends
-    only. The beams are ``sorted_angles, order, step`` (see
-    :func:`lidar_env.sensors.lidar_config.beam_geometry`) and their world-frame unit directions
-    ``dir_x, dir_y``. Returns False (all ranges 0) when the sensor is inside the circle."""
-    fx, fy = cx - ox, cy - oy
-    d = math.sqrt(fx * fx + fy * fy)
-    if d - r >= max_range:
-        return True
-    if d <= r:
-        ranges.fill(0.0)
-        return False
-    lo, width = _circle_window(fx, fy, d, r, heading)
-    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-    for q in range(l0 - f0 + l1 - f1):
-        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
-    return True
-
-
 @njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
@@ -301,6 +274,7 @@ def cast_sensor(
     c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
                                         0.0, 1.0, 0.0), grid[:5])
     pad = 1e-9 * size
+    near, n_near = np.empty((6, circles.shape[0])), 0  # the circles the walk keeps
     for iy in range(r0, r1 + 1):
         for column in range(c0, c1 + 1):
             c = iy * nx + column
@@ -322,32 +296,14 @@ def cast_sensor(
                 if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
                         cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
                     continue
-                fx, fy = cx - ox, cy - oy  # the circle's sweep (see sweep_circle)
-                d = math.sqrt(fx * fx + fy * fy)
-                if d - r >= max_range:
-                    continue
-                if d <= r:
-                    ranges.fill(0.0)
-                    return
-                lo, width = _circle_window(fx, fy, d, r, heading)
-                f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-                if in_order:
-                    for j in range(np.uint64(f0), np.uint64(l0)):
-                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r,
-                                                  ranges[j])
-                    for j in range(np.uint64(f1), np.uint64(l1)):
-                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r,
-                                                  ranges[j])
-                    continue
-                for q in range(l0 - f0 + l1 - f1):
-                    j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-                    ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+                near[0, n_near], near[1, n_near], near[2, n_near] = cx, cy, r
+                n_near += 1
             for p in range(segment_start[c], segment_start[c + 1]):
                 i = segment_ids[p]
                 if segment_seen[i] == stamp:
                     continue
                 segment_seen[i] = stamp
-                # the segment's sweep (see sweep_circle), on scalars: a row view costs
+                # the segment's sweep (see sweep_circles), on scalars: a row view costs
                 x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
                 v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
                 ex, ey = x2 - x1, y2 - y1
@@ -384,3 +340,40 @@ def cast_sensor(
                     j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
                     ranges[j] = _segment_lower(dir_x[j], dir_y[j], v1x, v1y, ex, ey, along,
                                                ranges[j])
+    if not sweep_circles(ranges, near, n_near, ox, oy, heading, own, max_range, in_order):
+        ranges.fill(0.0)
+
+
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
+def sweep_circles(ranges: NDArray[np.float64], near: NDArray[np.float64], count: int, ox: float,
+                  oy: float, heading: float, own: tuple, max_range: float, in_order: bool) -> bool:
+    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
+    exact hits on the first ``count`` circles of ``near`` (6, count or more: x, y, radius [m],
+    then scratch rows), each for the beams within the angle it subtends only (``own`` and
+    ``in_order`` as :func:`cast_sensor` takes them). Returns False (ranges left for the caller
+    to zero) when the sensor is inside one. Distances and windows come first, in a loop of
+    their own: no branch waits on their square roots and divisions, so many circles' overlap."""
+    sorted_angles, order, step, dir_x, dir_y = own
+    for k in range(count):
+        fx, fy, r = near[0, k] - ox, near[1, k] - oy, near[2, k]
+        d = math.sqrt(fx * fx + fy * fy)
+        near[3, k] = d
+        if d > r:
+            near[4, k], near[5, k] = _circle_window(fx, fy, d, r, heading)
+    for k in range(count):
+        cx, cy, r, d = near[0, k], near[1, k], near[2, k], near[3, k]
+        if d - r >= max_range:
+            continue
+        if d <= r:
+            return False
+        f0, l0, f1, l1 = _beam_span(near[4, k], near[5, k], sorted_angles, step)
+        if in_order:
+            for j in range(np.uint64(f0), np.uint64(l0)):
+                ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+            for j in range(np.uint64(f1), np.uint64(l1)):
+                ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+            continue
+        for q in range(l0 - f0 + l1 - f1):
+            j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+            ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+    return True
