@@ -41,13 +41,7 @@ from lidar_env.vector.draws import (
     words_at,
 )
 from lidar_env.vector.unowned import unowned, unowned_scene
-from lidar_env.vehicle.car import (
-    _moved_to,
-    arc_pose,
-    drive_arc,
-    drive_arc_among_movers,
-    mount_poses,
-)
+from lidar_env.vehicle.car import arc_pose, drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
 #: [m] added to the reach of a move when picking the obstacles it may touch: far above the
@@ -196,12 +190,14 @@ def obstacles_within(
 def drive_clear_arc(pose: NDArray[np.float64], speed: float, yaw_rate: float, duration: float,
                     substeps: int) -> bool:
     """:func:`lidar_env.vehicle.car.drive_arc` with no obstacle within reach: ``pose`` moved
-    to its last substep's pose, the same floats (no substep can touch, so only the last one's
-    pose is computed); returns False (no hit)."""
+    to its last substep's pose (``substeps`` >= 1), the same floats (no substep can touch, so
+    only the last one's pose is computed, its heading wrapped as ``drive_arc`` wraps it);
+    returns False (no hit)."""
     x0, y0, h0 = pose[0], pose[1], pose[2]
     x, y, h, _, _ = arc_pose(x0, y0, h0, math.cos(h0), math.sin(h0), speed, yaw_rate,
                              duration * substeps / substeps)
-    return _moved_to(pose, substeps, (x, y, h), substeps)
+    pose[0], pose[1], pose[2] = x, y, (h + math.pi) % (2.0 * math.pi) - math.pi
+    return False
 
 
 @njit(cache=True)
