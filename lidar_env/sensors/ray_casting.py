@@ -67,7 +67,7 @@ def inline_into_scan_loops(call: Any, caller: Any, callee: Any) -> bool:
     return getattr(caller.func_id.func, "inlines_scans", False)
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, error_model="numpy")  # no zero test: loops of it vectorise
 def _bearing(y: float, x: float) -> float:
     """``atan2(y, x)`` [rad] to within 1.7e-6 rad, several times cheaper than libm's.
 
@@ -88,12 +88,12 @@ def _bearing(y: float, x: float) -> float:
 
 @njit(cache=True, fastmath=False)
 def _wrap_positive(angle: float) -> float:
-    """``angle`` in ``[-3 pi, 3 pi)`` wrapped to ``[0, 2 pi)`` without a float modulo."""
-    while angle < 0.0:
-        angle += _TWO_PI
-    while angle >= _TWO_PI:
-        angle -= _TWO_PI
-    return angle
+    """``angle`` in ``[-4 pi, 4 pi)`` wrapped to ``[0, 2 pi)`` without a float modulo or a
+    branch: at most two turns added, then at most two taken off."""
+    angle = angle + _TWO_PI if angle < 0.0 else angle
+    angle = angle + _TWO_PI if angle < 0.0 else angle
+    angle = angle - _TWO_PI if angle >= _TWO_PI else angle
+    return angle - _TWO_PI if angle >= _TWO_PI else angle
 
 
 @njit(cache=True, fastmath=False)
@@ -344,6 +344,19 @@ def cast_sensor(
         ranges.fill(0.0)
 
 
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _circle_windows(near: NDArray[np.float64], count: int, ox: float, oy: float,
+                    heading: float) -> None:
+    """Rows 3 to 5 of ``near`` set to the distance [m] and :func:`_circle_window` of each of
+    its first ``count`` circles (rows 0 to 2) from the sensor at ``(ox, oy)``: a loop with no
+    branch and no zero test, which LLVM vectorises (a circle holding the sensor gets NaN)."""
+    for k in range(count):
+        fx, fy, r = near[0, k] - ox, near[1, k] - oy, near[2, k]
+        d = math.sqrt(fx * fx + fy * fy)
+        near[3, k] = d
+        near[4, k], near[5, k] = _circle_window(fx, fy, d, r, heading)
+
+
 @njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def sweep_circles(ranges: NDArray[np.float64], near: NDArray[np.float64], count: int, ox: float,
                   oy: float, heading: float, own: tuple, max_range: float, in_order: bool) -> bool:
@@ -351,15 +364,10 @@ def sweep_circles(ranges: NDArray[np.float64], near: NDArray[np.float64], count:
     exact hits on the first ``count`` circles of ``near`` (6, count or more: x, y, radius [m],
     then scratch rows), each for the beams within the angle it subtends only (``own`` and
     ``in_order`` as :func:`cast_sensor` takes them). Returns False (ranges left for the caller
-    to zero) when the sensor is inside one. Distances and windows come first, in a loop of
-    their own: no branch waits on their square roots and divisions, so many circles' overlap."""
+    to zero) when the sensor is inside one. Distances and windows come first, all circles'
+    at once (:func:`_circle_windows`): no branch waits on their square roots and divisions."""
     sorted_angles, order, step, dir_x, dir_y = own
-    for k in range(count):
-        fx, fy, r = near[0, k] - ox, near[1, k] - oy, near[2, k]
-        d = math.sqrt(fx * fx + fy * fy)
-        near[3, k] = d
-        if d > r:
-            near[4, k], near[5, k] = _circle_window(fx, fy, d, r, heading)
+    _circle_windows(near, count, ox, oy, heading)
     for k in range(count):
         cx, cy, r, d = near[0, k], near[1, k], near[2, k], near[3, k]
         if d - r >= max_range:
