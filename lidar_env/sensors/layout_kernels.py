@@ -46,7 +46,7 @@ from lidar_env.sensors.ray_casting import (
     cast_sensor,
     inline_into_scan_loops,
     segment_hit,
-    sweep_circle,
+    sweep_circles,
 )
 from lidar_env.world.primitive_grid import point_segment_distance2
 
@@ -59,11 +59,10 @@ def cast_movers(ranges: NDArray[np.float64], ox: float, oy: float, heading: floa
     the sensor is inside one. ``own`` is the sensor's beams from
     :func:`lidar_env.sensors.ray_casting.beam_directions`; each circle updates only the beams within
     the angle it subtends."""
-    sorted_angles, order, step, dir_x, dir_y = own
-    for i in range(movers.shape[0]):
-        if not sweep_circle(ranges, ox, oy, heading, movers[i, 0], movers[i, 1], movers[i, 2],
-                            sorted_angles, order, step, dir_x, dir_y, max_range):
-            return
+    near = np.empty((6, movers.shape[0]))
+    near[:3] = movers.T
+    if not sweep_circles(ranges, near, movers.shape[0], ox, oy, heading, own, max_range, False):
+        ranges.fill(0.0)
 
 
 @njit(cache=True, fastmath=False)

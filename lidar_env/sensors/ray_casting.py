@@ -67,7 +67,7 @@ def inline_into_scan_loops(call: Any, caller: Any, callee: Any) -> bool:
     return getattr(caller.func_id.func, "inlines_scans", False)
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, error_model="numpy")  # no zero test: loops of it vectorise
 def _bearing(y: float, x: float) -> float:
     """``atan2(y, x)`` [rad] to within 1.7e-6 rad, several times cheaper than libm's.
 
@@ -88,12 +88,12 @@ def _bearing(y: float, x: float) -> float:
 
 @njit(cache=True, fastmath=False)
 def _wrap_positive(angle: float) -> float:
-    """``angle`` in ``[-3 pi, 3 pi)`` wrapped to ``[0, 2 pi)`` without a float modulo."""
-    while angle < 0.0:
-        angle += _TWO_PI
-    while angle >= _TWO_PI:
-        angle -= _TWO_PI
-    return angle
+    """``angle`` in ``[-4 pi, 4 pi)`` wrapped to ``[0, 2 pi)`` without a float modulo or a
+    branch: at most two turns added, then at most two taken off."""
+    angle = angle + _TWO_PI if angle < 0.0 else angle
+    angle = angle + _TWO_PI if angle < 0.0 else angle
+    angle = angle - _TWO_PI if angle >= _TWO_PI else angle
+    return angle - _TWO_PI if angle >= _TWO_PI else angle
 
 
 @njit(cache=True, fastmath=False)
@@ -212,33 +212,6 @@ def _segment_lower(dx: float, dy: float, v1x: float, v1y: float, ex: float, ey: 
     return t if hit else current
 
 
-# cast_sensor writes both sweeps out, guards odd_crossings and hands cell_block the grid's
-# scalars: each array handed to a call costs ~10 ns of reference counting (~40 ns a sweep).
-@njit(cache=True, fastmath=False)
-def sweep_circle(ranges: NDArray[np.float64], ox: float, oy: float, heading: float, cx: float,
-                 cy: float, r: float, sorted_angles: NDArray[np.float64],
-                 order: NDArray[np.int64], step: float, dir_x: NDArray[np.float64],
-                 dir_y: NDArray[np.float64], max_range: float) -> bool:
-    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
-    exact hits on the circle ``(cx, cy, r)`` [m], for the beams within the angle it subtends
-    only. The beams are ``sorted_angles, order, step`` (see
-    :func:`lidar_env.sensors.lidar_config.beam_geometry`) and their world-frame unit directions
-    ``dir_x, dir_y``. Returns False (all ranges 0) when the sensor is inside the circle."""
-    fx, fy = cx - ox, cy - oy
-    d = math.sqrt(fx * fx + fy * fy)
-    if d - r >= max_range:
-        return True
-    if d <= r:
-        ranges.fill(0.0)
-        return False
-    lo, width = _circle_window(fx, fy, d, r, heading)
-    f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-    for q in range(l0 - f0 + l1 - f1):
-        j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
-    return True
-
-
 @njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
 def beam_directions(
     heading: float, sorted_angles: NDArray[np.float64], order: NDArray[np.int64], step: float,
@@ -279,7 +252,9 @@ def cast_sensor(
     primitive once without clearing them; ``facing``
     :func:`lidar_env.sensors.edge_facing.edge_facing`'s codes for the segments, or empty (then no
     edge is skipped as facing away); ``in_order`` True when the beams' ``order`` is 0, 1, 2, ...
-    (the loops over a primitive's beams then index the beams directly: contiguous, vectorised).
+    (the loops over a primitive's beams then index the beams directly: contiguous, vectorised;
+    their bounds are unsigned, so numba adds no wrap of negative indices and LLVM vectorises the
+    loops, square roots and divisions included).
     """
     ox, oy, heading = pose
     if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(heading)):
@@ -299,6 +274,7 @@ def cast_sensor(
     c0, c1, r0, r1, sx, sy = cell_block(ox, oy, max_range, wedge if cull else (_TWO_PI, 1.0,
                                         0.0, 1.0, 0.0), grid[:5])
     pad = 1e-9 * size
+    near, n_near = np.empty((6, circles.shape[0])), 0  # the circles the walk keeps
     for iy in range(r0, r1 + 1):
         for column in range(c0, c1 + 1):
             c = iy * nx + column
@@ -320,32 +296,14 @@ def cast_sensor(
                 if max(abs(cx - ox), abs(cy - oy)) - r >= max_range or (
                         cull and outside_wedge(wedge, cx - ox, cy - oy, cx - ox, cy - oy, r)):
                     continue
-                fx, fy = cx - ox, cy - oy  # the circle's sweep (see sweep_circle)
-                d = math.sqrt(fx * fx + fy * fy)
-                if d - r >= max_range:
-                    continue
-                if d <= r:
-                    ranges.fill(0.0)
-                    return
-                lo, width = _circle_window(fx, fy, d, r, heading)
-                f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
-                if in_order:
-                    for j in range(f0, l0):
-                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r,
-                                                  ranges[j])
-                    for j in range(f1, l1):
-                        ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r,
-                                                  ranges[j])
-                    continue
-                for q in range(l0 - f0 + l1 - f1):
-                    j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
-                    ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+                near[0, n_near], near[1, n_near], near[2, n_near] = cx, cy, r
+                n_near += 1
             for p in range(segment_start[c], segment_start[c + 1]):
                 i = segment_ids[p]
                 if segment_seen[i] == stamp:
                     continue
                 segment_seen[i] = stamp
-                # the segment's sweep (see sweep_circle), on scalars: a row view costs
+                # the segment's sweep (see sweep_circles), on scalars: a row view costs
                 x1, y1, x2, y2 = segments[i, 0], segments[i, 1], segments[i, 2], segments[i, 3]
                 v1x, v1y, v2x, v2y = x1 - ox, y1 - oy, x2 - ox, y2 - oy
                 ex, ey = x2 - x1, y2 - y1
@@ -371,10 +329,10 @@ def cast_sensor(
                 f0, l0, f1, l1 = _beam_span(lo, width, sorted_angles, step)
                 along = v1x * ey - v1y * ex  # t * denom
                 if in_order:
-                    for j in range(f0, l0):
+                    for j in range(np.uint64(f0), np.uint64(l0)):
                         ranges[j] = _segment_lower(dir_x[j], dir_y[j], v1x, v1y, ex, ey, along,
                                                    ranges[j])
-                    for j in range(f1, l1):
+                    for j in range(np.uint64(f1), np.uint64(l1)):
                         ranges[j] = _segment_lower(dir_x[j], dir_y[j], v1x, v1y, ex, ey, along,
                                                    ranges[j])
                     continue
@@ -382,3 +340,48 @@ def cast_sensor(
                     j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
                     ranges[j] = _segment_lower(dir_x[j], dir_y[j], v1x, v1y, ex, ey, along,
                                                ranges[j])
+    if not sweep_circles(ranges, near, n_near, ox, oy, heading, own, max_range, in_order):
+        ranges.fill(0.0)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _circle_windows(near: NDArray[np.float64], count: int, ox: float, oy: float,
+                    heading: float) -> None:
+    """Rows 3 to 5 of ``near`` set to the distance [m] and :func:`_circle_window` of each of
+    its first ``count`` circles (rows 0 to 2) from the sensor at ``(ox, oy)``: a loop with no
+    branch and no zero test, which LLVM vectorises (a circle holding the sensor gets NaN)."""
+    for k in range(count):
+        fx, fy, r = near[0, k] - ox, near[1, k] - oy, near[2, k]
+        d = math.sqrt(fx * fx + fy * fy)
+        near[3, k] = d
+        near[4, k], near[5, k] = _circle_window(fx, fy, d, r, heading)
+
+
+@njit(cache=True, fastmath=False, inline=inline_into_scan_loops)
+def sweep_circles(ranges: NDArray[np.float64], near: NDArray[np.float64], count: int, ox: float,
+                  oy: float, heading: float, own: tuple, max_range: float, in_order: bool) -> bool:
+    """Lower ``ranges`` (n,) of a sensor at ``(ox, oy)`` (heading [rad] in [0, 2 pi)) to the
+    exact hits on the first ``count`` circles of ``near`` (6, count or more: x, y, radius [m],
+    then scratch rows), each for the beams within the angle it subtends only (``own`` and
+    ``in_order`` as :func:`cast_sensor` takes them). Returns False (ranges left for the caller
+    to zero) when the sensor is inside one. Distances and windows come first, all circles'
+    at once (:func:`_circle_windows`): no branch waits on their square roots and divisions."""
+    sorted_angles, order, step, dir_x, dir_y = own
+    _circle_windows(near, count, ox, oy, heading)
+    for k in range(count):
+        cx, cy, r, d = near[0, k], near[1, k], near[2, k], near[3, k]
+        if d - r >= max_range:
+            continue
+        if d <= r:
+            return False
+        f0, l0, f1, l1 = _beam_span(near[4, k], near[5, k], sorted_angles, step)
+        if in_order:
+            for j in range(np.uint64(f0), np.uint64(l0)):
+                ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+            for j in range(np.uint64(f1), np.uint64(l1)):
+                ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+            continue
+        for q in range(l0 - f0 + l1 - f1):
+            j = order[f0 + q] if q < l0 - f0 else order[f1 + q - (l0 - f0)]
+            ranges[j] = _circle_lower(ox, oy, dir_x[j], dir_y[j], cx, cy, r, ranges[j])
+    return True

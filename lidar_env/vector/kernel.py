@@ -41,7 +41,7 @@ from lidar_env.vector.draws import (
     words_at,
 )
 from lidar_env.vector.unowned import unowned, unowned_scene
-from lidar_env.vehicle.car import drive_arc, drive_arc_among_movers, mount_poses
+from lidar_env.vehicle.car import arc_pose, drive_arc, drive_arc_among_movers, mount_poses
 from lidar_env.world.primitive_grid import cell_block, segment_distance2
 
 #: [m] added to the reach of a move when picking the obstacles it may touch: far above the
@@ -187,6 +187,20 @@ def obstacles_within(
 
 
 @njit(cache=True)
+def drive_clear_arc(pose: NDArray[np.float64], speed: float, yaw_rate: float, duration: float,
+                    substeps: int) -> bool:
+    """:func:`lidar_env.vehicle.car.drive_arc` with no obstacle within reach: ``pose`` moved
+    to its last substep's pose (``substeps`` >= 1), the same floats (no substep can touch, so
+    only the last one's pose is computed, its heading wrapped as ``drive_arc`` wraps it);
+    returns False (no hit)."""
+    x0, y0, h0 = pose[0], pose[1], pose[2]
+    x, y, h, _, _ = arc_pose(x0, y0, h0, math.cos(h0), math.sin(h0), speed, yaw_rate,
+                             duration * substeps / substeps)
+    pose[0], pose[1], pose[2] = x, y, (h + math.pi) % (2.0 * math.pi) - math.pi
+    return False
+
+
+@njit(cache=True)
 def step_envs(
     envs: NDArray[np.int64],
     speed: NDArray[np.float64],
@@ -238,7 +252,9 @@ def step_envs(
         near_circles, near_segments = obstacles_within(
             car_pose[i, 0], car_pose[i, 1], reach, circles, segments, grid, seen, stamp, near[0],
             near[1])
-        if crowd[0].shape[1] == 0:
+        if crowd[0].shape[1] == 0 and near_circles.shape[0] + near_segments.shape[0] == 0:
+            hit = drive_clear_arc(car_pose[i], speed[i], yaw_rate[i], dt, checks[i])
+        elif crowd[0].shape[1] == 0:
             hit = drive_arc(car_pose[i], speed[i], yaw_rate[i], dt, checks[i], half_length,
                             half_width, near_circles, near_segments)
         else:  # movers first (their waypoint draws), then the car among them

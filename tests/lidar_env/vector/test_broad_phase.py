@@ -1,12 +1,15 @@
 """The batched env's collision broad phase (:func:`lidar_env.vector.kernel.obstacles_within`)
-picks, through the world's grid, exactly the obstacles a scan of all of them picks, and the
-batched env stays bit-identical to single envs in a cluttered world of many grid cells."""
+picks, through the world's grid, exactly the obstacles a scan of all of them picks; a move with
+none picked (:func:`lidar_env.vector.kernel.drive_clear_arc`) ends where ``drive_arc`` ends it, bit
+for bit; and the batched env stays bit-identical to single envs in a cluttered world of many grid
+cells."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from lidar_env.vector.kernel import obstacles_within
+from lidar_env.vector.kernel import drive_clear_arc, obstacles_within
+from lidar_env.vehicle.car import drive_arc
 from lidar_env.world.primitive_grid import segment_distance2
 from lidar_env.world.world import World
 from tests.lidar_env.vector.test_identity import assert_same, pair, wall_seeking_actions
@@ -54,6 +57,22 @@ def test_the_grid_picks_the_same_obstacles_as_a_scan_of_all() -> None:
         assert picked <= {tuple(row) for row in circles[close]}
         assert sorted(map(tuple, got_segments)) == sorted(
             map(tuple, segments[distances <= reach * reach]))
+
+
+def test_a_move_with_no_obstacle_near_ends_where_drive_arc_ends_it() -> None:
+    rng = np.random.default_rng(5)
+    no_circles, no_segments = np.empty((0, 3)), np.empty((0, 4))
+    yaw_rates = np.concatenate([rng.uniform(-1.5, 1.5, 300), rng.uniform(-2e-9, 2e-9, 100),
+                                np.zeros(20)])
+    for yaw_rate in yaw_rates:
+        pose = np.array([rng.uniform(-50.0, 50.0), rng.uniform(-50.0, 50.0),
+                         rng.uniform(-np.pi, np.pi)])
+        speed, substeps = rng.uniform(-1.5, 1.5), int(rng.integers(1, 9))
+        expected = pose.copy()
+        hit = drive_arc(expected, speed, yaw_rate, 0.1, substeps, 0.25, 0.15, no_circles,
+                        no_segments)
+        assert drive_clear_arc(pose, speed, yaw_rate, 0.1, substeps) is hit is False
+        np.testing.assert_array_equal(pose.view(np.uint64), expected.view(np.uint64))
 
 
 def test_batched_steps_in_a_cluttered_world_are_bit_identical_to_single_envs() -> None:
