@@ -128,14 +128,13 @@ def _added(ring: FloatArray, slot: int, increment: FloatArray, heading: float,
     """Write the step into ``ring[slot]`` (forward, lateral [m] in the midpoint frame,
     ``2 sin(turn / 2)``, the variance [1 / points] across the car there, of ``information``
     inverted by LAPACK's ``dgesv`` as ``np.linalg.inv`` does, the other directions unknown)
-    where the match pins the car's sideways direction; else False, the ring untouched."""
+    where the match pins the car's sideways direction; else (also for a singular or not
+    finite ``information``) False, the ring untouched."""
     x, y, turn = increment[0], increment[1], increment[2]
     c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
-    if not np.all(np.isfinite(information)):
-        return False
     try:
         covariance = np.linalg.solve(information, np.eye(3))
-    except Exception:  # singular: nothing pinned
+    except Exception:  # singular or not finite: nothing pinned
         return False
     across = heading + 0.5 * turn
     normal = np.array([-math.sin(across), math.cos(across)])
