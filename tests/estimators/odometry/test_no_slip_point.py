@@ -192,6 +192,7 @@ def test_the_compiled_step_and_fit_are_their_numpy_form_bit_for_bit() -> None:
         pinned = 0 < variance <= 1.0 / no_slip_point.MIN_STEP_INFORMATION
         assert _added(ring, 0, increment, heading, information) == pinned
         assert not pinned or ring[0, 3] == variance
+    assert not _added(ring, 0, np.zeros(3), 0.0, np.diag([np.inf, 100.0, 100.0]))  # no match
     for seed, offset, motion in ((0, 0.2, {}), (1, -0.1, {"strafe": 0.03}),
                                  (2, 0.3, {"slide": 0.2}), (3, 0.0, {})):
         increments, _ = _steps(offset, 400, seed, **motion)
