@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
@@ -58,6 +59,8 @@ CAUCHY_SCALE = 2.0
 ITERATIONS = 5
 #: The fit is taken again every this many new steps (it moves little from one to the next).
 REFIT_EVERY = 5
+#: ``|2 sin(turn / 2)|`` of a step turning ``MIN_TURN``.
+MIN_CHORD = 2.0 * math.sin(0.5 * MIN_TURN)
 
 
 @dataclass(frozen=True)
@@ -101,22 +104,17 @@ class NoSlipCalibration:
         """One step: its ``increment`` (3,) (x, y [m], heading [rad], frame of its start), the
         world ``heading`` [rad] it starts from, and its match's ``information`` (3, 3, world
         frame, in points), None for a step not matched from the last one (after skipped scans
-        or a jumping clock). Steps the match does not pin across the car are not used (a
-        corridor's axis lies across a car turned towards a wall)."""
-        if information is None:
+        or a jumping clock). Steps the match does not pin across the car, or whose information
+        is not finite, are not used (a corridor's axis lies across a car turned towards a
+        wall)."""
+        if information is None or not _added(self._ring, self._count % WINDOW, increment,
+                                             heading, information):
             return
-        x, y, turn = increment.tolist()
-        c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
-        variance = _sideways_variance(information, heading + 0.5 * turn)
-        if not 0 < variance <= 1.0 / MIN_STEP_INFORMATION:
-            return
-        self._ring[self._count % WINDOW] = (c * x + s * y, c * y - s * x, 2.0 * s, variance)
         self._count += 1
         if self._count % REFIT_EVERY == 0:
-            steps = self.steps
-            turning = np.count_nonzero(np.abs(steps[:, 2]) > 2.0 * math.sin(0.5 * MIN_TURN))
-            if turning >= MIN_TURNING_STEPS:  # else too few to judge: the last fit stands
-                self.fit = fitted(steps)
+            outcome, offset, error, residual = _fit(self.steps, MIN_TURNING_STEPS)
+            if outcome != TOO_FEW_TURNS:  # else too few to judge: the last fit stands
+                self.fit = NoSlipFit(offset, error, residual) if outcome == FIT else None
 
     def restart(self) -> None:
         """Forget the steps but keep the fit (the same robot, its steps about to be matched
@@ -124,15 +122,107 @@ class NoSlipCalibration:
         self._count = 0
 
 
-def _sideways_variance(information: FloatArray, heading: float) -> float:
-    """The variance [1 / points] across ``heading`` [rad] of a pose with ``information`` (3,
-    3; world x, y, heading; in points), the other directions unknown; inf where singular."""
+@njit(cache=True)
+def _added(ring: FloatArray, slot: int, increment: FloatArray, heading: float,
+           information: FloatArray) -> bool:
+    """Write the step into ``ring[slot]`` (forward, lateral [m] in the midpoint frame,
+    ``2 sin(turn / 2)``, the variance [1 / points] across the car there, of ``information``
+    inverted by LAPACK's ``dgesv`` as ``np.linalg.inv`` does, the other directions unknown)
+    where the match pins the car's sideways direction; else (also for a singular or not
+    finite ``information``) False, the ring untouched."""
+    x, y, turn = increment[0], increment[1], increment[2]
+    c, s = math.cos(0.5 * turn), math.sin(0.5 * turn)
     try:
-        covariance = np.linalg.inv(information)
-    except np.linalg.LinAlgError:
-        return math.inf
-    n = np.array([-math.sin(heading), math.cos(heading)])
-    return float(n @ covariance[:2, :2] @ n)
+        covariance = np.linalg.solve(information, np.eye(3))
+    except Exception:  # singular or not finite: nothing pinned
+        return False
+    across = heading + 0.5 * turn
+    normal = np.array([-math.sin(across), math.cos(across)])
+    variance = np.dot(np.dot(normal, np.ascontiguousarray(covariance[:2, :2])), normal)
+    if not 0 < variance <= 1.0 / MIN_STEP_INFORMATION:
+        return False
+    ring[slot, 0] = c * x + s * y
+    ring[slot, 1] = c * y - s * x
+    ring[slot, 2] = 2.0 * s
+    ring[slot, 3] = variance
+    return True
+
+
+@njit(cache=True)
+def _sum(values: FloatArray) -> float:
+    """``np.sum`` of a contiguous ``values`` (n,) bit for bit: :func:`_pairwise_sum` added to
+    the sum's start, 0.0 (so that a sum of -0.0 is 0.0)."""
+    return 0.0 + _pairwise_sum(values)
+
+
+@njit(cache=True)
+def _pairwise_sum(values: FloatArray) -> float:
+    """numpy's pairwise summation: eight running sums over blocks of at most 128 values, the
+    halves of longer runs summed apart."""
+    n = len(values)
+    if n < 8:
+        total = 0.0
+        for value in values:
+            total += value
+        return total
+    if n > 128:
+        half = n // 2
+        half -= half % 8
+        return _pairwise_sum(values[:half]) + _pairwise_sum(values[half:])
+    partial = values[:8].copy()
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            partial[j] += values[i + j]
+        i += 8
+    total = ((partial[0] + partial[1]) + (partial[2] + partial[3])) + (
+        (partial[4] + partial[5]) + (partial[6] + partial[7]))
+    for k in range(i, n):
+        total += values[k]
+    return total
+
+
+#: Outcomes of :func:`_fit`.
+FIT, REFUSED, TOO_FEW_TURNS = 0, 1, 2
+
+
+@njit(cache=True)
+def _fit(steps: FloatArray, min_turning: int) -> tuple[int, float, float, float]:
+    """The fit of :func:`fitted` as (outcome, offset, offset_error, residual): ``FIT``,
+    ``REFUSED`` (not confident or not consistent), or ``TOO_FEW_TURNS`` (fewer than
+    ``min_turning`` steps turning ``MIN_TURN``); the arithmetic of numpy's array operations
+    in their order (sums by :func:`_sum`), so the same numbers bit for bit."""
+    n = len(steps)
+    forward, lateral, chord = steps[:, 0], steps[:, 1], steps[:, 2]
+    precision = 1.0 / steps[:, 3]
+    if np.count_nonzero(np.abs(chord) > MIN_CHORD) < min_turning:
+        return TOO_FEW_TURNS, 0.0, 0.0, 0.0
+    root_precision = np.sqrt(precision)
+    weights = precision.copy()
+    moment, spread, normalised = np.empty(n), np.empty(n), np.empty(n)
+    offset = scale = 0.0
+    for _ in range(ITERATIONS):
+        for i in range(n):
+            moment[i] = weights[i] * chord[i] * lateral[i]
+            spread[i] = weights[i] * (chord[i] * chord[i])
+        offset = _sum(moment) / _sum(spread)
+        for i in range(n):  # [m sqrt(points)]
+            normalised[i] = (lateral[i] - offset * chord[i]) * root_precision[i]
+        scale = 1.4826 * np.median(np.abs(normalised))
+        if scale <= 0:
+            return REFUSED, 0.0, 0.0, 0.0
+        for i in range(n):
+            ratio = normalised[i] / (CAUCHY_SCALE * scale)
+            weights[i] = precision[i] / (1.0 + ratio * ratio)
+    inliers = np.count_nonzero(np.abs(normalised) <= OUTLIER * scale)
+    for i in range(n):
+        spread[i] = weights[i] * (chord[i] * chord[i])
+    error = scale / math.sqrt(_sum(spread))
+    residual = scale * math.sqrt(np.median(steps[:, 3]))  # [m], a typical step
+    if (error > MAX_OFFSET_ERROR or residual > MAX_SIDESLIP_SHARE * np.median(np.abs(forward))
+            or 1.0 - inliers / n > MAX_OUTLIER_SHARE):
+        return REFUSED, 0.0, 0.0, 0.0
+    return FIT, offset, error, residual
 
 
 def fitted(steps: FloatArray) -> NoSlipFit | None:
@@ -141,23 +231,5 @@ def fitted(steps: FloatArray) -> NoSlipFit | None:
     (``MAX_OFFSET_ERROR``) and consistent (residuals within ``MAX_SIDESLIP_SHARE`` of the
     forward steps, outliers within ``MAX_OUTLIER_SHARE``), else None. Each step weighs by the
     inverse of its variance; the residuals are judged in units of their own spread."""
-    forward, lateral, chord, variance = steps.T
-    precision = 1.0 / variance
-    if not np.any(np.abs(chord) > 2.0 * math.sin(0.5 * MIN_TURN)):
-        return None
-    weights = precision.copy()
-    offset = scale = 0.0
-    for _ in range(ITERATIONS):
-        offset = float(np.sum(weights * chord * lateral) / np.sum(weights * chord**2))
-        normalised = (lateral - offset * chord) * np.sqrt(precision)  # [m sqrt(points)]
-        scale = 1.4826 * float(np.median(np.abs(normalised)))
-        if scale <= 0:
-            return None
-        weights = precision / (1.0 + (normalised / (CAUCHY_SCALE * scale)) ** 2)
-    inliers = np.abs(normalised) <= OUTLIER * scale
-    error = scale / math.sqrt(float(np.sum(weights * chord**2)))
-    residual = scale * math.sqrt(float(np.median(variance)))  # [m], a typical step
-    if (error > MAX_OFFSET_ERROR or residual > MAX_SIDESLIP_SHARE * float(np.median(
-            np.abs(forward))) or 1.0 - np.mean(inliers) > MAX_OUTLIER_SHARE):
-        return None
-    return NoSlipFit(offset, error, residual)
+    outcome, offset, error, residual = _fit(np.ascontiguousarray(steps, dtype=np.float64), 1)
+    return NoSlipFit(offset, error, residual) if outcome == FIT else None

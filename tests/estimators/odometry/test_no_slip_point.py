@@ -1,7 +1,7 @@
 """The no-slip point found online (``estimators.odometry.no_slip_point``): a frame ahead of a
 wheeled robot's axle is placed, a base that strafes or slides is refused, a step the scan does
-not pin across the car is not used; and the constraint with that offset
-(``motion_prior.no_sideslip_prior``)."""
+not pin across the car is not used, the compiled step and fit give the numbers of their numpy
+form bit for bit; and the constraint with that offset (``motion_prior.no_sideslip_prior``)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,17 @@ import math
 
 import numpy as np
 
+from estimators.odometry import no_slip_point
 from estimators.odometry.local_map import LocalMapOdometry
 from estimators.odometry.motion_prior import no_sideslip_prior
-from estimators.odometry.no_slip_point import MIN_TURNING_STEPS, NoSlipCalibration, fitted
+from estimators.odometry.no_slip_point import (
+    MIN_TURNING_STEPS,
+    NoSlipCalibration,
+    NoSlipFit,
+    _added,
+    _sum,
+    fitted,
+)
 from lidar_env.core.se2 import compose, relative
 
 #: A well-seen step's information (3, 3): 100 points' worth across x and y, 1000 in heading.
@@ -132,3 +140,65 @@ def test_a_known_no_slip_point_keeps_its_own_slip() -> None:
     off._reset_motion_model()
     off._no_slip.fit = _calibrated(0.1).fit  # found, but not to be used
     assert off._no_slip_fit() is None
+
+
+def _plain_variance(information: np.ndarray, heading: float) -> float:
+    """The sideways variance [1 / points] of a step across ``heading`` [rad], by numpy."""
+    try:
+        covariance = np.linalg.inv(information)
+    except np.linalg.LinAlgError:
+        return math.inf
+    n = np.array([-math.sin(heading), math.cos(heading)])
+    return float(n @ covariance[:2, :2] @ n)
+
+
+def _plain_fitted(steps: np.ndarray) -> NoSlipFit | None:
+    """:func:`fitted` in numpy array operations."""
+    forward, lateral, chord, variance = steps.T
+    precision = 1.0 / variance
+    if not np.any(np.abs(chord) > no_slip_point.MIN_CHORD):
+        return None
+    weights = precision.copy()
+    offset = scale = 0.0
+    for _ in range(no_slip_point.ITERATIONS):
+        offset = float(np.sum(weights * chord * lateral) / np.sum(weights * chord**2))
+        normalised = (lateral - offset * chord) * np.sqrt(precision)
+        scale = 1.4826 * float(np.median(np.abs(normalised)))
+        if scale <= 0:
+            return None
+        weights = precision / (1.0 + (normalised / (no_slip_point.CAUCHY_SCALE * scale)) ** 2)
+    inliers = np.abs(normalised) <= no_slip_point.OUTLIER * scale
+    error = scale / math.sqrt(float(np.sum(weights * chord**2)))
+    residual = scale * math.sqrt(float(np.median(variance)))
+    if (error > no_slip_point.MAX_OFFSET_ERROR
+            or residual > no_slip_point.MAX_SIDESLIP_SHARE * float(np.median(np.abs(forward)))
+            or 1.0 - np.mean(inliers) > no_slip_point.MAX_OUTLIER_SHARE):
+        return None
+    return NoSlipFit(offset, error, residual)
+
+
+def test_the_compiled_step_and_fit_are_their_numpy_form_bit_for_bit() -> None:
+    rng = np.random.default_rng(4)
+    for n in (1, 7, 8, 9, 127, 128, 129, 300, 400, 1000):
+        values = rng.normal(size=n) * rng.choice([1e-6, 1.0, 1e6], size=n)
+        assert _sum(values) == np.sum(values)
+    assert math.copysign(1.0, _sum(np.full(20, -0.0))) == 1.0
+    ring = np.zeros((1, 4))
+    for _ in range(2000):
+        root = rng.normal(size=(3, 3)) * rng.choice([1e-2, 1.0, 30.0], size=(3, 3))
+        information = root @ root.T if rng.random() < 0.8 else np.diag([0.0, 1.0, 1.0])
+        increment, heading = rng.normal(0.0, 0.3, 3), rng.uniform(-4.0, 4.0)
+        variance = _plain_variance(information, heading + 0.5 * increment[2])
+        pinned = 0 < variance <= 1.0 / no_slip_point.MIN_STEP_INFORMATION
+        assert _added(ring, 0, increment, heading, information) == pinned
+        assert not pinned or ring[0, 3] == variance
+    assert not _added(ring, 0, np.zeros(3), 0.0, np.diag([np.inf, 100.0, 100.0]))  # no match
+    for seed, offset, motion in ((0, 0.2, {}), (1, -0.1, {"strafe": 0.03}),
+                                 (2, 0.3, {"slide": 0.2}), (3, 0.0, {})):
+        increments, _ = _steps(offset, 400, seed, **motion)
+        c, s = np.cos(0.5 * increments[:, 2]), np.sin(0.5 * increments[:, 2])
+        steps = np.column_stack([c * increments[:, 0] + s * increments[:, 1],
+                                 c * increments[:, 1] - s * increments[:, 0], 2.0 * s,
+                                 rng.uniform(0.002, 0.2, len(increments))])
+        for n in (12, 131, 400):
+            assert fitted(steps[:n]) == _plain_fitted(steps[:n])
