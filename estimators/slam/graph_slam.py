@@ -18,9 +18,8 @@ the old keyframe: a symmetric corridor's far end seen turned around passes every
 not this one), becomes a loop edge. After new loop edges the graph is optimised
 (Levenberg–Marquardt, a Cauchy kernel on loop edges); loop edges it still cannot reconcile
 (Mahalanobis error above ``max_loop_sigma``) are dropped and the graph optimised again: a
-false loop must not bend the map. Where the front end lost its place (after a long blind
-stretch), the keyframes after are searched in the map before (:mod:`estimators.slam.
-relocalization`).
+false loop must not bend the map. Where the front end lost its place, the keyframes after
+are searched in the map before (:mod:`estimators.slam.relocalization`).
 
 Poses: ``update`` returns the online estimate (the latest keyframe's pose as optimised so
 far, plus the front end's motion since it); :attr:`GraphSlam.trajectory` returns the smoothed
@@ -87,12 +86,9 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
         max_candidates: verify at most 4 per keyframe, revisits first, best descriptor first.
         submap_neighbours: the old place is the candidate keyframe plus this many keyframes
             on each side (2: ~2 m of travel, enough walls to match a 180-degree scan).
-        min_query_points, loop_query_keyframes: a new keyframe with fewer than 100 points is
-            matched together with the keyframes before it, up to 4 (~2 m of travel, placed by
-            the graph; none of the old place's own), until they hold 100: a 3.5 m Lidar's scan
-            of two or three posts pins a loop edge's heading to only 1-2 deg, twice the front
-            end's own error over the same span, and the edge's error falls with the pairs it
-            rests on up to about 100 (``bench_loop_edges.py``).
+        min_query_points, loop_query_keyframes: a keyframe with fewer than 100 points is
+            loop-matched with up to 4 keyframes before it (placed by the graph, never the old
+            place's own): a scan of a few posts pins a loop edge's heading to only 1-2 deg.
         loss_scale: Cauchy kernel scale on loop edges, as a Mahalanobis distance (3).
         loop_gate: a verified match becomes a loop edge only if it is reachable from the
             graph's current estimate: its Mahalanobis distance from it, under the covariance
@@ -122,8 +118,7 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
             ``consistency_distance`` 0.3 m and ``consistency_angle`` 3 deg): one look-alike
             place is common indoors, two consistent ones in a row rarely are.
         lost_sigma: where the front end lost its place (``Health.lost``), the odometry edge
-            across is a place unknown within this [m] (10) and of any heading; the keyframes after
-            are sought in the map until two matches agree (:mod:`estimators.slam.relocalization`).
+            across is a place unknown within this [m] (10) and of any heading (relocalization).
         min_range: readings at or below this [m] are "no return".
         match_odometry: add the covariance of a keyframe-to-keyframe match Hessian to the
             distance model of each odometry edge (True: the edge is weak where the scene
