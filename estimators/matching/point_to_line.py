@@ -184,18 +184,23 @@ class PointToLineReference:
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """``kept`` and ``near`` (:func:`estimators.matching.nearest.search_near`) for the
         query points ``query`` (M, 2), updated in place by the kernels: ``given``, else those
-        the last iterations on this reference left when they were of the same array, else
-        fresh ones; kept for the next. ICP of one scan from several starts, or again without
-        some of its points, then skips the searches its kept points already answer; the pairs
-        stay the same bit for bit, as the kept points are this reference's wherever the
-        query stood. "The same array" is the same object: ICP takes a float64 array as it is
-        (``astype(copy=False)``; ``np.asarray`` copies one whose dtype is another instance,
-        as numba's are)."""
+        the last iterations on this reference left, row by row (fresh past their rows): all
+        of them when they were of the same array (the same object: ICP takes a float64 array
+        as it is, where ``np.asarray`` copies one whose dtype is another instance, as numba's
+        are), else another scan's, whose rows mostly lie near the same beams. ICP of one scan
+        from several starts, again without some of its points, or of the next scan then
+        skips the searches the kept points answer and starts the others near their answer;
+        the pairs stay the same bit for bit, as the kept points are this reference's wherever
+        the query stood."""
         last = self._neighbours
         if given is not None:
             last = (query, *given)
         elif last is None or last[0] is not query or len(last[1]) != len(query):
-            last = (query, *fresh_neighbours(len(query)))
+            kept, near = fresh_neighbours(len(query))
+            if last is not None:  # another scan's rows: seeds near the same beams' points
+                rows = min(len(query), len(last[1]))
+                kept[:rows], near[:rows] = last[1][:rows], last[2][:rows]
+            last = (query, kept, near)
         self._neighbours = last
         return last[1], last[2]
 
