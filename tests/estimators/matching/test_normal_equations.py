@@ -169,9 +169,10 @@ def _same_match(found, expected) -> None:
 def test_registration_from_kept_neighbours_is_bit_identical(
     seed: int, kind: str, shift: float, turn: float,
 ) -> None:
-    """ICP of a scan again from another start (its neighbours kept on the reference), and of
-    a subset of its points from their rows of those neighbours, pairs and ends exactly as
-    from no neighbours: the kept points only spare searches."""
+    """ICP of a scan again from another start (its neighbours kept on the reference), of a
+    subset of its points from their rows of those neighbours, and of another scan from the
+    rows the last left, pairs and ends exactly as from no neighbours: the kept points only
+    spare searches."""
     rng = np.random.default_rng(seed)
     ranges, angles = _room_scan(rng)
     hit = ranges < 20.0
@@ -192,3 +193,8 @@ def test_registration_from_kept_neighbours_is_bit_identical(
                          neighbours=(kept[rows], near[rows])),
                 register(reference, query[rows], start, params,
                          neighbours=fresh_neighbours(len(rows))))
+    # the next scan, another array, from the rows the last one left
+    following = query[1:] + 0.02 * rng.standard_normal((len(query) - 1, 2))
+    _same_match(register(reference, following, start, params),
+                register(reference, following, start, params,
+                         neighbours=fresh_neighbours(len(following))))
