@@ -104,13 +104,10 @@ class ICPParams:
 
 
 def register(
-    reference: PointToLineReference,
-    query_points: NDArray[np.float64],
-    initial_guess: ArrayLike,
-    params: ICPParams = ICPParams(),
-    prior_pose: ArrayLike | None = None,
-    prior_information: ArrayLike | None = None,
-    compiled: bool = True,
+    reference: PointToLineReference, query_points: NDArray[np.float64], initial_guess: ArrayLike,
+    params: ICPParams = ICPParams(), prior_pose: ArrayLike | None = None,
+    prior_information: ArrayLike | None = None, compiled: bool = True,
+    neighbours: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None,
 ) -> MatchResult:
     """Robust point-to-line ICP of ``query_points`` (M, 2, query frame) onto ``reference``.
 
@@ -120,9 +117,11 @@ def register(
     sideways motion tighter than forward motion (a car does not slip sideways). ``compiled``
     runs the iterations in one numba call
     (:func:`estimators.matching.normal_equations.register_loop`); ``False``, or a trimmed
-    loss, steps in Python (the same math; the tests' reference).
+    loss, steps in Python (the same math; the tests' reference). The compiled pair searches
+    start from ``neighbours``, the query points' nearest reference points found so far (by
+    default those of the last ICP of the same array: ``reference.neighbours_for``).
     """
-    query_points = np.asarray(query_points, dtype=np.float64)
+    query_points = np.asarray(query_points).astype(np.float64, copy=False)  # (neighbours_for)
     if query_points.ndim != 2 or query_points.shape[1] != 2:
         raise EstimatorInputError(f"query points: expected shape (M, 2), got {query_points.shape}")
     pose = np.array(initial_guess, dtype=np.float64)
@@ -143,7 +142,8 @@ def register(
             LOSSES.index(params.loss), params.loss_scale, prior is not None,
             _NO_PRIOR if prior is None else prior,
             _NO_INFORMATION if information is None else information, params.min_information,
-            params.tolerance_translation, params.tolerance_rotation, params.inlier_distance)
+            params.tolerance_translation, params.tolerance_rotation, params.inlier_distance,
+            *reference.neighbours_for(query_points, neighbours))
         return _assess(squares, len(query_points), pose, iterations, converged, hessian)
     converged = False
     iterations = 0
@@ -182,7 +182,7 @@ def leaves_a_direction_free(reference: PointToLineReference, query_points: NDArr
     RMS lever arm): the directions :func:`register` leaves to the motion prior (a corridor's
     axis). False with ``min_information`` 0 or fewer than 3 pairs."""
     hessian, _, count, lever, _ = reference.normal_equations(
-        np.asarray(query_points, dtype=np.float64), np.asarray(pose, dtype=np.float64),
+        np.asarray(query_points).astype(np.float64, copy=False), np.asarray(pose, float),
         params.max_correspondence_distance, params.loss, params.loss_scale)
     if params.min_information <= 0 or count < 3:
         return False

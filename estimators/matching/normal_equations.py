@@ -225,15 +225,17 @@ def register_loop(
     scale: float, has_prior: bool, prior: NDArray[np.float64],
     prior_information: NDArray[np.float64], min_information: float,
     tolerance_translation: float, tolerance_rotation: float, inlier_distance: float,
+    kept: NDArray[np.float64], near: NDArray[np.int64],
 ) -> tuple[NDArray[np.float64], int, bool, NDArray[np.float64], NDArray[np.float64]]:
     """The iterations of ``icp.register`` (untrimmed) in one call: the pose, the iterations
     run, whether the step fell below the tolerances, the squared residuals [m^2] at that pose
     of the query points whose residual against their pair within ``inlier_distance`` is
     below it (in query order), which the match is assessed on, and those pairs' ``J^T W J``
-    (3, 3), the points' information at the pose. ``prior_information`` is (3, 3)."""
+    (3, 3), the points' information at the pose. ``prior_information`` is (3, 3); ``kept`` and
+    ``near`` the query points' neighbours found so far (:func:`fresh_neighbours` for none),
+    updated in place (:func:`point_to_line_system`)."""
     pose = initial.copy()
     residuals = np.empty(query.shape[0])
-    kept, near = fresh_neighbours(query.shape[0])
     iterations = 0
     converged = False
     while iterations < max_iterations:

@@ -153,6 +153,8 @@ class PointToLineReference:
                 f"anchors: expected the points' shape {self.points.shape}, got "
                 f"{self.anchors.shape}"
             )
+        self._neighbours: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]] | (
+            None) = None
 
     #: The attributes :attr:`kernel_arrays` holds that may be set after construction (the
     #: curve fits set them on a built reference).
@@ -175,6 +177,32 @@ class PointToLineReference:
                                      dtype=np.float64),
                 self.valid_normals if has_normals else np.ones(len(self.points), bool),
                 np.ascontiguousarray(self.anchors), has_normals)
+
+    def neighbours_for(
+        self, query: NDArray[np.float64],
+        given: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """``kept`` and ``near`` (:func:`estimators.matching.nearest.search_near`) for the
+        query points ``query`` (M, 2), updated in place by the kernels: ``given``, else those
+        the last iterations on this reference left, row by row (fresh past their rows): all
+        of them when they were of the same array (the same object: ICP takes a float64 array
+        as it is, where ``np.asarray`` copies one whose dtype is another instance, as numba's
+        are), else another scan's, whose rows mostly lie near the same beams. ICP of one scan
+        from several starts, again without some of its points, or of the next scan then
+        skips the searches the kept points answer and starts the others near their answer;
+        the pairs stay the same bit for bit, as the kept points are this reference's wherever
+        the query stood."""
+        last = self._neighbours
+        if given is not None:
+            last = (query, *given)
+        elif last is None or last[0] is not query or len(last[1]) != len(query):
+            kept, near = fresh_neighbours(len(query))
+            if last is not None:  # another scan's rows: seeds near the same beams' points
+                rows = min(len(query), len(last[1]))
+                kept[:rows], near[:rows] = last[1][:rows], last[2][:rows]
+            last = (query, kept, near)
+        self._neighbours = last
+        return last[1], last[2]
 
     @classmethod
     def with_estimated_normals(
@@ -260,7 +288,7 @@ class PointToLineReference:
         hessian, gradient, count, rotation_squares = point_to_line_system(
             *self.kernel_arrays, np.ascontiguousarray(query_points, dtype=np.float64),
             np.asarray(pose, dtype=np.float64), float(max_distance), LOSSES.index(loss),
-            float(scale), residuals, *fresh_neighbours(len(query_points)),
+            float(scale), residuals, *self.neighbours_for(query_points),
         )
         lever = float(np.sqrt(rotation_squares / count)) if count else 0.0
         return hessian, gradient, count, lever, residuals

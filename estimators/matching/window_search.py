@@ -39,16 +39,26 @@ def thinned_for_search(points: FloatArray) -> FloatArray:
     return thinned[:: max(1, int(np.ceil(len(thinned) / SEARCH_POINTS)))]
 
 
-def search_in_box(map_points: FloatArray, low: FloatArray, high: FloatArray,
-                  thinned: FloatArray, guess: FloatArray, linear: float, angular: float,
-                  resolution: float) -> Match:
-    """Exact best pose of the ``thinned`` scan (:func:`thinned_for_search`, car frame) within
-    ``linear`` [m] and ``angular`` [rad] of ``guess`` (3,), on the likelihood grid
-    (``resolution`` [m] cells) of the ``map_points`` (N, 2) inside the box ``low``..``high``
-    (2,); "not found" at or below :data:`MIN_SEARCH_SCORE`."""
+def box_pyramid(map_points: FloatArray, low: FloatArray, high: FloatArray, resolution: float,
+                levels: int) -> GridPyramid:
+    """The likelihood grid (``resolution`` [m] cells) of the ``map_points`` (N, 2) inside the
+    box ``low``..``high`` (2,), and its ``levels`` max-pooled levels."""
     shape = tuple(np.maximum(np.ceil((high - low) / resolution).astype(int), 1))
     inside = np.all((map_points >= low) & (map_points <= high), axis=1)
     grid = likelihood_grid(map_points[inside], low, shape, resolution)
-    pyramid = GridPyramid(grid, low, resolution, levels_for_window(linear, resolution))
+    return GridPyramid(grid, low, resolution, levels)
+
+
+def search_in_box(map_points: FloatArray, low: FloatArray, high: FloatArray,
+                  thinned: FloatArray, guess: FloatArray, linear: float, angular: float,
+                  resolution: float, pyramid: GridPyramid | None = None) -> Match:
+    """Exact best pose of the ``thinned`` scan (:func:`thinned_for_search`, car frame) within
+    ``linear`` [m] and ``angular`` [rad] of ``guess`` (3,), on the likelihood grid
+    (``resolution`` [m] cells) of the ``map_points`` (N, 2) inside the box ``low``..``high``
+    (2,); "not found" at or below :data:`MIN_SEARCH_SCORE`. ``pyramid``: that box's
+    :func:`box_pyramid` with ``levels_for_window(linear, resolution)`` levels, if built."""
+    if pyramid is None:
+        pyramid = box_pyramid(map_points, low, high, resolution,
+                              levels_for_window(linear, resolution))
     return match(pyramid, thinned, guess, linear, angular,
                  angular_step_for(thinned, resolution), MIN_SEARCH_SCORE)

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.matching.branch_and_bound import Match
+from estimators.matching.branch_and_bound import GridPyramid, Match, levels_for_window
 from estimators.matching.scan_matching import LikelihoodField
-from estimators.matching.window_search import search_in_box, thinned_for_search
+from estimators.matching.window_search import box_pyramid, search_in_box, thinned_for_search
 
 FloatArray = NDArray[np.float64]
 
@@ -28,12 +28,16 @@ class SearchWindow:
 class GlobalSearch:
     """The correlative searches on one map: its likelihood field (``resolution`` cells, 0.1 m
     wide) for the exhaustive search, built once when first needed, and for each
-    branch-and-bound search a grid and pyramid over the part of the map the scan can reach."""
+    branch-and-bound search a grid and pyramid over the part of the map the scan can reach,
+    kept for the next search of the same part at the same depth (a scan far apart is searched
+    in its whole window, then in its near half; where the scan reaches past the map, every
+    search covers all of it)."""
 
     def __init__(self, map_points: FloatArray, resolution: float) -> None:
         self.map_points = map_points
         self.resolution = resolution
         self._field: LikelihoodField | None = None
+        self._pyramid: tuple[tuple[float, ...], GridPyramid] | None = None  # (box, levels)
 
     @property
     def field(self) -> LikelihoodField:
@@ -55,5 +59,9 @@ class GlobalSearch:
         reach = window.linear + scan_reach + 0.5
         low = np.maximum(self.map_points.min(axis=0), guess[:2] - reach) - 0.5
         high = np.minimum(self.map_points.max(axis=0), guess[:2] + reach) + 0.5
+        levels = levels_for_window(window.linear, self.resolution)
+        key = (*low.tolist(), *high.tolist(), levels)
+        if self._pyramid is None or self._pyramid[0] != key:
+            self._pyramid = key, box_pyramid(self.map_points, low, high, self.resolution, levels)
         return search_in_box(self.map_points, low, high, thinned, guess, window.linear,
-                             window.angular, self.resolution)
+                             window.angular, self.resolution, self._pyramid[1])

@@ -45,7 +45,7 @@ to points the new scan sees through, neither pull the registration nor enter the
 points the new scan sees through leave it (from
 :data:`~estimators.odometry.moving_rejection.MIN_MOVING_POINTS` on). They are judged at the
 matched pose (judged at the guess, a fast turn condemns static points), then the scan is matched
-again without them, twice.
+again without them, twice (:mod:`estimators.odometry.static_rematch`).
 
 What each of these choices is worth, with the commands that measure it, is in the
 documentation's design page (``docs/design-choices.md``).
@@ -75,8 +75,9 @@ from estimators.matching.scan_matching import (
 )
 from estimators.odometry.far_scans import FarScanMatching, GlobalSearch
 from estimators.odometry.motion_prior import no_sideslip_prior
-from estimators.odometry.moving_rejection import MIN_MOVING_POINTS, MovingPointRejection
+from estimators.odometry.moving_rejection import MovingPointRejection
 from estimators.odometry.no_slip_point import NoSlipFit
+from estimators.odometry.static_rematch import StaticRematch
 from estimators.odometry.unknown_start import UnknownStartSpeed
 from estimators.odometry.velocity_model import ConstantVelocityModel
 from lidar_env.core import ConfigError
@@ -85,7 +86,7 @@ from lidar_env.core.se2 import compose, relative_floats, transform_points, wrap_
 
 @dataclass
 class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel,
-                       MovingPointRejection, Estimator):
+                       StaticRematch, MovingPointRejection, Estimator):
     """Scan-to-local-map Lidar odometry with a robust loss, a constant-velocity motion prior
     and a correlative fallback. Distances [m], angles [rad]; defaults chosen for indoor 2D
     Lidars (1-3 cm range noise, 5-40 Hz), not for one log:
@@ -356,14 +357,8 @@ class LocalMapOdometry(UnknownStartSpeed, FarScanMatching, ConstantVelocityModel
         fit = None if self.skipped_before or self.clock_jumped else self._no_slip_fit()
         degenerate = fit is not None and leaves_a_direction_free(
             self._reference, points, guess, self.params)
-        result = self._match(points, guess, predicted, interval)
-        for _ in range(2 if self._moving is not None else 0):  # (module docstring)
-            static = self._static_points(seen, result.pose, scans)
-            if len(points) - len(static) < MIN_MOVING_POINTS or self._reference is None:
-                break
-            points = static
-            result = register(self._reference, points, result.pose, self.params, guess,
-                              self.match_information)
+        result, points = self._matched_without_moving(
+            self._match(points, guess, predicted, interval), seen, guess, scans)
         if degenerate:
             assert fit is not None
             result = self._no_sideslip_match(result, points, guess, fit)

@@ -18,7 +18,7 @@ from estimators.matching.curve_refinement import (
     CurveReference,
 )
 from estimators.matching.icp import ICPParams, register
-from estimators.matching.normal_equations import point_to_curve_system
+from estimators.matching.normal_equations import fresh_neighbours, point_to_curve_system
 from estimators.matching.point_to_line import (
     LOSSES,
     PointToLineReference,
@@ -154,3 +154,47 @@ def test_compiled_registration_matches_the_python_loop(
     assert (found.iterations, found.converged) == (expected.iterations, expected.converged)
     assert found.quality == expected.quality
     assert found.rmse == pytest.approx(expected.rmse, rel=1e-9)
+
+
+def _same_match(found, expected) -> None:
+    assert np.array_equal(found.pose, expected.pose)
+    assert (found.iterations, found.converged) == (expected.iterations, expected.converged)
+    assert (found.quality, found.rmse) == (expected.quality, expected.rmse)
+    assert np.array_equal(found.information, expected.information)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31), kind=st.sampled_from(["censi", "normals", "denoised"]),
+       shift=st.floats(-0.3, 0.3), turn=st.floats(-0.3, 0.3))
+def test_registration_from_kept_neighbours_is_bit_identical(
+    seed: int, kind: str, shift: float, turn: float,
+) -> None:
+    """ICP of a scan again from another start (its neighbours kept on the reference), of a
+    subset of its points from their rows of those neighbours, and of another scan from the
+    rows the last left, pairs and ends exactly as from no neighbours: the kept points only
+    spare searches."""
+    rng = np.random.default_rng(seed)
+    ranges, angles = _room_scan(rng)
+    hit = ranges < 20.0
+    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
+    reference = (PointToLineReference(points) if kind == "censi" else
+                 PointToLineReference.with_estimated_normals(points, 9, kind == "denoised", 72))
+    query = points[rng.permutation(len(points))[: len(points) // 2]] + 0.01 * rng.standard_normal(
+        (len(points) // 2, 2))
+    params = ICPParams(max_correspondence_distance=0.5)
+    register(reference, query, np.array([shift, -shift, turn]), params)
+    kept, near = reference.neighbours_for(query)
+    assert not np.isnan(kept[:, 0]).all()  # the first ICP left its neighbours
+    start = np.array([-shift, 0.5 * shift, -turn])
+    _same_match(register(reference, query, start, params),
+                register(reference, query, start, params, neighbours=fresh_neighbours(len(query))))
+    rows = np.flatnonzero(rng.random(len(query)) < 0.8)
+    _same_match(register(reference, query[rows], start, params,
+                         neighbours=(kept[rows], near[rows])),
+                register(reference, query[rows], start, params,
+                         neighbours=fresh_neighbours(len(rows))))
+    # the next scan, another array, from the rows the last one left
+    following = query[1:] + 0.02 * rng.standard_normal((len(query) - 1, 2))
+    _same_match(register(reference, following, start, params),
+                register(reference, following, start, params,
+                         neighbours=fresh_neighbours(len(following))))

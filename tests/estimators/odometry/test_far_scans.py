@@ -208,3 +208,21 @@ def test_a_far_match_no_pose_explains_keeps_the_guess() -> None:
     result = far_match(search, reference, scan, guess, window, ICPParams(), np.zeros(3))
     assert result.quality == 0.0
     np.testing.assert_allclose(result.pose, guess, atol=1e-9)
+
+
+def test_searches_of_one_map_find_what_searches_of_fresh_ones_find() -> None:
+    # the whole window, its near half (the same box: its grid is kept), then another guess
+    centres = np.random.default_rng(5).uniform(-4.0, 4.0, (10, 2))
+    around = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    world_points = (centres[:, None, :] + 0.15 * np.stack([np.cos(around), np.sin(around)],
+                                                          axis=1)[None]).reshape(-1, 2)
+    c, s = np.cos(0.4), np.sin(0.4)
+    scan = (world_points - [0.3, -0.2]) @ np.array([[c, -s], [s, c]])
+    kept = GlobalSearch(world_points, 0.05)
+    for guess, window in [(np.zeros(3), SearchWindow(1.0, 0.6)),
+                          (np.zeros(3), SearchWindow(1.0, 0.3)),
+                          (np.array([1.0, 0.5, 0.2]), SearchWindow(1.0, 0.6))]:
+        found = kept.search(scan, guess, window)
+        fresh = GlobalSearch(world_points, 0.05).search(scan, guess, window)
+        assert np.array_equal(found.pose, fresh.pose)
+        assert (found.score, found.found, found.nodes) == (fresh.score, fresh.found, fresh.nodes)
