@@ -52,7 +52,7 @@ from estimators.matching.scan_recovery import (
     off_seen_through,
     one_turn_guess,
     reach,
-    search_start,
+    search_starts,
 )
 from estimators.matching.surface_fits import surface_reference
 from estimators.paper.pc import MIN_MATCH_RETURNS
@@ -340,8 +340,8 @@ class ICPEstimator(Estimator):
         pose around it."""
         assert self._previous is not None
         kept = one_turn_guess(self._increment, span)
-        found = search_start(self._previous, current, kept, span, seconds)
-        return [(kept, kept)] + ([] if found is None else [(found, kept)])
+        return [(kept, kept)] + [(found, kept) for found in search_starts(
+            self._previous, current, kept, span, seconds)]
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)
@@ -374,13 +374,13 @@ class ICPEstimator(Estimator):
                 start is guess and span <= observations) else self.params, guess,
                                 self._prior_information / span**2)
                        for start, guess, span in zip(starts, guesses, spans, strict=True)]
-            best = most_likely_match(results, guesses, spans,
-                                     float(np.hypot(*self._increment[:2])), len(current))
+            best = most_likely_match(results, guesses, spans, float(np.hypot(
+                *self._increment[:2])), len(current), t - self._times[-1] if span > 1 else None)
             increment = results[best].pose
             if observations > BLIND_STRETCH:
                 kept, seen, place = off_seen_through(lambda start: register(  # a blind stretch
                     reference, current, start, self.params, start, self._prior_information
-                    / span**2), results[best], lambda match: match.pose, self._previous,
+                    / span**2), results[best], lambda m: (m.pose, m.quality), self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
                 increment, starts = kept.pose, starts + ([] if place is None else [place])
                 if lost_after_blind(kept.quality, seen):  # the best there is, flagged
