@@ -336,8 +336,7 @@ class ICPEstimator(Estimator):
                          ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` scan
         intervals and ``seconds`` [s], each with the guess its match is judged against: the
-        last increment's translation with one interval's turn, and the correlative search's
-        pose around it."""
+        last increment's translation with one interval's turn, and the searches' poses."""
         assert self._previous is not None
         kept = one_turn_guess(self._increment, span)
         return [(kept, kept)] + [(found, kept) for found in search_starts(
@@ -383,8 +382,9 @@ class ICPEstimator(Estimator):
                     / span**2), results[best], lambda m: (m.pose, m.quality), self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
                 increment, starts = kept.pose, starts + ([] if place is None else [place])
-                if lost_after_blind(kept.quality, seen):  # the best there is, flagged
+                if lost_after_blind(kept.quality, seen):  # the scans cannot tell: the guess
                     self.health.note_lost(len(self._observations))
+                    increment = one_turn_guess(self._increment, span)
             if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the

@@ -171,7 +171,7 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: 
     Then matched again from itself (``step_to``: a motion from the keyframe as a guess from
     the last pose used) while that explains more and sees through no more. ``solve``: the
     matches from a guess. Also whether the motion found after a blind stretch leaves the car
-    lost (:meth:`BlindScans.lost`): the best there is, flagged, not a place found again."""
+    lost (:meth:`BlindScans.lost`): the scans cannot tell where it is, and the guess stands."""
     other = solve(longer)
     tie = SCORE_TOLERANCE if blind is None else blind.share_error(found[2])
     if other[2] > found[2] + SCORE_TOLERANCE or (other[2] >= found[2] - tie and (
