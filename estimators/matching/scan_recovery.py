@@ -137,6 +137,11 @@ def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], in
 MIN_SEARCH_POINTS = 50
 
 
+#: Share of its scan the kept match after a blind stretch explains below which the car may
+#: be lost (``lidar_odometry``'s ``min_quality``).
+LOST_BELOW = 0.5
+
+
 def within_reach(pose: FloatArray, guess: FloatArray, intervals: float, seconds: float) -> bool:
     """Whether ``pose`` (3,) lies within the translation :func:`reach` allows around ``guess``
     (3,) after ``intervals`` scan intervals and ``seconds`` [s]: farther, the car would have
@@ -153,12 +158,19 @@ def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float
     share's standard error, where a scan of few points leaves it noisy), the one the motion
     model finds least surprising (:func:`lost_scan_surprise` with the last ``step`` [m]; the
     first on a tie). Given the gap's ``seconds`` [s], matches out of the guess's reach
-    (:func:`within_reach`) are judged only where none is within: a corridor seen turned round
-    fits a scan taken after a turn on the spot as well, metres down the corridor."""
+    (:func:`within_reach`) are judged only where none is within (a corridor seen turned round
+    fits a scan taken after a turn on the spot as well, metres down the corridor), and of
+    those, matches turned more than :data:`MAX_SEARCH_TURN` off their guess only where none
+    turned less explains :data:`LOST_BELOW` of the scan (the car turned out of the window a
+    corridor's reversed view cannot enter)."""
     judged = list(range(len(results)))
     if seconds is not None:
         judged = [k for k in judged if within_reach(
             results[k].pose, guesses[k], spans[k], seconds)] or judged
+        near = [k for k in judged if abs(math.remainder(
+            float(results[k].pose[2] - guesses[k][2]), 2.0 * math.pi)) <= MAX_SEARCH_TURN]
+        if any(results[k].quality >= LOST_BELOW for k in near):
+            judged = near
     top = max(results[k].quality for k in judged)
     margin = max(LOST_SCANS_MARGIN, math.sqrt(top * (1.0 - top) / max(points, 1)))
     surprise = [lost_scan_surprise(r.pose, g, n, step) if k in judged and r.quality >= top - margin
@@ -198,11 +210,6 @@ def least_seen_through_place(reference_points: FloatArray, query_points: FloatAr
     placed = np.stack([free[:, :1] + c[:, None] * x - s[:, None] * y,
                        free[:, 1:2] + s[:, None] * x + c[:, None] * y], axis=-1)
     return free[int(np.argmax(field.score(placed).mean(axis=1)))].copy()
-
-
-#: Share of its scan the kept match after a blind stretch explains below which the car may
-#: be lost (``lidar_odometry``'s ``min_quality``).
-LOST_BELOW = 0.5
 
 
 def lost_after_blind(quality: float, seen: int) -> bool:

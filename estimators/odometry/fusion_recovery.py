@@ -178,10 +178,12 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: 
             skipped or likelier_longer(found, other, guess, longer, intervals, step_to))):
         found = other
     if blind is not None and (found[2] < POOR_SCORE or not blind.within_reach(found)):
-        for searched in blind.searched():
+        for searched in blind.searched():  # turned further only where still poor or far
             other = solve(step_to(searched))
             if blind.likelier(other, found):
                 found = other
+            if found[2] >= POOR_SCORE and blind.within_reach(found):
+                break
     seen = 0
     if blind is not None and blind.intervals > BLIND_STRETCH:
         found, seen = blind.off_seen_through(lambda place: solve(step_to(place)), found)
