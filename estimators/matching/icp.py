@@ -334,13 +334,13 @@ class ICPEstimator(Estimator):
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float
                          ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` scan
-        intervals and ``seconds`` [s], each with the guess its match is judged against: the
-        last increment's translation with one interval's turn, and the searches' poses."""
+        """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` intervals
+        and ``seconds`` [s], each with the guess its match is judged against: the last
+        increment's translation with one turn, and the searches' (far turns: skipped only)."""
         assert self._previous is not None
         kept = one_turn_guess(self._increment, span)
         return [(kept, kept)] + [(found, kept) for found in search_starts(
-            self._previous, current, kept, span, seconds)]
+            self._previous, current, kept, span, seconds, self.skipped_before > 0)]
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)

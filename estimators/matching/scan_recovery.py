@@ -94,16 +94,18 @@ def search_start(reference_points: FloatArray, query_points: FloatArray, guess: 
 
 
 def search_starts(reference_points: FloatArray, query_points: FloatArray, guess: FloatArray,
-                  intervals: float, seconds: float) -> list[FloatArray]:
+                  intervals: float, seconds: float, blind: bool = True) -> list[FloatArray]:
     """The starts :func:`search_start` gives after a gap: its best pose turned at most
-    :data:`MAX_SEARCH_TURN` from ``guess`` (3,) and, where the car can have turned further
-    over the gap (:data:`TURN_PER_INTERVAL` per interval, a half turn at most either way),
-    its best over every such turn where that lies beyond: a robot that stopped and turned
-    into a side corridor while blind. Of the two, a corridor seen turned round by the near
-    one is told from the turn by :func:`most_likely_match` (share explained, and reach)."""
+    :data:`MAX_SEARCH_TURN` from ``guess`` (3,) and, after ``blind`` scans (skipped: the
+    time passed, the car unseen; a clock gap may be a stamp that jumped alone) where the car
+    can have turned further (:data:`TURN_PER_INTERVAL` per interval, a half turn at most
+    either way), its best over every such turn where that lies beyond: a robot that stopped
+    and turned into a side corridor while blind. Of the two, a corridor seen turned round by
+    the near one is told from the turn by :func:`most_likely_match` (share explained, and
+    reach)."""
     near = search_start(reference_points, query_points, guess, intervals, seconds)
     starts = [] if near is None else [near]
-    if TURN_PER_INTERVAL * intervals <= MAX_SEARCH_TURN:
+    if not blind or TURN_PER_INTERVAL * intervals <= MAX_SEARCH_TURN:
         return starts
     wide = search_start(reference_points, query_points, guess, intervals, seconds, math.pi)
     if wide is not None and abs(math.remainder(float(wide[2] - guess[2]), 2.0 * math.pi)) > (
