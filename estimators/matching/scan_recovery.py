@@ -7,14 +7,17 @@ blind, or stopped turning, lies outside ICP's basin from there. Two more starts 
 translation extrapolated with one interval's turn, and the exact best pose of a multi-
 resolution branch-and-bound correlative search (Olson 2009; Hess et al. 2016) of the new scan
 on the likelihood grid of the last one used, over every pose the car can have reached
-(:func:`reach`) turned at most :data:`MAX_SEARCH_TURN` from the guess. Of the matches from
-all starts, :func:`most_likely_match` keeps the one explaining clearly
-more of the scan, else the one the motion model finds least surprising
-(:func:`lost_scan_surprise`). After skipped scans, where the kept match has the new scan
-see through the last one's points (placed short of the car along a corridor, which fits its
-walls as well, it sees through the walls the car drove past), it is matched again from the
-place that sees through the fewest (:func:`off_seen_through`). Poses are in the last used
-scan's car frame: x [m] forward, y [m] left, heading [rad].
+(:func:`reach`) turned at most :data:`MAX_SEARCH_TURN` from the guess, and after skipped
+scans also over every turn the gap allows (:func:`search_starts`: a robot that stopped and
+turned into a side corridor). Of the matches from all starts within the motion model's reach
+(:func:`within_reach`), :func:`most_likely_match` keeps the one explaining clearly more of
+the scan, else the one the motion model finds least surprising (:func:`lost_scan_surprise`);
+one turned past the near window only where none within it explains half the scan. After
+skipped scans, where the kept match has the new scan see through the last one's points
+(placed short of the car along a corridor, which fits its walls as well, it sees through the
+walls the car drove past), it is matched again from the place that sees through the fewest
+and still explains the scan (:func:`off_seen_through`). Poses are in the last used scan's
+car frame: x [m] forward, y [m] left, heading [rad].
 """
 
 from __future__ import annotations
@@ -50,10 +53,11 @@ ACCELERATION = 0.5
 #: Most [m] the acceleration widens the window by: over a gap of seconds a wider one holds
 #: places elsewhere that explain more of a scan-to-scan match than the right one.
 MAX_SPEED_CHANGE_REACH = 1.0
-#: [rad] the search turns the car at most this far from the guess: matched to the last scan
-#: alone, with no map to tell the space it saw free from space it never saw, a corridor seen
-#: turned round fits the new scan as well as the way the car faces, and better where the last
-#: scan saw more of it (the fault matrix's hallway after 3 s blind: 29 m off).
+#: [rad] the near search turns the car at most this far from the guess: matched to the last
+#: scan alone, with no map to tell the space it saw free from space it never saw, a corridor
+#: seen turned round fits the new scan as well as the way the car faces, and better where the
+#: last scan saw more of it (the fault matrix's hallway after 3 s blind: 29 m off). Farther
+#: turns are searched apart and believed only where the near window holds no fit.
 MAX_SEARCH_TURN = 0.5 * math.pi
 
 
