@@ -52,7 +52,7 @@ from estimators.matching.scan_recovery import (
     off_seen_through,
     one_turn_guess,
     reach,
-    search_start,
+    search_starts,
 )
 from estimators.matching.surface_fits import surface_reference
 from estimators.paper.pc import MIN_MATCH_RETURNS
@@ -334,14 +334,13 @@ class ICPEstimator(Estimator):
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float
                          ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` scan
-        intervals and ``seconds`` [s], each with the guess its match is judged against: the
-        last increment's translation with one interval's turn, and the correlative search's
-        pose around it."""
+        """Starts of :mod:`estimators.matching.scan_recovery` over a gap of ``span`` intervals
+        and ``seconds`` [s], each with the guess its match is judged against: the last
+        increment's translation with one turn, and the searches' (far turns: skipped only)."""
         assert self._previous is not None
         kept = one_turn_guess(self._increment, span)
-        found = search_start(self._previous, current, kept, span, seconds)
-        return [(kept, kept)] + ([] if found is None else [(found, kept)])
+        return [(kept, kept)] + [(found, kept) for found in search_starts(
+            self._previous, current, kept, span, seconds, self.skipped_before > 0)]
 
     def _step(self, scans: dict[str, NDArray[np.float64]], t: float) -> NDArray[np.float64]:
         current = self._points(scans)
@@ -374,17 +373,18 @@ class ICPEstimator(Estimator):
                 start is guess and span <= observations) else self.params, guess,
                                 self._prior_information / span**2)
                        for start, guess, span in zip(starts, guesses, spans, strict=True)]
-            best = most_likely_match(results, guesses, spans,
-                                     float(np.hypot(*self._increment[:2])), len(current))
+            best = most_likely_match(results, guesses, spans, float(np.hypot(
+                *self._increment[:2])), len(current), t - self._times[-1] if span > 1 else None)
             increment = results[best].pose
             if observations > BLIND_STRETCH:
                 kept, seen, place = off_seen_through(lambda start: register(  # a blind stretch
                     reference, current, start, self.params, start, self._prior_information
-                    / span**2), results[best], lambda match: match.pose, self._previous,
+                    / span**2), results[best], lambda m: (m.pose, m.quality), self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
                 increment, starts = kept.pose, starts + ([] if place is None else [place])
-                if lost_after_blind(kept.quality, seen):  # the best there is, flagged
+                if lost_after_blind(kept.quality, seen):  # the scans cannot tell: the guess
                     self.health.note_lost(len(self._observations))
+                    increment = one_turn_guess(self._increment, span)
             if min(np.hypot(*(increment[:2] - start[:2])) for start in starts) > (
                     self.params.max_correspondence_distance):
                 # no pair is accepted beyond this distance, so no solution this far from the

@@ -211,8 +211,11 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
                 (from_latest, edges, score), step, longer, intervals, bool(self.skipped_before),
                 lambda motion: list(relative_floats(previous, compose_floats(
                     latest.pose.tolist(), motion.tolist()))), blind)
-            if lost:
+            if lost:  # the scans cannot tell where the car is: the guess, a fresh window
                 self.health.note_lost(len(self._observations))
+                pose = np.array(compose_floats(previous, longer))
+                self._restart_window(Keyframe(pose, current))
+                return pose
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance

@@ -56,6 +56,12 @@ class KeyframeMatching:
         first = self._n_keyframes - len(self._keyframes)
         self._edges = [(a, b, e) for a, b, e in self._edges if a >= first]
 
+    def _restart_window(self, keyframe: Keyframe) -> None:
+        """Start the window again from ``keyframe`` alone: no match ties it to the older
+        keyframes (the car lost its place while blind), so none may pull it."""
+        self._keyframes.clear()
+        self._edges.clear()
+        self._add_keyframe(keyframe)
 
     def _match_all(
         self,

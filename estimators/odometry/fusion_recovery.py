@@ -49,7 +49,8 @@ from estimators.matching.scan_recovery import (
     lost_scan_surprise,
     off_seen_through,
     reach,
-    search_start,
+    search_starts,
+    within_reach,
 )
 from estimators.matching.seen_through import seen_through_count
 from lidar_env.core.se2 import transform_points
@@ -94,13 +95,25 @@ class BlindScans:
                             for prepared in (keyframe_scans, scans))
         return cls(reference, query, guess, intervals, seconds)
 
-    def searched(self) -> NDArray[np.float64] | None:
-        """The car motion (3,) from the keyframe the search finds around the guess, or None
-        (too few points on either side, or nothing found)."""
+    def searched(self) -> list[NDArray[np.float64]]:
+        """The car motions (3,) from the keyframe the search finds around the guess
+        (:func:`~estimators.matching.scan_recovery.search_starts`: turned little, and turned
+        further where the gap allows); none with too few points on either side."""
         if min(len(self.reference), len(self.query)) < MIN_SEARCH_POINTS:
-            return None
-        return search_start(self.reference, self.query, self.guess, self.intervals,
-                            self.seconds)
+            return []
+        return search_starts(self.reference, self.query, self.guess, self.intervals,
+                             self.seconds)
+
+    def within_reach(self, found: Solution) -> bool:
+        """Whether ``found``'s motion lies within the guess's reach over the gap
+        (:func:`~estimators.matching.scan_recovery.within_reach`)."""
+        return within_reach(found[0], self.guess, self.intervals, self.seconds)
+
+    def likelier(self, other: Solution, found: Solution) -> bool:
+        """Whether ``other`` is likelier than ``found``: within reach where ``found`` is not,
+        else, both alike in reach, explaining clearly more of the scans."""
+        near, far = self.within_reach(other), self.within_reach(found)
+        return (near and not far) or (near == far and other[2] > found[2] + SCORE_TOLERANCE)
 
     def share_error(self, share: float) -> float:
         """The standard error of a ``share`` of the new scans' points explained, at least
@@ -123,7 +136,7 @@ class BlindScans:
         points, within the search's reach
         (:func:`~estimators.matching.scan_recovery.off_seen_through`), and the count."""
         linear, _ = reach(self.guess, self.intervals, self.seconds)
-        return off_seen_through(match_from, found, lambda solution: solution[0],
+        return off_seen_through(match_from, found, lambda solution: (solution[0], solution[2]),
                                 self.reference, self.query, linear)[:2]
 
 
@@ -158,17 +171,19 @@ def recovered(solve: Callable[[list[float]], Solution], found: Solution, guess: 
     Then matched again from itself (``step_to``: a motion from the keyframe as a guess from
     the last pose used) while that explains more and sees through no more. ``solve``: the
     matches from a guess. Also whether the motion found after a blind stretch leaves the car
-    lost (:meth:`BlindScans.lost`): the best there is, flagged, not a place found again."""
+    lost (:meth:`BlindScans.lost`): the scans cannot tell where it is, and the guess stands."""
     other = solve(longer)
     tie = SCORE_TOLERANCE if blind is None else blind.share_error(found[2])
     if other[2] > found[2] + SCORE_TOLERANCE or (other[2] >= found[2] - tie and (
             skipped or likelier_longer(found, other, guess, longer, intervals, step_to))):
         found = other
-    searched = None if blind is None or found[2] >= POOR_SCORE else blind.searched()
-    if searched is not None:
-        other = solve(step_to(searched))
-        if other[2] > found[2] + SCORE_TOLERANCE:
-            found = other
+    if blind is not None and (found[2] < POOR_SCORE or not blind.within_reach(found)):
+        for searched in blind.searched():  # turned further only where still poor or far
+            other = solve(step_to(searched))
+            if blind.likelier(other, found):
+                found = other
+            if found[2] >= POOR_SCORE and blind.within_reach(found):
+                break
     seen = 0
     if blind is not None and blind.intervals > BLIND_STRETCH:
         found, seen = blind.off_seen_through(lambda place: solve(step_to(place)), found)

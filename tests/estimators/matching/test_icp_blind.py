@@ -14,6 +14,10 @@ from tests.estimators.odometry.test_fusion_blind import corridor, scan_at
 bench = load("bench_faults")
 
 
+def judged(match: MatchResult) -> tuple[np.ndarray, float]:
+    return match.pose, match.quality
+
+
 def test_a_match_that_sees_through_walls_is_replaced_by_one_that_sees_through_none() -> None:
     scan, walls = scan_at(8.0, 10.0), corridor(10.0)
     tried = []
@@ -23,14 +27,25 @@ def test_a_match_that_sees_through_walls_is_replaced_by_one_that_sees_through_no
         return MatchResult(start.copy(), 1.0, 0.01, 5, True, None)
 
     short = MatchResult(np.array([3.0, 0.0, 0.0]), 1.0, 0.01, 5, True, None)
-    kept, seen, start = off_seen_through(match_from, short, lambda m: m.pose, walls, scan, 6.0)
+    kept, seen, start = off_seen_through(match_from, short, judged, walls, scan, 6.0)
     assert seen <= SEEN_THROUGH_SLACK and start is not None and np.array_equal(kept.pose, start)
     assert abs(kept.pose[0] - 8.0) <= 0.4
     # a match the scan does not contradict stands, and nothing is matched again
     at_car = MatchResult(np.array([8.0, 0.0, 0.0]), 1.0, 0.01, 5, True, None)
     tried.clear()
-    assert off_seen_through(match_from, at_car, lambda m: m.pose, walls, scan, 6.0)[0] is at_car
+    assert off_seen_through(match_from, at_car, judged, walls, scan, 6.0)[0] is at_car
     assert not tried
+
+
+def test_a_place_that_sees_through_fewer_but_explains_far_less_is_not_taken() -> None:
+    """A place that overlaps the reference little sees through little: it is no better."""
+    scan, walls = scan_at(8.0, 10.0), corridor(10.0)
+
+    def match_from(start: np.ndarray) -> MatchResult:
+        return MatchResult(start.copy(), 0.3, 0.01, 5, True, None)
+
+    short = MatchResult(np.array([3.0, 0.0, 0.0]), 0.9, 0.01, 5, True, None)
+    assert off_seen_through(match_from, short, judged, walls, scan, 6.0)[0] is short
 
 
 def test_after_100_blind_scans_leaving_the_corridor_icp_finds_the_place_again() -> None:

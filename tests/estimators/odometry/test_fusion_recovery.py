@@ -28,10 +28,15 @@ def same(motion: np.ndarray) -> list[float]:
     return motion.tolist()
 
 
-def blind(search) -> SimpleNamespace:
-    """Blind scans whose search is ``search`` and that see through nothing anywhere."""
-    return SimpleNamespace(searched=search, seen_through=lambda motion: 0, intervals=2.0,
-                           share_error=lambda share: 0.02)
+def blind(search, within=lambda found: True) -> SimpleNamespace:
+    """Blind scans whose search finds what ``search`` returns (None: nothing), that see
+    through nothing anywhere and whose guess reaches the motions ``within`` says."""
+    namespace = SimpleNamespace(
+        searched=lambda: [] if (found := search()) is None else [found],
+        seen_through=lambda motion: 0, intervals=2.0, share_error=lambda share: 0.02,
+        within_reach=within)
+    namespace.likelier = lambda other, found: BlindScans.likelier(namespace, other, found)
+    return namespace
 
 
 def test_the_search_runs_only_where_neither_guess_fits() -> None:
@@ -47,6 +52,19 @@ def test_the_search_runs_only_where_neither_guess_fits() -> None:
     poor = solver({1.0: POOR_SCORE - 0.1, 2.0: 0.2, 3.0: 0.9})
     found = recovered(poor, poor(ONE), ONE, LONGER, 2.0, True, same, blind(search))[0]
     assert searched and found[0][0] == 3.0
+
+
+def test_a_match_out_of_the_guess_reach_gives_way_to_one_within_it() -> None:
+    """ACES after a turn on the spot while blind: a corridor seen turned round fits the new
+    scans as well 2 m down it, farther than the stopped robot can have driven; the search's
+    match within reach is kept, and searched for although the far one explains enough."""
+    scores = solver({1.0: 0.6, 2.0: 0.2, 3.0: 0.55})
+    within = blind(lambda: np.array([3.0, 0.0, 0.0]), lambda found: found[0][0] != 1.0)
+    found, _ = recovered(scores, scores(ONE), ONE, LONGER, 2.0, False, same, within)
+    assert found[0][0] == 3.0
+    found, _ = recovered(scores, scores(ONE), ONE, LONGER, 2.0, False, same,
+                         blind(lambda: np.array([3.0, 0.0, 0.0])))
+    assert found[0][0] == 1.0
 
 
 def test_a_search_that_explains_no_more_is_not_taken() -> None:
@@ -65,11 +83,10 @@ def test_the_search_finds_the_car_on_the_keyframe_and_needs_enough_points() -> N
     scan = [SimpleNamespace(points=scan_points(compose(start, motion), rng))]
     mounts = [np.zeros(3)]
     # guessed as no motion at all: 0.85 m and 50 degrees off, past any ICP basin
-    found = BlindScans.of(mounts, keyframe, scan, np.zeros(3), 10.0, 1.0).searched()
-    assert found is not None
+    found = BlindScans.of(mounts, keyframe, scan, np.zeros(3), 10.0, 1.0).searched()[0]
     assert np.hypot(*(found[:2] - motion[:2])) < 0.1 and abs(found[2] - motion[2]) < 0.05
     few = [SimpleNamespace(points=scan[0].points[:20])]  # under MIN_SEARCH_POINTS
-    assert BlindScans.of(mounts, keyframe, few, np.zeros(3), 10.0, 1.0).searched() is None
+    assert BlindScans.of(mounts, keyframe, few, np.zeros(3), 10.0, 1.0).searched() == []
 
 
 def test_after_blind_scans_the_longer_guess_wins_within_the_shares_standard_error() -> None:
@@ -79,7 +96,8 @@ def test_after_blind_scans_the_longer_guess_wins_within_the_shares_standard_erro
     skipped scans prove the time passed."""
     scores = solver({1.0: 0.822, 2.0: 0.800})
     for points, kept in [(180, 2.0), (20_000, 1.0)]:
-        scans = BlindScans(np.zeros((180, 2)), np.zeros((points, 2)), np.zeros(3), 20.0, 3.0)
+        scans = BlindScans(np.zeros((180, 2)), np.zeros((points, 2)), np.array(LONGER), 20.0,
+                           3.0)
         found, _ = recovered(scores, scores(ONE), ONE, LONGER, 2.0, True, same, scans)
         assert found[0][0] == kept
 
@@ -109,8 +127,8 @@ def test_a_blind_stretch_that_leaves_the_car_facing_the_unseen_is_flagged() -> N
     see through keyframe points there: the car is lost (the match is kept, flagged)."""
     def scans(seen: int) -> SimpleNamespace:
         namespace = SimpleNamespace(
-            searched=lambda: None, seen_through=lambda motion: seen, intervals=101.0,
-            share_error=lambda share: 0.02,
+            searched=lambda: [], within_reach=lambda found: True,
+            seen_through=lambda motion: seen, intervals=101.0, share_error=lambda share: 0.02,
             off_seen_through=lambda match_from, found: (found, seen))
         namespace.lost = lambda found: BlindScans.lost(namespace, found)
         return namespace
