@@ -68,4 +68,9 @@ def test_among_cylinders_the_faulted_drives_end_near_the_truth(fault, limit) -> 
 
 @pytest.mark.skipif(not bench.ACES.exists(), reason="ACES log absent")
 def test_aces_blind_three_seconds_at_a_time_ends_within_its_clean_drift() -> None:
-    assert faulted_final(bench.aces_recording(600), "blind_3s") < 1.7  # [m]
+    # the robot stops and turns 113 degrees on the spot while blind: the turn is searched for
+    recording = bench.aces_recording(600)
+    clean = bench.score(bench.run("icp", recording, bench.start_of(recording.truth))[0],
+                        recording.truth, recording.truth)[1]
+    assert faulted_final(recording, "blind_3s") <= (
+        bench.FINAL_FACTOR * clean + bench.FINAL_MARGIN)  # [m] the fault matrix's target
