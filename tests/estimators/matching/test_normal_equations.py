@@ -44,6 +44,16 @@ def _room_scan(rng: np.random.Generator, n_beams: int = 360, noise: float = 0.01
     return ranges, angles
 
 
+def _room_reference(rng: np.random.Generator, kind: str) -> tuple:
+    """A room scan's returns (N, 2), its beam angles and its reference of ``kind``."""
+    ranges, angles = _room_scan(rng)
+    hit = ranges < 20.0
+    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
+    reference = (PointToLineReference(points) if kind == "censi" else
+                 PointToLineReference.with_estimated_normals(points, 9, kind == "denoised", 72))
+    return points, angles, reference
+
+
 def _pure_system(reference: PointToLineReference, query: np.ndarray, pose: np.ndarray,
                  max_distance: float, loss: str, scale: float):
     world = transform_points(pose, query)
@@ -135,11 +145,7 @@ def test_compiled_registration_matches_the_python_loop(
 ) -> None:
     """``register`` in one numba call against its Python loop over the same steps."""
     rng = np.random.default_rng(seed)
-    ranges, angles = _room_scan(rng)
-    hit = ranges < 20.0
-    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
-    reference = (PointToLineReference(points) if kind == "censi" else
-                 PointToLineReference.with_estimated_normals(points, 9, kind == "denoised", 72))
+    points, angles, reference = _room_reference(rng, kind)
     query_ranges, _ = _room_scan(rng)
     keep = query_ranges < 20.0
     query = np.column_stack([query_ranges[keep] * np.cos(angles[keep]),
@@ -174,11 +180,7 @@ def test_registration_from_kept_neighbours_is_bit_identical(
     rows the last left, pairs and ends exactly as from no neighbours: the kept points only
     spare searches."""
     rng = np.random.default_rng(seed)
-    ranges, angles = _room_scan(rng)
-    hit = ranges < 20.0
-    points = np.column_stack([ranges[hit] * np.cos(angles[hit]), ranges[hit] * np.sin(angles[hit])])
-    reference = (PointToLineReference(points) if kind == "censi" else
-                 PointToLineReference.with_estimated_normals(points, 9, kind == "denoised", 72))
+    points, angles, reference = _room_reference(rng, kind)
     query = points[rng.permutation(len(points))[: len(points) // 2]] + 0.01 * rng.standard_normal(
         (len(points) // 2, 2))
     params = ICPParams(max_correspondence_distance=0.5)
