@@ -42,6 +42,7 @@ from estimators.leaderboard.recording import record, replay
 from estimators.leaderboard.records import Scenario, source_digest
 from estimators.leaderboard.tasks import EstimatorSpec, ScenarioTask, run_scenario_task
 from estimators.matching.correlative import correlative_search
+from estimators.matching.likelihood_grids import likelihood_grid
 from estimators.matching.nearest import PointIndex
 from estimators.matching.scan_matching import LikelihoodField, scans_to_car_points
 from estimators.odometry.moving_points import MovingPointFilter
@@ -201,11 +202,13 @@ def _step_batched() -> None:
 
 def _search_exhaustively() -> None:
     """The correlative search of the odometry's fallback, which a drive reaches only where ICP
-    loses track: 3 headings x 9 translations of 3 points. Here rather than in
+    loses track: 3 headings x 9 translations of 3 points, and the stamped likelihood grid of
+    the far-apart search (scans a metre or more apart, as on real logs). Here rather than in
     :func:`warm_estimators`, the longer task."""
     points = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
     correlative_search(LikelihoodField(points, resolution=0.1), points, np.zeros(3),
                        linear_window=0.1, angular_window=np.radians(1.0))
+    likelihood_grid(points, np.array([-2.0, -2.0]), (40, 40), 0.1)
 
 
 def _walk_away() -> None:
