@@ -297,6 +297,9 @@ def test_bad_parameters_are_named():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ConfigError, match="speed_information: expected a positive value"):
             LocalMapOdometry(speed_information=bad)
+        with pytest.raises(ConfigError,
+                           match="calibrated_sideslip_sigma: expected a positive value"):
+            LocalMapOdometry(calibrated_sideslip_sigma=bad)
     with pytest.raises(ConfigError, match="start_speed_scans: expected an integer >= 1"):
         LocalMapOdometry(start_speed_scans=0)
     with pytest.raises(ValueError, match="min_quality: expected a share"):

@@ -131,6 +131,9 @@ def test_bad_settings_are_named() -> None:
         GraphSlam(min_overlap_separation=12.0)
     with pytest.raises(ValueError, match="min_overlap_separation: expected >= 0"):
         GraphSlam(min_overlap_separation=-1.0)
+    for name in ("min_query_points", "loop_query_keyframes"):
+        with pytest.raises(ValueError, match=f"{name}: expected >= 0"):
+            GraphSlam(**{name: -1})
 
 
 def test_overlap_edges_match_the_recent_stretch_and_can_be_turned_off() -> None:
