@@ -25,7 +25,7 @@ _ENTRIES: dict[str, tuple[str, dict[str, Any]]] = {
         {"icp_iterations": 3, "image_size": 200},
     ),
     "pc_fusion": ("estimators.odometry.fusion:FusionEstimator", {}),
-    "icp": ("estimators.matching.icp:ICPEstimator", {}),
+    "icp": ("estimators.matching.icp_estimator:ICPEstimator", {}),
     "lidar_odometry": ("estimators.odometry.local_map:LocalMapOdometry", {}),
     "slam": ("estimators.slam.graph_slam:GraphSlam", {}),
 }

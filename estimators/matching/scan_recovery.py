@@ -61,6 +61,11 @@ MAX_SPEED_CHANGE_REACH = 1.0
 MAX_SEARCH_TURN = 0.5 * math.pi
 
 
+def turn_between(heading: float, other: float) -> float:
+    """[rad] in ``[0, pi]``: how far ``heading`` [rad] lies from ``other`` [rad] either way."""
+    return abs(math.remainder(heading - other, 2.0 * math.pi))
+
+
 def one_turn_guess(increment: FloatArray, intervals: float) -> FloatArray:
     """The last per-interval ``increment`` (3,) over ``intervals`` with its turn taken once:
     the car kept its speed and direction and the gap's turn is left to the match."""
@@ -112,8 +117,7 @@ def search_starts(reference_points: FloatArray, query_points: FloatArray, guess:
     if not blind or TURN_PER_INTERVAL * intervals <= MAX_SEARCH_TURN:
         return starts
     wide = search_start(reference_points, query_points, guess, intervals, seconds, math.pi)
-    if wide is not None and abs(math.remainder(float(wide[2] - guess[2]), 2.0 * math.pi)) > (
-            MAX_SEARCH_TURN):
+    if wide is not None and turn_between(float(wide[2]), float(guess[2])) > MAX_SEARCH_TURN:
         starts.append(wide)
     return starts
 
@@ -133,7 +137,7 @@ def lost_scan_surprise(pose: NDArray[np.float64], guess: NDArray[np.float64], in
     is the likelier: a one-interval guess that has to turn 40 degrees more, or a whole-gap
     guess that has to undo its extrapolated turn, says which of the two it was."""
     off = pose - guess
-    turn = abs(math.remainder(float(off[2]), 2.0 * math.pi))
+    turn = turn_between(float(off[2]), 0.0)
     return (turn + math.hypot(float(off[0]), float(off[1])) / max(step, 0.05)) / intervals
 
 
@@ -173,8 +177,8 @@ def most_likely_match(results: list[MatchResult], guesses: list[NDArray[np.float
     if seconds is not None:
         judged = [k for k in judged if within_reach(
             results[k].pose, guesses[k], spans[k], seconds)] or judged
-        near = [k for k in judged if abs(math.remainder(
-            float(results[k].pose[2] - guesses[k][2]), 2.0 * math.pi)) <= MAX_SEARCH_TURN]
+        near = [k for k in judged if turn_between(
+            float(results[k].pose[2]), float(guesses[k][2])) <= MAX_SEARCH_TURN]
         if any(results[k].quality >= LOST_BELOW for k in near):
             judged = near
     top = max(results[k].quality for k in judged)

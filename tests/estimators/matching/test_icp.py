@@ -9,6 +9,7 @@ from scipy.optimize import least_squares
 
 from estimators import SensorSetup, make
 from estimators.matching.icp import ICPParams, match_scans, register
+from estimators.matching.match_result import MatchResult
 from estimators.matching.point_to_line import (
     PointToLineReference,
     gauss_newton_step,
@@ -281,7 +282,7 @@ def test_icp_estimator_finds_the_car_after_scans_lost_in_a_turn():
 
 
 def test_icp_estimator_starts_each_match_from_the_last_increment(monkeypatch):
-    import estimators.matching.icp as icp
+    import estimators.matching.icp_estimator as icp
 
     guesses, results = [], []
 
@@ -289,7 +290,7 @@ def test_icp_estimator_starts_each_match_from_the_last_increment(monkeypatch):
         guesses.append(np.array(initial_guess, dtype=float))
         results.append(real_register(reference, query, initial_guess, params, prior_pose,
                                      prior_information).pose)
-        return icp.MatchResult(results[-1], 1.0, 0.0, 1, True)
+        return MatchResult(results[-1], 1.0, 0.0, 1, True)
 
     real_register = icp.register
     monkeypatch.setattr(icp, "register", spy)
