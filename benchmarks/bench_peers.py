@@ -3,6 +3,7 @@
     python benchmarks/bench_peers.py                          # ACES and Intel, 2,000 scans each
     python benchmarks/bench_peers.py --limit 500 my.clf.gz my_bag --json peers.json
     python benchmarks/bench_peers.py --peers-path /tmp/kiss   # KISS-ICP installed with --target
+    python benchmarks/bench_peers.py --kernels                # + CPU inside compiled kernels
     python benchmarks/bench_peers.py --env --peers-path DIR   # the peers' Lidars, not the logs
 
 Runs ``lidar_odometry``, ``slam`` and ``icp`` (``--estimators``) and KISS-ICP (PyPI
@@ -17,7 +18,10 @@ deskew off, one thread, the log's maximum range; its pose's x, y and yaw are its
 trajectory. Printed per log: CPU ms per scan of each, the ratios to KISS-ICP (and ``slam`` to
 ``lidar_odometry``), and the relation errors where the log has a reference (ACES: Kümmerle's
 relations; Intel: the SLAM-corrected log's poses, pseudo ground truth); ``--json`` writes all
-of it with the settings and the machine. The clocks are bench_real_logs.py's: ACES on the IPC
+of it with the settings and the machine. ``--kernels`` runs each of ours once more under
+cProfile and reports the CPU it spends inside its compiled kernels alone
+(:mod:`kernel_time`), also as a ratio to KISS-ICP's whole CPU: what no faster Python around
+the kernels could remove. The clocks are bench_real_logs.py's: ACES on the IPC
 stamps, Intel on the logger's made to run forward (``estimators.datasets.real_log``).
 
 ``--env`` times the simulators' Lidars instead: IR-SIM's (PyPI ``ir-sim``) and VMAS's (PyPI
@@ -44,6 +48,7 @@ from typing import Any
 
 import numpy as np
 import peer_lidars
+from kernel_time import kernel_seconds
 from numpy.typing import NDArray
 
 from estimators import make
@@ -194,8 +199,17 @@ def _summaries(run: LogRun, label: str, relations: Relations) -> dict[str, Any]:
     return {label: relation_errors(run.times, run.poses, inside, tolerance=0.01).summary()}
 
 
-def bench_log(source: LogSource, names: list[str], with_peer: bool) -> dict[str, Any]:
-    """One log: CPU ms per scan, ratios and relation errors of every runner."""
+def feed(source: LogSource, runner: Any) -> None:
+    """Every scan of ``source`` to ``runner``, in order."""
+    for ranges, t in zip(source.ranges, source.times, strict=True):
+        runner.update(ranges, float(t))
+
+
+def bench_log(source: LogSource, names: list[str], with_peer: bool,
+              kernels: bool = False) -> dict[str, Any]:
+    """One log: CPU ms per scan, ratios and relation errors of every runner; with
+    ``kernels``, also the CPU ms per scan each of ours spends inside compiled kernels
+    (:func:`kernel_time.kernel_seconds`, a second, profiled run)."""
     for name in names:  # load (or compile) each estimator's kernels outside the timing
         warm = OurRunner(name, source.setup)
         for ranges, t in zip(source.ranges[:WARM_SCANS], source.times[:WARM_SCANS],
@@ -216,6 +230,13 @@ def bench_log(source: LogSource, names: list[str], with_peer: bool) -> dict[str,
         ratios.update({f"{n}/{PEER}": per_scan[n] / per_scan[PEER] for n in names})
     if "slam" in per_scan and "lidar_odometry" in per_scan:
         ratios["slam/lidar_odometry"] = per_scan["slam"] / per_scan["lidar_odometry"]
+    if kernels:
+        result["kernel_ms_per_scan"] = {name: 1e3 * kernel_seconds(
+            lambda name=name: feed(source, OurRunner(name, source.setup))) / len(source.times)
+            for name in names}
+        if with_peer:
+            ratios.update({f"{n} kernels/{PEER}": result["kernel_ms_per_scan"][n]
+                           / result["cpu_ms_per_scan"][PEER] for n in names})
     result["ratios"] = ratios
     return result
 
@@ -226,7 +247,9 @@ def print_log(name: str, result: dict[str, Any]) -> None:
         errors = result["errors"].get(runner, {})
         shown = "; ".join(f"{label} {e['translation_m']:.4f} m / {e['rotation_deg']:.3f} deg"
                           for label, e in errors.items())
-        print(f"  {runner:15s} {ms:7.3f} ms/scan CPU  {shown}")
+        inside = result.get("kernel_ms_per_scan", {}).get(runner)
+        kernels = "" if inside is None else f" ({inside:.3f} in kernels)"
+        print(f"  {runner:15s} {ms:7.3f} ms/scan CPU{kernels}  {shown}")
     for label, ratio in result["ratios"].items():
         print(f"  {label:32s} {ratio:6.2f}x CPU")
 
@@ -286,6 +309,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--batch", type=positive, default=1,
                         help="--env: poses per scan call (VMAS's environments, our sensors)")
     parser.add_argument("--seed", type=int, default=0, help="--env: the scene and the poses")
+    parser.add_argument("--kernels", action="store_true",
+                        help="also run each of ours once more under cProfile and report the "
+                             "CPU it spends inside compiled kernels")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
     if args.peers_path is not None:
@@ -315,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
                               "peer_settings": KISS_SETTINGS, "limit": args.limit, "logs": {}}
     for load in loaders:
         source = load()
-        result = bench_log(source, args.estimators, peer_version is not None)
+        result = bench_log(source, args.estimators, peer_version is not None, args.kernels)
         print_log(source.name, result)
         report["logs"][source.name] = result
     write_json(args.json, report)
