@@ -20,10 +20,16 @@ one, over the observations that arrive; on ACES, which has no truth per scan, ag
 clean run's step), ``final`` [m] the end-point error (the translation error of the last scan
 with truth relative to the first one, which is the start on the simulated drives); ``jump+``
 the worst step error beyond the clean run's. Targets (issue 43): ``jump+ <= 0.3 m`` and
-``final <= 2 x clean final + 0.1 m``. The long blind stretch (``blind_100``) is shown against
-the same targets. ``health`` is the estimator's own report (skipped, frozen, clock jumps,
-blind stretches, and ``lost_scans``: scans after which it lost its place). CPU seconds per
-run are measured with ``time.process_time``.
+``final <= 2 x clean final + 0.1 m`` under every fault with at most 3 s blind in a row. After a
+longer blind stretch (``blind_100``) the issue asks for no jump when the returns come back,
+the stretch flagged, and the pose found again where the map still covers the place: a run
+passes when its step onto the first scan with returns is at most 0.3 m beyond the clean run's
+worst, ``health`` counts the stretch, and the end-point bound holds, or else that first scan
+does not cover the place (under half its points within 0.2 m of the last scan's before the
+stretch, both placed at their true poses: ``covered``) and the estimator reports the scan
+lost (``lost_scans``) rather than trusting a placement. ``health`` is the estimator's own
+report (skipped, frozen, clock jumps, blind stretches, and ``lost_scans``: scans after which
+it lost its place). CPU seconds per run are measured with ``time.process_time``.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from scipy.spatial import cKDTree
 
 import estimators
 import lidar_env  # noqa: F401  (registers DualLidar-v0)
@@ -47,8 +54,9 @@ from estimators import SensorSetup
 from estimators.datasets.faults import recording_from_log, with_faults
 from estimators.datasets.recording import Recording
 from estimators.datasets.truth import match_truth
+from estimators.matching.scan_matching import CarPoints
 from estimators.paths import SHARED_DATA
-from lidar_env.core.se2 import relative
+from lidar_env.core.se2 import relative, transform_points
 from lidar_env.faults import BeamDropout, Blind, ClockJump, Fault, FrozenLidar, ScanLoss
 
 GROUPS = ("open_cylinders/right_turn", "hallway/zigzag", "closed_to_open/zigzag")
@@ -57,6 +65,10 @@ ACES = SHARED_DATA / "radish" / "aces.clf.bz2"
 ACES_TRUTH = SHARED_DATA / "radish" / "aces-corrected.log.gz"
 JUMP_MARGIN = 0.3  # [m]
 FINAL_FACTOR, FINAL_MARGIN = 2.0, 0.1  # final <= 2 x clean + 0.1 m
+#: [s] blind in a row beyond which a stretch is a long one, judged by :func:`verdict`'s rule.
+LONG_STRETCH = 3.0
+#: A scan covers the place when this share of another's points lies within COVER_DISTANCE [m].
+COVERED_SHARE, COVER_DISTANCE = 0.5, 0.2
 
 
 def faults_for(period: float, n_lidars: int) -> dict[str, Callable[[], list[Fault]]]:
@@ -176,10 +188,48 @@ def start_of(truth: np.ndarray) -> np.ndarray:
     return truth[0] if np.all(np.isfinite(truth[0])) else np.zeros(3)
 
 
+@dataclasses.dataclass(frozen=True)
+class FaultedRun:
+    """One faulted run: worst step error and final error [m] (:func:`score`), ``health``
+    counts, CPU seconds, and after a long blind stretch (:func:`long_stretch`) the step error
+    [m] onto the first scan with returns and the share of that scan the last one before the
+    stretch covers (None without one)."""
+
+    jump: float
+    final: float
+    health: dict
+    seconds: float
+    return_jump: float | None = None
+    covered: float | None = None
+
+
+def long_stretch(faulted: Recording, truth: np.ndarray) -> tuple[int, float] | None:
+    """Index of the first observation with returns after ``faulted``'s longest run of
+    observations without any, where that run is longer than :data:`LONG_STRETCH`, and the
+    share of its points within :data:`COVER_DISTANCE` of the last scan's before the run, both
+    placed at their poses in ``truth`` (one row per observation); None otherwise."""
+    points = CarPoints(faulted.setup)
+    scans = [points({key: faulted.scans[key][i] for key in faulted.setup.keys})
+             for i in range(len(faulted))]
+    blind = np.array([len(p) == 0 for p in scans] + [False])
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], blind]).astype(int)))
+    starts, ends = edges[::2], edges[1::2]  # [start, end) of each blind run
+    if not len(starts):
+        return None
+    k = int(np.argmax(ends - starts))
+    first, after = int(starts[k]), int(ends[k])
+    period = float(np.median(np.diff(faulted.times)))
+    if after - first <= round(LONG_STRETCH / period) or first == 0 or after >= len(faulted):
+        return None
+    before = transform_points(truth[first - 1], scans[first - 1])
+    seen = transform_points(truth[after], scans[after])
+    distances, _ = cKDTree(before).query(seen)
+    return after, float(np.mean(distances <= COVER_DISTANCE))
+
+
 def faulted_score(name: str, recording: Recording, fault: str,
-                  reference: np.ndarray | None = None) -> tuple[float, float, dict, float]:
-    """Worst step error and final error [m] (:func:`score`), health counts and CPU seconds
-    of ``name`` on ``recording`` with the matrix's ``fault`` (seed 0); steps against
+                  reference: np.ndarray | None = None) -> FaultedRun:
+    """``name`` on ``recording`` with the matrix's ``fault`` (seed 0), steps against
     ``reference`` (the clean run where truth comes at keyframes only; default the truth)."""
     period = float(np.median(np.diff(recording.times)))
     faulted = with_faults(recording, faults_for(period, recording.setup.n_lidars)[fault](),
@@ -187,8 +237,26 @@ def faulted_score(name: str, recording: Recording, fault: str,
     truth = recording.truth
     poses, health, seconds = run(name, faulted, start_of(truth))
     kept = steps_of(recording, faulted)
-    jump, final = score(poses, (truth if reference is None else reference)[kept], truth[kept])
-    return jump, final, health, seconds
+    steps = (truth if reference is None else reference)[kept]
+    jump, final = score(poses, steps, truth[kept])
+    stretch = long_stretch(faulted, steps)
+    if stretch is None:
+        return FaultedRun(jump, final, health, seconds)
+    after, covered = stretch
+    return FaultedRun(jump, final, health, seconds,
+                      float(step_errors(poses[after - 1:after + 1], steps[after - 1:after + 1])[0]),
+                      covered)
+
+
+def verdict(run: FaultedRun, clean_jump: float, clean_final: float) -> bool:
+    """Whether ``run`` meets issue 43's targets (the module docstring)."""
+    bound = FINAL_FACTOR * clean_final + FINAL_MARGIN
+    if run.return_jump is None:
+        return run.jump - clean_jump <= JUMP_MARGIN and run.final <= bound
+    return (run.health.get("blind_stretches", 0) >= 1
+            and run.return_jump - clean_jump <= JUMP_MARGIN
+            and (run.final <= bound or (run.covered < COVERED_SHARE
+                                        and run.health.get("lost_scans", 0) >= 1)))
 
 
 def matrix(drives: dict[str, Recording], names: list[str], selected: list[str] | None,
@@ -206,17 +274,21 @@ def matrix(drives: dict[str, Recording], names: list[str], selected: list[str] |
             for fault_name in FAULT_NAMES:
                 if selected and fault_name not in selected:
                     continue
-                jump, final, health, seconds = faulted_score(name, recording, fault_name,
-                                                             reference)
-                ok = (jump - clean_jump <= JUMP_MARGIN
-                      and final <= FINAL_FACTOR * clean_final + FINAL_MARGIN)
+                faulted = faulted_score(name, recording, fault_name, reference)
+                ok = verdict(faulted, clean_jump, clean_final)
                 results.append({"drive": group, "estimator": name, "fault": fault_name,
-                                "jump": jump, "clean_jump": clean_jump, "final": final,
-                                "clean_final": clean_final, "pass": bool(ok),
-                                "cpu_s": seconds, "health": health})
-                print(f"{group:28s} {name:15s} {fault_name:18s} jump+ {jump - clean_jump:6.3f} "
-                      f"final {final:6.3f} (clean {clean_final:6.3f})  "
-                      f"{'pass' if ok else 'FAIL'}  {seconds:6.1f} s  {health}", flush=True)
+                                "jump": faulted.jump, "clean_jump": clean_jump,
+                                "final": faulted.final, "clean_final": clean_final,
+                                "return_jump": faulted.return_jump, "covered": faulted.covered,
+                                "pass": bool(ok), "cpu_s": faulted.seconds,
+                                "health": faulted.health})
+                stretch = "" if faulted.covered is None else (
+                    f"  return jump+ {faulted.return_jump - clean_jump:6.3f} covered "
+                    f"{faulted.covered:4.2f}")
+                print(f"{group:28s} {name:15s} {fault_name:18s} jump+ "
+                      f"{faulted.jump - clean_jump:6.3f} final {faulted.final:6.3f} (clean "
+                      f"{clean_final:6.3f}){stretch}  {'pass' if ok else 'FAIL'}  "
+                      f"{faulted.seconds:6.1f} s  {faulted.health}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -62,11 +62,12 @@ def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> 
     recording = drives[group]
     clean, _, _ = bench.run(name, recording, recording.truth[0])
     clean_jump, clean_final = bench.score(clean, recording.truth, recording.truth)
-    jump, final, health, _ = bench.faulted_score(name, recording, fault)
-    assert jump - clean_jump <= bench.JUMP_MARGIN, (jump, clean_jump)
-    assert final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (final, clean_final)
+    run = bench.faulted_score(name, recording, fault)
+    assert run.jump - clean_jump <= bench.JUMP_MARGIN, (run.jump, clean_jump)
+    assert run.final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (run.final,
+                                                                                clean_final)
     if fault.startswith("blind"):
-        assert health["skipped_scans"] > 0 and health["blind_stretches"] > 0
+        assert run.health["skipped_scans"] > 0 and run.health["blind_stretches"] > 0
 
 
 def test_a_log_without_truth_is_scored_on_the_scans_kept(drives) -> None:
@@ -98,3 +99,38 @@ def test_aces_carries_the_corrected_keyframes_at_their_scans() -> None:
     assert 30 <= len(known) <= 60  # a keyframe every 0.5-1 m of ~40 m driven
     steps = np.linalg.norm(np.diff(recording.truth[known, :2], axis=0), axis=1)
     assert 0.3 < np.median(steps) < 1.5  # [m] the keyframe spacing, not a scan far off
+
+
+def _faulted(recording, fault: str):
+    period = float(np.median(np.diff(recording.times)))
+    return with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
+                       seed=0)
+
+
+def test_a_stretch_longer_than_3_s_is_long_and_measured_against_the_scan_before_it(
+        drives) -> None:
+    recording = drives["closed_to_open/zigzag"]
+    after, covered = bench.long_stretch(_faulted(recording, "blind_100"), recording.truth)
+    assert after == 160  # 100 blind scans from scan 60 on
+    assert 0.0 < covered <= 1.0
+    assert bench.long_stretch(_faulted(recording, "blind_3s"), recording.truth) is None
+    # the same scans placed 1 m apart no longer cover each other
+    moved = recording.truth.copy()
+    moved[160:, 0] += 1.0
+    assert bench.long_stretch(_faulted(recording, "blind_100"), moved)[1] < covered
+
+
+def _run(final: float, return_jump: float | None, covered: float | None,
+         lost: int = 0) -> object:
+    return bench.FaultedRun(0.1, final, {"blind_stretches": 1, "lost_scans": lost}, 1.0,
+                            return_jump, covered)
+
+
+def test_after_a_long_stretch_a_place_not_covered_passes_only_if_reported_lost() -> None:
+    clean_jump, clean_final = 0.0, 0.05  # final bound 0.2 m
+    assert bench.verdict(_run(0.1, 0.05, 0.9), clean_jump, clean_final)
+    assert not bench.verdict(_run(5.0, 0.05, 0.9, lost=1), clean_jump, clean_final)  # covered
+    assert not bench.verdict(_run(5.0, 0.05, 0.1), clean_jump, clean_final)  # not said
+    assert bench.verdict(_run(5.0, 0.05, 0.1, lost=1), clean_jump, clean_final)
+    assert not bench.verdict(_run(0.1, 0.5, 0.9), clean_jump, clean_final)  # a jump on return
+    assert not bench.verdict(_run(5.0, None, None, lost=1), clean_jump, clean_final)  # short

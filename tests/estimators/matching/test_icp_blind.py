@@ -52,6 +52,6 @@ def test_after_100_blind_scans_leaving_the_corridor_icp_finds_the_place_again() 
     """closed_to_open: the car drives 8 m out of the corridor while blind; matched on the
     last scan alone, a place between the corridor and the car fits best (4 m off)."""
     recording = bench.record_drive("closed_to_open/zigzag")
-    _, error, health, _ = bench.faulted_score("icp", recording, "blind_100")
-    assert health["blind_stretches"] == 1
-    assert error < 0.5  # (clean: 0.21 m; the cell's bound 2 x clean + 0.1 m)
+    run = bench.faulted_score("icp", recording, "blind_100")
+    assert run.health["blind_stretches"] == 1
+    assert run.final < 0.5  # (clean: 0.21 m; the cell's bound 2 x clean + 0.1 m)

@@ -58,7 +58,7 @@ def test_the_midpoints_lie_on_the_cylinders() -> None:
 
 def faulted_final(recording, fault: str) -> float:
     """[m] the end-point error of ``icp`` on ``recording`` with the matrix's ``fault``."""
-    return bench.faulted_score("icp", recording, fault)[1]
+    return bench.faulted_score("icp", recording, fault).final
 
 
 @pytest.mark.parametrize(("fault", "limit"), [("dropout_half", 0.44), ("frozen", 0.2)])

@@ -26,6 +26,6 @@ def test_after_100_blind_scans_leaving_the_corridor_the_place_is_found_again() -
     last keyframe alone, the scan fits the corridor where the car went blind best (8 m
     off)."""
     recording = bench.record_drive("closed_to_open/zigzag")
-    _, error, health, _ = bench.faulted_score("pc_fusion", recording, "blind_100")
-    assert health["blind_stretches"] == 1
-    assert error < 0.15  # (clean: 0.02 m)
+    run = bench.faulted_score("pc_fusion", recording, "blind_100")
+    assert run.health["blind_stretches"] == 1
+    assert run.final < 0.15  # (clean: 0.02 m)
