@@ -11,10 +11,16 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   through walls the map holds (the last metres of the corridor it has driven out of).
   :func:`along_least_pinned` moves the match along the direction it pins least, to where
   the scan sees through the fewest map points
-  (:func:`~estimators.matching.seen_through.seen_through_counts`), and of those places to
-  the one whose points score highest on the map's likelihood field (the ray consistency
+  (:func:`~estimators.matching.seen_through.seen_through_counts`; the ray consistency
   test of occupancy-grid scan matching: a beam ending beyond a mapped surface says the
-  surface is not where the pose puts it). Where the scan pins that direction with less than
+  surface is not where the pose puts it) and its points score as high as anywhere on the
+  map's likelihood field. The two bound the place from either side: placed short, the scan
+  sees through the walls' ends it passed, but only once its beams end
+  :data:`~estimators.matching.seen_through.SEEN_THROUGH_MARGIN` behind them; placed past
+  it, its points run off the mapped walls' ends and score less, a few points per step. The
+  car lies between, and the middle of that run of places is the least far off whichever
+  bound is the looser (past a corridor's open end, the nearest place free of contradiction
+  is 0.1-0.3 m short of the car). Where the scan pins that direction with less than
   ``min_information`` points (a bare corridor), no place along it is evidence, though one
   nearer the mapped part scores a little higher: :func:`toward_guess` puts the car at the
   motion model's guess along it, where the scan sees through no more map points there.
@@ -81,8 +87,9 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     """The pose (3,) on the line through ``match.pose`` along its least pinned direction,
     within ``reach`` [m] either side in ``step`` [m] steps, where the scan's ``points``
     (M, 2, car frame) see through the fewest ``map_points`` (N, 2, world) of the places
-    scoring at least :data:`NEAR_BEST` of the best on ``field``, and of those the one
-    scoring highest (the mean score, within its standard error: of such ties, the nearest).
+    scoring at least :data:`NEAR_BEST` of the best on ``field``, and of those the ones
+    scoring highest (the mean score, within its standard error): the middle of the run of
+    such places next to each other that holds the one nearest the match (module docstring).
     Only a contradiction moves the match: ``match.pose`` itself where the scan sees through
     at most :data:`SEEN_THROUGH_SLACK` map points more there."""
     direction = least_pinned_direction(match.information)
@@ -99,10 +106,23 @@ def along_least_pinned(field: LikelihoodField, map_points: FloatArray, points: F
     consistent = candidates & (counts == fewest)
     best = float(scores[consistent].max())
     # scores within the mean's standard error tie (along a bare corridor the field's noise
-    # alone ranks them); ties go to the smallest move
+    # alone ranks them)
     tie = max(np.sqrt(best * max(1.0 - best, 0.0) / len(points)), 1.0 / len(points))
-    tied = np.flatnonzero(consistent & (scores >= best - tie))
-    return poses[tied[np.argmin(np.abs(offsets[tied]))]]
+    tied = consistent & (scores >= best - tie)
+    first, last = tied_run(tied, int(np.flatnonzero(tied)[np.argmin(np.abs(offsets[tied]))]))
+    moved = match.pose.copy()
+    moved[:2] += 0.5 * (offsets[first] + offsets[last]) * direction
+    return moved
+
+
+def tied_run(tied: NDArray[np.bool_], start: int) -> tuple[int, int]:
+    """The first and last index of the run of ``tied`` places (P,) holding ``start``."""
+    first = last = start
+    while first > 0 and tied[first - 1]:
+        first -= 1
+    while last < len(tied) - 1 and tied[last + 1]:
+        last += 1
+    return first, last
 
 
 def toward_guess(map_points: FloatArray, points: FloatArray, match: MatchResult,
