@@ -324,12 +324,8 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
             if reference is not None and self.check_steps and not poor:
                 step = self._checked_step(reference, previous.points, points, step)
             index = self.graph.add_node(compose(self.graph.pose(-1), step))
-            drift = self._odometry_information(step)
-            information = (self._matched_information(reference, points, step, drift)
-                           if self.match_odometry and reference is not None else drift)
-            error = self._odometry_error(step, np.linalg.inv(information) if poor else None,
-                                         measured)
-            information, error = self._unless_lost(index, information, error)
+            information, error = self._unless_lost(
+                index, *self._odometry_edge(reference, points, step, poor, measured))
             self.graph.add_edge(index - 1, index, step, information)
         self.keyframes.append(keyframe)
         self._table.append(keyframe, *error)

@@ -300,6 +300,29 @@ class KeyframeMatching:
         self.graph.add_edge(old, new, pose, information, is_loop=True)
         self._dirty = True
 
+    def _odometry_edge(self, reference: PointToLineReference | None, points: NDArray[np.float64],
+                       step: NDArray[np.float64], poor: bool,
+                       measured: NDArray[np.float64] | None
+                       ) -> tuple[NDArray[np.float64], tuple[NDArray[np.float64],
+                                                             NDArray[np.float64]]]:
+        """Information (3, 3) of the odometry edge over ``step`` (3,) and the front end's error
+        over it (:meth:`_odometry_error`). Where the front end measured its drift from its scan
+        matches (``measured``, (3, 3)) and did not flag the scan poor, the edge is that error
+        (noise plus the measured drift): the front end matched its whole local map, so two
+        keyframes that share a few posts do not make its step loose, and a loop edge must not
+        bend it there more than the front end can have erred. Elsewhere it is the distance
+        model, plus the keyframes' match covariance (``match_odometry``,
+        :meth:`_matched_information`) where ``reference``, the previous keyframe's lines, is
+        given."""
+        if measured is not None and not poor:
+            error = self._odometry_error(step, measured=measured)
+            return np.linalg.inv(error[0]), error
+        information = self._odometry_information(step)
+        if self.match_odometry and reference is not None:
+            information = self._matched_information(reference, points, step, information)
+        return information, self._odometry_error(step, np.linalg.inv(information) if poor
+                                                 else None, measured)
+
     def _matched_information(self, reference: PointToLineReference, points: NDArray[np.float64],
                              step: NDArray[np.float64], prior: NDArray[np.float64]
                              ) -> NDArray[np.float64]:
