@@ -306,20 +306,23 @@ class KeyframeMatching:
                        ) -> tuple[NDArray[np.float64], tuple[NDArray[np.float64],
                                                              NDArray[np.float64]]]:
         """Information (3, 3) of the odometry edge over ``step`` (3,) and the front end's error
-        over it (:meth:`_odometry_error`). Where the front end measured its drift from its scan
-        matches (``measured``, (3, 3)) and did not flag the scan poor, the edge is that error
-        (noise plus the measured drift): the front end matched its whole local map, so two
-        keyframes that share a few posts do not make its step loose, and a loop edge must not
-        bend it there more than the front end can have erred. Elsewhere it is the distance
-        model, plus the keyframes' match covariance (``match_odometry``,
-        :meth:`_matched_information`) where ``reference``, the previous keyframe's lines, is
-        given."""
-        if measured is not None and not poor:
-            error = self._odometry_error(step, measured=measured)
-            return np.linalg.inv(error[0]), error
+        over it (:meth:`_odometry_error`). The distance model, plus the keyframes' match
+        covariance where ``reference`` (the previous keyframe's lines) is given
+        (``match_odometry``, :meth:`_matched_information`), and, where the front end measured
+        its drift over the step from its scan matches (``measured``, (3, 3)) and did not flag
+        the scan poor, plus the information of that error (noise plus measured drift). Both
+        bound the same step's error, so the edge is at least as tight as either (and up to
+        sqrt(2) tighter in sigma where they agree): two keyframes that share a few posts
+        leave their match loose, but not the step the front end pinned on its whole local
+        map, which a wrong loop edge must then not bend by more than the front end can have
+        erred; where the front end's measure is loose (its bound over a map's span), the
+        distance model keeps the edge tight."""
         information = self._odometry_information(step)
         if self.match_odometry and reference is not None:
             information = self._matched_information(reference, points, step, information)
+        if measured is not None and not poor:
+            error = self._odometry_error(step, measured=measured)
+            return information + np.linalg.inv(error[0]), error
         return information, self._odometry_error(step, np.linalg.inv(information) if poor
                                                  else None, measured)
 
