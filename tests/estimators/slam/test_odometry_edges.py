@@ -1,6 +1,7 @@
 """Odometry edges carry the front end's own error where it measures it: keyframes that share
 no walls leave their match loose, but not the step the front end pinned on its local map, so
-a wrong loop edge cannot bend it."""
+a wrong loop edge cannot bend it; a step the keyframe check replaced is not the front end's,
+and keeps the keyframes' match information."""
 
 from __future__ import annotations
 
@@ -11,7 +12,14 @@ import numpy as np
 from estimators import SensorSetup
 from estimators.slam.frontend_drift import FrontEndDrift
 from estimators.slam.graph_slam import GraphSlam
-from lidar_env.core.se2 import relative
+from lidar_env.core.se2 import compose, relative
+from tests.estimators.slam.test_step_check import (
+    ANGLES,
+    CURRENT,
+    MAX_RANGE,
+    PREVIOUS,
+    keyframe_points,
+)
 
 
 @dataclass
@@ -70,3 +78,23 @@ def test_without_measured_drift_the_keyframes_match_still_weakens_the_edge() -> 
     odometry = ~slam.graph.is_loop
     heading = np.degrees(np.sqrt(np.linalg.inv(slam.graph.information[odometry])[:, 2, 2]))
     assert np.all(heading > 5.0)
+
+
+def test_a_step_the_keyframe_check_replaced_does_not_take_the_front_end_s_error() -> None:
+    """A turn the front end lost (40 deg) replaced by the keyframes' match: the edge's
+    information is the match's, whatever the front end claims of its own step."""
+    truth = relative(PREVIOUS, CURRENT)
+    lost = compose(PREVIOUS, compose(truth, np.array([0.0, 0.0, np.radians(-40.0)])))
+    informations = []
+    for frontend in (ScanMatches(), object()):
+        slam = GraphSlam(global_every=0)
+        slam.reset(SensorSetup(np.zeros((1, 3)), ANGLES, MAX_RANGE), PREVIOUS)
+        slam._drift = FrontEndDrift(frontend, slam.keyframe_distance)
+        for seed, (pose, odometry) in enumerate(((PREVIOUS, PREVIOUS), (CURRENT, lost))):
+            slam._drift.add(float(odometry[2]))
+            slam.add_scan(keyframe_points(pose, np.zeros((0, 3)), seed), odometry)
+        assert len(slam.step_checks) == 1
+        error = relative(truth, slam.graph.measurements[0])
+        assert abs(error[2]) < np.radians(1.0)  # replaced
+        informations.append(slam.graph.information[0])
+    np.testing.assert_array_equal(informations[0], informations[1])
