@@ -4,7 +4,8 @@
 The front end (any registered estimator, by name) turns every scan into an odometry pose.
 Every ``keyframe_distance`` of travel (or ``keyframe_angle`` of turn) the scan becomes a
 keyframe: a node of a :class:`~estimators.slam.pose_graph.PoseGraph`, linked to the previous one
-by an odometry edge whose uncertainty grows with the distance driven; a step that leaves most
+by an odometry edge whose uncertainty grows with the distance driven (no looser than the front
+end's own error, where it measures it from its scan matches); a step that leaves most
 of the new keyframe's points off the previous one's walls (a turn the front end lost) is
 replaced by an all-heading match of the two keyframes when that explains more. Each new
 keyframe looks for old keyframes it may revisit (at least ``min_loop_separation`` of path
@@ -322,14 +323,12 @@ class GraphSlam(KeyframeMatching, Relocalization, SlamOutputs, Estimator):
                 self.loop_params.denoise_reference)
                 if len(previous.points) >= 3 and len(points) >= 3 else None)
             if reference is not None and self.check_steps and not poor:
-                step = self._checked_step(reference, previous.points, points, step)
+                checked = self._checked_step(reference, previous.points, points, step)
+                measured = None if checked is not step else measured  # not the front end's step
+                step = checked
             index = self.graph.add_node(compose(self.graph.pose(-1), step))
-            drift = self._odometry_information(step)
-            information = (self._matched_information(reference, points, step, drift)
-                           if self.match_odometry and reference is not None else drift)
-            error = self._odometry_error(step, np.linalg.inv(information) if poor else None,
-                                         measured)
-            information, error = self._unless_lost(index, information, error)
+            information, error = self._unless_lost(
+                index, *self._odometry_edge(reference, points, step, poor, measured))
             self.graph.add_edge(index - 1, index, step, information)
         self.keyframes.append(keyframe)
         self._table.append(keyframe, *error)

@@ -300,6 +300,32 @@ class KeyframeMatching:
         self.graph.add_edge(old, new, pose, information, is_loop=True)
         self._dirty = True
 
+    def _odometry_edge(self, reference: PointToLineReference | None, points: NDArray[np.float64],
+                       step: NDArray[np.float64], poor: bool,
+                       measured: NDArray[np.float64] | None
+                       ) -> tuple[NDArray[np.float64], tuple[NDArray[np.float64],
+                                                             NDArray[np.float64]]]:
+        """Information (3, 3) of the odometry edge over ``step`` (3,) and the front end's error
+        over it (:meth:`_odometry_error`). The distance model, plus the keyframes' match
+        covariance where ``reference`` (the previous keyframe's lines) is given
+        (``match_odometry``, :meth:`_matched_information`), and, where the front end measured
+        its drift over the step from its scan matches (``measured``, (3, 3)) and did not flag
+        the scan poor, plus the information of that error (noise plus measured drift). Both
+        bound the same step's error, so the edge is at least as tight as either (and up to
+        sqrt(2) tighter in sigma where they agree): two keyframes that share a few posts
+        leave their match loose, but not the step the front end pinned on its whole local
+        map, which a wrong loop edge must then not bend by more than the front end can have
+        erred; where the front end's measure is loose (its bound over a map's span), the
+        distance model keeps the edge tight."""
+        information = self._odometry_information(step)
+        if self.match_odometry and reference is not None:
+            information = self._matched_information(reference, points, step, information)
+        if measured is not None and not poor:
+            error = self._odometry_error(step, measured=measured)
+            return information + np.linalg.inv(error[0]), error
+        return information, self._odometry_error(step, np.linalg.inv(information) if poor
+                                                 else None, measured)
+
     def _matched_information(self, reference: PointToLineReference, points: NDArray[np.float64],
                              step: NDArray[np.float64], prior: NDArray[np.float64]
                              ) -> NDArray[np.float64]:
