@@ -185,40 +185,50 @@ def thinned(log: CarmenLog, k: int, limit: int | None) -> CarmenLog:
     return CarmenLog(log.source, scans if limit is None else scans[:limit], params=log.params)
 
 
-def kept_relations(relations: Relations, times: NDArray[np.float64],
+def kept_relations(relations: Relations, scans: NDArray[np.float64], kept: NDArray[np.float64],
                    tolerance: float) -> Relations:
-    """The relations whose two ends are among ``times`` (within ``tolerance`` [s])."""
-    ordered = np.sort(times)
+    """The relations whose two ends were taken at a scan that the thinning ``kept``: the log's
+    scan (of all its ``scans`` stamps [s], before thinning) nearest to each end, within
+    ``tolerance`` [s], is among the ``kept`` stamps. Not merely a kept scan within the
+    tolerance: on Intel's bursty clock a dropped scan's neighbour lies 1 ms away, and a
+    relation moved onto it spans another stretch than its truth."""
+    ordered = np.sort(scans)
 
-    def kept(queries: NDArray[np.float64]) -> NDArray[np.bool_]:
+    def taken_at_kept(queries: NDArray[np.float64]) -> NDArray[np.bool_]:
         right = np.clip(np.searchsorted(ordered, queries), 0, len(ordered) - 1)
         left = np.maximum(right - 1, 0)
-        nearest = np.minimum(np.abs(ordered[left] - queries), np.abs(ordered[right] - queries))
-        return nearest <= tolerance
+        nearest = np.where(np.abs(ordered[left] - queries) <= np.abs(ordered[right] - queries),
+                           ordered[left], ordered[right])
+        return (np.abs(nearest - queries) <= tolerance) & np.isin(nearest, kept)
 
-    return relations.select(kept(relations.t1) & kept(relations.t2))
+    return relations.select(taken_at_kept(relations.t1) & taken_at_kept(relations.t2))
 
 
 def keyframe_relations(stamps: NDArray[np.float64], poses: NDArray[np.float64],
-                       times: NDArray[np.float64], tolerance: float) -> Relations:
+                       scans: NDArray[np.float64], kept: NDArray[np.float64],
+                       tolerance: float) -> Relations:
     """Relations between keyframes (``stamps`` (N,) [s], increasing, ``poses`` (N, 3)), each
-    paired with the first at least ``WINDOW`` later, kept where both are among the thinned
-    log's scan ``times`` (within ``tolerance`` [s]). Paired before the thinning, as ACES's
-    relations are: a keyframe whose scan was dropped is not bridged (on Intel every 2nd scan,
-    a bridged pair spanned 18 s and 5 m, a drift rather than a local error)."""
-    return kept_relations(relations_from_trajectory(stamps, poses, WINDOW), times, tolerance)
+    paired with the first at least ``WINDOW`` later, kept where both were taken at scans the
+    thinning kept (:func:`kept_relations`; the log's ``scans`` stamps and the ``kept`` ones
+    [s], within ``tolerance``). Paired before the thinning, as ACES's relations are: a
+    keyframe whose scan was dropped is not bridged (on Intel every 2nd scan, a bridged pair
+    spanned 18 s and 5 m, a drift rather than a local error)."""
+    return kept_relations(relations_from_trajectory(stamps, poses, WINDOW), scans, kept,
+                          tolerance)
 
 
 def log_case(name: str, k: int, limit: int | None) -> Case:
     """ACES (ipc clock, Kümmerle's local relations) or Intel (logger clock, pseudo truth)."""
     if name == "aces":
-        log = thinned(load_log(DATA / "aces.clf.bz2"), k, limit)
+        full = load_log(DATA / "aces.clf.bz2")
+        log = thinned(full, k, limit)
         times = log.scan_times("ipc")
         relations = load_relations(DATA / "aces.relations").local()
-        relations = kept_relations(relations, times, 1e-3)
+        relations = kept_relations(relations, full.scan_times("ipc"), times, 1e-3)
         clock, tolerance, truth_rate = "ipc", 1e-3, float("nan")
     else:
-        log = thinned(load_log(DATA / "intel.clf.bz2"), k, limit)
+        full = load_log(DATA / "intel.clf.bz2")
+        log = thinned(full, k, limit)
         times = log.scan_times("logger")
         corrected = load_log(DATA / "intel-corrected.log.gz")
         stamps = corrected.scan_times("logger")
@@ -226,7 +236,7 @@ def log_case(name: str, k: int, limit: int | None) -> Case:
         stamps, unique = np.unique(stamps[order], return_index=True)
         poses = corrected.logged_poses()[order][unique]
         # The corrected log prints 6 significant digits: 10 ms covers its rounding.
-        relations = keyframe_relations(stamps, poses, times, 0.01)
+        relations = keyframe_relations(stamps, poses, full.scan_times("logger"), times, 0.01)
         clock, tolerance = "logger", 0.01
         truth_rate = turn_rate(stamps, poses)
     label = f"{name}_every_{k}"

@@ -39,7 +39,19 @@ def test_thinned_log_relations_do_not_bridge_a_dropped_keyframe() -> None:
     # keyframes 1 s apart; the thinning kept the scans of all but the one at 2 s
     stamps = np.arange(5.0)
     poses = np.column_stack([stamps, np.zeros(5), np.zeros(5)])
-    relations = bench.keyframe_relations(stamps, poses, np.array([0.0, 1.0, 3.0, 4.0]), 1e-3)
+    relations = bench.keyframe_relations(stamps, poses, stamps, np.array([0.0, 1.0, 3.0, 4.0]),
+                                         1e-3)
     np.testing.assert_array_equal(relations.t1, [0.0, 3.0])
     np.testing.assert_array_equal(relations.t2, [1.0, 4.0])
     np.testing.assert_allclose(relations.poses, [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+
+
+def test_a_relation_is_not_moved_onto_a_kept_neighbour_of_its_dropped_scan() -> None:
+    # the log's scans come in bursts: 2.000 s and 2.001 s; the thinning kept 2.001 s only
+    stamps = np.arange(5.0)
+    poses = np.column_stack([stamps, np.zeros(5), np.zeros(5)])
+    scans = np.array([0.0, 1.0, 2.0, 2.001, 3.0, 4.0])
+    kept = np.array([0.0, 1.0, 2.001, 3.0, 4.0])
+    relations = bench.keyframe_relations(stamps, poses, scans, kept, 0.01)
+    np.testing.assert_array_equal(relations.t1, [0.0, 3.0])  # not 1 -> 2 nor 2 -> 3
+    assert len(bench.keyframe_relations(stamps, poses, kept, kept, 0.01).t1) == 4
