@@ -136,7 +136,7 @@ def far_match(
     if not found.found:
         return from_guess
     from_search = register(reference, points, found.pose, params, guess, prior_information)
-    if from_search.quality == from_guess.quality == 0.0:
+    if from_search.quality == from_guess.quality == 0.0 and found.score < min_quality:
         return from_guess  # a handful of returns beyond the map: every pose scores nothing
     best = from_search if from_search.quality >= from_guess.quality else from_guess
     if abs(wrap_angle(found.pose[2] - guess[2])) <= 0.5 * window.angular:
@@ -258,11 +258,15 @@ class FarScanMatching:
     def _far_prior(self, window: SearchWindow) -> FloatArray:
         """Prior information (3,) of a constant-velocity guess over the window's interval
         ``dt``: its position good to ``prediction_acceleration * dt^2`` (never better than
-        ``prior_sigma_translation``)."""
+        ``prior_sigma_translation``), its heading weakened by the same factor. A heading held
+        as firmly as over one scan against a position held by next to nothing would pull
+        the pose along whatever direction the scan leaves free: ICP from a search's pose
+        turned from the guess would step tens of metres along a corridor to turn it back."""
         dt = window.linear / self.max_speed
         sigma = max(self.prediction_acceleration * dt**2, self.prior_sigma_translation)
         information = self._prior_information.copy()
         information[:2] = (self.noise_sigma / sigma) ** 2
+        information[2] *= (self.prior_sigma_translation / sigma) ** 2
         return information
 
     def _slow_clock(self, typical: float) -> bool:
