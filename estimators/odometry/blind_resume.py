@@ -169,10 +169,11 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
     leaves the guess's (3,) place on that line open (:func:`toward_guess`). Else ICP from the better
     place, held by nothing in the directions the scan leaves free, or from the guess's,
     held there along the line; or, where the placement explains less than ``min_quality`` of
-    the scan and the scan still sees through map points there, the ``guess``. The scan is
-    lost wherever what is kept explains less than ``min_quality`` of it: a placement that
-    sees through nothing may be a half-new place driven into while blind, or a wrong place
-    whose walls lie beyond the scan's reach, and the scan cannot tell which."""
+    the scan and the scan still sees through map points there, the ``guess``, lost. A
+    better place explaining less than ``min_quality`` is kept but the scan is lost too: the
+    map contradicted the far-apart match, and a place that sees through nothing yet explains
+    little may be a half-new place driven into while blind or a wrong one whose walls lie
+    beyond the scan's reach; the scan cannot tell which."""
     unheld = register(reference, points, match.pose, params, match.pose, np.zeros(3))
     start = along_least_pinned(search.field, search.map_points, points, unheld, reach,
                                2.0 * search.resolution)
@@ -186,5 +187,5 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
     if guessed is not None:
         held = held_along(least_pinned_direction(unheld.information), unheld.information)
         kept = register(reference, points, guessed, params, guessed, held)
-        return kept, kept.quality < min_quality
-    return (placed if moved else None), placed.quality < min_quality
+        return kept, moved and kept.quality < min_quality
+    return (placed if moved else None), moved and placed.quality < min_quality

@@ -329,7 +329,11 @@ class FarScanMatching:
                                               self.min_quality)
                 if resumed is not None:  # placed anew: the guess holds no direction
                     self.match_information, result = np.zeros(3), resumed
-                if lost:
+                # with every heading in the window, a placement nearer the half turn than
+                # the guess's heading is as likely a place symmetric under a half turn (a
+                # corridor seen turned round) as a car that turned round blind
+                if lost or (window.angular >= np.pi and abs(
+                        wrap_angle(result.pose[2] - guess[2])) > 0.5 * np.pi):
                     self.health.note_lost(len(self._observations))
         else:
             self.match_information = self._prediction_information()
