@@ -30,7 +30,10 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   metres off as right: the motion model's pose is kept and the scan is flagged lost
   (``Health.lost``), so a back end can look for the pose in its whole map. (A scan of a
   place half new, driven into while blind, explains as little, 15-35 %, but its placement
-  sees through none of the map.)
+  sees through none of the map: it is kept.) Where the map contradicted the far-apart match
+  and the better place along its line still explains less than ``min_quality``, that place
+  is kept but the scan is flagged lost too: nothing vouches for it, and a wrong place whose
+  walls lie beyond the scan's reach sees through nothing either.
 
 Frames: map points in the world frame, scan points in the car frame. Distances [m], angles
 [rad].
