@@ -30,7 +30,10 @@ scan wherever the local map explains most of it. Two things can go wrong there:
   metres off as right: the motion model's pose is kept and the scan is flagged lost
   (``Health.lost``), so a back end can look for the pose in its whole map. (A scan of a
   place half new, driven into while blind, explains as little, 15-35 %, but its placement
-  sees through none of the map.)
+  sees through none of the map: it is kept.) Where the map contradicted the far-apart match
+  and the better place along its line still explains less than ``min_quality``, that place
+  is kept but the scan is flagged lost too: nothing vouches for it, and a wrong place whose
+  walls lie beyond the scan's reach sees through nothing either.
 
 Frames: map points in the world frame, scan points in the car frame. Distances [m], angles
 [rad].
@@ -169,7 +172,11 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
     leaves the guess's (3,) place on that line open (:func:`toward_guess`). Else ICP from the better
     place, held by nothing in the directions the scan leaves free, or from the guess's,
     held there along the line; or, where the placement explains less than ``min_quality`` of
-    the scan and the scan still sees through map points there, the ``guess``, lost."""
+    the scan and the scan still sees through map points there, the ``guess``, lost. A
+    better place explaining less than ``min_quality`` is kept but the scan is lost too: the
+    map contradicted the far-apart match, and a place that sees through nothing yet explains
+    little may be a half-new place driven into while blind or a wrong one whose walls lie
+    beyond the scan's reach; the scan cannot tell which."""
     unheld = register(reference, points, match.pose, params, match.pose, np.zeros(3))
     start = along_least_pinned(search.field, search.map_points, points, unheld, reach,
                                2.0 * search.resolution)
@@ -182,5 +189,6 @@ def resumed_match(search: GlobalSearch, reference: PointToLineReference, points:
                            params.min_information, 2.0 * search.resolution)
     if guessed is not None:
         held = held_along(least_pinned_direction(unheld.information), unheld.information)
-        return register(reference, points, guessed, params, guessed, held), False
-    return (placed if moved else None), False
+        kept = register(reference, points, guessed, params, guessed, held)
+        return kept, moved and kept.quality < min_quality
+    return (placed if moved else None), moved and placed.quality < min_quality

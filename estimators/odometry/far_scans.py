@@ -38,7 +38,14 @@ checked against the scan's match to the previous scan
 (:mod:`estimators.odometry.scan_check`): the widest windows are where a wrong pose explains a
 few points more than the right one. After a long blind stretch the match is placed anew
 along the direction it pins least, or the guess is kept and the scan flagged lost
-(:mod:`estimators.odometry.blind_resume`).
+(:mod:`estimators.odometry.blind_resume`); where every heading was searched, a placement
+turning the car more than a quarter turn from the guess is flagged lost too (a place
+symmetric under a half turn fits as well as the car turned round).
+
+Over scans skipped or lost the far-apart prior weakens the whole constant-velocity guess,
+heading with position: a heading held as firmly as over one scan against a position held by next to
+nothing pulls ICP along whatever direction the scan leaves free (along a gently curving
+corridor, a turn is a move along it).
 """
 
 from __future__ import annotations
@@ -112,7 +119,9 @@ def far_match(
     ``window`` around it, both held by the weak prior ``prior_information`` (3,) at ``guess``.
 
     The result explaining the larger share of the points wins (a tie: the search's; where
-    neither explains a point, the guess's). Keeping
+    neither explains a point, the guess's, unless the search's pose itself scored
+    ``min_quality``: then ICP from it failed, not the scan, and the near half is searched
+    as below). Keeping
     the guess's result unless the search's explained more by the count's own noise (one
     standard error of the share), on the grounds that along a corridor's axis every pose
     scores about the same, is worse: the guess is as lost as the search there once one step
@@ -136,9 +145,10 @@ def far_match(
     if not found.found:
         return from_guess
     from_search = register(reference, points, found.pose, params, guess, prior_information)
-    if from_search.quality == from_guess.quality == 0.0:
+    if from_search.quality == from_guess.quality == 0.0 and found.score < min_quality:
         return from_guess  # a handful of returns beyond the map: every pose scores nothing
-    best = from_search if from_search.quality >= from_guess.quality else from_guess
+    best = from_search if from_search.quality >= from_guess.quality > 0.0 or (
+        from_search.quality > from_guess.quality) else from_guess
     if abs(wrap_angle(found.pose[2] - guess[2])) <= 0.5 * window.angular:
         return best
     near = search.search(points, guess, SearchWindow(window.linear, 0.5 * window.angular))
@@ -152,7 +162,8 @@ def far_match(
     tie = max(np.sqrt(best.quality * (1.0 - best.quality) / len(points)), 1.0 / len(points))
     as_good = [option for option in options if option.quality >= best.quality - tie]
     if as_good:
-        return max(as_good, key=lambda option: option.quality)
+        chosen = max(as_good, key=lambda option: option.quality)
+        return chosen if chosen.quality > 0.0 else best
     if seen_free is None:
         return best
     against_best = seen_free(points, best.pose) + tie
@@ -255,14 +266,18 @@ class FarScanMatching:
             self._search = GlobalSearch(self._reference.points, self.search_resolution)
         return self._search
 
-    def _far_prior(self, window: SearchWindow) -> FloatArray:
+    def _far_prior(self, window: SearchWindow, intervals: float) -> FloatArray:
         """Prior information (3,) of a constant-velocity guess over the window's interval
         ``dt``: its position good to ``prediction_acceleration * dt^2`` (never better than
-        ``prior_sigma_translation``)."""
+        ``prior_sigma_translation``); over more than one scan interval (``intervals``: scans
+        skipped or lost) its heading weakened by the same factor (module docstring), over
+        one as firm as the ordinary per-scan prior holds it."""
         dt = window.linear / self.max_speed
         sigma = max(self.prediction_acceleration * dt**2, self.prior_sigma_translation)
         information = self._prior_information.copy()
         information[:2] = (self.noise_sigma / sigma) ** 2
+        if intervals > 1:
+            information[2] *= (self.prior_sigma_translation / sigma) ** 2
         return information
 
     def _slow_clock(self, typical: float) -> bool:
@@ -300,7 +315,7 @@ class FarScanMatching:
                 predicted, self.keyframe_distance, self.search_angular_window):
             self.far_searches += 1
             searched = True
-            self.match_information = self._far_prior(window)
+            self.match_information = self._far_prior(window, intervals)
             seen_free = None if self._moving is None else self._moving.seen_free_share
             step = self._velocity * (typical if self.use_timestamps else 1.0)
             starts = (one_turn_start(self._poses[-1], step, intervals),) if (
@@ -325,7 +340,11 @@ class FarScanMatching:
                                               self.min_quality)
                 if resumed is not None:  # placed anew: the guess holds no direction
                     self.match_information, result = np.zeros(3), resumed
-                if lost:
+                # with every heading in the window, a placement nearer the half turn than
+                # the guess's heading is as likely a place symmetric under a half turn (a
+                # corridor seen turned round) as a car that turned round blind
+                if lost or (window.angular >= np.pi and abs(
+                        wrap_angle(result.pose[2] - guess[2])) > 0.5 * np.pi):
                     self.health.note_lost(len(self._observations))
         else:
             self.match_information = self._prediction_information()
