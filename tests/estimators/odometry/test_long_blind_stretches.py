@@ -36,7 +36,7 @@ def test_icp_held_by_the_far_prior_stays_where_a_gently_curving_corridor_fits() 
     reference = PointToLineReference(walls)
     near = walls[np.hypot(walls[:, 0], walls[:, 1]) < 10.0]  # the scan from the origin
     odometry = LocalMapOdometry()
-    information = odometry._far_prior(SearchWindow(odometry.max_speed * 10.0, np.pi), 100)
+    information = odometry._far_prior(SearchWindow(odometry.max_speed * 10.0, np.pi), True)
     guess = np.array([0.0, 0.0, -0.26])
     result = register(reference, near, np.zeros(3), odometry.params, guess, information)
     assert np.hypot(*result.pose[:2]) < 0.5
