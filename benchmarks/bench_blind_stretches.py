@@ -31,22 +31,18 @@ from pathlib import Path
 
 from bench_faults import (
     ESTIMATORS,
-    FINAL_FACTOR,
-    FINAL_MARGIN,
     GROUPS,
     FaultedRun,
-    long_stretch,
+    faulted_run,
+    final_bound,
     record_drive,
     run,
     score,
     start_of,
-    step_errors,
-    steps_of,
     verdict,
 )
 
 import estimators
-from estimators.datasets.faults import with_faults
 from estimators.datasets.recording import Recording
 from lidar_env.faults import Blind
 
@@ -55,19 +51,7 @@ def blind_run(name: str, recording: Recording, stretch: int, offset: int) -> Fau
     """``name`` on ``recording`` blind for ``stretch`` scans from scan ``offset``, scored as
     the fault matrix scores its faulted runs (against the truth, which the simulated drives
     carry per scan)."""
-    faulted = with_faults(recording, [Blind(every=10_000, stretch=stretch, offset=offset)],
-                          seed=0)
-    truth = recording.truth
-    poses, health, seconds = run(name, faulted, start_of(truth))
-    kept = steps_of(recording, faulted)
-    jump, final = score(poses, truth[kept], truth[kept])
-    found = long_stretch(faulted, truth[kept])
-    if found is None:
-        return FaultedRun(jump, final, health, seconds)
-    after, covered = found
-    return FaultedRun(jump, final, health, seconds,
-                      float(step_errors(poses[after - 1:after + 1],
-                                        truth[kept][after - 1:after + 1])[0]), covered)
+    return faulted_run(name, recording, [Blind(every=10_000, stretch=stretch, offset=offset)])
 
 
 def sweep(names: list[str], groups: list[str], seeds: list[int], stretches: list[int],
@@ -84,7 +68,7 @@ def sweep(names: list[str], groups: list[str], seeds: list[int], stretches: list
                     for offset in offsets:
                         faulted = blind_run(name, recording, stretch, offset)
                         ok = verdict(faulted, clean_jump, clean_final)
-                        bound = faulted.final <= FINAL_FACTOR * clean_final + FINAL_MARGIN
+                        bound = faulted.final <= final_bound(clean_final)
                         lost = int(faulted.health.get("lost_scans", 0))
                         jump_plus = (None if faulted.return_jump is None
                                      else faulted.return_jump - clean_jump)
