@@ -12,6 +12,7 @@ which is measured on a kernel that does next to nothing and taken off per call.
 from __future__ import annotations
 
 import cProfile
+import functools
 import pstats
 import sys
 import time
@@ -49,9 +50,11 @@ def _profiled(work: Callable[[], object]) -> tuple[float, int]:
     return sum(s for s, _ in own), sum(c for _, c in own)
 
 
+@functools.cache
 def profiler_cost() -> float:
     """CPU seconds the profiler adds to a kernel call's own time: a three-beam scan's points
-    (next to no work) called :data:`CALIBRATION_CALLS` times with and without it."""
+    (next to no work) called :data:`CALIBRATION_CALLS` times with and without it (measured
+    once per process)."""
     from estimators.matching.scan_matching import _beam_points
 
     ones = np.ones(3)
