@@ -63,6 +63,17 @@ def test_a_bad_value_is_a_one_line_error_naming_it(argv, capsys) -> None:
     assert "--limit" in error or "no/such/log.clf" in error
 
 
+def test_kernels_reports_each_estimator_s_cpu_inside_compiled_kernels_and_its_ratio(
+        monkeypatch) -> None:
+    monkeypatch.setattr(bench, "kernel_seconds", lambda work: (work(), 0.003)[1])
+    monkeypatch.setattr(bench, "KissRunner", lambda setup: Burner(0.001))
+    result = bench.bench_log(source(), ["icp"], with_peer=True, kernels=True)
+    assert result["kernel_ms_per_scan"] == {"icp": pytest.approx(0.5)}  # 3 ms over 6 scans
+    assert result["ratios"]["icp kernels/kiss_icp"] == pytest.approx(
+        0.5 / result["cpu_ms_per_scan"]["kiss_icp"])
+    assert "kernel_ms_per_scan" not in bench.bench_log(source(), ["icp"], with_peer=False)
+
+
 @pytest.mark.realdata
 def test_aces_gives_cpu_times_ratios_and_relation_errors_of_each() -> None:
     if not bench.DATA.is_dir():

@@ -1,4 +1,4 @@
-"""publish.py: the vector and cold-start results files, their tables and recorded command."""
+"""publish.py: the vector, cold-start and peers results files, their tables and recorded command."""
 
 from __future__ import annotations
 
@@ -91,3 +91,15 @@ def test_the_vector_benchmark_writes_what_its_tables_read(tmp_path) -> None:
     tables = publish.vector_tables(raw)
     assert [row[0] for row in tables["speed"]["rows"]] == ["1", "2"]
     assert [row[1] for row in tables["targets"]["rows"]] == ["2", "1"]
+
+
+def test_the_peers_table_gives_our_kernels_cpu_over_the_peer_s_whole() -> None:
+    log = {"cpu_ms_per_scan": {"lidar_odometry": 1.0, "kiss_icp": 0.5},
+           "kernel_ms_per_scan": {"lidar_odometry": 0.6},
+           "errors": {"lidar_odometry": {"local": {"translation_m": 0.03}},
+                      "kiss_icp": {"local": {"translation_m": 0.15}}}}
+    table = publish.peers_tables({"peer": "kiss_icp", "logs": {"ACES": log}})["peers"]
+    assert table["columns"] == ["estimator", "ACES CPU [ms/scan]", "ACES × KISS-ICP CPU",
+                                "ACES kernels × KISS-ICP CPU", "ACES local error [m]"]
+    assert table["rows"] == [["lidar_odometry", "1.000", "2.00", "1.20", "0.0300"],
+                             ["KISS-ICP", "0.500", "1.00", "", "0.1500"]]
