@@ -9,7 +9,12 @@ import math
 import numpy as np
 
 from estimators.matching.match_result import MatchResult
-from estimators.matching.scan_recovery import MAX_SEARCH_TURN, most_likely_match, search_starts
+from estimators.matching.scan_recovery import (
+    MAX_SEARCH_TURN,
+    most_likely_match,
+    search_starts,
+    turn_between,
+)
 from lidar_env.core.se2 import compose
 from tests.estimators.room_scans import scan_points
 
@@ -41,3 +46,9 @@ def test_a_match_out_of_the_guess_reach_is_judged_only_where_none_is_within() ->
     assert most_likely_match(*args, seconds=3.0) == 1
     # none within reach: all are judged
     assert most_likely_match([far], [guess], [20.0], 0.01, 180, seconds=3.0) == 0
+
+
+def test_a_turn_between_two_headings_is_the_shorter_way_round() -> None:
+    assert math.isclose(turn_between(3.0, -3.0), 2.0 * math.pi - 6.0)  # across +-pi
+    assert math.isclose(turn_between(-0.5, 0.25), 0.75)
+    assert turn_between(0.2, 0.2 + 4.0 * math.pi) < 1e-12  # whole turns apart

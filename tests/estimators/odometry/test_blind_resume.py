@@ -12,6 +12,7 @@ from estimators.matching.scan_matching import LikelihoodField
 from estimators.odometry.blind_resume import (
     along_least_pinned,
     least_pinned_direction,
+    tied_run,
     toward_guess,
 )
 from estimators.odometry.local_map import LocalMapOdometry
@@ -105,3 +106,10 @@ def test_after_100_blind_scans_leaving_the_corridor_the_place_is_found_again() -
     error = np.hypot(*(estimator.trajectory[-1, :2] - recording.truth[-1, :2]))
     clean_error = np.hypot(*(clean[-1, :2] - recording.truth[-1, :2]))
     assert error <= bench.FINAL_FACTOR * clean_error + bench.FINAL_MARGIN  # issue 43's target
+
+
+def test_the_run_of_tied_places_holding_the_start_is_found_whole() -> None:
+    tied = np.array([True, False, True, True, True, False, True])
+    assert tied_run(tied, 3) == (2, 4)
+    assert tied_run(tied, 0) == (0, 0)
+    assert tied_run(tied, 6) == (6, 6)
