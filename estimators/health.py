@@ -7,14 +7,16 @@ between them (an estimator's ``min_returns``: scan-to-map odometry, whose map an
 pose that one pillar's few returns pin down, asks fewer): below that a fit of a handful of
 points can land metres away, so the scan is skipped and the constant-velocity prediction
 carries the pose (:meth:`estimators.base.Estimator.update`). A sensor whose scan repeats its
-previous one exactly while another sensor's scan changed is frozen (a real Lidar's range noise
-never repeats a scan bit for bit): its scan reads 0 m for that observation (below every
-estimator's ``min_range``: no return, and unlike ``max_range`` it clears no space the sensor
-did not see). Where every sensor repeats while the estimate was moving, the repeat is counted
-as frozen but the scans are used (a car stopping dead in a noise-free simulation repeats its
-scans too, and matching them says it stands). A time step over :data:`CLOCK_JUMP_FACTOR` times
-the median of the recent ones is a clock jump (or scans lost); it is counted, and estimators
-that scale their prediction by time guard it.
+previous one exactly while another sensor's scan changed, or while the estimate was moving,
+is frozen (a real Lidar's range noise never repeats a scan bit for bit): its scan reads 0 m for
+that observation (below every estimator's ``min_range``: no return, and unlike ``max_range`` it
+clears no space the sensor did not see). Where every sensor is frozen, the observation is
+skipped like a blind one: the constant-velocity prediction carries the pose until the scans
+change, and the match onto them finds where the car went meanwhile (matching the repeats would
+hold the car still while it drives on). Every sensor repeating while the estimate stands is a
+car standing still (a noise-free simulation), and its scans are used. A time step over
+:data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or scans lost);
+it is counted, and estimators that scale their prediction by time guard it.
 """
 
 from __future__ import annotations
@@ -178,7 +180,6 @@ class ScanScreen:
         for k, scan in enumerate(scans):
             if repeated[k] and (others_changed or moving):
                 self.health.frozen_scans += 1
-            if repeated[k] and others_changed:
                 scan = np.zeros_like(scan)  # below any min_range: says nothing, clears nothing
             screened.append(scan)
         returns = sum(int(np.count_nonzero((screened[k] > 0) & (screened[k] < self.max_ranges[k])))

@@ -162,8 +162,10 @@ def test_the_screen_tells_frozen_from_standing_still():
     screened, usable = screen.screen([a.copy(), b + 0.01], moving=False)  # only one repeats
     assert usable and screen.health.frozen_scans == 1 and np.all(screened[0] == 0.0)
     screened, usable = screen.screen([a.copy(), b + 0.01], moving=True)  # both repeat, moving
-    assert usable and screen.health.frozen_scans == 3  # reported, used: it may have stopped
-    assert np.all(screened[0] == a)
+    assert not usable and screen.health.frozen_scans == 3  # skipped: the car drives on
+    assert np.all(screened[0] == 0.0) and np.all(screened[1] == 0.0)
+    screened, usable = screen.screen([a.copy(), b + 0.01], moving=False)  # both repeat, standing
+    assert usable and screen.health.frozen_scans == 3 and np.all(screened[0] == a)
     blank = np.full(36, 10.0)
     screen.screen([blank, blank], moving=True)
     screen.screen([blank, blank], moving=True)  # a blank scan repeating is not frozen
