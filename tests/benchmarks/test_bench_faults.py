@@ -101,8 +101,16 @@ def test_aces_carries_the_corrected_keyframes_at_their_scans() -> None:
     assert 0.3 < np.median(steps) < 1.5  # [m] the keyframe spacing, not a scan far off
 
 
+def test_three_seconds_on_a_bursty_clock_are_three_seconds_of_scans() -> None:
+    bursts = np.repeat(np.arange(0.0, 6.0, 0.4), 2) + np.tile([0.0, 0.001], 15)  # Intel-like
+    period = bench.mean_period(bursts)
+    assert period == pytest.approx(0.2, rel=0.05)  # the median interval is 1 ms
+    blind = bench.faults_for(period, 1)["blind_3s"]()[0]
+    assert blind.stretch * period == pytest.approx(3.0, rel=0.05)
+
+
 def _faulted(recording, fault: str):
-    period = float(np.median(np.diff(recording.times)))
+    period = bench.mean_period(recording.times)
     return with_faults(recording, bench.faults_for(period, recording.setup.n_lidars)[fault](),
                        seed=0)
 
