@@ -3,15 +3,18 @@ against the same drive without the fault.
 
     python benchmarks/bench_faults.py                       # default matrix (~5 min)
     python benchmarks/bench_faults.py --estimators lidar_odometry --groups hallway/zigzag
-    python benchmarks/bench_faults.py --aces-scans 0 --json faults.json
+    python benchmarks/bench_faults.py --logs --json faults.json         # paper groups only
+    python benchmarks/bench_faults.py --groups --logs intel:3000 aces:6000  # other windows
 
 Drives: the three paper groups (open_cylinders/right_turn, hallway/zigzag,
-closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and
-``--aces-scans`` scans of ACES from its first scan with truth on (``../shared/data/radish``;
-skipped when absent), so every run starts on a known pose that no fault covers; its truth
-is pseudo truth at keyframes only: the poses of ``aces-corrected.log.gz`` (another SLAM
-system's output, keyframes 0.5-1 m apart) at the scans they were logged with (same logger stamps).
-Each drive is recorded once
+closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and windows of
+the real logs (``--logs NAME:SCAN``, default ``aces:0``): ``--log-scans`` scans of
+``NAME.clf.bz2`` (``../shared/data/radish``; skipped when absent) from its first scan with
+truth at or after scan ``SCAN``, so every run starts on a known pose that no fault covers;
+their truth is pseudo truth at keyframes only: the poses of ``NAME-corrected.log.gz``
+(another SLAM system's output, keyframes 0.5-1 m apart) at the scans they were logged with
+(same logger stamps). A fault's seconds are turned into scans by the drive's mean scan
+interval. Each drive is recorded once
 and the faults are applied to the recording (``estimators.datasets.faults.with_faults``), so
 a faulted run sees the same world as its clean run.
 
@@ -61,8 +64,7 @@ from lidar_env.faults import BeamDropout, Blind, ClockJump, Fault, FrozenLidar, 
 
 GROUPS = ("open_cylinders/right_turn", "hallway/zigzag", "closed_to_open/zigzag")
 ESTIMATORS = ("lidar_odometry", "slam", "pc_fusion", "icp")
-ACES = SHARED_DATA / "radish" / "aces.clf.bz2"
-ACES_TRUTH = SHARED_DATA / "radish" / "aces-corrected.log.gz"
+RADISH = SHARED_DATA / "radish"
 JUMP_MARGIN = 0.3  # [m]
 FINAL_FACTOR, FINAL_MARGIN = 2.0, 0.1  # final <= 2 x clean + 0.1 m
 #: [s] blind in a row beyond which a stretch is a long one, judged by :func:`verdict`'s rule.
@@ -113,26 +115,34 @@ def record_drive(group: str, seed: int = 0) -> Recording:
                      truth=np.stack([p for _, _, p in rows]))
 
 
-def aces_recording(limit: int) -> Recording:
-    """``limit`` scans of ACES (IPC clock) from its first scan with truth on, with the pseudo
-    truth of ``aces-corrected`` at its keyframes' scans (matched on the logger clock both logs
-    carry) and NaN rows elsewhere."""
-    log = estimators.datasets.load_log(ACES)
+def log_paths(name: str) -> tuple[Path, Path]:
+    """The Radish log ``name`` (e.g. ``aces``, ``intel``) and its corrected log."""
+    return RADISH / f"{name}.clf.bz2", RADISH / f"{name}-corrected.log.gz"
+
+
+def log_recording(name: str, start: int, limit: int) -> Recording:
+    """``limit`` scans of the Radish log ``name`` (IPC clock) from its first scan with truth
+    at or after scan ``start``, with the pseudo truth of its corrected log at that log's
+    keyframes' scans (matched on the logger clock both logs carry) and NaN rows elsewhere."""
+    log_path, truth_path = log_paths(name)
+    log = estimators.datasets.load_log(log_path)
     recording = recording_from_log(log)
-    corrected = estimators.datasets.load_log(ACES_TRUTH)
+    corrected = estimators.datasets.load_log(truth_path)
     match = match_truth(log.scan_times("logger"), corrected.scan_times("logger"),
                         corrected.logged_poses())
     return from_first_truth(dataclasses.replace(recording, truth=match.on_scans(len(recording))),
-                            limit)
+                            limit, start)
 
 
-def from_first_truth(recording: Recording, limit: int) -> Recording:
-    """``limit`` scans of ``recording`` from its first scan with truth on: every run starts
-    on a known pose and the faults' offsets count from it, so the final error's anchor (the
-    first truth) never lies inside a fault, as on the simulated drives."""
+def from_first_truth(recording: Recording, limit: int, start: int = 0) -> Recording:
+    """``limit`` scans of ``recording`` from its first scan with truth on at or after scan
+    ``start``: every run starts on a known pose and the faults' offsets count from it, so the
+    final error's anchor (the first truth) never lies inside a fault, as on the simulated
+    drives."""
     known = np.flatnonzero(np.isfinite(recording.truth[:, 0]))
+    known = known[known >= start]
     if not len(known):
-        raise ValueError(f"{recording.source}: no scan has truth")
+        raise ValueError(f"{recording.source}: no scan from scan {start} on has truth")
     window = slice(int(known[0]), int(known[0]) + limit)
     return dataclasses.replace(recording, times=recording.times[window],
                                scans={key: scans[window]
@@ -314,21 +324,27 @@ def main(argv: list[str] | None = None) -> int:
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--estimators", nargs="+", default=list(ESTIMATORS),
                         choices=estimators.names())
-    parser.add_argument("--groups", nargs="+", default=list(GROUPS), choices=GROUPS)
+    parser.add_argument("--groups", nargs="*", default=list(GROUPS), choices=GROUPS,
+                        help="paper groups (none: only the logs)")
     parser.add_argument("--faults", nargs="+", default=None,
                         help="only these faults (default: all)")
-    parser.add_argument("--aces-scans", type=int, default=600,
-                        help="ACES scans (0: no ACES)")
+    parser.add_argument("--logs", nargs="*", default=["aces:0"], metavar="NAME:SCAN",
+                        help="Radish log windows: NAME.clf.bz2 from its first scan with truth "
+                             "at or after SCAN (none: no log)")
+    parser.add_argument("--log-scans", type=int, default=600, help="scans per log window")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}")
     drives = {group: record_drive(group) for group in args.groups}
-    if args.aces_scans > 0:
-        if ACES.exists():
-            drives["aces"] = aces_recording(args.aces_scans)
-        else:
-            print(f"ACES skipped: {ACES} is absent")
+    for spec in args.logs:
+        name, _, start = spec.partition(":")
+        paths = log_paths(name)
+        if not all(path.exists() for path in paths):
+            print(f"{spec} skipped: {' or '.join(str(p) for p in paths)} absent")
+            continue
+        first = int(start or 0)
+        drives[spec if first else name] = log_recording(name, first, args.log_scans)
     results: list[dict] = []
     matrix(drives, args.estimators, args.faults, results)
     failed = [r for r in results if not r["pass"]]

@@ -90,15 +90,18 @@ def test_truth_at_keyframes_scores_the_end_between_the_first_and_last_of_them() 
     assert final == pytest.approx(0.5)  # 2.5 m ahead where the truth went 2 m
 
 
-@pytest.mark.skipif(not (bench.ACES.exists() and bench.ACES_TRUTH.exists()),
+@pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
                     reason="ACES and aces-corrected are absent from ../shared/data/radish")
 def test_aces_carries_the_corrected_keyframes_at_their_scans() -> None:
-    recording = bench.aces_recording(600)
+    recording = bench.log_recording("aces", 0, 600)
     assert len(recording) == 600 and np.isfinite(recording.truth[0]).all()  # starts on truth
     known = np.flatnonzero(np.isfinite(recording.truth[:, 0]))
     assert 30 <= len(known) <= 60  # a keyframe every 0.5-1 m of ~40 m driven
     steps = np.linalg.norm(np.diff(recording.truth[known, :2], axis=0), axis=1)
     assert 0.3 < np.median(steps) < 1.5  # [m] the keyframe spacing, not a scan far off
+    later = bench.log_recording("aces", 3000, 50)
+    assert len(later) == 50 and np.isfinite(later.truth[0]).all()
+    assert not np.array_equal(later.times, recording.times[:50])
 
 
 def test_three_seconds_on_a_bursty_clock_are_three_seconds_of_scans() -> None:

@@ -66,10 +66,11 @@ def test_among_cylinders_the_faulted_drives_end_near_the_truth(fault, limit) -> 
     assert faulted_final(bench.record_drive("open_cylinders/right_turn"), fault) < limit  # [m]
 
 
-@pytest.mark.skipif(not bench.ACES.exists(), reason="ACES log absent")
+@pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
+                    reason="ACES or aces-corrected absent")
 def test_aces_blind_three_seconds_at_a_time_ends_within_its_clean_drift() -> None:
     # the robot stops and turns 113 degrees on the spot while blind: the turn is searched for
-    recording = bench.aces_recording(600)
+    recording = bench.log_recording("aces", 0, 600)
     clean = bench.score(bench.run("icp", recording, bench.start_of(recording.truth))[0],
                         recording.truth, recording.truth)[1]
     assert faulted_final(recording, "blind_3s") <= (
