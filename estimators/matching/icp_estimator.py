@@ -36,6 +36,16 @@ from lidar_env.core import ConfigError
 from lidar_env.core.se2 import compose
 
 
+def turn_intervals(turn: float, held: float, lost: float) -> float:
+    """Scan intervals in ``[1, lost]`` a ``turn`` [rad] over a clock gap of ``lost`` intervals
+    took at the turn rate ``held`` [rad per interval] before it: all of them where it held
+    none. The gap's translation says nothing of its turn (a robot turning on the spot), and
+    a turn rate overestimated by the intervals the translation bears out starts the next
+    matches turned out of ICP's basin; one underestimated only starts them unturned."""
+    rate = abs(held)
+    return lost if rate * lost <= abs(turn) else max(1.0, abs(turn) / rate)
+
+
 @dataclass
 class ICPEstimator(Estimator):
     """Scan-to-previous-scan point-to-line ICP (no odometry): the baseline a user would pick.
@@ -171,10 +181,13 @@ class ICPEstimator(Estimator):
                 # guesses is backed by the points (a few sparse returns slid away): the guess
                 self.health.note_unusable(len(self._observations))
                 return compose(self.pose, guesses[best])
-            if lost > observations:  # per interval the scans bear out at the speed held
+            turns = observations
+            if lost > observations:  # per interval the scans bear out at the rates held
                 observations = max(observations, evident_time_step(
                     float(np.hypot(*increment[:2])), float(np.hypot(*self._increment[:2])),
                     lost, 1.0))
-            self._increment = increment / observations
+                turns = max(observations, turn_intervals(
+                    float(increment[2]), float(self._increment[2]), lost))
+            self._increment = increment / np.array([observations, observations, turns])
         self._previous = current
         return compose(self.pose, increment)
