@@ -64,7 +64,10 @@ class ICPEstimator(Estimator):
     weighted points follow the constant-velocity guess alone (:func:`register`'s
     ``min_information``), held by a weak prior (``prior_sigma_*`` against ``noise_sigma``,
     widening with the scan intervals it spans), where the guess spans only observations that
-    came (a clock gap may be a stamp that jumped alone).
+    came (a clock gap may be a stamp that jumped alone). Over a clock gap the next guess
+    takes the match's translation over the intervals the speed held bears out
+    (:func:`~estimators.health.evident_time_step`) and its turn over those the turn rate held
+    bears out (:func:`turn_intervals`), at least the former.
 
     After skipped or lost scans the match also starts from the translation extrapolated with
     one interval's turn and from a correlative search on the last scan; of the matches
