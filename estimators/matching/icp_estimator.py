@@ -35,6 +35,12 @@ from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError
 from lidar_env.core.se2 import compose
 
+#: [s] the shortest scan interval a clock gap is counted in (100 Hz, beyond planar Lidars'
+#: scan rates): Intel's logger repeats stamps, moved 1 us apart to run forward, and a run
+#: starting on a few of them would count a 0.6 s step as 600 000 lost intervals and search
+#: for the car kilometres away.
+MIN_SCAN_INTERVAL = 0.01
+
 
 def turn_intervals(turn: float, held: float, lost: float) -> float:
     """Scan intervals in ``[1, lost]`` a ``turn`` [rad] over a clock gap of ``lost`` intervals
@@ -117,12 +123,13 @@ class ICPEstimator(Estimator):
 
     def _intervals_lost(self, t: float) -> float:
         """Scan intervals since the last scan used when the clock jumped before ``t`` [s]: the
-        time step over the median of the last positive ones, if :data:`CLOCK_JUMP_FACTOR` or
-        more (less, as Intel's bursty stamps jump at most scans, is no loss); else 1."""
+        time step over the median of the last positive ones (at least
+        :data:`MIN_SCAN_INTERVAL`), if :data:`CLOCK_JUMP_FACTOR` or more (less, as Intel's
+        bursty stamps jump at most scans, is no loss); else 1."""
         steps = np.diff(self._times[-CLOCK_HISTORY:])
         steps = steps[steps > 0]
-        lost = intervals_since_used(0, self.clock_jumped, t - self._times[-1],
-                                    float(np.median(steps)) if len(steps) else 0.0)
+        lost = intervals_since_used(0, self.clock_jumped, t - self._times[-1], max(
+            float(np.median(steps)), MIN_SCAN_INTERVAL) if len(steps) else 0.0)
         return lost if lost >= CLOCK_JUMP_FACTOR else 1.0
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float

@@ -1,6 +1,7 @@
-"""``icp`` after scans lost while the car turned on the spot: the next matches start from
-the turn rate it held, not from the gap's turn spread over the few intervals its creep
-bears out."""
+"""``icp`` over clock gaps: after scans lost while the car turned on the spot the next
+matches start from the turn rate it held, not from the gap's turn spread over the few
+intervals its creep bears out; and a gap after stamps a microsecond apart (Intel's repeated
+stamps, run forward) counts scan intervals no shorter than a Lidar's."""
 
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from estimators import SensorSetup, make
 from estimators.datasets.recording import Recording
 from estimators.matching.icp_estimator import turn_intervals
-from lidar_env.core.se2 import relative
+from lidar_env.core.se2 import compose, relative, wrap_angle
 from tests.benchmarks.bench_modules import load
+from tests.estimators.matching.test_icp import ANGLES, ray_cast
 
 bench = load("bench_faults")
 
@@ -48,3 +51,18 @@ def test_aces_scans_lost_in_a_turn_on_the_spot_keep_icp_on_the_clean_runs_track(
     assert health["clock_jumps"] == 1
     off = relative(clean[-1], faulted[-1])
     assert np.hypot(off[0], off[1]) < 0.1 and abs(off[2]) < 0.02  # [m], [rad]
+
+
+def test_a_gap_after_stamps_a_microsecond_apart_is_counted_in_lidar_intervals() -> None:
+    # four scans stamped 1 us apart, then 0.6 s: over 1 us intervals the gap would span
+    # 600 000 of them and the guess lie 36 km away
+    rng = np.random.default_rng(2)
+    estimator = make("icp")
+    pose = np.array([-3.0, -2.0, 0.6])
+    estimator.reset(SensorSetup(np.zeros((1, 3)), ANGLES, 20.0), pose)
+    step = np.array([0.06, 0.0, 0.01])
+    for t in [0.0, 1e-6, 2e-6, 3e-6, 0.6, 0.7, 0.8]:
+        estimator.update({"lidar_1": ray_cast(pose, noise=0.01, rng=rng)}, t)
+        error = relative(pose, estimator.pose)
+        assert np.hypot(error[0], error[1]) < 0.05 and abs(wrap_angle(error[2])) < 0.01, t
+        pose = compose(pose, step)
