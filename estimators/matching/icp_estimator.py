@@ -35,6 +35,22 @@ from estimators.paper.pc import MIN_MATCH_RETURNS
 from lidar_env.core import ConfigError
 from lidar_env.core.se2 import compose
 
+#: [s] the shortest scan interval a clock gap is counted in (100 Hz, beyond planar Lidars'
+#: scan rates): Intel's logger repeats stamps, moved 1 us apart to run forward, and a run
+#: starting on a few of them would count a 0.6 s step as 600 000 lost intervals and search
+#: for the car kilometres away.
+MIN_SCAN_INTERVAL = 0.01
+
+
+def turn_intervals(turn: float, held: float, lost: float) -> float:
+    """Scan intervals in ``[1, lost]`` a ``turn`` [rad] over a clock gap of ``lost`` intervals
+    took at the turn rate ``held`` [rad per interval] before it: all of them where it held
+    none. The gap's translation says nothing of its turn (a robot turning on the spot), and
+    a turn rate overestimated by the intervals the translation bears out starts the next
+    matches turned out of ICP's basin; one underestimated only starts them unturned."""
+    rate = abs(held)
+    return lost if rate * lost <= abs(turn) else max(1.0, abs(turn) / rate)
+
 
 @dataclass
 class ICPEstimator(Estimator):
@@ -54,7 +70,10 @@ class ICPEstimator(Estimator):
     weighted points follow the constant-velocity guess alone (:func:`register`'s
     ``min_information``), held by a weak prior (``prior_sigma_*`` against ``noise_sigma``,
     widening with the scan intervals it spans), where the guess spans only observations that
-    came (a clock gap may be a stamp that jumped alone).
+    came (a clock gap may be a stamp that jumped alone). Over a clock gap the next guess
+    takes the match's translation over the intervals the speed held bears out
+    (:func:`~estimators.health.evident_time_step`) and its turn over those the turn rate held
+    bears out (:func:`turn_intervals`), at least the former.
 
     After skipped or lost scans the match also starts from the translation extrapolated with
     one interval's turn and from a correlative search on the last scan; of the matches
@@ -104,12 +123,13 @@ class ICPEstimator(Estimator):
 
     def _intervals_lost(self, t: float) -> float:
         """Scan intervals since the last scan used when the clock jumped before ``t`` [s]: the
-        time step over the median of the last positive ones, if :data:`CLOCK_JUMP_FACTOR` or
-        more (less, as Intel's bursty stamps jump at most scans, is no loss); else 1."""
+        time step over the median of the last positive ones (at least
+        :data:`MIN_SCAN_INTERVAL`), if :data:`CLOCK_JUMP_FACTOR` or more (less, as Intel's
+        bursty stamps jump at most scans, is no loss); else 1."""
         steps = np.diff(self._times[-CLOCK_HISTORY:])
         steps = steps[steps > 0]
-        lost = intervals_since_used(0, self.clock_jumped, t - self._times[-1],
-                                    float(np.median(steps)) if len(steps) else 0.0)
+        lost = intervals_since_used(0, self.clock_jumped, t - self._times[-1], max(
+            float(np.median(steps)), MIN_SCAN_INTERVAL) if len(steps) else 0.0)
         return lost if lost >= CLOCK_JUMP_FACTOR else 1.0
 
     def _recovery_starts(self, current: NDArray[np.float64], span: float, seconds: float
@@ -171,10 +191,13 @@ class ICPEstimator(Estimator):
                 # guesses is backed by the points (a few sparse returns slid away): the guess
                 self.health.note_unusable(len(self._observations))
                 return compose(self.pose, guesses[best])
-            if lost > observations:  # per interval the scans bear out at the speed held
+            turns = observations
+            if lost > observations:  # per interval the scans bear out at the rates held
                 observations = max(observations, evident_time_step(
                     float(np.hypot(*increment[:2])), float(np.hypot(*self._increment[:2])),
                     lost, 1.0))
-            self._increment = increment / observations
+                turns = max(observations, turn_intervals(
+                    float(increment[2]), float(self._increment[2]), lost))
+            self._increment = increment / np.array([observations, observations, turns])
         self._previous = current
         return compose(self.pose, increment)

@@ -1,0 +1,68 @@
+"""``icp`` over clock gaps: after scans lost while the car turned on the spot the next
+matches start from the turn rate it held, not from the gap's turn spread over the few
+intervals its creep bears out; and a gap after stamps a microsecond apart (Intel's repeated
+stamps, run forward) counts scan intervals no shorter than a Lidar's."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimators import SensorSetup, make
+from estimators.datasets.recording import Recording
+from estimators.matching.icp_estimator import turn_intervals
+from lidar_env.core.se2 import compose, relative, wrap_angle
+from tests.benchmarks.bench_modules import load
+from tests.estimators.matching.test_icp import ANGLES, ray_cast
+
+bench = load("bench_faults")
+
+
+@pytest.mark.parametrize(("turn", "held", "lost", "intervals"), [
+    (-1.2, -0.1, 15.0, 12.0),  # at the rate held
+    (0.05, 0.1, 15.0, 1.0),  # less than one interval's turn: one interval
+    (0.3, 0.0, 15.0, 15.0),  # no turn held: over the whole gap
+    (3.0, 0.1, 15.0, 15.0),  # faster than held: over the whole gap
+])
+def test_a_gaps_turn_takes_the_intervals_the_turn_rate_held_needs(
+        turn: float, held: float, lost: float, intervals: float) -> None:
+    assert turn_intervals(turn, held, lost) == pytest.approx(intervals)
+
+
+def scans(recording: Recording, kept: np.ndarray) -> Recording:
+    """The observations ``kept`` (indices) of ``recording``."""
+    return dataclasses.replace(recording, times=recording.times[kept],
+                               scans={key: s[kept] for key, s in recording.scans.items()},
+                               truth=recording.truth[kept])
+
+
+@pytest.mark.skipif(not bench.ACES.exists(), reason="ACES log absent")
+def test_aces_scans_lost_in_a_turn_on_the_spot_keep_icp_on_the_clean_runs_track() -> None:
+    # ACES's scans 6344-6443 (the recording starts on the log's first truth, scan 136), of
+    # which 6394-6403 (1.9 s) are lost while the robot turns 73 degrees on the spot, creeping
+    # 6 cm; then it turns 0.04-0.25 rad a scan
+    recording = bench.aces_recording(6400)
+    window = np.arange(6208, 6308)
+    lost = (window >= window[50]) & (window < window[60])
+    clean = bench.run("icp", scans(recording, window), np.zeros(3))[0][~lost]
+    faulted, health, _ = bench.run("icp", scans(recording, window[~lost]), np.zeros(3))
+    assert health["clock_jumps"] == 1
+    off = relative(clean[-1], faulted[-1])
+    assert np.hypot(off[0], off[1]) < 0.1 and abs(off[2]) < 0.02  # [m], [rad]
+
+
+def test_a_gap_after_stamps_a_microsecond_apart_is_counted_in_lidar_intervals() -> None:
+    # four scans stamped 1 us apart, then 0.6 s: over 1 us intervals the gap would span
+    # 600 000 of them and the guess lie 36 km away
+    rng = np.random.default_rng(2)
+    estimator = make("icp")
+    pose = np.array([-3.0, -2.0, 0.6])
+    estimator.reset(SensorSetup(np.zeros((1, 3)), ANGLES, 20.0), pose)
+    step = np.array([0.06, 0.0, 0.01])
+    for t in [0.0, 1e-6, 2e-6, 3e-6, 0.6, 0.7, 0.8]:
+        estimator.update({"lidar_1": ray_cast(pose, noise=0.01, rng=rng)}, t)
+        error = relative(pose, estimator.pose)
+        assert np.hypot(error[0], error[1]) < 0.05 and abs(wrap_angle(error[2])) < 0.01, t
+        pose = compose(pose, step)
