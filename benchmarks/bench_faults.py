@@ -1,14 +1,14 @@
 """Fault matrix: every sensor fault of :mod:`lidar_env.faults` x estimator x drive, each run
 against the same drive without the fault.
 
-    python benchmarks/bench_faults.py                       # default matrix (~5 min)
+    python benchmarks/bench_faults.py                       # default matrix (~8 min)
     python benchmarks/bench_faults.py --estimators lidar_odometry --groups hallway/zigzag
     python benchmarks/bench_faults.py --logs --json faults.json         # paper groups only
     python benchmarks/bench_faults.py --groups --logs intel:3000 aces:6000  # other windows
 
 Drives: the three paper groups (open_cylinders/right_turn, hallway/zigzag,
 closed_to_open/zigzag, seed 0, pure-pursuit driver, ground truth from the env) and windows of
-the real logs (``--logs NAME:SCAN``, default ``aces:0``): ``--log-scans`` scans of
+the real logs (``--logs NAME:SCAN``, default :data:`LOG_WINDOWS`): ``--log-scans`` scans of
 ``NAME.clf.bz2`` (``../shared/data/radish``; skipped when absent) from its first scan with
 truth at or after scan ``SCAN``, so every run starts on a known pose that no fault covers;
 their truth is pseudo truth at keyframes only: the poses of ``NAME-corrected.log.gz``
@@ -65,6 +65,9 @@ from lidar_env.faults import BeamDropout, Blind, ClockJump, Fault, FrozenLidar, 
 GROUPS = ("open_cylinders/right_turn", "hallway/zigzag", "closed_to_open/zigzag")
 ESTIMATORS = ("lidar_odometry", "slam", "pc_fusion", "icp")
 RADISH = SHARED_DATA / "radish"
+#: The real-log windows the matrix runs by default: ACES from its first truth, and one window
+#: further on in each log (Intel: a 180-degree Lidar on a bursty clock).
+LOG_WINDOWS = ("aces:0", "aces:6000", "intel:3000")
 JUMP_MARGIN = 0.3  # [m]
 FINAL_FACTOR, FINAL_MARGIN = 2.0, 0.1  # final <= 2 x clean + 0.1 m
 #: [s] blind in a row beyond which a stretch is a long one, judged by :func:`verdict`'s rule.
@@ -328,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="paper groups (none: only the logs)")
     parser.add_argument("--faults", nargs="+", default=None,
                         help="only these faults (default: all)")
-    parser.add_argument("--logs", nargs="*", default=["aces:0"], metavar="NAME:SCAN",
+    parser.add_argument("--logs", nargs="*", default=list(LOG_WINDOWS), metavar="NAME:SCAN",
                         help="Radish log windows: NAME.clf.bz2 from its first scan with truth "
                              "at or after SCAN (none: no log)")
     parser.add_argument("--log-scans", type=int, default=600, help="scans per log window")
