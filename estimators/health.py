@@ -218,6 +218,19 @@ def evident_time_step(distance: float, speed: float, dt: float, typical: float) 
     return float(np.clip(distance / speed, typical, dt))
 
 
+def evident_turn_time(turn: float, rate: float, elapsed: float, least: float) -> float:
+    """The time (in [s] or scan intervals, as ``elapsed``) a ``turn`` [rad] over a clock jump
+    took at the turn ``rate`` held before it [rad per unit], within [``least``, ``elapsed``]:
+    all of ``elapsed`` where that rate turns less in it. A gap's translation says nothing of
+    its turn (a robot turning on the spot creeps a few centimetres), and a turn rate
+    overestimated by the time its translation bears out starts the next matches turned out
+    of their basin; one underestimated only starts them unturned."""
+    held = abs(rate)
+    if held * elapsed <= abs(turn):
+        return elapsed
+    return min(max(abs(turn) / held, least), elapsed)
+
+
 def intervals_since_used(skipped_before: int, clock_jumped: bool, interval: float,
                          typical: float) -> float:
     """How many scan intervals the car may have moved since the last scan an estimator used:

@@ -15,6 +15,7 @@ from estimators.health import (
     CLOCK_HISTORY,
     CLOCK_JUMP_FACTOR,
     evident_time_step,
+    evident_turn_time,
     intervals_since_used,
 )
 from estimators.matching.icp import ICPParams, register
@@ -42,16 +43,6 @@ from lidar_env.core.se2 import compose
 MIN_SCAN_INTERVAL = 0.01
 
 
-def turn_intervals(turn: float, held: float, lost: float) -> float:
-    """Scan intervals in ``[1, lost]`` a ``turn`` [rad] over a clock gap of ``lost`` intervals
-    took at the turn rate ``held`` [rad per interval] before it: all of them where it held
-    none. The gap's translation says nothing of its turn (a robot turning on the spot), and
-    a turn rate overestimated by the intervals the translation bears out starts the next
-    matches turned out of ICP's basin; one underestimated only starts them unturned."""
-    rate = abs(held)
-    return lost if rate * lost <= abs(turn) else max(1.0, abs(turn) / rate)
-
-
 @dataclass
 class ICPEstimator(Estimator):
     """Scan-to-previous-scan point-to-line ICP (no odometry): the baseline a user would pick.
@@ -73,7 +64,7 @@ class ICPEstimator(Estimator):
     came (a clock gap may be a stamp that jumped alone). Over a clock gap the next guess
     takes the match's translation over the intervals the speed held bears out
     (:func:`~estimators.health.evident_time_step`) and its turn over those the turn rate held
-    bears out (:func:`turn_intervals`), at least the former.
+    bears out (:func:`~estimators.health.evident_turn_time`), at least the former.
 
     After skipped or lost scans the match also starts from the translation extrapolated with
     one interval's turn and from a correlative search on the last scan; of the matches
@@ -196,8 +187,8 @@ class ICPEstimator(Estimator):
                 observations = max(observations, evident_time_step(
                     float(np.hypot(*increment[:2])), float(np.hypot(*self._increment[:2])),
                     lost, 1.0))
-                turns = max(observations, turn_intervals(
-                    float(increment[2]), float(self._increment[2]), lost))
+                turns = evident_turn_time(float(increment[2]), float(self._increment[2]),
+                                          lost, observations)
             self._increment = increment / np.array([observations, observations, turns])
         self._previous = current
         return compose(self.pose, increment)

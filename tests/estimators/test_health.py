@@ -23,6 +23,7 @@ from estimators.health import (
     ScanScreen,
     SortedWindow,
     evident_time_step,
+    evident_turn_time,
     intervals_since_used,
 )
 from estimators.odometry.far_scans import GlobalSearch, SearchWindow
@@ -230,3 +231,15 @@ def test_a_sorted_window_keeps_its_last_values_and_numpys_median() -> None:
         assert list(window) == seen[-6:]
         assert window.ordered == sorted(seen[-6:])
         assert window.median == np.median(seen[-6:])
+
+
+@pytest.mark.parametrize(("turn", "held", "elapsed", "least", "turn_time"), [
+    (-1.2, -0.1, 15.0, 1.0, 12.0),  # at the rate held
+    (0.05, 0.1, 15.0, 1.0, 1.0),  # less than one interval's turn: at least ``least``
+    (0.05, 0.1, 15.0, 3.0, 3.0),  # never less than the translation's time
+    (0.3, 0.0, 15.0, 1.0, 15.0),  # no turn held: over the whole gap
+    (3.0, 0.1, 15.0, 1.0, 15.0),  # faster than held: over the whole gap
+])
+def test_a_gaps_turn_takes_the_time_the_turn_rate_held_needs(
+        turn: float, held: float, elapsed: float, least: float, turn_time: float) -> None:
+    assert evident_turn_time(turn, held, elapsed, least) == pytest.approx(turn_time)

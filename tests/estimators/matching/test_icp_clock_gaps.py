@@ -12,23 +12,11 @@ import pytest
 
 from estimators import SensorSetup, make
 from estimators.datasets.recording import Recording
-from estimators.matching.icp_estimator import turn_intervals
 from lidar_env.core.se2 import compose, relative, wrap_angle
 from tests.benchmarks.bench_modules import load
 from tests.estimators.matching.test_icp import ANGLES, ray_cast
 
 bench = load("bench_faults")
-
-
-@pytest.mark.parametrize(("turn", "held", "lost", "intervals"), [
-    (-1.2, -0.1, 15.0, 12.0),  # at the rate held
-    (0.05, 0.1, 15.0, 1.0),  # less than one interval's turn: one interval
-    (0.3, 0.0, 15.0, 15.0),  # no turn held: over the whole gap
-    (3.0, 0.1, 15.0, 15.0),  # faster than held: over the whole gap
-])
-def test_a_gaps_turn_takes_the_intervals_the_turn_rate_held_needs(
-        turn: float, held: float, lost: float, intervals: float) -> None:
-    assert turn_intervals(turn, held, lost) == pytest.approx(intervals)
 
 
 def scans(recording: Recording, kept: np.ndarray) -> Recording:
@@ -38,12 +26,13 @@ def scans(recording: Recording, kept: np.ndarray) -> Recording:
                                truth=recording.truth[kept])
 
 
-@pytest.mark.skipif(not bench.ACES.exists(), reason="ACES log absent")
+@pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
+                    reason="ACES or aces-corrected absent")
 def test_aces_scans_lost_in_a_turn_on_the_spot_keep_icp_on_the_clean_runs_track() -> None:
     # ACES's scans 6344-6443 (the recording starts on the log's first truth, scan 136), of
     # which 6394-6403 (1.9 s) are lost while the robot turns 73 degrees on the spot, creeping
     # 6 cm; then it turns 0.04-0.25 rad a scan
-    recording = bench.aces_recording(6400)
+    recording = bench.log_recording("aces", 0, 6400)
     window = np.arange(6208, 6308)
     lost = (window >= window[50]) & (window < window[60])
     clean = bench.run("icp", scans(recording, window), np.zeros(3))[0][~lost]
