@@ -36,7 +36,12 @@ from estimators.matching.rotation_pc import (
 from estimators.odometry.edge_consensus import fuse_from_consensus
 from estimators.odometry.fusion_keyframes import Keyframe, KeyframeMatching
 from estimators.odometry.fusion_motion import CLOCK_HISTORY, FusedVelocity
-from estimators.odometry.fusion_recovery import BlindScans, recovered
+from estimators.odometry.fusion_recovery import (
+    POOR_SCORE,
+    SCORE_TOLERANCE,
+    BlindScans,
+    recovered,
+)
 from estimators.odometry.motion_prior import (
     ScanClock,
     midpoint_velocity,
@@ -211,6 +216,13 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
                 (from_latest, edges, score), step, longer, intervals, bool(self.skipped_before),
                 lambda motion: list(relative_floats(previous, compose_floats(
                     latest.pose.tolist(), motion.tolist()))), blind)
+            if not self.skipped_before and score < POOR_SCORE:
+                # over a clock gap no search turns the car: where neither guess's match
+                # explains the scans, it may have kept its turn rate too (a turn on the spot)
+                turning = (self._velocity * (intervals * typical[0])).tolist()
+                turned = self._solve(latest, current, previous, turning, information)
+                if turned[2] > score + SCORE_TOLERANCE:
+                    from_latest, edges, score = turned
             if lost:  # the scans cannot tell where the car is: the guess, a fresh window
                 self.health.note_lost(len(self._observations))
                 pose = np.array(compose_floats(previous, longer))

@@ -1,6 +1,7 @@
-"""``icp`` over clock gaps: after scans lost while the car turned on the spot the next
-matches start from the turn rate it held, not from the gap's turn spread over the few
-intervals its creep bears out; and a gap after stamps a microsecond apart (Intel's repeated
+"""``icp`` and ``pc_fusion`` over clock gaps: after scans lost while the car turned on the
+spot the next matches start from the turn rate it held (``icp``: not from the gap's turn
+spread over the few intervals its creep bears out; ``pc_fusion``: also, where neither guess's
+match explains the scans); and a gap after stamps a microsecond apart (Intel's repeated
 stamps, run forward) counts scan intervals no shorter than a Lidar's."""
 
 from __future__ import annotations
@@ -28,15 +29,17 @@ def scans(recording: Recording, kept: np.ndarray) -> Recording:
 
 @pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
                     reason="ACES or aces-corrected absent")
-def test_aces_scans_lost_in_a_turn_on_the_spot_keep_icp_on_the_clean_runs_track() -> None:
+@pytest.mark.parametrize("name", ["icp", "pc_fusion"])
+def test_aces_scans_lost_in_a_turn_on_the_spot_keep_the_estimate_on_the_clean_runs_track(
+        name: str) -> None:
     # ACES's scans 6344-6443 (the recording starts on the log's first truth, scan 136), of
     # which 6394-6403 (1.9 s) are lost while the robot turns 73 degrees on the spot, creeping
     # 6 cm; then it turns 0.04-0.25 rad a scan
     recording = bench.log_recording("aces", 0, 6400)
     window = np.arange(6208, 6308)
     lost = (window >= window[50]) & (window < window[60])
-    clean = bench.run("icp", scans(recording, window), np.zeros(3))[0][~lost]
-    faulted, health, _ = bench.run("icp", scans(recording, window[~lost]), np.zeros(3))
+    clean = bench.run(name, scans(recording, window), np.zeros(3))[0][~lost]
+    faulted, health, _ = bench.run(name, scans(recording, window[~lost]), np.zeros(3))
     assert health["clock_jumps"] == 1
     off = relative(clean[-1], faulted[-1])
     assert np.hypot(off[0], off[1]) < 0.1 and abs(off[2]) < 0.02  # [m], [rad]
