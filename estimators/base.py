@@ -344,7 +344,7 @@ class Estimator(ABC):
         if self._poses and not usable:
             self._screen.skip(index)
             self._skip(scans, t)
-            return self._observations.skip(self._poses, t)
+            return self._observations.skip(self._poses, t, hold=self._screen.all_frozen)
         self.skipped_before = self._screen.used_one()
         self._stepping = True
         try:

@@ -11,10 +11,12 @@ previous one exactly while another sensor's scan changed, or while the estimate 
 is frozen (a real Lidar's range noise never repeats a scan bit for bit): its scan reads 0 m for
 that observation (below every estimator's ``min_range``: no return, and unlike ``max_range`` it
 clears no space the sensor did not see). Where every sensor is frozen, the observation is
-skipped like a blind one: the constant-velocity prediction carries the pose until the scans
-change, and the match onto them finds where the car went meanwhile (matching the repeats would
-hold the car still while it drives on). Every sensor repeating while the estimate stands is a
-car standing still (a noise-free simulation), and its scans are used. A time step over
+skipped like a blind one: the match onto the scans that change again finds where the car
+went meanwhile (matching the repeats would hold the car still while it drives on), and the
+frozen observations lie on the way there; until then they hold the last pose (a car that
+stopped dead in a noise-free simulation repeats its scans too). Every sensor repeating while
+the estimate stands is a car standing still (a noise-free simulation), and its scans are used.
+A time step over
 :data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or scans lost);
 it is counted, and estimators that scale their prediction by time guard it.
 """
@@ -152,6 +154,8 @@ class ScanScreen:
         self._previous: list[NDArray[np.float64] | None] = [None] * len(self.max_ranges)
         self._steps = SortedWindow(CLOCK_HISTORY)
         self._run = 0  # skipped observations in a row
+        #: whether the last observation screened had every sensor frozen
+        self.all_frozen = False
 
     def watch_clock(self, index: int, dt: float) -> bool:
         """Take the (finite) time step ``dt`` [s] before observation ``index``; whether it is a
@@ -176,6 +180,7 @@ class ScanScreen:
                                                      strict=True)]
         self._previous = list(scans)
         others_changed = not all(repeated)
+        self.all_frozen = not others_changed and moving
         screened = []
         for k, scan in enumerate(scans):
             if repeated[k] and (others_changed or moving):
@@ -276,14 +281,19 @@ class Observations:
         self._used.append(len(self.rows))
         self.rows.append((pose_index, None, float(t)))
 
-    def skip(self, poses: Sequence[NDArray[np.float64]], t: float) -> NDArray[np.float64]:
+    def skip(self, poses: Sequence[NDArray[np.float64]], t: float,
+             hold: bool = False) -> NDArray[np.float64]:
         """Record an observation at ``t`` [s] as skipped; its predicted pose. The prediction:
         the last used increment per observation, once for each observation since, scaled by
         its time step over the median of the last :data:`CLOCK_HISTORY` (at most 2: a clock
-        jump is not extrapolated; near 0: a scan republished at once)."""
+        jump is not extrapolated; near 0: a scan republished at once); with ``hold``, the
+        last pose (a frozen sensor cannot tell a car driving on from one that stopped dead:
+        the scans that change again say which)."""
         index, before, last = self.rows[-1]
         offset = np.zeros(3)
-        if len(self._used) == 2:
+        if hold:
+            offset = offset if before is None else before
+        elif len(self._used) == 2:
             step = relative(poses[-2], poses[-1]) / (self._used[1] - self._used[0])
             times = [time for _, _, time in self.rows[-CLOCK_HISTORY:]]
             median = float(np.median(np.diff(times))) if len(times) > 1 else t - last

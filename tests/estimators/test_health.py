@@ -20,6 +20,7 @@ from estimators.health import (
     CLOCK_JUMP_FACTOR,
     MIN_RETURNS,
     Health,
+    Observations,
     ScanScreen,
     SortedWindow,
     evident_time_step,
@@ -243,3 +244,14 @@ def test_a_sorted_window_keeps_its_last_values_and_numpys_median() -> None:
 def test_a_gaps_turn_takes_the_time_the_turn_rate_held_needs(
         turn: float, held: float, elapsed: float, least: float, turn_time: float) -> None:
     assert evident_turn_time(turn, held, elapsed, least) == pytest.approx(turn_time)
+
+
+def test_a_frozen_observation_holds_the_last_pose_where_a_skipped_one_coasts() -> None:
+    observations = Observations()
+    poses = [np.zeros(3), np.array([0.1, 0.0, 0.05])]
+    observations.use(0, 0.0)
+    observations.use(1, 0.1)
+    np.testing.assert_allclose(observations.skip(poses, 0.2, hold=True), poses[1])
+    np.testing.assert_allclose(observations.skip(poses, 0.3, hold=True), poses[1])
+    coasted = observations.skip(poses, 0.4)
+    assert coasted[0] > poses[1][0] + 0.05
