@@ -16,9 +16,8 @@ went meanwhile (matching the repeats would hold the car still while it drives on
 frozen observations lie on the way there; until then they hold the last pose (a car that
 stopped dead in a noise-free simulation repeats its scans too). Every sensor repeating while
 the estimate stands is a car standing still (a noise-free simulation), and its scans are used.
-A time step over
-:data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump (or scans lost);
-it is counted, and estimators that scale their prediction by time guard it.
+A time step over :data:`CLOCK_JUMP_FACTOR` times the median of the recent ones is a clock jump
+(or scans lost); it is counted, and estimators that scale their prediction by time guard it.
 """
 
 from __future__ import annotations
