@@ -205,9 +205,9 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         recovering = not predicted and intervals > 1 and bool(typical)
         if recovering:
             # or the car kept its speed over every interval since the last scan used
-            # (estimators.odometry.fusion_recovery)
-            longer = (self._velocity * (intervals * typical[0])).tolist()
-            longer[2] = step[2]
+            # (estimators.odometry.fusion_recovery), with one interval's turn
+            turning = (self._velocity * (intervals * typical[0])).tolist()
+            longer = [turning[0], turning[1], step[2]]
             blind = None if not self.skipped_before else BlindScans.of(
                 self._mounts, latest.scans, current, np.array(relative_floats(
                     latest.pose.tolist(), compose_floats(previous, longer))), intervals, dt)
@@ -219,7 +219,6 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
             if not self.skipped_before and score < POOR_SCORE:
                 # over a clock gap no search turns the car: where neither guess's match
                 # explains the scans, it may have kept its turn rate too (a turn on the spot)
-                turning = (self._velocity * (intervals * typical[0])).tolist()
                 turned = self._solve(latest, current, previous, turning, information)
                 if turned[2] > score + SCORE_TOLERANCE:
                     from_latest, edges, score = turned
