@@ -67,7 +67,7 @@ ESTIMATORS = ("lidar_odometry", "slam", "pc_fusion", "icp")
 RADISH = SHARED_DATA / "radish"
 #: The real-log windows the matrix runs by default: ACES from its first truth, and one window
 #: further on in each log (Intel: a 180-degree Lidar on a bursty clock).
-LOG_WINDOWS = ("aces:0", "aces:6000", "intel:3000")
+LOG_WINDOWS = (("aces", 0), ("aces", 6000), ("intel", 3000))
 JUMP_MARGIN = 0.3  # [m]
 FINAL_FACTOR, FINAL_MARGIN = 2.0, 0.1  # final <= 2 x clean + 0.1 m
 #: [s] blind in a row beyond which a stretch is a long one, judged by :func:`verdict`'s rule.
@@ -121,6 +121,23 @@ def record_drive(group: str, seed: int = 0) -> Recording:
 def log_paths(name: str) -> tuple[Path, Path]:
     """The Radish log ``name`` (e.g. ``aces``, ``intel``) and its corrected log."""
     return RADISH / f"{name}.clf.bz2", RADISH / f"{name}-corrected.log.gz"
+
+
+def log_window(spec: str) -> tuple[str, int]:
+    """``NAME:SCAN`` (``:SCAN`` optional, 0) as the log's name and the scan to start from; an
+    ``argparse`` type."""
+    name, _, start = spec.partition(":")
+    if not name or not (start or "0").isdigit():
+        raise argparse.ArgumentTypeError(
+            f"expected NAME:SCAN (a Radish log's name and a scan index >= 0), got {spec!r}")
+    return name, int(start or 0)
+
+
+def positive_count(text: str) -> int:
+    """An integer >= 1; an ``argparse`` type."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return int(text)
 
 
 def log_recording(name: str, start: int, limit: int) -> Recording:
@@ -331,23 +348,24 @@ def main(argv: list[str] | None = None) -> int:
                         help="paper groups (none: only the logs)")
     parser.add_argument("--faults", nargs="+", default=None,
                         help="only these faults (default: all)")
-    parser.add_argument("--logs", nargs="*", default=list(LOG_WINDOWS), metavar="NAME:SCAN",
+    parser.add_argument("--logs", nargs="*", type=log_window, default=list(LOG_WINDOWS),
+                        metavar="NAME:SCAN",
                         help="Radish log windows: NAME.clf.bz2 from its first scan with truth "
                              "at or after SCAN (none: no log)")
-    parser.add_argument("--log-scans", type=int, default=600, help="scans per log window")
+    parser.add_argument("--log-scans", type=positive_count, default=600,
+                        help="scans per log window")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"Python {platform.python_version()}")
     drives = {group: record_drive(group) for group in args.groups}
-    for spec in args.logs:
-        name, _, start = spec.partition(":")
+    for name, first in args.logs:
         paths = log_paths(name)
+        label = f"{name}:{first}" if first else name
         if not all(path.exists() for path in paths):
-            print(f"{spec} skipped: {' or '.join(str(p) for p in paths)} absent")
+            print(f"{label} skipped: {' or '.join(str(p) for p in paths)} absent")
             continue
-        first = int(start or 0)
-        drives[spec if first else name] = log_recording(name, first, args.log_scans)
+        drives[label] = log_recording(name, first, args.log_scans)
     results: list[dict] = []
     matrix(drives, args.estimators, args.faults, results)
     failed = [r for r in results if not r["pass"]]

@@ -159,3 +159,29 @@ def test_a_single_lidar_frozen_while_driving_is_skipped_and_the_car_found_after(
     assert frozen.health["frozen_scans"] >= 10 and frozen.health["skipped_scans"] >= 10
     assert frozen.final <= bench.final_bound(bench.score(clean, clean, truth)[1])
     assert frozen.jump <= bench.JUMP_MARGIN
+
+
+@pytest.mark.parametrize("spec", ["", ":3000", "aces:x", "aces:-5", "aces:3.5"])
+def test_a_log_window_that_is_not_name_colon_scan_is_refused(
+        spec: str, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as refused:
+        bench.main(["--groups", "--logs", spec])
+    assert refused.value.code == 2
+    assert "expected NAME:SCAN" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("count", ["0", "-3", "many"])
+def test_log_scans_below_one_are_refused(count: str, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as refused:
+        bench.main(["--groups", "--log-scans", count])
+    assert refused.value.code == 2
+    assert "expected an integer >= 1" in capsys.readouterr().err
+
+
+def test_a_log_window_reads_its_name_and_first_scan_and_an_absent_log_is_skipped(
+        capsys: pytest.CaptureFixture) -> None:
+    assert bench.log_window("intel:3000") == ("intel", 3000)
+    assert bench.log_window("aces") == ("aces", 0)
+    assert bench.main(["--groups", "--logs", "nolog:10", "--estimators", "icp"]) == 0
+    out = capsys.readouterr().out
+    assert "nolog:10 skipped" in out and "0 of 0 runs" in out

@@ -165,9 +165,10 @@ def test_the_screen_tells_frozen_from_standing_still():
     assert usable and screen.health.frozen_scans == 1 and np.all(screened[0] == 0.0)
     screened, usable = screen.screen([a.copy(), b + 0.01], moving=True)  # both repeat, moving
     assert not usable and screen.health.frozen_scans == 3  # skipped: the car drives on
-    assert np.all(screened[0] == 0.0) and np.all(screened[1] == 0.0)
+    assert np.all(screened[0] == 0.0) and np.all(screened[1] == 0.0) and screen.all_frozen
     screened, usable = screen.screen([a.copy(), b + 0.01], moving=False)  # both repeat, standing
     assert usable and screen.health.frozen_scans == 3 and np.all(screened[0] == a)
+    assert not screen.all_frozen
     blank = np.full(36, 10.0)
     screen.screen([blank, blank], moving=True)
     screen.screen([blank, blank], moving=True)  # a blank scan repeating is not frozen
