@@ -125,8 +125,10 @@ print(read())
 
 
 def read_in_new_process(root: Path, mode: str) -> str:
-    """What the cached caller returns in a fresh interpreter (``mode``: guarded or bare)."""
-    completed = subprocess.run([sys.executable, "-c", RUN, str(root), mode], check=True,
+    """What the cached caller returns in a fresh interpreter (``mode``: guarded or bare).
+    ``-B``: no bytecode cache, whose stamp is the source's mtime in whole seconds (a source
+    rewritten within the second of its last import would run its old bytecode)."""
+    completed = subprocess.run([sys.executable, "-B", "-c", RUN, str(root), mode], check=True,
                                capture_output=True, text=True)
     return completed.stdout.strip()
 
