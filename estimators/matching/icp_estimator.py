@@ -18,6 +18,7 @@ from estimators.health import (
     evident_turn_time,
     intervals_since_used,
 )
+from estimators.matching.held_returns import MAX_AGE, HeldReturns, check_max_age
 from estimators.matching.icp import ICPParams, register
 from estimators.matching.neighbourhood_fits import check_neighbours
 from estimators.matching.normal_equations import prior_information
@@ -53,16 +54,19 @@ class ICPEstimator(Estimator):
     its starting pose, most where a corridor leaves its axis to a few points, and from the
     identity it needs about twice the iterations.
 
-    The previous scan's lines are the curves fitted through each point's
-    ``normal_neighbours`` (up to ``max_normal_neighbours`` along a noisy wall), with their
-    midpoints where they bend (:mod:`estimators.matching.surface_fits`): a line through two
-    returns of a wall at a grazing angle tilts with their noise and pulls the match off a
+    The reference is the previous scan with, at each beam that lost its return, the return it
+    had within ``held_scans`` scans, moved by the matches since
+    (:mod:`estimators.matching.held_returns`): a scan with beams lost at random is matched onto
+    a reference nearly as dense as a full scan. Its lines are the curves fitted through each
+    point's ``normal_neighbours`` (up to ``max_normal_neighbours`` along a noisy wall), with
+    their midpoints where they bend (:mod:`estimators.matching.surface_fits`): a line through
+    two returns of a wall at a grazing angle tilts with their noise and pulls the match off a
     corridor's axis. Directions the pairs pin down with less than ``min_information`` fully
     weighted points follow the constant-velocity guess alone (:func:`register`'s
     ``min_information``), held by a weak prior (``prior_sigma_*`` against ``noise_sigma``,
     widening with the scan intervals it spans), where the guess spans only observations that
-    came (a clock gap may be a stamp that jumped alone). Over a clock gap the next guess
-    takes the match's translation over the intervals the speed held bears out
+    came (a clock gap may be a stamp that jumped alone). Over a clock gap the next guess takes
+    the match's translation over the intervals the speed held bears out
     (:func:`~estimators.health.evident_time_step`) and its turn over those the turn rate held
     bears out (:func:`~estimators.health.evident_turn_time`), at least the former.
 
@@ -71,7 +75,8 @@ class ICPEstimator(Estimator):
     explaining nearly the most points the least surprising is kept, after skipped ones moved
     off where it sees through the last scan (:mod:`estimators.matching.scan_recovery`).
 
-    Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns.
+    Parameters: see :class:`ICPParams` (distances [m]); ``min_range`` [m] drops near returns;
+    ``held_scans`` (0: the previous scan's returns alone).
     """
 
     max_iterations: int = 30
@@ -86,6 +91,7 @@ class ICPEstimator(Estimator):
     noise_sigma: float = 0.02
     prior_sigma_translation: float = 0.03
     prior_sigma_rotation: float = 0.1
+    held_scans: int = MAX_AGE
 
     def __post_init__(self) -> None:
         self.params = ICPParams(
@@ -99,6 +105,7 @@ class ICPEstimator(Estimator):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive value, got {getattr(self, name)}")
         check_neighbours(self.normal_neighbours, self.max_normal_neighbours)
+        check_max_age(self.held_scans)
         self._held_params = replace(self.params, min_information=self.min_information)
         self._prior_information = prior_information(
             self.noise_sigma, self.prior_sigma_translation, self.prior_sigma_rotation)
@@ -108,9 +115,12 @@ class ICPEstimator(Estimator):
         self._increment = np.zeros(3)
         assert self.setup is not None
         self._points = CarPoints(self.setup, self.min_range)
+        self._held = HeldReturns(self.setup, self.min_range, self.held_scans)
+        self._reference: NDArray[np.float64] | None = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
         self._previous = self._points(scans)
+        self._reference = self._held.start(scans, self._previous)
 
     def _intervals_lost(self, t: float) -> float:
         """Scan intervals since the last scan used when the clock jumped before ``t`` [s]: the
@@ -156,7 +166,7 @@ class ICPEstimator(Estimator):
                     starts.append(start)
                     guesses.append(guess)
                     spans.append(span)
-            reference = surface_reference(self._previous, self.normal_neighbours,
+            reference = surface_reference(self._reference, self.normal_neighbours,
                                           self.max_normal_neighbours)
             # free directions follow a guess over observations that came (not a clock gap's,
             # whose stamp may have jumped alone, nor the search's); priors weaken with the span
@@ -190,5 +200,9 @@ class ICPEstimator(Estimator):
                 turns = evident_turn_time(float(increment[2]), float(self._increment[2]),
                                           lost, observations)
             self._increment = increment / np.array([observations, observations, turns])
+            self._reference = self._held.advance(scans, current, increment,
+                                                 1 + self.skipped_before)
+        else:
+            self._reference = self._held.start(scans, current)
         self._previous = current
         return compose(self.pose, increment)
