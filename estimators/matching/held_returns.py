@@ -78,7 +78,7 @@ class HeldReturns:
         return np.array(points, dtype=np.float64)
 
     def advance(self, scans: Mapping[str, NDArray[np.float64]], points: NDArray[np.float64],
-                increment: NDArray[np.float64], scans_since: int = 1) -> NDArray[np.float64]:
+                increment: NDArray[np.float64], scans_since: float = 1.0) -> NDArray[np.float64]:
         """Take the next scans' returns ``points`` (M, 2) [m] (car frame) after the car moved
         by ``increment`` (3,) (the new car frame's pose in the last one's) over ``scans_since``
         scans (the skipped ones counted); return the reference (N, 2) [m], N >= M, in the new
