@@ -5,13 +5,13 @@ Matched on the previous scan alone, a scan whose beams are lost at random (a dir
 flaky receiver, dark or glancing surfaces) pairs its points with lines fitted through
 neighbours that are as sparse as its own: with half the beams lost, successive scans share a
 quarter of their beams, a far wall's few returns give noisy lines or none, and the heading
-turns by milliradians of noise at every step (30 times the full scans'), which add up to
-metres over a few hundred scans. A beam without a return keeps the return it last had, moved
-by the matched increments, for up to ``max_age`` scans: the reference stays nearly as
-dense as a full scan (with half the beams lost at random, all but 1 in 2^8 of them return
-within 8 scans) and it is a point of the same static world, seen from a pose a few
-centimetres away. A beam that returns replaces its held point, so the reference holds at most
-one point per beam, and a full scan is its own reference.
+turns by milliradians of noise at every step, a random walk that adds up to metres over a few
+hundred scans. A beam without a return (lost, or turned into the open as the car moved) keeps
+the return it last had, moved by the matched increments, for up to ``max_age`` scans: the
+reference stays nearly as dense as a full scan (with half the beams lost at random, all but 1
+in 2^8 of them return within 8 scans) and it is a point of the same static world, seen from a
+pose a few centimetres away. A beam that returns replaces its held point, so the reference
+holds at most one point per beam, and a full scan is its own reference.
 
 Beams are counted over the setup's Lidars in their order, each in beam order (the order of
 :class:`~estimators.matching.scan_matching.CarPoints`' points). Points (N, 2) [m] are in the
