@@ -179,7 +179,8 @@ class ICPEstimator(Estimator):
                     guesses.append(guess)
                     spans.append(span)
             # over a longer gap, the last scan's own returns, which the recovery reasons on
-            # (the held ones follow into the next match)
+            # (the held ones carry on where the match bears out no more intervals: a stamp
+            # that jumped alone)
             reference = surface_reference(self._reference if span <= self.held_scans else
                                           self._previous,
                                           self.normal_neighbours, self.max_normal_neighbours)
