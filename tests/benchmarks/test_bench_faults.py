@@ -1,6 +1,7 @@
 """Fault-matrix cells the estimators meet: after scans skipped (a blinded Lidar), lost (a
 clock gap) or half their beams dropped, or a clock that jumps while the scans run on, the
-pose is found again."""
+pose is found again; after a long blind stretch it is found again or, where the first scan back
+does not cover the place, reported lost (``bench_faults.verdict``)."""
 
 from __future__ import annotations
 
@@ -63,11 +64,13 @@ def test_the_pose_is_found_again_after_the_fault(drives, name, group, fault) -> 
     clean, _, _ = bench.run(name, recording, recording.truth[0])
     clean_jump, clean_final = bench.score(clean, recording.truth, recording.truth)
     run = bench.faulted_score(name, recording, fault)
-    assert run.jump - clean_jump <= bench.JUMP_MARGIN, (run.jump, clean_jump)
-    assert run.final <= bench.FINAL_FACTOR * clean_final + bench.FINAL_MARGIN, (run.final,
-                                                                                clean_final)
     if fault.startswith("blind"):
         assert run.health["skipped_scans"] > 0 and run.health["blind_stretches"] > 0
+    if run.return_jump is not None:  # a long stretch: the matrix's own rule (found or lost)
+        assert bench.verdict(run, clean_jump, clean_final), (run, clean_jump, clean_final)
+        return
+    assert run.jump - clean_jump <= bench.JUMP_MARGIN, (run.jump, clean_jump)
+    assert run.final <= bench.final_bound(clean_final), (run.final, clean_final)
 
 
 def test_a_log_without_truth_is_scored_on_the_scans_kept(drives) -> None:
