@@ -25,6 +25,7 @@ from estimators.matching.normal_equations import prior_information
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE, CarPoints
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
+    UNPLACED_BELOW,
     lost_after_blind,
     most_likely_match,
     off_seen_through,
@@ -42,14 +43,6 @@ from lidar_env.core.se2 import compose
 #: starting on a few of them would count a 0.6 s step as 600 000 lost intervals and search
 #: for the car kilometres away.
 MIN_SCAN_INTERVAL = 0.01
-
-#: Share of the scan below which the match kept after a blind stretch is reported lost (its
-#: pose stands, as the best the scans give), whatever it sees through: at the car's place a
-#: match explains about the share of the scan the last one saw too, and under a quarter is too
-#: little of the scan to tell the place (ACES after 100 blind scans: 12 % explained 9 m off
-#: the car, a sixth of the scan seen).
-UNPLACED_BELOW = 0.25
-
 
 @dataclass
 class ICPEstimator(Estimator):

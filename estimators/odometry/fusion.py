@@ -227,6 +227,8 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
                 pose = np.array(compose_floats(previous, longer))
                 self._restart_window(Keyframe(pose, current))
                 return pose
+            if blind is not None and blind.unplaced(score):  # the best placement, unvouched
+                self.health.note_lost(len(self._observations))
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance

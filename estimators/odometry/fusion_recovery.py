@@ -24,7 +24,8 @@ explain half of the scans, and is kept where its matches explain clearly more. A
 stretch the kept match is judged by the space the new scans see free: placed short of the car
 along a corridor, whose walls it fits as well or better, they see through the walls the car
 drove past, and the match starts again from the place that sees through the fewest
-(:func:`~estimators.matching.scan_recovery.off_seen_through`).
+(:func:`~estimators.matching.scan_recovery.off_seen_through`). A kept match that explains
+under a quarter of the new scans stands, but the car is reported lost (:meth:`BlindScans.unplaced`).
 
 Either guess may be a metre or more from the car after a turn, and the correlation that seeds
 the matches is ambiguous across such a gap (it may land a metre off too); a few ICP
@@ -45,6 +46,7 @@ from numpy.typing import NDArray
 from estimators.health import BLIND_STRETCH
 from estimators.matching.scan_recovery import (
     MIN_SEARCH_POINTS,
+    UNPLACED_BELOW,
     lost_after_blind,
     lost_scan_surprise,
     off_seen_through,
@@ -129,6 +131,12 @@ class BlindScans:
         (:func:`~estimators.matching.scan_recovery.lost_after_blind` of its matches' mean
         share and the keyframe points the new scans see through there)."""
         return lost_after_blind(found[2], self.seen_through(found[0]))
+
+    def unplaced(self, share: float) -> bool:
+        """Whether a match explaining ``share`` of the new scans after a blind stretch leaves
+        the car's place unknown, though it stands as the best the scans give
+        (:data:`~estimators.matching.scan_recovery.UNPLACED_BELOW`)."""
+        return self.intervals > BLIND_STRETCH and share < UNPLACED_BELOW
 
     def off_seen_through(self, match_from: Callable[[NDArray[np.float64]], Solution],
                          found: Solution) -> tuple[Solution, int]:
