@@ -64,6 +64,10 @@ def test_held_scans_is_a_whole_number_of_scans(count: object) -> None:
         make("icp", held_scans=count)
 
 
+needs_aces = pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
+                                reason="ACES or aces-corrected absent")
+
+
 @pytest.fixture(scope="module")
 def aces_6000() -> tuple[object, np.ndarray, float]:
     recording = bench.log_recording("aces", 6000, 600)
@@ -71,8 +75,7 @@ def aces_6000() -> tuple[object, np.ndarray, float]:
     return recording, clean, bench.score(clean, clean, recording.truth)[1]
 
 
-@pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
-                    reason="ACES or aces-corrected absent")
+@needs_aces
 def test_aces_with_half_the_beams_dropped_ends_within_twice_the_clean_error(
         aces_6000: tuple[object, np.ndarray, float]) -> None:
     # matched on the previous (halved) scan alone, the heading random-walked: 2.9 m off
@@ -81,8 +84,7 @@ def test_aces_with_half_the_beams_dropped_ends_within_twice_the_clean_error(
     assert run.final <= bench.final_bound(clean_final)
 
 
-@pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("aces")),
-                    reason="ACES or aces-corrected absent")
+@needs_aces
 def test_aces_after_100_blind_scans_a_place_seen_too_little_is_reported_lost(
         aces_6000: tuple[object, np.ndarray, float]) -> None:
     # the first scan back shares a sixth of its points with the last one; the best match
