@@ -44,6 +44,18 @@ from lidar_env.core.se2 import compose
 #: for the car kilometres away.
 MIN_SCAN_INTERVAL = 0.01
 
+def held_where_free(new: NDArray[np.float64], old: NDArray[np.float64],
+                    information: NDArray[np.float64], least: float) -> NDArray[np.float64]:
+    """``new`` (2,) with its part along each direction ``information`` (2, 2, in points'
+    worth) holds with fewer than ``least`` points replaced by ``old``'s (2,) part."""
+    values, vectors = np.linalg.eigh(information)
+    held = new.copy()
+    for value, vector in zip(values, vectors.T, strict=True):
+        if value < least:
+            held += vector * float((old - new) @ vector)
+    return held
+
+
 @dataclass
 class ICPEstimator(Estimator):
     """Scan-to-previous-scan point-to-line ICP (no odometry): the baseline a user would pick.
@@ -185,13 +197,14 @@ class ICPEstimator(Estimator):
                        for start, guess, span in zip(starts, guesses, spans, strict=True)]
             best = most_likely_match(results, guesses, spans, float(np.hypot(
                 *self._increment[:2])), len(current), t - self._times[-1] if span > 1 else None)
-            increment = results[best].pose
+            increment, chosen = results[best].pose, results[best]
             if observations > BLIND_STRETCH:
                 kept, seen, place = off_seen_through(lambda start: register(  # a blind stretch
                     reference, current, start, self.params, start, self._prior_information
                     / span**2), results[best], lambda m: (m.pose, m.quality), self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
                 increment, starts = kept.pose, starts + ([] if place is None else [place])
+                chosen = kept
                 if lost_after_blind(kept.quality, seen):  # the scans cannot tell: the guess
                     self.health.note_lost(len(self._observations))
                     increment = one_turn_guess(self._increment, span)
@@ -210,7 +223,12 @@ class ICPEstimator(Estimator):
                     lost, 1.0))
                 turns = evident_turn_time(float(increment[2]), float(self._increment[2]),
                                           lost, observations)
-            self._increment = increment / np.array([observations, observations, turns])
+            velocity = increment / np.array([observations, observations, turns])
+            if lost > observations and chosen.information is not None:
+                # the gap's match says nothing of the speed along what its scans leave free
+                velocity[:2] = held_where_free(velocity[:2], self._increment[:2],
+                                               chosen.information[:2, :2], self.min_information)
+            self._increment = velocity
             # held returns age by the scan intervals the match bears out (not a stamp's jump)
             self._reference = self._held.advance(scans, current, increment, observations)
         else:

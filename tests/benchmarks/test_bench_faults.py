@@ -43,6 +43,9 @@ CELLS = [(name, group, fault) for name in ("lidar_odometry", "slam") for group, 
     ("pc_fusion", "hallway/zigzag", "blind_100"),
     # icp: scans lost; 3 s of scans skipped through a 45-degree turn or a zigzag; 10 s skipped
     ("icp", "open_cylinders/right_turn", "gaps"),
+    # icp: 10 scans lost where the scans pin little; the speed after the gap keeps its old part
+    # along what the gap's match leaves free (the match's own slid 0.2 m across the drive)
+    ("icp", "hallway/zigzag", "gaps"),
     ("icp", "closed_to_open/zigzag", "gaps"),
     ("icp", "open_cylinders/right_turn", "blind_3s"),
     ("icp", "open_cylinders/right_turn", "blind_100"),

@@ -1,8 +1,9 @@
 """``icp`` and ``pc_fusion`` over clock gaps: after scans lost while the car turned on the
 spot the next matches start from the turn rate it held (``icp``: not from the gap's turn
 spread over the few intervals its creep bears out; ``pc_fusion``: also, where neither guess's
-match explains the scans); and a gap after stamps a microsecond apart (Intel's repeated
-stamps, run forward) counts scan intervals no shorter than a Lidar's."""
+match explains the scans); a gap after stamps a microsecond apart (Intel's repeated
+stamps, run forward) counts scan intervals no shorter than a Lidar's; and the speed after a gap
+keeps what it was along a direction the gap's match leaves free."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 
 from estimators import SensorSetup, make
 from estimators.datasets.recording import Recording
+from estimators.matching.icp_estimator import held_where_free
 from lidar_env.core.se2 import compose, relative, wrap_angle
 from tests.benchmarks.bench_modules import load
 from tests.estimators.matching.test_icp import ANGLES, ray_cast
@@ -58,3 +60,13 @@ def test_a_gap_after_stamps_a_microsecond_apart_is_counted_in_lidar_intervals() 
         error = relative(pose, estimator.pose)
         assert np.hypot(error[0], error[1]) < 0.05 and abs(wrap_angle(error[2])) < 0.01, t
         pose = compose(pose, step)
+
+
+def test_the_speed_after_a_gap_keeps_its_old_part_along_a_direction_the_match_leaves_free(
+) -> None:
+    # down a corridor along x the match pins y (40 points) and leaves x free (0.5 points)
+    information = np.diag([0.5, 40.0])
+    held = held_where_free(np.array([0.08, 0.02]), np.array([0.1, 0.0]), information, 2.0)
+    np.testing.assert_allclose(held, [0.1, 0.02])
+    np.testing.assert_array_equal(held_where_free(np.array([0.08, 0.02]), np.array([0.1, 0.0]),
+                                                  information * 100.0, 2.0), [0.08, 0.02])
