@@ -26,9 +26,12 @@ from numpy.typing import NDArray
 #: to 28 cm: ``benchmarks/bench_movers_estimators.py``).
 DROPOUT_WINDOW = math.radians(3.0)
 #: Where a scan drops beams, a no-return beam within ``w`` beams of a return is a dropped one
-#: while the chance that ``w`` beams in a row dropped, at the scan's dropout rate, is above
-#: this (1 in 64, the chance :data:`DROPOUT_WINDOW` leaves at half the beams dropped, on
-#: both sides): at half the beams dropped, 6 beams.
+#: while the chance that ``w`` beams in a row dropped, at the scan's dropout rate, is at
+#: least this: 6 beams either side at half the beams dropped (a dropped beam escapes being
+#: bounded 1 time in 4096); :data:`DROPOUT_WINDOW` (3 beams of a 1-degree Lidar) on a scan
+#: dropping a quarter of its beams or fewer.
+#: The wider window also bounds the views into the open beside walkers, but only on scans
+#: that drop beams at such rates.
 DROPPED_RUN_CHANCE = 1.0 / 64.0
 
 
