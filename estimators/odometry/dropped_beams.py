@@ -25,9 +25,9 @@ from numpy.typing import NDArray
 #: the filter needs beside walkers (at 7 degrees it loses walkers in ``hallway``, ATE 3 mm
 #: to 28 cm: ``benchmarks/bench_movers_estimators.py``).
 DROPOUT_WINDOW = math.radians(3.0)
-#: Where a scan drops beams, a no-return beam within ``w`` beams of a return is a dropped one
-#: while the chance that ``w`` beams in a row dropped, at the scan's dropout rate, is at
-#: least this: 6 beams either side at half the beams dropped (a dropped beam escapes being
+#: Where a scan drops beams, a no-return beam within ``w`` beams of a return is a dropped one,
+#: ``w`` the shortest run of beams that drops whole, at the scan's dropout rate, with at
+#: most this chance: 6 beams either side at half the beams dropped (a dropped beam escapes being
 #: bounded 1 time in 4096); :data:`DROPOUT_WINDOW` (3 beams of a 1-degree Lidar) on a scan
 #: dropping a quarter of its beams or fewer.
 #: The wider window also bounds the views into the open beside walkers, but only on scans
