@@ -45,3 +45,21 @@ def test_where_the_scan_pins_every_direction_the_guess_matches_stand() -> None:
     found = register(reference, points, car, params, car, WEAK)
     longer = car + [3.0, 0.0, 0.0]  # a match from here would land elsewhere, or not at all
     assert across_gap(reference, points, found, car, longer, 11.0, 0.1, params, WEAK) is found
+
+
+def test_a_stamp_that_jumped_alone_keeps_the_one_interval_match() -> None:
+    """Driving straight along the corridor, 0.05 m per interval from (10, 0.2): the scan pins
+    y alone, both guesses put the car within a centimetre of it across the axis, and the
+    stamp jumped alone (bursty stamps). The guess over 9 intervals fits per interval by
+    chance; the car stays a step on."""
+    reference = PointToLineReference(WALLS)
+    start, step = np.array([10.0, 0.2, 0.0]), np.array([0.05, 0.0, 0.0])
+    guess, longer = start + step, start + 9.0 * step
+    params = ICPParams(min_information=2.0)
+    car = guess + [0.0, 0.01, 0.0]
+    x = np.arange(-6.0, 6.0, 0.05)
+    points = np.concatenate([np.column_stack([x, 2.0 - np.full_like(x, car[1])]),
+                             np.column_stack([x, -2.0 - np.full_like(x, car[1])])])
+    found = register(reference, points, guess, params, guess, WEAK)
+    kept = across_gap(reference, points, found, guess, longer, 9.0, 0.05, params, WEAK)
+    assert np.hypot(*(kept.pose[:2] - car[:2])) < 0.02
