@@ -25,7 +25,8 @@ at the predicted pose, a fast turn's error makes static points look seen through
 judges earlier points only where its beams lie close enough to hit a thin object
 (``MovingPointFilter``'s ``stale_resolution``). No-return beams count as seeing free space:
 in the open, space behind a walker is seen free only by beams that return nothing. But a
-no-return beam among returns (within :data:`DROPOUT_WINDOW` of one) is a dropped return,
+no-return beam among returns (within :data:`DROPOUT_WINDOW` of one, or more beams on a scan
+that drops many: :func:`~estimators.odometry.dropped_beams.dropout_window`) is a dropped return,
 not a look into the open: it counts as free only as far as the nearer of the nearest
 returns on either side (a Lidar dropping half its beams otherwise sees through the walls it
 measures, and the odometry loses them from its map).
@@ -314,7 +315,7 @@ class BeamGeometry:
 
     def pack(self, scans: Sequence[ArrayLike], min_range: float = 0.0) -> NDArray[np.float64]:
         """The K sensors' readings ``scans`` [m] as one float64 array, checked for length, each
-        no-return reading within :data:`DROPOUT_WINDOW` of a return (readings from
+        no-return reading within its dropout window of a return (readings from
         ``min_range`` [m] up) bounded by the nearest returns on either side (module
         docstring)."""
         ranges = np.concatenate([np.asarray(r, dtype=np.float64).ravel() for r in scans])
