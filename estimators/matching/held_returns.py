@@ -25,7 +25,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from estimators.base import SensorSetup
+from estimators.matching.scan_matching import CarPoints
 from lidar_env.core import ConfigError, EstimatorInputError
 from lidar_env.core.se2 import inverse, transform_points
 
@@ -43,26 +43,19 @@ def check_max_age(max_age: int) -> int:
 
 class HeldReturns:
     """Each beam's latest return of the last ``max_age`` scans (``0``: the latest
-    scan's returns alone) of the Lidars of ``setup``, read as
-    :class:`~estimators.matching.scan_matching.CarPoints` reads them (a return lies in
-    ``(min_range, max_range)`` [m])."""
+    scan's returns alone) of the Lidars ``car_points`` reads (its beams and returns)."""
 
-    def __init__(self, setup: SensorSetup, min_range: float, max_age: int = MAX_AGE) -> None:
+    def __init__(self, car_points: CarPoints, max_age: int = MAX_AGE) -> None:
         self.max_age = check_max_age(max_age)
-        self.min_range = float(min_range)
-        self._keys = [(key, float(sensor.max_range))
-                      for key, sensor in zip(setup.keys, setup.sensors, strict=True)]
-        beams = sum(len(sensor.beam_angles) for sensor in setup.sensors)
-        self._points = np.zeros((beams, 2))
-        self._age = np.full(beams, np.inf)  # [scans] since each beam's held return
+        self._car_points = car_points
+        self._points = np.zeros((car_points.beams, 2))
+        self._age = np.full(car_points.beams, np.inf)  # [scans] since each beam's held return
 
     def _returns(self, scans: Mapping[str, NDArray[np.float64]],
                  points: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which beams (B,) of ``scans`` returned, checked against their ``points`` (M, 2)."""
-        hit = np.concatenate([(ranges < max_range) & (ranges > self.min_range) for ranges,
-                              max_range in ((np.asarray(scans[key], dtype=np.float64), far)
-                                            for key, far in self._keys)])
-        if len(hit) != len(self._points) or np.count_nonzero(hit) != len(points):
+        hit = self._car_points.returned(scans)
+        if np.count_nonzero(hit) != len(points):
             raise EstimatorInputError(
                 f"points: expected one per return ({np.count_nonzero(hit)} of {len(hit)} "
                 f"beams), got {len(points)}")

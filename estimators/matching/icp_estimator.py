@@ -132,7 +132,7 @@ class ICPEstimator(Estimator):
         self._increment = np.zeros(3)
         assert self.setup is not None
         self._points = CarPoints(self.setup, self.min_range)
-        self._held = HeldReturns(self.setup, self.min_range, self.held_scans)
+        self._held = HeldReturns(self._points, self.held_scans)
         self._reference: NDArray[np.float64] | None = None
 
     def _start(self, scans: dict[str, NDArray[np.float64]], t: float) -> None:
@@ -197,14 +197,15 @@ class ICPEstimator(Estimator):
                        for start, guess, span in zip(starts, guesses, spans, strict=True)]
             best = most_likely_match(results, guesses, spans, float(np.hypot(
                 *self._increment[:2])), len(current), t - self._times[-1] if span > 1 else None)
-            increment, chosen = results[best].pose, results[best]
+            chosen = results[best]
+            increment = chosen.pose
             if observations > BLIND_STRETCH:
                 kept, seen, place = off_seen_through(lambda start: register(  # a blind stretch
                     reference, current, start, self.params, start, self._prior_information
                     / span**2), results[best], lambda m: (m.pose, m.quality), self._previous,
                     current, reach(guesses[best], span, t - self._times[-1])[0])
-                increment, starts = kept.pose, starts + ([] if place is None else [place])
-                chosen = kept
+                chosen, starts = kept, starts + ([] if place is None else [place])
+                increment = chosen.pose
                 if lost_after_blind(kept.quality, seen):  # the scans cannot tell: the guess
                     self.health.note_lost(len(self._observations))
                     increment = one_turn_guess(self._increment, span)

@@ -100,19 +100,36 @@ class CarPoints:
             angles = np.asarray(sensor.beam_angles, dtype=np.float64)
             self._sensors.append((key, np.cos(angles), np.sin(angles), float(sensor.max_range),
                                   np.array([[c, -s], [s, c]]), mount[:2]))
+        #: beams of all the Lidars, in the order of the points
+        self.beams = sum(len(cos) for _, cos, *_ in self._sensors)
+
+    @staticmethod
+    def _ranges(scans: Mapping[str, NDArray[np.float64]], key: str,
+                cos: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Lidar ``key``'s ranges [m] of ``scans``, one per beam, as float64."""
+        ranges = np.ascontiguousarray(scans[key], dtype=np.float64)
+        if ranges.shape != cos.shape:
+            raise EstimatorInputError(
+                f"{key}: expected {cos.shape[0]} ranges (one per beam), got shape "
+                f"{ranges.shape}")
+        return ranges
 
     def __call__(self, scans: Mapping[str, NDArray[np.float64]]) -> NDArray[np.float64]:
         """The hits ``(M, 2)`` [m] of ``scans`` (ranges [m] by Lidar key) in the car frame."""
         merged = []
         for key, cos, sin, max_range, rotation, translation in self._sensors:
-            ranges = np.ascontiguousarray(scans[key], dtype=np.float64)
-            if ranges.shape != cos.shape:
-                raise EstimatorInputError(
-                    f"{key}: expected {cos.shape[0]} ranges (one per beam), got shape "
-                    f"{ranges.shape}")
-            points = _beam_points(ranges, cos, sin, max_range, self.min_range)
+            points = _beam_points(self._ranges(scans, key, cos), cos, sin, max_range,
+                                  self.min_range)
             merged.append(points @ rotation.T + translation)
         return merged[0] if len(merged) == 1 else np.concatenate(merged)
+
+    def returned(self, scans: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
+        """Which beams (:attr:`beams`,) of ``scans`` returned: those that give a point, the
+        points' rows in order."""
+        return np.concatenate([
+            (ranges < max_range) & (ranges > self.min_range) for ranges, max_range in (
+                (self._ranges(scans, key, cos), max_range)
+                for key, cos, _, max_range, *_ in self._sensors)])
 
 
 @njit(cache=True)

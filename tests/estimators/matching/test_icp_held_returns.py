@@ -11,7 +11,7 @@ import pytest
 from estimators import SensorSetup, make
 from estimators.matching.held_returns import HeldReturns
 from estimators.matching.scan_matching import CarPoints
-from lidar_env.core import ConfigError
+from lidar_env.core import ConfigError, EstimatorInputError
 from tests.benchmarks.bench_modules import load
 
 bench = load("bench_faults")
@@ -32,7 +32,7 @@ def in_frame(pose: np.ndarray, world: np.ndarray) -> np.ndarray:
 
 
 def test_a_beam_without_a_return_keeps_its_last_one_where_the_world_holds_it() -> None:
-    held = HeldReturns(SETUP, 0.05, max_age=2)
+    held = HeldReturns(CarPoints(SETUP, 0.05), max_age=2)
     scans, points = observed([2.0, 3.0, 4.0, 5.0])
     assert np.array_equal(held.start(scans, points), points)  # a full scan: its own reference
     wall = np.array([0.0, 3.0])  # beam 1's return in the first car frame
@@ -51,8 +51,23 @@ def test_a_beam_without_a_return_keeps_its_last_one_where_the_world_holds_it() -
     assert np.array_equal(held.advance(scans, points, np.zeros(3)), points)
 
 
+def test_the_beams_that_returned_are_those_that_give_the_points_in_order() -> None:
+    car_points = CarPoints(SETUP, 0.05)
+    scans, points = observed([2.0, MAX_RANGE, 0.01, 5.0])
+    hit = car_points.returned(scans)
+    assert car_points.beams == 4 and hit.tolist() == [True, False, False, True]
+    assert np.allclose(points, [[2.0, 0.0], [0.0, -5.0]])
+
+
+def test_points_that_are_not_the_scans_returns_are_refused() -> None:
+    held = HeldReturns(CarPoints(SETUP, 0.05))
+    scans, points = observed([2.0, MAX_RANGE, 4.0, 5.0])
+    with pytest.raises(EstimatorInputError, match="one per return"):
+        held.start(scans, points[:2])
+
+
 def test_skipped_scans_age_the_held_returns() -> None:
-    held = HeldReturns(SETUP, 0.05, max_age=8)
+    held = HeldReturns(CarPoints(SETUP, 0.05), max_age=8)
     held.start(*observed([2.0, 3.0, 4.0, 5.0]))
     scans, points = observed([2.0, MAX_RANGE, 4.0, 5.0])
     assert len(held.advance(scans, points, np.zeros(3), scans_since=9)) == 3
