@@ -7,6 +7,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from estimators.health import BLIND_STRETCH
+from estimators.matching.scan_recovery import UNPLACED_BELOW
 from estimators.odometry.fusion_recovery import POOR_SCORE, BlindScans, recovered
 from lidar_env.core.se2 import compose
 from tests.estimators.room_scans import scan_points
@@ -137,3 +139,12 @@ def test_a_blind_stretch_that_leaves_the_car_facing_the_unseen_is_flagged() -> N
     for seen, flagged in [(40, True), (0, False)]:
         found, lost = recovered(poor, poor(ONE), ONE, LONGER, 101.0, True, same, scans(seen))
         assert found[0][0] == 1.0 and lost == flagged
+
+
+def test_after_a_blind_stretch_a_match_explaining_under_a_quarter_leaves_the_car_unplaced(
+) -> None:
+    # Intel from scan 3000 after 100 blind scans: the kept match explained 15.6 % 5.5 m off
+    stretch = SimpleNamespace(intervals=BLIND_STRETCH + 1.0)
+    assert BlindScans.unplaced(stretch, UNPLACED_BELOW - 0.01)
+    assert not BlindScans.unplaced(stretch, UNPLACED_BELOW)
+    assert not BlindScans.unplaced(SimpleNamespace(intervals=2.0), 0.1)  # a short gap
