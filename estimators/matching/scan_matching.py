@@ -100,8 +100,7 @@ class CarPoints:
             angles = np.asarray(sensor.beam_angles, dtype=np.float64)
             self._sensors.append((key, np.cos(angles), np.sin(angles), float(sensor.max_range),
                                   np.array([[c, -s], [s, c]]), mount[:2]))
-        #: beams of all the Lidars, in the order of the points
-        self.beams = sum(len(cos) for _, cos, *_ in self._sensors)
+        self.beams = sum(len(cos) for _, cos, *_ in self._sensors)  # all Lidars, points' order
 
     @staticmethod
     def _ranges(scans: Mapping[str, NDArray[np.float64]], key: str,
@@ -124,8 +123,7 @@ class CarPoints:
         return merged[0] if len(merged) == 1 else np.concatenate(merged)
 
     def returned(self, scans: Mapping[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
-        """Which beams (:attr:`beams`,) of ``scans`` returned: those that give a point, the
-        points' rows in order."""
+        """Which beams (:attr:`beams`,) of ``scans`` returned, each giving a point, in order."""
         return np.concatenate([
             (ranges < max_range) & (ranges > self.min_range) for ranges, max_range in (
                 (self._ranges(scans, key, cos), max_range)
