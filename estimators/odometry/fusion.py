@@ -28,12 +28,14 @@ from numpy.typing import NDArray
 from estimators.base import Estimator
 from estimators.health import evident_time_step, intervals_since_used
 from estimators.matching.curve_refinement import PRIOR_SIGMA
+from estimators.matching.held_returns import MAX_AGE, check_max_age
 from estimators.matching.rotation_pc import (
     PreparedScan,
     ScanMatcher,
     require_sensor_frame,
 )
 from estimators.odometry.edge_consensus import fuse_from_consensus
+from estimators.odometry.fusion_held import HeldKeyframeScans
 from estimators.odometry.fusion_keyframes import Keyframe, KeyframeMatching
 from estimators.odometry.fusion_motion import CLOCK_HISTORY, FusedVelocity
 from estimators.odometry.fusion_recovery import (
@@ -107,7 +109,9 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
     sigma_heading: float = 0.005
     robust_scale: float = 3.0
     velocity_window: float = 1.0
+    held_scans: int = MAX_AGE
     _matcher: ScanMatcher | None = field(default=None, init=False, repr=False)
+    _held: HeldKeyframeScans | None = field(default=None, init=False, repr=False)
     #: the setup's mounts (N, 3) and their inverses, made once per reset
     _mounts: FloatArray = field(default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
     _mount_inverses: FloatArray = field(
@@ -140,6 +144,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
             raise ConfigError(
                 f"velocity_window: expected a positive duration [s], got {self.velocity_window!r}"
             )
+        check_max_age(self.held_scans)
         if not (self.keyframe_distance > 0 and self.keyframe_turn > 0):
             raise ConfigError(
                 "keyframe_distance [m] and keyframe_turn [rad]: expected positive numbers, got "
@@ -156,6 +161,8 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
                 f"share one geometry), got max ranges {ranges} [m]")
         self._matcher = ScanMatcher(ranges[0], self.image_size, self.resolution,
                                     self.icp_iterations)
+        self._held = HeldKeyframeScans(self.setup.mounts, [
+            sensor.beam_angles for sensor in self.setup.sensors], self._matcher, self.held_scans)
         self._mounts = self.setup.mounts
         self._mount_inverses = inverse(self._mounts)
         self._mount_floats = [tuple(mount) for mount in self._mounts.tolist()]
@@ -175,7 +182,11 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
                      for key, sensor in zip(self.setup.keys, self.setup.sensors, strict=True))
 
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
-        self._add_keyframe(Keyframe(self._initial_pose.copy(), self._prepare(scans)))
+        assert self._held is not None
+        current = self._prepare(scans)
+        self._held.forget()
+        self._held.hold(current, tuple(self._initial_pose.tolist()), 0.0)
+        self._add_keyframe(Keyframe(self._initial_pose.copy(), current))
 
     def _weights(self) -> dict[str, float]:
         return {
@@ -185,7 +196,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         }
 
     def _step(self, scans: dict[str, FloatArray], t: float) -> FloatArray:
-        assert self.setup is not None
+        assert self.setup is not None and self._held is not None
         # the poses on Python floats (compose_floats), arrays only where the matcher reads them
         current = self._prepare(scans)
         latest = self._keyframes[-1]
@@ -225,16 +236,22 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
             if lost:  # the scans cannot tell where the car is: the guess, a fresh window
                 self.health.note_lost(len(self._observations))
                 pose = np.array(compose_floats(previous, longer))
+                self._held.forget()
+                self._held.hold(current, tuple(pose.tolist()), 0.0)
                 self._restart_window(Keyframe(pose, current))
                 return pose
             if blind is not None and blind.unplaced(score):  # the best placement, unvouched
                 self.health.note_lost(len(self._observations))
         pose = np.array(compose_floats(latest.pose.tolist(), from_latest.tolist()))
+        here = tuple(pose.tolist())
+        self._held.hold(current, here, 1.0 + self.skipped_before)
         if (
             np.hypot(from_latest[0], from_latest[1]) >= self.keyframe_distance
             or abs(from_latest[2]) >= self.keyframe_turn
         ):
-            pose = self._insert_keyframe(current, pose, edges)
+            pose = self._insert_keyframe(current, pose, edges, self._held.keyframe(current, here))
+        else:
+            latest.scans = self._held.refill(latest.scans, tuple(latest.pose.tolist()))
         motion = list(relative_floats(previous, pose.tolist()))
         if recovering:
             # a car turning over the gap moved along the chord of its turn: straight ahead

@@ -120,10 +120,13 @@ class KeyframeMatching:
 
 
     def _insert_keyframe(
-        self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge]
+        self, scans: tuple[PreparedScan, ...], pose: FloatArray, latest_edges: list[SensorEdge],
+        reference: tuple[PreparedScan, ...],
     ) -> FloatArray:
-        """Make ``scans`` a keyframe, match it to the older ones that stay in the window and
-        re-solve the window; return its solved pose."""
+        """Make ``scans`` a keyframe with ``reference``, the scans later ones are matched
+        onto (``scans`` with held returns, :mod:`estimators.odometry.fusion_held`); match
+        ``scans`` to the older keyframes that stay in the window and re-solve the window;
+        return its solved pose."""
         assert self.setup is not None
         new_id = self._n_keyframes
         # The oldest keyframe leaves a full window now: matching against it would be wasted.
@@ -135,7 +138,7 @@ class KeyframeMatching:
             guess = relative_floats(keyframe.pose.tolist(), pose.tolist())
             ids = (first_staying + offset, new_id)
             self._edges.extend((*ids, e) for e in self._match_all(keyframe, scans, guess))
-        self._add_keyframe(Keyframe(pose, scans))
+        self._add_keyframe(Keyframe(pose, reference))
         if older:
             # Without older edges, the window's graph is the four edges just fused: nothing to
             # re-solve.

@@ -1,0 +1,152 @@
+"""The keyframe scans of ``pc_fusion`` (:class:`~estimators.odometry.fusion.FusionEstimator`)
+with the beams they lack filled from the last few scans.
+
+A keyframe is the reference that every scan until the next one is refined onto, along the
+curves its returns chain into (:class:`~estimators.matching.curve_refinement.CurveReference`:
+a return links to the next beam's when they lie within a few decimetres). With beams lost at
+random (a dirty window, dark or glancing surfaces), half of a keyframe's beams are missing:
+a third of its returns stand alone, without a curve, and the refinement slides along what
+is left. Each Lidar's returns of the last ``max_age`` scans are kept with the car's
+estimated pose, and a keyframe's beam without a return takes the return of the latest of
+those scans that falls into it (the nearest one of that scan, as a beam sees the nearest
+surface), seen from where the Lidar is now: with half the beams lost at random, all but
+1 in 2^8 of them return within 8 scans, a few centimetres away. A beam that returns keeps its
+own return. A filled beam keeps the bearing of its point, so the scan's image and curves see
+it where the world holds it.
+
+Poses [m, m, rad] are in the trajectory frame; ranges [m] and bearings [rad] in each Lidar's
+frame.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+from estimators.matching.curve_refinement import covers_full_turn
+from estimators.matching.held_returns import MAX_AGE, check_max_age
+from estimators.matching.rotation_pc import PreparedScan, ScanMatcher
+from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
+from lidar_env.core.se2 import PoseFloats, compose_floats, inverse_floats, transform_points
+
+FloatArray = NDArray[np.float64]
+
+
+class BeamLookup:
+    """The beam of a Lidar whose direction is nearest a bearing: ``beam_angles`` (n,) [rad]
+    increasing in beam order, about evenly spaced (a beam covers half the spacing on each
+    side; a Lidar covering a full turn wraps around)."""
+
+    def __init__(self, beam_angles: FloatArray) -> None:
+        self._first = float(beam_angles[0])
+        grid = beam_angles - self._first
+        self._half = 0.5 * float(np.median(np.diff(beam_angles))) if len(grid) > 1 else 0.0
+        self._n = len(grid)
+        # the first beam again a full turn on, when the beams cover one
+        self._grid = np.append(grid, 2.0 * np.pi) if covers_full_turn(beam_angles) else grid
+
+    def __call__(self, bearings: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
+        """Each bearing's (K,) [rad] beam (-1: none covers it) and its offset [rad] from the
+        beam's direction."""
+        relative = np.remainder(bearings - self._first, 2.0 * np.pi)
+        above = np.minimum(np.searchsorted(self._grid, relative), len(self._grid) - 1)
+        below = np.maximum(above - 1, 0)
+        nearer = np.where(relative - self._grid[below] <= self._grid[above] - relative,
+                          below, above)
+        offset = relative - self._grid[nearer]
+        index = np.where(np.abs(offset) <= self._half, nearer % self._n, -1)
+        return index, offset
+
+
+def returned(scan: PreparedScan) -> NDArray[np.bool_]:
+    """Which beams (n,) of ``scan`` returned (the test :class:`ScanMatcher` prepares with)."""
+    return (scan.ranges < scan.max_range) & (scan.ranges > DEFAULT_MIN_RANGE)
+
+
+class HeldKeyframeScans:
+    """The returns of the last ``max_age`` scans (``0``: none) of Lidars at ``mounts``
+    (K, 3) with ``beam_angles`` (one (n,) array per Lidar), and the keyframe scans they fill
+    (prepared by ``matcher``)."""
+
+    def __init__(self, mounts: FloatArray, beam_angles: list[FloatArray], matcher: ScanMatcher,
+                 max_age: int = MAX_AGE) -> None:
+        self.max_age = check_max_age(max_age)
+        self._matcher = matcher
+        self._mounts = [tuple(mount) for mount in np.asarray(mounts, dtype=np.float64).tolist()]
+        self._beams_of = [BeamLookup(np.asarray(angles, dtype=np.float64))
+                          for angles in beam_angles]
+        #: per scan: its age [scan intervals], the car pose, each Lidar's returns (M, 2) [m]
+        self._scans: deque[tuple[float, PoseFloats, list[FloatArray]]] = deque()
+        self._filled_from = 0  # scans the latest keyframe is filled from
+
+    def hold(self, scans: tuple[PreparedScan, ...], pose: PoseFloats,
+             scans_since: float) -> None:
+        """Keep ``scans`` (one per Lidar) taken at car ``pose``, ``scans_since`` scan
+        intervals after the last ones (those further back than ``max_age`` go)."""
+        if not self.max_age:
+            return
+        aged = [(age + scans_since, *rest) for age, *rest in self._scans]
+        self._scans = deque(entry for entry in aged if entry[0] <= self.max_age)
+        self._scans.append((0.0, pose, [
+            np.column_stack([scan.ranges[hit] * np.cos(scan.beam_angles[hit]),
+                             scan.ranges[hit] * np.sin(scan.beam_angles[hit])])
+            for scan, hit in ((scan, returned(scan)) for scan in scans)]))
+
+    def forget(self) -> None:
+        """Drop every scan kept (the car lost its place: their poses say nothing now)."""
+        self._scans.clear()
+        self._filled_from = 0
+
+    def keyframe(self, scans: tuple[PreparedScan, ...], pose: PoseFloats
+                 ) -> tuple[PreparedScan, ...]:
+        """``scans`` (prepared, one per Lidar, the latest held) at car ``pose`` with each beam
+        without a return filled from the scans kept before them, prepared again; a scan with
+        nothing to fill is kept."""
+        earlier = list(self._scans)[-2::-1]  # newest first, without the latest
+        self._filled_from = len(earlier)
+        return self._filled(scans, pose, earlier)
+
+    def refill(self, keyframe: tuple[PreparedScan, ...], pose: PoseFloats
+               ) -> tuple[PreparedScan, ...]:
+        """The latest ``keyframe`` (its scans, at car ``pose``) with its beams without a
+        return filled from the latest scan held too, while it is filled from fewer than
+        ``max_age`` scans (a keyframe made with few scans before it: the first one, or the
+        first after the car lost its place)."""
+        if self._filled_from >= self.max_age or len(self._scans) < 2:
+            return keyframe
+        self._filled_from += 1
+        return self._filled(keyframe, pose, [self._scans[-1]])
+
+    def _filled(self, scans: tuple[PreparedScan, ...], pose: PoseFloats,
+                held: list[tuple[float, PoseFloats, list[FloatArray]]]
+                ) -> tuple[PreparedScan, ...]:
+        """``scans`` at car ``pose`` with each beam without a return given the nearest
+        return of the first of the ``held`` scans that has one in it."""
+        filled = []
+        for k, scan in enumerate(scans):
+            to_sensor = inverse_floats(compose_floats(pose, self._mounts[k]))
+            empty = ~returned(scan)
+            ranges, angles = scan.ranges.copy(), scan.beam_angles.copy()
+            for _, held_pose, points in held:
+                if not np.any(empty):
+                    break
+                local = transform_points(
+                    compose_floats(to_sensor, compose_floats(held_pose, self._mounts[k])),
+                    points[k])
+                distance = np.hypot(local[:, 0], local[:, 1])
+                index, offset = self._beams_of[k](np.arctan2(local[:, 1], local[:, 0]))
+                usable = ((index >= 0) & empty[np.maximum(index, 0)]
+                          & (distance < scan.max_range) & (distance > DEFAULT_MIN_RANGE))
+                # the nearest point in each beam, as the beam would see it
+                order = np.lexsort((distance[usable], index[usable]))
+                index, distance = index[usable][order], distance[usable][order]
+                offset = offset[usable][order]
+                nearest = np.diff(index, prepend=-1) != 0
+                ranges[index[nearest]] = distance[nearest]
+                angles[index[nearest]] += offset[nearest]
+                empty[index[nearest]] = False
+            filled.append(scan if np.array_equal(ranges, scan.ranges)
+                          else self._matcher.prepare(ranges, angles))
+        return tuple(filled)
