@@ -24,8 +24,9 @@ from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
-from estimators.matching.curve_refinement import covers_full_turn
+from estimators.matching.curve_refinement import MAX_SURFACE_GAP, covers_full_turn
 from estimators.matching.held_returns import MAX_AGE, check_max_age
 from estimators.matching.rotation_pc import PreparedScan, ScanMatcher
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
@@ -127,7 +128,10 @@ class HeldKeyframeScans:
         filled = []
         for k, scan in enumerate(scans):
             to_sensor = inverse_floats(compose_floats(pose, self._mounts[k]))
-            empty = ~returned(scan)
+            hit = returned(scan)
+            empty = ~hit
+            surfaces = cKDTree(np.column_stack([scan.ranges[hit] * np.cos(scan.beam_angles[hit]),
+                                                scan.ranges[hit] * np.sin(scan.beam_angles[hit])]))
             ranges, angles = scan.ranges.copy(), scan.beam_angles.copy()
             for _, held_pose, points in held:
                 if not np.any(empty):
@@ -139,6 +143,8 @@ class HeldKeyframeScans:
                 index, offset = self._beams_of[k](np.arctan2(local[:, 1], local[:, 0]))
                 usable = ((index >= 0) & empty[np.maximum(index, 0)]
                           & (distance < scan.max_range) & (distance > DEFAULT_MIN_RANGE))
+                usable[usable] = np.isfinite(surfaces.query(
+                    local[usable], distance_upper_bound=MAX_SURFACE_GAP)[0])
                 # the nearest point in each beam, as the beam would see it
                 order = np.lexsort((distance[usable], index[usable]))
                 index, distance = index[usable][order], distance[usable][order]
