@@ -24,15 +24,21 @@ from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
-from estimators.matching.curve_refinement import MAX_SURFACE_GAP, covers_full_turn
+from estimators.matching.curve_refinement import covers_full_turn
 from estimators.matching.held_returns import MAX_AGE, check_max_age
 from estimators.matching.rotation_pc import PreparedScan, ScanMatcher
 from estimators.matching.scan_matching import DEFAULT_MIN_RANGE
 from lidar_env.core.se2 import PoseFloats, compose_floats, inverse_floats, transform_points
 
 FloatArray = NDArray[np.float64]
+
+#: Share of a keyframe scan's beams with a return after filling that must come from the held
+#: scans for the keyframe to take them: a Lidar losing beams at random (half of them: ~0.5)
+#: rather than beams turning into the open as the car moves (on the real logs and simulated
+#: drives 0-0.19 of a keyframe's beams, 0.01 in the median), which leaves its keyframes
+#: as measured.
+LOST_SHARE = 0.25
 
 
 class BeamLookup:
@@ -80,7 +86,9 @@ class HeldKeyframeScans:
                           for angles in beam_angles]
         #: per scan: its age [scan intervals], the car pose, each Lidar's returns (M, 2) [m]
         self._scans: deque[tuple[float, PoseFloats, list[FloatArray]]] = deque()
-        self._filled_from = 0  # scans the latest keyframe is filled from
+        #: the latest keyframe's scans as measured, and the held scans it is filled from
+        self._measured: tuple[PreparedScan, ...] = ()
+        self._sources: list[tuple[float, PoseFloats, list[FloatArray]]] = []
 
     def hold(self, scans: tuple[PreparedScan, ...], pose: PoseFloats,
              scans_since: float) -> None:
@@ -98,42 +106,39 @@ class HeldKeyframeScans:
     def forget(self) -> None:
         """Drop every scan kept (the car lost its place: their poses say nothing now)."""
         self._scans.clear()
-        self._filled_from = 0
+        self._measured, self._sources = (), []
 
     def keyframe(self, scans: tuple[PreparedScan, ...], pose: PoseFloats
                  ) -> tuple[PreparedScan, ...]:
-        """``scans`` (prepared, one per Lidar, the latest held) at car ``pose`` with each beam
-        without a return filled from the scans kept before them, prepared again; a scan with
-        nothing to fill is kept."""
-        earlier = list(self._scans)[-2::-1]  # newest first, without the latest
-        self._filled_from = len(earlier)
-        return self._filled(scans, pose, earlier)
+        """``scans`` (prepared, one per Lidar, the latest held), a new keyframe at car
+        ``pose``, each filled from the scans kept before them (:meth:`_filled`)."""
+        self._measured = scans
+        self._sources = list(self._scans)[-2::-1]  # newest first, without the latest
+        return self._filled(pose)
 
     def refill(self, keyframe: tuple[PreparedScan, ...], pose: PoseFloats
                ) -> tuple[PreparedScan, ...]:
-        """The latest ``keyframe`` (its scans, at car ``pose``) with its beams without a
-        return filled from the latest scan held too, while it is filled from fewer than
-        ``max_age`` scans (a keyframe made with few scans before it: the first one, or the
-        first after the car lost its place)."""
-        if self._filled_from >= self.max_age or len(self._scans) < 2:
+        """The latest ``keyframe`` (its scans, at car ``pose``) filled from the latest scan
+        held too, while it is filled from fewer than ``max_age`` scans (one made with few
+        scans before it: the first, or the first after the car lost its place)."""
+        if not self._measured:  # the first keyframe, or the first after forget()
+            self._measured = keyframe
+        if len(self._sources) >= self.max_age or len(self._scans) < 2:
             return keyframe
-        self._filled_from += 1
-        return self._filled(keyframe, pose, [self._scans[-1]])
+        self._sources.append(self._scans[-1])
+        return self._filled(pose)
 
-    def _filled(self, scans: tuple[PreparedScan, ...], pose: PoseFloats,
-                held: list[tuple[float, PoseFloats, list[FloatArray]]]
-                ) -> tuple[PreparedScan, ...]:
-        """``scans`` at car ``pose`` with each beam without a return given the nearest
-        return of the first of the ``held`` scans that has one in it."""
+    def _filled(self, pose: PoseFloats) -> tuple[PreparedScan, ...]:
+        """The latest keyframe's measured scans at car ``pose``, each whose Lidar lost at
+        least ``LOST_SHARE`` of its beams (:data:`LOST_SHARE`) with each beam without a
+        return given the nearest return of the first of the held scans it is filled from
+        that has one in it, prepared again."""
         filled = []
-        for k, scan in enumerate(scans):
+        for k, scan in enumerate(self._measured):
             to_sensor = inverse_floats(compose_floats(pose, self._mounts[k]))
-            hit = returned(scan)
-            empty = ~hit
-            surfaces = cKDTree(np.column_stack([scan.ranges[hit] * np.cos(scan.beam_angles[hit]),
-                                                scan.ranges[hit] * np.sin(scan.beam_angles[hit])]))
+            empty = ~returned(scan)
             ranges, angles = scan.ranges.copy(), scan.beam_angles.copy()
-            for _, held_pose, points in held:
+            for _, held_pose, points in self._sources:
                 if not np.any(empty):
                     break
                 local = transform_points(
@@ -143,8 +148,6 @@ class HeldKeyframeScans:
                 index, offset = self._beams_of[k](np.arctan2(local[:, 1], local[:, 0]))
                 usable = ((index >= 0) & empty[np.maximum(index, 0)]
                           & (distance < scan.max_range) & (distance > DEFAULT_MIN_RANGE))
-                usable[usable] = np.isfinite(surfaces.query(
-                    local[usable], distance_upper_bound=MAX_SURFACE_GAP)[0])
                 # the nearest point in each beam, as the beam would see it
                 order = np.lexsort((distance[usable], index[usable]))
                 index, distance = index[usable][order], distance[usable][order]
@@ -153,6 +156,7 @@ class HeldKeyframeScans:
                 ranges[index[nearest]] = distance[nearest]
                 angles[index[nearest]] += offset[nearest]
                 empty[index[nearest]] = False
-            filled.append(scan if np.array_equal(ranges, scan.ranges)
-                          else self._matcher.prepare(ranges, angles))
+            lost = np.count_nonzero(~empty) - np.count_nonzero(returned(scan))
+            filled.append(self._matcher.prepare(ranges, angles)
+                          if lost >= LOST_SHARE * np.count_nonzero(~empty) > 0 else scan)
         return tuple(filled)
