@@ -72,6 +72,15 @@ def returned(scan: PreparedScan) -> NDArray[np.bool_]:
     return (scan.ranges < scan.max_range) & (scan.ranges > DEFAULT_MIN_RANGE)
 
 
+def returns(scan: PreparedScan) -> FloatArray:
+    """The returns (M, 2) [m] of ``scan`` in its Lidar's frame, in beam order."""
+    if scan.reference is not None:  # made of them
+        return scan.reference.points
+    hit = returned(scan)
+    return np.column_stack([scan.ranges[hit] * np.cos(scan.beam_angles[hit]),
+                            scan.ranges[hit] * np.sin(scan.beam_angles[hit])])
+
+
 class HeldKeyframeScans:
     """The returns of the last ``max_age`` scans (``0``: none) of Lidars at ``mounts``
     (K, 3) with ``beam_angles`` (one (n,) array per Lidar), and the keyframe scans they fill
@@ -98,10 +107,7 @@ class HeldKeyframeScans:
             return
         aged = [(age + scans_since, *rest) for age, *rest in self._scans]
         self._scans = deque(entry for entry in aged if entry[0] <= self.max_age)
-        self._scans.append((0.0, pose, [
-            np.column_stack([scan.ranges[hit] * np.cos(scan.beam_angles[hit]),
-                             scan.ranges[hit] * np.sin(scan.beam_angles[hit])])
-            for scan, hit in ((scan, returned(scan)) for scan in scans)]))
+        self._scans.append((0.0, pose, [returns(scan) for scan in scans]))
 
     def forget(self) -> None:
         """Drop every scan kept (the car lost its place: their poses say nothing now)."""
@@ -130,33 +136,35 @@ class HeldKeyframeScans:
 
     def _filled(self, pose: PoseFloats) -> tuple[PreparedScan, ...]:
         """The latest keyframe's measured scans at car ``pose``, each whose Lidar lost at
-        least ``LOST_SHARE`` of its beams (:data:`LOST_SHARE`) with each beam without a
-        return given the nearest return of the first of the held scans it is filled from
-        that has one in it, prepared again."""
+        least :data:`LOST_SHARE` of its beams with each beam without a return given the
+        nearest return of the first of the held scans it is filled from that has one in it,
+        prepared again."""
         filled = []
         for k, scan in enumerate(self._measured):
+            hit = returned(scan)
+            # too few beams without a return to reach LOST_SHARE, however many are filled
+            if not self._sources or np.count_nonzero(~hit) < LOST_SHARE * len(hit):
+                filled.append(scan)
+                continue
             to_sensor = inverse_floats(compose_floats(pose, self._mounts[k]))
-            empty = ~returned(scan)
+            local = np.concatenate([transform_points(
+                compose_floats(to_sensor, compose_floats(held_pose, self._mounts[k])), points[k])
+                for _, held_pose, points in self._sources])
+            source = np.concatenate([np.full(len(points[k]), rank)
+                                     for rank, (_, _, points) in enumerate(self._sources)])
+            distance = np.hypot(local[:, 0], local[:, 1])
+            index, offset = self._beams_of[k](np.arctan2(local[:, 1], local[:, 0]))
+            usable = np.flatnonzero((index >= 0) & ~hit[np.maximum(index, 0)]
+                                    & (distance < scan.max_range)
+                                    & (distance > DEFAULT_MIN_RANGE))
+            # per beam, the first source's nearest point, as the beam would see it
+            usable = usable[np.lexsort((distance[usable], source[usable], index[usable]))]
+            usable = usable[np.diff(index[usable], prepend=-1) != 0]
+            if len(usable) < LOST_SHARE * (np.count_nonzero(hit) + len(usable)):
+                filled.append(scan)
+                continue
             ranges, angles = scan.ranges.copy(), scan.beam_angles.copy()
-            for _, held_pose, points in self._sources:
-                if not np.any(empty):
-                    break
-                local = transform_points(
-                    compose_floats(to_sensor, compose_floats(held_pose, self._mounts[k])),
-                    points[k])
-                distance = np.hypot(local[:, 0], local[:, 1])
-                index, offset = self._beams_of[k](np.arctan2(local[:, 1], local[:, 0]))
-                usable = ((index >= 0) & empty[np.maximum(index, 0)]
-                          & (distance < scan.max_range) & (distance > DEFAULT_MIN_RANGE))
-                # the nearest point in each beam, as the beam would see it
-                order = np.lexsort((distance[usable], index[usable]))
-                index, distance = index[usable][order], distance[usable][order]
-                offset = offset[usable][order]
-                nearest = np.diff(index, prepend=-1) != 0
-                ranges[index[nearest]] = distance[nearest]
-                angles[index[nearest]] += offset[nearest]
-                empty[index[nearest]] = False
-            lost = np.count_nonzero(~empty) - np.count_nonzero(returned(scan))
-            filled.append(self._matcher.prepare(ranges, angles)
-                          if lost >= LOST_SHARE * np.count_nonzero(~empty) > 0 else scan)
+            ranges[index[usable]] = distance[usable]
+            angles[index[usable]] += offset[usable]
+            filled.append(self._matcher.prepare(ranges, angles))
         return tuple(filled)
