@@ -97,6 +97,12 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
     :func:`estimators.odometry.motion_prior.prediction_information`.
     It resolves the rotation's pi ambiguity, damps the steps' noise where few returns pin the
     translation down, and is the answer along featureless corridors.
+
+    Beams lost at random (``held_scans``, default 8; 0: none): a keyframe whose Lidar lost
+    a quarter or more of its beams takes them back from the returns of the last
+    ``held_scans`` scans, moved by the car's estimated poses
+    (:mod:`estimators.odometry.fusion_held`), so the scans after it are refined onto whole
+    surfaces rather than onto the scattered half of them.
     """
 
     window: int = 2
