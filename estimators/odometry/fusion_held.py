@@ -12,7 +12,11 @@ those scans that falls into it (the nearest one of that scan, as a beam sees the
 surface), seen from where the Lidar is now: with half the beams lost at random, all but
 1 in 2^8 of them return within 8 scans, a few centimetres away. A beam that returns keeps its
 own return. A filled beam keeps the bearing of its point, so the scan's image and curves see
-it where the world holds it.
+it where the world holds it. A keyframe made with fewer scans before it (the first one, or
+the first after the car lost its place) is filled from the scans after it too. A keyframe
+takes its filled beams only where they make up :data:`LOST_SHARE` of its returns: beams that
+turn into the open as the car moves leave it as measured. Scans age by the scans that came
+(skipped ones counted), not by the clock: each loses its beams on its own.
 
 Poses [m, m, rad] are in the trajectory frame; ranges [m] and bearings [rad] in each Lidar's
 frame.
