@@ -135,6 +135,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
     _clock: ScanClock = field(
         default_factory=lambda: ScanClock(CLOCK_HISTORY, CLOCK_HISTORY), init=False, repr=False
     )
+    _bunched: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.icp_iterations, bool) or not (
@@ -181,6 +182,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         self._velocity = np.zeros(3)
         self._recent = deque()
         self._clock = ScanClock(CLOCK_HISTORY, CLOCK_HISTORY)
+        self._bunched = False
 
     def _prepare(self, scans: dict[str, FloatArray]) -> tuple[PreparedScan, ...]:
         assert self._matcher is not None and self.setup is not None
@@ -206,15 +208,15 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
         # the poses on Python floats (compose_floats), arrays only where the matcher reads them
         current = self._prepare(scans)
         latest = self._keyframes[-1]
-        dt = t - self._times[-1]
+        stamped = t - self._times[-1]
+        dt, typical = self._scan_timing(stamped)
         # past the prediction horizon (a clock gap) the velocity says nothing: no prior; the
         # guess then moves the car one typical interval on (the least time that passed, all
         # of it when only the stamp jumped), not none (a weak prior at a standstill holds a
         # corridor's axis back by a step's share)
-        typical = [self._clock.typical_step] if self._clock.steps else []
         predicted = within_prediction_horizon(dt, typical)
         previous = self.pose.tolist()
-        information = self._prediction_information(dt, predicted)
+        information = self._prediction_information(stamped, dt, predicted)
         step = (self._velocity * (dt if predicted else min(typical, default=0.0))).tolist()
         from_latest, edges, score = self._solve(latest, current, previous, step, information)
         intervals = intervals_since_used(self.skipped_before, self.clock_jumped, dt,
@@ -264,9 +266,8 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
             # in the frame halfway through the turn, as it drives on from the end of it
             motion = midpoint_velocity(motion).tolist()
         speed = math.hypot(self._velocity[0], self._velocity[1])
-        typical_step = self._clock.typical_step if self._clock.steps else 0.0
         self._update_velocity(motion, evident_time_step(math.hypot(motion[0], motion[1]), speed,
-                                                        dt, typical_step))
+                                                        dt, min(typical, default=0.0)))
         return pose
 
     def _solve(self, latest: Keyframe, current: tuple[PreparedScan, ...],
