@@ -192,8 +192,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
     def _start(self, scans: dict[str, FloatArray], t: float) -> None:
         assert self._held is not None
         current = self._prepare(scans)
-        self._held.forget()
-        self._held.hold(current, tuple(self._initial_pose.tolist()), 0.0)
+        self._held.restart(current, tuple(self._initial_pose.tolist()))
         self._add_keyframe(Keyframe(self._initial_pose.copy(), current))
 
     def _weights(self) -> dict[str, float]:
@@ -244,8 +243,7 @@ class FusionEstimator(KeyframeMatching, FusedVelocity, Estimator):
             if lost:  # the scans cannot tell where the car is: the guess, a fresh window
                 self.health.note_lost(len(self._observations))
                 pose = np.array(compose_floats(previous, longer))
-                self._held.forget()
-                self._held.hold(current, tuple(pose.tolist()), 0.0)
+                self._held.restart(current, tuple(pose.tolist()))
                 self._restart_window(Keyframe(pose, current))
                 return pose
             if blind is not None and blind.unplaced(score):  # the best placement, unvouched

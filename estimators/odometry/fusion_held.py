@@ -113,10 +113,12 @@ class HeldKeyframeScans:
         self._scans = deque(entry for entry in aged if entry[0] <= self.max_age)
         self._scans.append((0.0, pose, [returns(scan) for scan in scans]))
 
-    def forget(self) -> None:
-        """Drop every scan kept (the car lost its place: their poses say nothing now)."""
+    def restart(self, scans: tuple[PreparedScan, ...], pose: PoseFloats) -> None:
+        """Drop every scan kept and keep ``scans`` at car ``pose`` alone (the start, or the car
+        lost its place: the poses of the scans before say nothing now)."""
         self._scans.clear()
         self._measured, self._sources = (), []
+        self.hold(scans, pose, 0.0)
 
     def keyframe(self, scans: tuple[PreparedScan, ...], pose: PoseFloats
                  ) -> tuple[PreparedScan, ...]:
@@ -131,7 +133,7 @@ class HeldKeyframeScans:
         """The latest ``keyframe`` (its scans, at car ``pose``) filled from the latest scan
         held too, while it is filled from fewer than ``max_age`` scans (one made with few
         scans before it: the first, or the first after the car lost its place)."""
-        if not self._measured:  # the first keyframe, or the first after forget()
+        if not self._measured:  # the first keyframe, or the first after restart()
             self._measured = keyframe
         if len(self._sources) >= self.max_age or len(self._scans) < 2:
             return keyframe

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import estimators
-from tests.benchmarks.bench_modules import load
 from tests.estimators.odometry.test_fusion import drive_through_corridor
 
 
@@ -33,18 +32,3 @@ def test_scans_stamped_in_bunches_cross_a_featureless_corridor_at_the_scans_own_
     entry = np.argmax(truth[:, 0] > 13.0)
     assert abs(along[-1] - along[entry]) < 0.1
 
-
-bench = load("bench_faults")
-needs_intel = pytest.mark.skipif(not all(path.exists() for path in bench.log_paths("intel")),
-                                 reason="needs the Intel Lab Radish log")
-
-
-@needs_intel
-@pytest.mark.parametrize("first", [3000, 6000])
-def test_intel_with_half_the_beams_dropped_meets_the_fault_targets(first: int) -> None:
-    # Intel's logger stamps its ~5 Hz scans in bunches (median interval 0.06 s, mean 0.2 s)
-    recording = bench.log_recording("intel", first, 600)
-    clean, _, _ = bench.run("pc_fusion", recording, bench.start_of(recording.truth))
-    clean_jump, clean_final = bench.score(clean, clean, recording.truth)
-    run = bench.faulted_score("pc_fusion", recording, "dropout_half", clean)
-    assert bench.verdict(run, clean_jump, clean_final)
